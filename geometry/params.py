@@ -1,0 +1,367 @@
+"""Parameter types of flexure hinges, flexure chains and the reference mechanism.
+
+Pure data: frozen dataclasses validated on construction, no CadQuery. Everything is
+SI ([m], [Pa], [kg]); the command line converts from mm at the edge. The analytic model
+(``flexcal.model``) imports these types and nothing else of ``geometry``.
+
+Frames
+------
+Hinge frame: x along the hinge (from the fixed end to the free end), y across the
+thin direction (thickness t), z along the width. The origin is the centre of the thin
+section; the hinge spans x in [-length/2, +length/2] and the blocks extend beyond.
+
+Chain frame: x along the strut from end A (base or actuator side, x = 0) to end B
+(payload-frame side, x = L). Leaf 1 of each biaxial flexure is thin in local y (it
+bends about local z); leaf 2 is the same leaf turned 90 deg about x (thin in local z,
+bends about local y). The order from A to B is
+``block | leaf1 | connector | leaf2 | strut | leaf2 | connector | leaf1 | block``
+(mirror-symmetric about the strut's middle).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+__all__ = [
+    "Material",
+    "STEEL",
+    "CircularNotchHinge",
+    "LeafHinge",
+    "FlexureChain",
+    "ChainPlacement",
+    "MechanismParams",
+    "reference_mechanism",
+    "chain_rotation",
+]
+
+
+def _require(condition: bool, name: str, value: float, allowed: str, unit: str = "mm") -> None:
+    """Raise ``ValueError`` naming the parameter, its value and the allowed range."""
+    if not condition:
+        shown = value * 1e3 if unit == "mm" else value
+        raise ValueError(f"{name}={shown:.6g} {unit} is out of range: must be {allowed}")
+
+
+def _finite(name: str, value: float) -> None:
+    if not (isinstance(value, (int, float, np.floating, np.integer)) and math.isfinite(float(value))):
+        raise ValueError(f"{name}={value!r} must be a finite number")
+
+
+@dataclass(frozen=True, kw_only=True)
+class Material:
+    """Linear-elastic isotropic material.
+
+    youngs_modulus [Pa], poisson_ratio [-], density [kg/m^3].
+    """
+
+    youngs_modulus: float = 206e9
+    poisson_ratio: float = 0.29
+    density: float = 7850.0
+
+    def __post_init__(self) -> None:
+        for f in dataclasses.fields(self):
+            _finite(f.name, getattr(self, f.name))
+        _require(self.youngs_modulus > 0, "youngs_modulus", self.youngs_modulus, "> 0 Pa", unit="Pa")
+        _require(-1.0 < self.poisson_ratio < 0.5, "poisson_ratio", self.poisson_ratio, "in (-1, 0.5)", unit="")
+        _require(self.density > 0, "density", self.density, "> 0 kg/m^3", unit="kg/m^3")
+
+    @property
+    def shear_modulus(self) -> float:
+        """G = E / (2 (1 + nu)) [Pa]."""
+        return self.youngs_modulus / (2.0 * (1.0 + self.poisson_ratio))
+
+
+STEEL = Material()
+
+
+@dataclass(frozen=True, kw_only=True)
+class CircularNotchHinge:
+    """Right-circular notch hinge: a block of height t + 2R with two semicircular cuts.
+
+    radius R [m], thickness t [m] (minimum, at x = 0), width b [m] (along z),
+    block_length [m]: length of the rigid block on each side of the notch (the hinge
+    spans 2R in x; the part is 2R + 2 block_length long). The free end is the face at
+    x = R + block_length; the fixed end the face at x = -(R + block_length).
+    """
+
+    radius: float
+    thickness: float
+    width: float
+    block_length: float
+
+    def __post_init__(self) -> None:
+        for f in dataclasses.fields(self):
+            _finite(f.name, getattr(self, f.name))
+        _require(self.radius > 0, "radius", self.radius, "> 0 mm")
+        _require(self.thickness > 0, "thickness", self.thickness, "> 0 mm (a notch with t <= 0 cuts through the block)")
+        _require(self.width > 0, "width", self.width, "> 0 mm")
+        _require(self.block_length > 0, "block_length", self.block_length, "> 0 mm")
+
+    @property
+    def height(self) -> float:
+        """Block height t + 2R [m]."""
+        return self.thickness + 2.0 * self.radius
+
+    @property
+    def length(self) -> float:
+        """Length of the compliant (notched) part, 2R [m]."""
+        return 2.0 * self.radius
+
+    @property
+    def total_length(self) -> float:
+        """Length of the whole part including both blocks [m]."""
+        return self.length + 2.0 * self.block_length
+
+
+@dataclass(frozen=True, kw_only=True)
+class LeafHinge:
+    """Corner-filleted leaf hinge (paper Fig. 5c).
+
+    length l [m]: segment length including both fillets; thickness t [m];
+    width w [m] (along z); fillet radius a [m] (quarter circles at both ends, a = 0 is a
+    plain leaf); block_height [m]: height of the blocks the leaf joins (>= t + 2a;
+    ``None`` means t + 2a); block_length [m]: rigid block on each side.
+    """
+
+    length: float
+    thickness: float
+    width: float
+    fillet: float
+    block_length: float
+    block_height: float | None = None
+
+    def __post_init__(self) -> None:
+        for f in dataclasses.fields(self):
+            value = getattr(self, f.name)
+            if value is not None:
+                _finite(f.name, value)
+        _require(self.length > 0, "length", self.length, "> 0 mm")
+        _require(self.thickness > 0, "thickness", self.thickness, "> 0 mm")
+        _require(self.width > 0, "width", self.width, "> 0 mm")
+        _require(self.fillet >= 0, "fillet", self.fillet, ">= 0 mm")
+        _require(
+            2.0 * self.fillet <= self.length,
+            "fillet",
+            self.fillet,
+            f"<= length/2 = {self.length * 500:.6g} mm (both fillets must fit the segment)",
+        )
+        _require(self.block_length > 0, "block_length", self.block_length, "> 0 mm")
+        if self.block_height is not None:
+            _require(
+                self.block_height >= self.thickness + 2.0 * self.fillet - 1e-12,
+                "block_height",
+                self.block_height,
+                f">= t + 2a = {(self.thickness + 2 * self.fillet) * 1e3:.6g} mm",
+            )
+
+    @property
+    def height(self) -> float:
+        """Block height [m]."""
+        return self.thickness + 2.0 * self.fillet if self.block_height is None else self.block_height
+
+    @property
+    def total_length(self) -> float:
+        """Length of the whole part including both blocks [m]."""
+        return self.length + 2.0 * self.block_length
+
+
+@dataclass(frozen=True, kw_only=True)
+class FlexureChain:
+    """A strut with a biaxial flexure (two leaf hinges in series, the second turned 90 deg)
+    at each end. See the module docstring for the layout and frame.
+
+    length L [m]: distance between the end faces A and B; hinge_length l [m], width w [m],
+    fillet a [m] of every leaf; thickness_1 t1 [m] (leaf thin in local y) and
+    thickness_2 t2 [m] (leaf thin in local z); section [m]: side of the square cross-section
+    of blocks, connectors and strut (>= w and >= t + 2a); connector_length [m] between
+    the two leaves of a flexure; end_block_length [m] at each end.
+    """
+
+    length: float
+    hinge_length: float = 0.020
+    width: float = 0.040
+    fillet: float = 0.006
+    thickness_1: float = 0.004
+    thickness_2: float = 0.004
+    section: float = 0.040
+    connector_length: float = 0.010
+    end_block_length: float = 0.010
+
+    def __post_init__(self) -> None:
+        for f in dataclasses.fields(self):
+            _finite(f.name, getattr(self, f.name))
+        for name in ("length", "hinge_length", "width", "thickness_1", "thickness_2", "section",
+                     "connector_length", "end_block_length"):
+            _require(getattr(self, name) > 0, name, getattr(self, name), "> 0 mm")
+        _require(self.fillet >= 0, "fillet", self.fillet, ">= 0 mm")
+        _require(2 * self.fillet <= self.hinge_length, "fillet", self.fillet,
+                 f"<= hinge_length/2 = {self.hinge_length * 500:.6g} mm (both fillets must fit the segment)")
+        _require(self.section >= self.width - 1e-12, "section", self.section,
+                 f">= width = {self.width * 1e3:.6g} mm")
+        for name in ("thickness_1", "thickness_2"):
+            t = getattr(self, name)
+            _require(t + 2 * self.fillet <= self.section + 1e-12, name, t,
+                     f"<= section - 2*fillet = {(self.section - 2 * self.fillet) * 1e3:.6g} mm")
+        _require(self.strut_length > 0, "length", self.length,
+                 f"> 2*end_block + 4*hinge_length + 2*connector = {self.minimum_length * 1e3:.6g} mm")
+
+    @property
+    def minimum_length(self) -> float:
+        return 2 * self.end_block_length + 4 * self.hinge_length + 2 * self.connector_length
+
+    @property
+    def strut_length(self) -> float:
+        """Length of the rigid-ish strut between the two biaxial flexures [m]."""
+        return self.length - self.minimum_length
+
+    def leaf(self, which: int) -> LeafHinge:
+        """Leaf hinge 1 (thin in y) or 2 (thin in z), as a stand-alone ``LeafHinge``."""
+        if which not in (1, 2):
+            raise ValueError(f"leaf index {which!r} must be 1 or 2")
+        return LeafHinge(
+            length=self.hinge_length,
+            thickness=self.thickness_1 if which == 1 else self.thickness_2,
+            width=self.width,
+            fillet=self.fillet,
+            block_length=self.connector_length,
+            block_height=self.section,
+        )
+
+    def segments(self) -> tuple[tuple[str, float, float], ...]:
+        """The segments from A to B as ``(kind, x_start, x_end)`` [m], kind in
+        {"block", "leaf1", "leaf2", "connector", "strut"}."""
+        e, l, c, s = self.end_block_length, self.hinge_length, self.connector_length, self.strut_length
+        kinds_lengths = [("block", e), ("leaf1", l), ("connector", c), ("leaf2", l), ("strut", s),
+                         ("leaf2", l), ("connector", c), ("leaf1", l), ("block", e)]
+        out, x = [], 0.0
+        for kind, length in kinds_lengths:
+            out.append((kind, x, x + length))
+            x += length
+        return tuple(out)
+
+    @property
+    def pivot_distance(self) -> float:
+        """L_d of paper Eq. 4: distance between the centres of the two biaxial flexures [m]."""
+        return self.length - 2 * self.end_block_length - 2 * self.hinge_length - self.connector_length
+
+
+def chain_rotation(point_a: np.ndarray, point_b: np.ndarray, roll_reference: np.ndarray) -> np.ndarray:
+    """Rotation matrix (3, 3) whose columns are the chain's local x, y, z in the global frame.
+
+    x points from A to B; local y is ``roll_reference`` made orthogonal to x; z = x * y.
+    """
+    x = np.asarray(point_b, float) - np.asarray(point_a, float)
+    x = x / np.linalg.norm(x)
+    ref = np.asarray(roll_reference, float)
+    y = ref - ref.dot(x) * x
+    norm = np.linalg.norm(y)
+    if norm < 1e-9:
+        raise ValueError("roll_reference is parallel to the chain axis; choose another")
+    y = y / norm
+    return np.column_stack([x, y, np.cross(x, y)])
+
+
+@dataclass(frozen=True, kw_only=True)
+class ChainPlacement:
+    """One chain of the mechanism: its geometry and where its two ends sit.
+
+    name: "L1".."L3" (load chains, base end fixed) or "D1".."D3" (driving chains, end A
+    on an actuator that moves along the chain axis). point_a, point_b [m] in the
+    mechanism frame (origin O_C); roll_reference: a vector fixing local y (see
+    ``chain_rotation``). The chain's length is |point_b - point_a|; ``chain.length`` must
+    agree to 1 um.
+    """
+
+    name: str
+    chain: FlexureChain
+    point_a: tuple[float, float, float]
+    point_b: tuple[float, float, float]
+    roll_reference: tuple[float, float, float] = (0.0, 0.0, 1.0)
+
+    def __post_init__(self) -> None:
+        if not (self.name[:1] in ("L", "D") and self.name[1:].isdigit()):
+            raise ValueError(f"chain name {self.name!r} must be L<n> (load) or D<n> (driving)")
+        distance = float(np.linalg.norm(np.subtract(self.point_b, self.point_a)))
+        _require(abs(distance - self.chain.length) <= 1e-6, f"{self.name}.chain.length", self.chain.length,
+                 f"equal to |point_b - point_a| = {distance * 1e3:.6g} mm")
+
+    @property
+    def is_driving(self) -> bool:
+        return self.name.startswith("D")
+
+    @property
+    def rotation(self) -> np.ndarray:
+        """(3, 3) columns = local axes in the mechanism frame."""
+        return chain_rotation(np.array(self.point_a), np.array(self.point_b), np.array(self.roll_reference))
+
+
+def _load_chain(name: str, angle_deg: float, chain: FlexureChain | None = None) -> ChainPlacement:
+    phi = math.radians(angle_deg)
+    direction = np.array([0.0, math.cos(phi), math.sin(phi)])
+    point_a = np.array([0.600, 0, 0]) + 0.300 * direction
+    point_b = np.array([0.200, 0, 0]) + 0.100 * direction
+    length = float(np.linalg.norm(point_b - point_a))
+    chain = chain or FlexureChain(length=length)
+    # local y tangential to the circle: bending about local z swings the strut radially
+    tangent = np.array([0.0, -math.sin(phi), math.cos(phi)])
+    return ChainPlacement(name=name, chain=dataclasses.replace(chain, length=length),
+                          point_a=tuple(point_a), point_b=tuple(point_b), roll_reference=tuple(tangent))
+
+
+def _default_chains() -> tuple[ChainPlacement, ...]:
+    driving = FlexureChain(length=0.150, thickness_1=0.003, thickness_2=0.003)
+    return (
+        _load_chain("L1", 90.0),
+        _load_chain("L2", 210.0),
+        _load_chain("L3", 330.0),
+        # D1/D2 sit in front of their frame points (actuator at x = 50 mm) so that the
+        # payload's weight compresses them: see docs/model.md, "Reference mechanism".
+        ChainPlacement(name="D1", chain=driving, point_a=(0.050, 0.600, -0.150), point_b=(0.200, 0.600, -0.150),
+                       roll_reference=(0.0, 1.0, 0.0)),
+        ChainPlacement(name="D2", chain=driving, point_a=(0.050, -0.600, -0.150), point_b=(0.200, -0.600, -0.150),
+                       roll_reference=(0.0, 1.0, 0.0)),
+        ChainPlacement(name="D3", chain=driving, point_a=(0.200, 0.600, 0.150), point_b=(0.200, 0.600, 0.0),
+                       roll_reference=(1.0, 0.0, 0.0)),
+    )
+
+
+@dataclass(frozen=True, kw_only=True)
+class MechanismParams:
+    """The six-chain remote-centre mount of DESIGN.md.
+
+    chains: six ``ChainPlacement`` (L1-L3 then D1-D3); payload_mass [kg];
+    centre_of_gravity [m] in the mechanism frame; gravity [m/s^2] vector;
+    material; actuator_stiffness [N/m]: axial stiffness of ball screw + coupling in
+    series with each driving chain.
+    """
+
+    chains: tuple[ChainPlacement, ...] = field(default_factory=_default_chains)
+    payload_mass: float = 300.0
+    centre_of_gravity: tuple[float, float, float] = (0.150, 0.0, 0.0)
+    gravity: tuple[float, float, float] = (0.0, 0.0, -9.81)
+    material: Material = STEEL
+    actuator_stiffness: float = 2.0e8
+
+    def __post_init__(self) -> None:
+        names = [c.name for c in self.chains]
+        if names != ["L1", "L2", "L3", "D1", "D2", "D3"]:
+            raise ValueError(f"chains must be L1, L2, L3, D1, D2, D3 in that order, got {names}")
+        _require(self.payload_mass >= 0, "payload_mass", self.payload_mass, ">= 0 kg", unit="kg")
+        _require(self.actuator_stiffness > 0, "actuator_stiffness", self.actuator_stiffness, "> 0 N/m", unit="N/m")
+
+    @property
+    def load_chains(self) -> tuple[ChainPlacement, ...]:
+        return self.chains[:3]
+
+    @property
+    def driving_chains(self) -> tuple[ChainPlacement, ...]:
+        return self.chains[3:]
+
+
+def reference_mechanism() -> MechanismParams:
+    """The default mechanism of DESIGN.md (1400 mm x 420 mm grating, 300 kg)."""
+    return MechanismParams()
