@@ -1,0 +1,189 @@
+"""Measurement files: misalignment curves as CSV plus a JSON sidecar (DESIGN.md "Data formats").
+
+One row per sampled posture. Required columns, in the field's units:
+
+``point, time_s, leg, xa1_mm, xa2_mm, xa3_mm, theta_x_urad, theta_y_urad, theta_z_urad``
+
+Optional columns are numeric and carry their unit in the name (``temperature_c``, …).
+The sidecar ``<name>.json`` holds provenance (generator, seed, preset errors, injected
+effects). The same reader loads synthetic and real measurements; it rejects a bad file
+with a ``ValueError`` naming the row (1-based, header = row 1) and the column.
+
+Inside, everything is SI: inputs [m], angles [rad], time [s].
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+__all__ = ["Measurement", "REQUIRED_COLUMNS", "read_measurement", "write_measurement",
+           "sidecar_path"]
+
+REQUIRED_COLUMNS = ("point", "time_s", "leg", "xa1_mm", "xa2_mm", "xa3_mm",
+                    "theta_x_urad", "theta_y_urad", "theta_z_urad")
+INPUT_COLUMNS = REQUIRED_COLUMNS[3:6]
+ANGLE_COLUMNS = REQUIRED_COLUMNS[6:9]
+_UNIT_SUFFIXES = ("_mm", "_urad", "_s", "_c", "_k", "_n", "_um", "_deg", "_pct", "_count")
+# Plausibility limits: an actuator stroke beyond 100 mm or an angle beyond 0.1 rad is not a
+# flexure mount's misalignment curve but a unit mistake (m vs mm, rad vs urad).
+MAX_ABS_INPUT_MM = 100.0
+MAX_ABS_ANGLE_URAD = 1e5
+
+
+@dataclass(frozen=True, kw_only=True)
+class Measurement:
+    """A misalignment curve. Shapes: n = number of points.
+
+    point (n,) int; time (n,) [s]; leg (n,) int; inputs (n, 3) [m] commanded actuator
+    positions; angles (n, 3) [rad] measured θx, θy, θz; extras: optional columns by
+    name (file units, as named); metadata: the JSON sidecar (empty if none).
+    """
+
+    point: np.ndarray
+    time: np.ndarray
+    leg: np.ndarray
+    inputs: np.ndarray
+    angles: np.ndarray
+    extras: dict[str, np.ndarray] = field(default_factory=dict)
+    metadata: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        n = len(self.point)
+        for name, value, shape in (("time", self.time, (n,)), ("leg", self.leg, (n,)),
+                                   ("inputs", self.inputs, (n, 3)), ("angles", self.angles, (n, 3))):
+            if np.shape(value) != shape:
+                raise ValueError(f"Measurement.{name} has shape {np.shape(value)}, expected {shape}")
+        for name, value in self.extras.items():
+            if np.shape(value) != (n,):
+                raise ValueError(f"extra column {name!r} has shape {np.shape(value)}, expected ({n},)")
+
+    @property
+    def n_points(self) -> int:
+        return len(self.point)
+
+
+def sidecar_path(csv_path: str | os.PathLike) -> Path:
+    return Path(csv_path).with_suffix(".json")
+
+
+def _parse_number(text: str, row: int, column: str, integer: bool = False) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise ValueError(f"row {row}, column {column!r}: {text!r} is not a number") from None
+    if not math.isfinite(value):
+        raise ValueError(f"row {row}, column {column!r}: {text!r} is not finite")
+    if integer and value != int(value):
+        raise ValueError(f"row {row}, column {column!r}: {text!r} must be an integer")
+    return value
+
+
+def read_measurement(path: str | os.PathLike) -> Measurement:
+    """Load and check a measurement CSV (and its JSON sidecar if present).
+
+    Raises ``FileNotFoundError`` for a missing file and ``ValueError`` naming the row and
+    column of the first bad value.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"measurement file {path} does not exist")
+    text = path.read_text()
+    reader = csv.reader(io.StringIO(text))
+    try:
+        header = [h.strip() for h in next(reader)]
+    except StopIteration:
+        raise ValueError(f"{path}: empty file (expected a header row {','.join(REQUIRED_COLUMNS)})") from None
+    missing = [c for c in REQUIRED_COLUMNS if c not in header]
+    if missing:
+        raise ValueError(f"{path}: row 1 (header) lacks required column(s) {', '.join(missing)}")
+    duplicates = sorted({h for h in header if header.count(h) > 1})
+    if duplicates:
+        raise ValueError(f"{path}: row 1 (header) repeats column(s) {', '.join(duplicates)}")
+    extras_names = [h for h in header if h not in REQUIRED_COLUMNS]
+    for name in extras_names:
+        if not name.lower().endswith(_UNIT_SUFFIXES):
+            raise ValueError(f"{path}: row 1 (header), column {name!r}: optional columns must name their "
+                             f"unit with a suffix such as {', '.join(_UNIT_SUFFIXES)}")
+    rows = []
+    for row_number, raw in enumerate(reader, start=2):
+        if not raw or all(not cell.strip() for cell in raw):
+            continue
+        if len(raw) != len(header):
+            raise ValueError(f"{path}: row {row_number} has {len(raw)} values, the header has {len(header)}")
+        values = {}
+        for column, cell in zip(header, raw):
+            values[column] = _parse_number(cell.strip(), row_number, column,
+                                           integer=column in ("point", "leg"))
+        for column in INPUT_COLUMNS:
+            if abs(values[column]) > MAX_ABS_INPUT_MM:
+                raise ValueError(f"{path}: row {row_number}, column {column!r}: {values[column]:g} mm exceeds "
+                                 f"{MAX_ABS_INPUT_MM:g} mm (inputs are in mm)")
+        for column in ANGLE_COLUMNS:
+            if abs(values[column]) > MAX_ABS_ANGLE_URAD:
+                raise ValueError(f"{path}: row {row_number}, column {column!r}: {values[column]:g} urad exceeds "
+                                 f"{MAX_ABS_ANGLE_URAD:g} urad (angles are in microradians)")
+        if values["leg"] < 0:
+            raise ValueError(f"{path}: row {row_number}, column 'leg': must be >= 0")
+        if rows:
+            if values["point"] <= rows[-1][1]["point"]:
+                raise ValueError(f"{path}: row {row_number}, column 'point': points must increase")
+            if values["time_s"] < rows[-1][1]["time_s"]:
+                raise ValueError(f"{path}: row {row_number}, column 'time_s': time must not decrease")
+        rows.append((row_number, values))
+    if not rows:
+        raise ValueError(f"{path}: no data rows")
+
+    def column(name: str) -> np.ndarray:
+        return np.array([values[name] for _, values in rows])
+
+    metadata: dict[str, Any] = {}
+    side = sidecar_path(path)
+    if side.is_file():
+        try:
+            metadata = json.loads(side.read_text())
+        except json.JSONDecodeError as error:
+            raise ValueError(f"{side}: not valid JSON ({error})") from None
+    return Measurement(
+        point=column("point").astype(int),
+        time=column("time_s"),
+        leg=column("leg").astype(int),
+        inputs=np.column_stack([column(c) for c in INPUT_COLUMNS]) * 1e-3,
+        angles=np.column_stack([column(c) for c in ANGLE_COLUMNS]) * 1e-6,
+        extras={name: column(name) for name in extras_names},
+        metadata=metadata,
+    )
+
+
+def write_measurement(path: str | os.PathLike, measurement: Measurement) -> None:
+    """Write the CSV (and the sidecar JSON if ``metadata`` is not empty), atomically.
+
+    Inputs are written in mm with 9 decimals (1 pm), angles in µrad with 6 decimals
+    (1 prad): far below any sensor's resolution, so a round trip is lossless for use.
+    """
+    from flexcal.validation.output import write_json
+
+    path = Path(path)
+    header = list(REQUIRED_COLUMNS) + list(measurement.extras)
+    buffer = io.StringIO()
+    writer = csv.writer(buffer, lineterminator="\n")
+    writer.writerow(header)
+    for k in range(measurement.n_points):
+        row = [str(int(measurement.point[k])), f"{measurement.time[k]:.6f}", str(int(measurement.leg[k]))]
+        row += [f"{v * 1e3:.9f}" for v in measurement.inputs[k]]
+        row += [f"{v * 1e6:.6f}" for v in measurement.angles[k]]
+        row += [f"{measurement.extras[name][k]:.9g}" for name in measurement.extras]
+        writer.writerow(row)
+    tmp = path.with_name(f".{path.name}.tmp")
+    tmp.write_text(buffer.getvalue())
+    os.replace(tmp, path)
+    if measurement.metadata:
+        write_json(sidecar_path(path), measurement.metadata)
