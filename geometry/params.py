@@ -187,7 +187,7 @@ class FlexureChain:
     fillet: float = 0.006
     thickness_1: float = 0.004
     thickness_2: float = 0.004
-    section: float = 0.040
+    section: float = 0.050
     connector_length: float = 0.010
     end_block_length: float = 0.010
 

@@ -1,0 +1,106 @@
+"""Hook for effects injected into the virtual prototype's physics.
+
+An effect is any object with a ``name`` (str) and ``parameters`` (mapping of JSON-able
+values, recorded in the run's provenance) and any subset of these methods, called by
+``flexcal.validation.prototype.simulate`` at each trajectory point, in this order and in
+the order the effects are given:
+
+``modify_screw_position(actuator, command, position, context) -> position``
+    actuator 0..2 (D1..D3), command x_cmd [m], position: the screw position so far
+    ``x_cmd + x0`` [m] (after earlier effects); returns the screw position [m] the
+    transmission then works from (lead error, periodic screw error, drift...).
+``modify_stiffness(stiffness, context) -> stiffness``
+    stiffness (6, 5, 6, 6): K_jj [SI] of the five segments of chains L1..L3, D1..D3;
+    return the modified array (a weaker hinge, a cracked strut, temperature).
+``modify_mechanism(conditions, context) -> conditions``
+    ``PointConditions`` of the point (stiffness of every segment, dead forces on the
+    payload frame, actuator contact stiffness); return a modified copy
+    (``dataclasses.replace``) -- thermal softening, an extra cable force, a weaker hinge.
+``measure(angles, context) -> angles``
+    sensor side only: the frame's true rotation vector (3,) [rad] -> what the sensor
+    reports (offsets, scale errors, cross-talk). Noise belongs to the scenario, not here.
+
+``context`` is an ``EffectContext``: point index, command (3,) [m], travel direction of
+each actuator (+1/-1, docs/conventions.md) and the previous point's result (or None).
+Effects must be deterministic functions of their parameters and the context (seeded
+randomness is drawn at construction), so equal inputs give equal runs.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import Any, Mapping, Protocol, runtime_checkable
+
+import numpy as np
+
+__all__ = ["Effect", "EffectContext", "PointConditions", "PointResult", "effect_record"]
+
+
+@runtime_checkable
+class Effect(Protocol):
+    """Minimal protocol: a name and parameters; the hook methods are optional (module docstring)."""
+
+    name: str
+    parameters: Mapping[str, Any]
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class PointResult:
+    """The physics' answer at one point, as effects see it for the next point.
+
+    angles (3,) [rad] (true rotation vector of the frame), pose (6,) [m, rad], axial_loads
+    (6,) [N] (tension positive, chains L1..L3, D1..D3), nut_offsets (3,) [m].
+    """
+
+    angles: np.ndarray
+    pose: np.ndarray
+    axial_loads: np.ndarray
+    nut_offsets: np.ndarray
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class EffectContext:
+    """point_index; command (3,) [m]; direction (3,) of +1/-1; previous: ``PointResult`` or None."""
+
+    point_index: int
+    command: np.ndarray
+    direction: np.ndarray
+    previous: PointResult | None
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class PointConditions:
+    """What the physics uses at one point, open to ``modify_mechanism``.
+
+    segment_stiffness (6, 5, 6, 6): K_jj of every segment [SI]; frame_forces: tuple of
+    (force (3,) [N] world, point (3,) [m] in the frame body, i.e. design coordinates) --
+    the payload weight first; actuator_stiffness (3,) [N/m].
+    """
+
+    segment_stiffness: np.ndarray
+    frame_forces: tuple
+    actuator_stiffness: np.ndarray
+
+    def __post_init__(self) -> None:
+        if np.shape(self.segment_stiffness) != (6, 5, 6, 6):
+            raise ValueError(f"segment_stiffness must have shape (6, 5, 6, 6), got {np.shape(self.segment_stiffness)}")
+        if np.shape(self.actuator_stiffness) != (3,) or not np.all(np.asarray(self.actuator_stiffness) > 0):
+            raise ValueError("actuator_stiffness must be three values > 0 N/m")
+
+
+def effect_record(effect: Any) -> dict[str, Any]:
+    """Provenance entry ``{"name": ..., "parameters": {...}}`` of an effect.
+
+    Raises ``ValueError`` if the effect has no name or none of the hook methods.
+    """
+    name = getattr(effect, "name", None)
+    if not isinstance(name, str) or not name:
+        raise ValueError(f"effect {effect!r} needs a non-empty string attribute 'name'")
+    hooks = ("modify_screw_position", "modify_stiffness", "modify_mechanism", "measure")
+    if not any(callable(getattr(effect, h, None)) for h in hooks):
+        raise ValueError(f"effect {name!r} has none of the hook methods {', '.join(hooks)}")
+    parameters = getattr(effect, "parameters", None)
+    if parameters is None and dataclasses.is_dataclass(effect):
+        parameters = {f.name: getattr(effect, f.name) for f in dataclasses.fields(effect) if f.name != "name"}
+    return {"name": name, "parameters": dict(parameters or {})}
