@@ -1,0 +1,89 @@
+"""Throughput of the analytic forward model (issue "analytic model", Speed).
+
+300 candidate parameter sets (uniform in the 45-D error space) on the 77-point standard
+trajectory, full physics (parasitic term, clearance, gravity), tolerance 1e-13 m. Prints
+posture evaluations per second for each engine and thread count (best of --repeat calls,
+wall time, each call including the per-candidate setup), the CPU time of the single-thread
+call, the machine load, and the ratio against the straightforward per-point implementation
+(``model.reference``: assemble the 6x6 frame stiffness and ``numpy.linalg.solve`` per
+equilibrium, same physics) timed in the same run on a few candidates.
+
+    .venv/bin/python benchmarks/bench_model.py [--candidates 300] [--repeat 15]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import time
+
+import numpy as np
+
+from flexcal.model import kernel
+from flexcal.model.assembly import mechanism_matrices
+from flexcal.model.forward import forward
+from flexcal.model.parameters import parameter_space
+from flexcal.model.reference import reference_forward
+from flexcal.model.trajectory import standard_trajectory
+
+TARGET = 2e6  # posture evaluations per second (issue "analytic model")
+
+
+def best_of(fn, repeat):
+    walls, cpus = [], []
+    for _ in range(repeat):
+        w0, c0 = time.perf_counter(), time.process_time()
+        fn()
+        walls.append(time.perf_counter() - w0)
+        cpus.append(time.process_time() - c0)
+    return min(walls), float(np.median(walls)), min(cpus)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--candidates", type=int, default=300)
+    parser.add_argument("--repeat", type=int, default=15)
+    parser.add_argument("--baseline-candidates", type=int, default=2)
+    parser.add_argument("--seed", type=int, default=0)
+    args = parser.parse_args()
+
+    space = parameter_space()
+    trajectory = standard_trajectory()
+    rng = np.random.default_rng(args.seed)
+    values = space.from_unit(rng.random((args.candidates, 45)))
+    n_evals = args.candidates * trajectory.n_points
+    print(f"flexcal model benchmark: {args.candidates} candidates x {trajectory.n_points} points = {n_evals} postures,"
+          f" load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores")
+
+    warm = forward(values, trajectory.inputs)  # compiles / loads the numba cache
+    print(f"  states: classes S1/S2/S3 = {np.bincount(warm.point_class.ravel(), minlength=4)[1:].tolist()}, "
+          f"fixed-point iterations <= {warm.n_iterations}")
+    setup_wall, _, setup_cpu = best_of(lambda: mechanism_matrices(values, space), args.repeat)
+    print(f"  per-candidate setup alone: {setup_wall * 1e3:.2f} ms wall, {setup_cpu * 1e3:.2f} ms CPU")
+
+    engines = ["numba", "numpy"] if kernel.available() else ["numpy"]
+    rates = {}
+    for engine in engines:
+        for threads in (1, 2):
+            wall, median, cpu = best_of(lambda: forward(values, trajectory.inputs, engine=engine, n_threads=threads),
+                                        args.repeat if engine == "numba" else max(3, args.repeat // 3))
+            rates[(engine, threads)] = n_evals / wall
+            print(f"  {engine:5s} {threads} thread(s): {wall * 1e3:7.2f} ms best ({median * 1e3:7.2f} median), "
+                  f"{cpu * 1e3:7.2f} ms CPU -> {n_evals / wall / 1e6:5.2f} M postures/s")
+
+    subset = list(range(min(args.baseline_candidates, args.candidates)))
+    matrices = mechanism_matrices(values[subset], space)
+    start = time.perf_counter()
+    reference_forward(matrices, space.mechanism, trajectory.inputs, trajectory.directions)
+    baseline = len(subset) * trajectory.n_points / (time.perf_counter() - start)
+    print(f"  straightforward per-point solve ({len(subset)} candidates): {1e3 / baseline:.3f} ms per posture -> "
+          f"{baseline:,.0f} postures/s")
+    best = max(rates.values())
+    best_key = max(rates, key=rates.get)
+    print(f"RESULT best {best / 1e6:.2f} M postures/s ({best_key[0]}, {best_key[1]} thread(s)), "
+          f"{best / baseline:,.0f}x the per-point baseline; target {TARGET / 1e6:.1f} M/s "
+          f"{'met' if best >= TARGET else f'missed by {100 * (1 - best / TARGET):.0f} %'}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,223 @@
+"""Paper Eq. 2-3: per-candidate assembly of the six chains in parallel at O_C.
+
+Everything here depends only on the parameters, so it is computed once per candidate
+(batched over candidates) and the per-point solve (``forward``) only does small products.
+
+Chain i has stiffness ``K_i = C_B,i^-1`` (chain frame, at B, A clamped; driving chains
+include the actuator spring). The frame twist ``X_C`` at O_C moves B by
+``J_i X_C`` (chain frame), ``J_i = [[R^T, -R^T [p_B]x], [0, R^T]]``; the A end moves only
+along the axis by ``u_i`` (actuator input + initial position + parasitic term + clearance),
+which reaches B rigidly as ``u_i e_x``. The energy ``1/2 sum (J_i X_C - u_i e_x)^T K_i (...)``
+gives the Eq. 3 blocks ``K_i-22 = J^T K J``, ``K_i-21 = -J^T K W`` and the equilibrium
+
+    K_CC X_C = F_C + sum_i g_i u_i,   K_CC = sum_i J_i^T K_i J_i,   g_i = J_i^T K_i e_x,
+
+with ``F_C`` the payload's weight moved to O_C (force m g, moment r_cg x m g). The axial
+load of chain i (positive = tension) is ``N_i = e_x^T K_i (J_i X_C - u_i e_x)
+= g_i^T X_C - k_i u_i``, ``k_i = K_i[0, 0]``.
+
+Mount offsets (d, phi) of a load chain move its base point A by
+``d (cos(phi) y0 + sin(phi) z0)`` (nominal local axes); the chain is built to fit the new
+A-B distance (the strut absorbs it), so the unloaded pose stays zero.
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+
+import numpy as np
+
+from flexcal.geometry.params import MechanismParams
+
+from . import kernel
+from .chain import chain_compliance_entries, stiffness_from_entries
+from .frames import axis_rotation, frame_to_point_transform
+from .parameters import CHAIN_NAMES, ParameterSpace
+
+__all__ = ["MechanismMatrices", "mechanism_matrices", "payload_wrench", "N_CHAINS", "DRIVING"]
+
+N_CHAINS = 6
+DRIVING = slice(3, 6)
+COMPILED_MIN_CANDIDATES = 32  # batches this large use the compiled linear algebra (tested equal)
+
+
+@dataclass(frozen=True, kw_only=True)
+class MechanismMatrices:
+    """Per-candidate matrices of the model (leading axis = candidate, n_c).
+
+    chain_stiffness K_i (n_c, 6, 6, 6) [SI stiffness, chain frame at B];
+    frame_transform J_i (n_c, 6, 6, 6); rotation R_i (n_c, 6, 3, 3); point_a (n_c, 6, 3) [m];
+    frame_stiffness K_CC (n_c, 6, 6); axial_gain G (n_c, 6, 6), column i = g_i [N/m, N];
+    input_gain H = K_CC^-1 G (n_c, 6, 6), column i = dX_C/du_i [m/m, rad/m];
+    gravity_pose X_g (n_c, 6) [m, rad]; gravity_loads N_g (n_c, 6) [N];
+    coupling m_ij = g_i^T K_CC^-1 g_j (n_c, 6, 6) [N/m]; axial_stiffness k_i (n_c, 6) [N/m];
+    load_gain dN/du = m - diag(k) (n_c, 6, 6) [N/m]; nut_stiffness s_i = k_i - m_ii of the
+    driving chains (n_c, 3) [N/m]; parasitic_rows P (n_c, 12, 6): rows 0-5 the local-y
+    displacement of each chain's B-side leaf-1 hinge, scaled by sqrt(L_d/L_y), rows 6-11
+    the local-z displacement of its B-side leaf-2 hinge, scaled by sqrt(L_d/L_z), per unit X_C;
+    parasitic_gain Q = P H (n_c, 12, 6); parasitic_gravity P X_g (n_c, 12) [m];
+    parasitic_coefficient K_L = 1/(2 L_d) (n_c, 6) [1/m]; hysteresis mu (n_c, 3) [-];
+    clearance CL (n_c, 3) [m]; initial_position x0 (n_c, 3) [m].
+    """
+
+    chain_stiffness: np.ndarray
+    frame_transform: np.ndarray
+    rotation: np.ndarray
+    point_a: np.ndarray
+    frame_stiffness: np.ndarray
+    axial_gain: np.ndarray
+    input_gain: np.ndarray
+    gravity_pose: np.ndarray
+    gravity_loads: np.ndarray
+    coupling: np.ndarray
+    axial_stiffness: np.ndarray
+    load_gain: np.ndarray
+    nut_stiffness: np.ndarray
+    parasitic_rows: np.ndarray
+    parasitic_gain: np.ndarray
+    parasitic_gravity: np.ndarray
+    parasitic_coefficient: np.ndarray
+    mu: np.ndarray
+    clearance: np.ndarray
+    initial_position: np.ndarray
+
+    @property
+    def n_candidates(self) -> int:
+        return self.chain_stiffness.shape[0]
+
+
+def payload_wrench(mech: MechanismParams) -> np.ndarray:
+    """F_C (6,): the payload's weight moved to O_C, [N, N m] (force m g, moment r_cg x m g)."""
+    force = mech.payload_mass * np.asarray(mech.gravity, dtype=float)
+    return np.concatenate([force, np.cross(np.asarray(mech.centre_of_gravity, dtype=float), force)])
+
+
+_RULES = {"a": "0 <= a <= l/2", "mu": "0 <= mu <= 1", "d": ">= 0", "CL": ">= 0", "phi": "finite", "x0": "finite"}
+
+
+def _validate(values: np.ndarray, names: tuple[str, ...], candidate_offset: int = 0) -> None:
+    """Raise ``ValueError`` naming the first candidate and parameter with an invalid value."""
+    n_c = values.shape[0]
+    with np.errstate(invalid="ignore"):
+        problem = ~np.isfinite(values)
+        dims = values[:, :30].reshape(n_c, N_CHAINS, 5)
+        dim_bad = dims <= 0
+        dim_bad[..., 1] = (dims[..., 1] < 0) | (2.0 * dims[..., 1] > dims[..., 2])
+        problem[:, :30] |= dim_bad.reshape(n_c, 30)
+        problem[:, 30:36:2] |= values[:, 30:36:2] < 0
+        problem[:, 36::3] |= (values[:, 36::3] < 0) | (values[:, 36::3] > 1)
+        problem[:, 37::3] |= values[:, 37::3] < 0
+    if np.any(problem):
+        cand, col = np.argwhere(problem)[0]
+        symbol = names[col].split(".")[1]
+        rule = _RULES.get(symbol, "> 0")
+        raise ValueError(f"candidate {cand + candidate_offset}: parameter {names[col]}={values[cand, col]!r} (SI) is invalid: "
+                         f"must be finite and {rule}")
+
+
+@functools.lru_cache(maxsize=16)
+def _mechanism_constants(mech: MechanismParams) -> dict[str, np.ndarray]:
+    """Arrays of the nominal design that every call needs (cached per mechanism)."""
+    return {
+        "point_a": np.array([c.point_a for c in mech.chains], dtype=float),
+        "point_b": np.array([c.point_b for c in mech.chains], dtype=float),
+        "roll": np.array([c.roll_reference for c in mech.chains], dtype=float),
+        "rotation": np.array([c.rotation for c in mech.chains]),
+        "section": np.array([c.chain.section for c in mech.chains]),
+        "connector": np.array([c.chain.connector_length for c in mech.chains]),
+        "end_block": np.array([c.chain.end_block_length for c in mech.chains]),
+        "actuator": np.array([mech.actuator_stiffness if c.is_driving else np.inf for c in mech.chains]),
+        "wrench": payload_wrench(mech),
+    }
+
+
+def mechanism_matrices(values, space: ParameterSpace, *, candidate_offset: int = 0) -> MechanismMatrices:
+    """Per-candidate matrices for parameter vectors ``values`` (n_c, 45) or (45,) [SI].
+
+    ``space`` supplies the nominal mechanism (points, material, payload, actuators).
+    Raises ``ValueError`` naming the candidate (index + ``candidate_offset``) and parameter
+    for invalid values, or a chain whose dimensions leave no strut.
+    """
+    values = np.atleast_2d(np.asarray(values, dtype=float))
+    if values.ndim != 2 or values.shape[1] != len(space.parameters):
+        raise ValueError(f"parameter values must have shape (n_candidates, {len(space.parameters)}) with all "
+                         f"parameters (use ParameterSpace.full_values for a subset), got {values.shape}")
+    _validate(values, space.all_names, candidate_offset)
+    mech = space.mechanism
+    n_c = values.shape[0]
+    dims = values[:, :30].reshape(n_c, N_CHAINS, 5)
+    w, a, l, t1, t2 = (dims[..., j] for j in range(5))
+    fixed = _mechanism_constants(mech)
+    point_a0, point_b, roll, nominal_rotation = fixed["point_a"], fixed["point_b"], fixed["roll"], fixed["rotation"]
+    section, connector, end_block, actuator = fixed["section"], fixed["connector"], fixed["end_block"], fixed["actuator"]
+    offset = np.zeros((n_c, N_CHAINS, 3))
+    d, phi = values[:, 30:36:2], values[:, 31:36:2]
+    offset[:, :3] = d[..., None] * (np.cos(phi)[..., None] * nominal_rotation[:3, :, 1]
+                                     + np.sin(phi)[..., None] * nominal_rotation[:3, :, 2])
+    point_a = point_a0 + offset
+    rotation = axis_rotation(point_a, point_b, roll)
+    length = np.linalg.norm(point_b - point_a, axis=-1)
+    strut = length - 2.0 * end_block - 4.0 * l - 2.0 * connector
+    if np.any(strut <= 0):
+        cand, chain = np.argwhere(strut <= 0)[0]
+        raise ValueError(f"candidate {cand + candidate_offset}: chain {CHAIN_NAMES[chain]} has no strut left (hinge length "
+                         f"l={l[cand, chain] * 1e3:.4g} mm too long for the chain length {length[cand, chain] * 1e3:.4g} mm)")
+    compliance = chain_compliance_entries(length, l, w, a, t1, t2, section=section, connector_length=connector,
+                                          end_block_length=end_block, material=mech.material,
+                                          actuator_stiffness=actuator)
+    stiffness = stiffness_from_entries(compliance)
+    # (the compiled kernel also returns parasitic rows of one centre point; they are
+    # replaced below by the per-direction pivots)
+    centre_distance = end_block + l + 0.5 * connector
+    centre = point_b - centre_distance[..., None] * rotation[..., :, 0]
+    if n_c >= COMPILED_MIN_CANDIDATES and kernel.available():
+        linear = kernel.assemble_compiled(stiffness, rotation, point_b, centre, fixed["wrench"])
+        if not np.all(np.isfinite(linear["gravity_pose"])):
+            cand = int(np.argwhere(~np.all(np.isfinite(linear["gravity_pose"]), axis=1))[0, 0])
+            raise ValueError(f"candidate {cand + candidate_offset}: the frame stiffness is not positive definite; "
+                             f"the mechanism is singular for these parameters")
+        transform, frame_stiffness, axial_gain = linear["frame_transform"], linear["frame_stiffness"], linear["axial_gain"]
+        input_gain, gravity_pose = linear["input_gain"], linear["gravity_pose"]
+    else:
+        transform = frame_to_point_transform(rotation, point_b)
+        transform_t = np.swapaxes(transform, -1, -2)
+        frame_stiffness = np.sum(transform_t @ stiffness @ transform, axis=1)
+        axial_gain = np.swapaxes((transform_t @ stiffness[..., :, :1])[..., 0], -1, -2)  # (n_c, 6 dof, 6 chains)
+        rhs = np.concatenate([axial_gain, np.broadcast_to(fixed["wrench"][:, None], (n_c, 6, 1))], axis=-1)
+        solved = np.linalg.solve(frame_stiffness, rhs)
+        input_gain, gravity_pose = solved[..., :6], solved[..., 6]
+    # Eq. 4-5 with the paper's "distance between the corresponding flexure hinges": a
+    # local-y swing turns the strut about its two leaf-1 hinges (thin in y), a local-z
+    # swing about its two leaf-2 hinges, so each direction has its own pivot pair (the
+    # paper's points C4 and C3). The rows give the B-side pivot's lateral displacement,
+    # scaled by sqrt(L_d / L_y) and sqrt(L_d / L_z) so that one K_L = 1/(2 L_d) per chain
+    # yields r = -(dy^2 / (2 L_y) + dz^2 / (2 L_z)). See docs/model.md.
+    axis = rotation[..., :, 0]
+    pivot_y = point_b - (end_block + 0.5 * l)[..., None] * axis
+    pivot_z = point_b - (end_block + 1.5 * l + connector)[..., None] * axis
+    pivot_distance = length - 2.0 * end_block - 2.0 * l - connector
+    span_y = length - 2.0 * end_block - l
+    span_z = length - 2.0 * end_block - 3.0 * l - 2.0 * connector
+    rows_y = frame_to_point_transform(rotation, pivot_y)[:, :, 1, :] * np.sqrt(pivot_distance / span_y)[..., None]
+    rows_z = frame_to_point_transform(rotation, pivot_z)[:, :, 2, :] * np.sqrt(pivot_distance / span_z)[..., None]
+    parasitic_rows = np.concatenate([rows_y, rows_z], axis=1)
+    parasitic_gain = parasitic_rows @ input_gain
+    parasitic_gravity = np.einsum("ckd,cd->ck", parasitic_rows, gravity_pose)
+    coupling = np.swapaxes(axial_gain, -1, -2) @ input_gain
+    axial_stiffness = stiffness[..., 0, 0]
+    load_gain = coupling - axial_stiffness[:, :, None] * np.eye(N_CHAINS)
+    nut = axial_stiffness[:, DRIVING] - np.diagonal(coupling, axis1=1, axis2=2)[:, DRIVING]
+    if np.any(nut <= 0):
+        cand, chain = np.argwhere(nut <= 0)[0]
+        raise ValueError(f"candidate {cand + candidate_offset}: driving chain D{chain + 1} has no stiffness of its own "
+                         f"(s = {nut[cand, chain]:.3g} N/m); the mechanism is singular for these parameters")
+    return MechanismMatrices(
+        chain_stiffness=stiffness, frame_transform=transform, rotation=rotation, point_a=point_a,
+        frame_stiffness=frame_stiffness, axial_gain=axial_gain, input_gain=input_gain, gravity_pose=gravity_pose,
+        gravity_loads=np.einsum("cdi,cd->ci", axial_gain, gravity_pose), coupling=coupling,
+        axial_stiffness=axial_stiffness, load_gain=load_gain, nut_stiffness=nut,
+        parasitic_rows=parasitic_rows, parasitic_gain=parasitic_gain, parasitic_gravity=parasitic_gravity,
+        parasitic_coefficient=0.5 / pivot_distance,
+        mu=values[:, 36::3].copy(), clearance=values[:, 37::3].copy(), initial_position=values[:, 38::3].copy(),
+    )
