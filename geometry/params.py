@@ -32,6 +32,7 @@ __all__ = [
     "CircularNotchHinge",
     "LeafHinge",
     "FlexureChain",
+    "ChainSegment",
     "ChainPlacement",
     "MechanismParams",
     "reference_mechanism",
@@ -247,6 +248,45 @@ class FlexureChain:
     def pivot_distance(self) -> float:
         """L_d of paper Eq. 4: distance between the centres of the two biaxial flexures [m]."""
         return self.length - 2 * self.end_block_length - 2 * self.hinge_length - self.connector_length
+
+
+@dataclass(frozen=True, kw_only=True)
+class ChainSegment:
+    """The part of a ``FlexureChain`` between two cross-sections x_start < x_end [m]
+    (chain frame). The cuts must lie in rigid segments (end blocks, connectors, strut),
+    never inside a leaf, so every segment is a hinge between two blocks. Its end faces are
+    named "A" (at x_start) and "B" (at x_end), like a chain's. The virtual prototype
+    condenses each segment to a 12 x 12 superelement (docs/prototype.md).
+    """
+
+    chain: FlexureChain
+    x_start: float
+    x_end: float
+
+    def __post_init__(self) -> None:
+        _finite("x_start", self.x_start)
+        _finite("x_end", self.x_end)
+        length = self.chain.length
+        _require(0.0 <= self.x_start < self.x_end, "x_start", self.x_start, f">= 0 and < x_end = {self.x_end * 1e3:.6g} mm")
+        _require(self.x_end <= length + 1e-12, "x_end", self.x_end, f"<= chain length = {length * 1e3:.6g} mm")
+        for name, x in (("x_start", self.x_start), ("x_end", self.x_end)):
+            for kind, a, b in self.chain.segments():
+                if kind.startswith("leaf") and a + 1e-12 < x < b - 1e-12:
+                    raise ValueError(f"{name}={x * 1e3:.6g} mm cuts through a leaf ({a * 1e3:.6g}-{b * 1e3:.6g} mm); "
+                                     f"cut in a block, connector or the strut")
+
+    @property
+    def length(self) -> float:
+        return self.x_end - self.x_start
+
+    def segments(self) -> tuple[tuple[str, float, float], ...]:
+        """The chain's segments clipped to [x_start, x_end], empty ones dropped."""
+        out = []
+        for kind, a, b in self.chain.segments():
+            a, b = max(a, self.x_start), min(b, self.x_end)
+            if b - a > 1e-12:
+                out.append((kind, a, b))
+        return tuple(out)
 
 
 def chain_rotation(point_a: np.ndarray, point_b: np.ndarray, roll_reference: np.ndarray) -> np.ndarray:

@@ -18,15 +18,16 @@ from __future__ import annotations
 
 import numpy as np
 
-from flexcal.geometry.params import FlexureChain, Material
+from flexcal.geometry.params import CircularNotchHinge, FlexureChain, LeafHinge, Material
 
 from . import kernel
 from .frames import twist_transform
-from .hinge import (ENTRY_INDEX, _gauss_legendre, beam_compliance, entries_to_matrix, gauss_node_count,
-                    leaf_compliance, segment_entries, shear_coefficient, torsion_constant)
+from .hinge import (ENTRY_INDEX, _gauss_legendre, beam_compliance, circular_notch_compliance, entries_to_matrix,
+                    gauss_node_count, leaf_compliance, segment_entries, shear_coefficient, torsion_constant)
 
 __all__ = [
     "serial_compliance",
+    "hinge_part_compliance",
     "chain_elements",
     "chain_compliance",
     "chain_compliance_matrix",
@@ -250,3 +251,25 @@ def chain_stiffness_matrix(chain: FlexureChain, material: Material) -> np.ndarra
     out[6:, :6] = -k @ w
     out[6:, 6:] = k
     return out
+
+
+def hinge_part_compliance(hinge: LeafHinge | CircularNotchHinge, material: Material) -> np.ndarray:
+    """(6, 6) compliance of a whole hinge part at its free-end reference point with its two
+    blocks elastic: fixed block, hinge, free block in series (Eq. 1), the blocks as
+    Timoshenko beams of the block height x width. ``hinge_compliance_matrix`` takes the
+    blocks rigid; an FEM of the part sees them, so this is the like-for-like reference.
+    """
+    if isinstance(hinge, CircularNotchHinge):
+        core, half, width = circular_notch_compliance(hinge.radius, hinge.thickness, hinge.width, material), \
+            hinge.radius, hinge.width
+    elif isinstance(hinge, LeafHinge):
+        core, half, width = leaf_compliance(hinge.length, hinge.thickness, hinge.width, hinge.fillet, material), \
+            0.5 * hinge.length, hinge.width
+    else:
+        raise TypeError(f"expected CircularNotchHinge or LeafHinge, got {type(hinge).__name__}")
+    block = beam_compliance(hinge.block_length, hinge.height, width, material)
+    end = half + hinge.block_length
+    elements = np.stack([block, core, block])
+    points = np.array([[-half, 0.0, 0.0], [half, 0.0, 0.0], [end, 0.0, 0.0]])
+    rotations = np.broadcast_to(np.eye(3), (3, 3, 3))
+    return serial_compliance(elements, rotations, points, np.array([end, 0.0, 0.0]))

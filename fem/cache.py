@@ -1,0 +1,161 @@
+"""Content-addressed cache of condensed FEM results (NPZ files).
+
+A result is stored under the SHA-256 of a canonical JSON description of everything it
+depends on: the geometry parameters, the mesh settings, the material, the load/coupling
+description the caller adds, and the code version (the package version plus a hash of
+the FEM numerics sources, so a change of the numerics never serves a stale matrix).
+A repeated run finds the file and costs one ``np.load``.
+
+Location: ``$FLEXCAL_CACHE_DIR`` if set, else ``~/.cache/flexcal``. Files are written
+whole or not at all (temporary file in the same folder, then ``os.replace``); a
+damaged file is treated as a miss and rewritten.
+
+Usage::
+
+    parts = {"kind": "hinge_compliance", "hinge": hinge, "mesh": {"n_thickness": 3},
+             "material": STEEL}
+    arrays = cached(parts, lambda: {"compliance": hinge_compliance(...)})
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import math
+import os
+import tempfile
+import zipfile
+from pathlib import Path
+from typing import Any, Callable, Mapping
+
+import numpy as np
+
+__all__ = [
+    "CACHE_ENV",
+    "cache_dir",
+    "code_version",
+    "canonical",
+    "cache_key",
+    "load_cached",
+    "store_cached",
+    "cached",
+]
+
+CACHE_ENV = "FLEXCAL_CACHE_DIR"
+
+# The modules whose numerics determine a cached result. Editing any of them changes
+# the code version and therefore every key.
+_NUMERICS_MODULES = (
+    "elements.py",
+    "assembly.py",
+    "coupling.py",
+    "condense.py",
+    "solve.py",
+    "structured.py",
+    "mesh.py",
+)
+
+
+def cache_dir(path: str | os.PathLike | None = None) -> Path:
+    """The cache folder: ``path`` if given, else ``$FLEXCAL_CACHE_DIR``, else
+    ``~/.cache/flexcal`` (created on first write)."""
+    if path is not None:
+        return Path(path)
+    env = os.environ.get(CACHE_ENV)
+    return Path(env) if env else Path.home() / ".cache" / "flexcal"
+
+
+def code_version() -> str:
+    """Package version + SHA-256 (first 16 hex) of the FEM numerics sources."""
+    try:
+        from importlib.metadata import version
+
+        package = version("flexcal")
+    except Exception:  # not installed (running from a source tree)
+        package = "unknown"
+    digest = hashlib.sha256()
+    here = Path(__file__).parent
+    for name in _NUMERICS_MODULES:
+        source = here / name
+        if source.exists():
+            digest.update(name.encode())
+            digest.update(source.read_bytes())
+    return f"{package}+{digest.hexdigest()[:16]}"
+
+
+def canonical(value: Any) -> Any:
+    """A JSON-ready form of ``value`` that is equal for equal inputs: dataclasses become
+    ``{"__type__": name, fields...}``, mappings get sorted keys, numpy arrays and
+    scalars become lists/numbers (JSON writes floats round-trip exact)."""
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        fields = {f.name: canonical(getattr(value, f.name)) for f in dataclasses.fields(value)}
+        return {"__type__": type(value).__qualname__, **fields}
+    if isinstance(value, Mapping):
+        return {str(k): canonical(v) for k, v in sorted(value.items(), key=lambda kv: str(kv[0]))}
+    if isinstance(value, (list, tuple)):
+        return [canonical(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return {"__array__": canonical(value.tolist()), "dtype": str(value.dtype), "shape": list(value.shape)}
+    if isinstance(value, np.generic):
+        return canonical(value.item())
+    if isinstance(value, float):
+        if not math.isfinite(value):
+            raise ValueError(f"cannot key a cache entry on the non-finite number {value!r}")
+        return value  # json writes repr(float): round-trip exact
+    if value is None or isinstance(value, (bool, int, str)):
+        return value
+    raise ValueError(f"cannot key a cache entry on a {type(value).__name__}; pass numbers, strings, arrays or dataclasses")
+
+
+def cache_key(parts: Mapping[str, Any]) -> str:
+    """SHA-256 hex digest of ``parts`` plus the code version."""
+    text = json.dumps({"code_version": code_version(), "parts": canonical(parts)}, sort_keys=True, separators=(",", ":"))
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def _path(key: str, directory: Path) -> Path:
+    if len(key) != 64 or any(c not in "0123456789abcdef" for c in key):
+        raise ValueError(f"cache key {key!r} is not a SHA-256 hex digest")
+    return directory / f"{key}.npz"
+
+
+def load_cached(key: str, directory: str | os.PathLike | None = None) -> dict[str, np.ndarray] | None:
+    """The arrays stored under ``key``, or ``None`` (missing or unreadable file)."""
+    path = _path(key, cache_dir(directory))
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            return {name: data[name] for name in data.files}
+    except (FileNotFoundError, OSError, ValueError, zipfile.BadZipFile, EOFError):
+        return None
+
+
+def store_cached(key: str, arrays: Mapping[str, np.ndarray], directory: str | os.PathLike | None = None) -> Path:
+    """Write ``arrays`` under ``key`` atomically; returns the file path."""
+    folder = cache_dir(directory)
+    folder.mkdir(parents=True, exist_ok=True)
+    path = _path(key, folder)
+    handle, tmp = tempfile.mkstemp(prefix=f".{key[:16]}.", suffix=".tmp", dir=folder)
+    try:
+        with os.fdopen(handle, "wb") as stream:
+            np.savez(stream, **{name: np.asarray(a) for name, a in arrays.items()})
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return path
+
+
+def cached(
+    parts: Mapping[str, Any],
+    compute: Callable[[], Mapping[str, np.ndarray]],
+    directory: str | os.PathLike | None = None,
+) -> dict[str, np.ndarray]:
+    """Arrays for ``parts`` from the cache, or ``compute()`` them and store them."""
+    key = cache_key(parts)
+    found = load_cached(key, directory)
+    if found is not None:
+        return found
+    arrays = {name: np.asarray(a) for name, a in compute().items()}
+    store_cached(key, arrays, directory)
+    return arrays

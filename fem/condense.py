@@ -1,0 +1,251 @@
+"""Hinge compliance and chain stiffness at rigid end reference points.
+
+Both ends of the part are end faces (planes) rigidly coupled to reference points (see
+``flexcal.fem.coupling``). DOF order at a reference point: ux, uy, uz, rx, ry, rz [m,
+rad]; loads Fx, Fy, Fz, Mx, My, Mz [N, N m]. Results are expressed in the mesh axes, or
+in the axes given by ``frame`` ((3, 3), columns = frame axes in mesh coordinates).
+
+* ``solve_hinge``: fixed face clamped, six unit loads at the free reference point in one
+  factorization -> compliance (6, 6) and the six displacement fields.
+* ``solve_chain``: static condensation of the whole part onto the 12 master DOFs of the
+  two reference points, ``K_c = K_mm - K_mi K_ii^-1 K_im`` -> stiffness (12, 12), DOF
+  order (A then B), and the 12 displacement fields of unit master motions.
+
+The fields feed ``flexcal.fem.results.write_vtu`` for any load case by linearity
+(``hinge_displacement``, ``chain_displacement``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from flexcal.geometry.params import Material
+
+from .assembly import assemble_stiffness, check_mesh
+from .coupling import DEFAULT_PLANE_TOLERANCE, CouplingMap, RigidCoupling, coupling_map, select_plane_nodes, skew
+from .solve import solve_spd
+
+__all__ = [
+    "HingeSolution",
+    "ChainSolution",
+    "solve_hinge",
+    "hinge_compliance",
+    "hinge_displacement",
+    "solve_chain",
+    "chain_stiffness",
+    "chain_displacement",
+    "twist_transform",
+]
+
+Plane = tuple[np.ndarray, np.ndarray]
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class HingeSolution:
+    """compliance (6, 6) [m/N, m/(N m), rad/N, rad/(N m)] at the free reference point;
+    unit_load_fields (6, n_nodes, 3) [m per unit load]: field k answers a unit load k
+    (Fx, Fy, Fz, Mx, My, Mz, mesh axes); fixed_nodes, free_nodes: the coupled face
+    nodes; free_point (3,) [m]; n_reduced_dofs: size of the solved system."""
+
+    compliance: np.ndarray
+    unit_load_fields: np.ndarray
+    fixed_nodes: np.ndarray
+    free_nodes: np.ndarray
+    free_point: np.ndarray
+    n_reduced_dofs: int
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class ChainSolution:
+    """stiffness (12, 12) [SI] between reference points A and B (DOFs ux..rz at A then
+    at B); unit_motion_fields (12, n_nodes, 3) [m per unit master DOF]: field k is the
+    displacement when master DOF k moves by one unit (mesh axes) and the others stay;
+    nodes_a, nodes_b: coupled face nodes; point_a, point_b (3,) [m]."""
+
+    stiffness: np.ndarray
+    unit_motion_fields: np.ndarray
+    nodes_a: np.ndarray
+    nodes_b: np.ndarray
+    point_a: np.ndarray
+    point_b: np.ndarray
+    n_reduced_dofs: int
+
+
+def twist_transform(frame: np.ndarray) -> np.ndarray:
+    """(6, 6) block-diag(R^T, R^T) taking a twist or wrench from mesh axes to the axes of
+    ``frame`` (3, 3) (columns = frame axes in mesh coordinates, orthonormal)."""
+    R = np.asarray(frame, float)
+    if R.shape != (3, 3) or not np.allclose(R.T @ R, np.eye(3), atol=1e-9):
+        raise ValueError("frame must be a (3, 3) orthonormal matrix whose columns are the frame axes")
+    A = np.zeros((6, 6))
+    A[:3, :3] = A[3:, 3:] = R.T
+    return A
+
+
+def _reduced(mesh, material: Material, couplings: list[RigidCoupling], stiffness: sp.spmatrix | None):
+    nodes, _ = check_mesh(mesh)
+    K = assemble_stiffness(mesh, material) if stiffness is None else sp.csr_matrix(stiffness)
+    if K.shape != (3 * len(nodes),) * 2:
+        raise ValueError(f"stiffness has shape {K.shape}; expected {(3 * len(nodes),) * 2}")
+    cmap = coupling_map(len(nodes), nodes, couplings)
+    T = cmap.transform
+    K_r = (T.T @ K @ T).tocsr()
+    return nodes, cmap, K_r
+
+
+def _reduced_rigid_modes(nodes: np.ndarray, cmap: CouplingMap, couplings: list[RigidCoupling]) -> np.ndarray:
+    """Rigid-body modes (n_reduced, 6) in reduced DOFs (near-null space for AMG)."""
+    origin = nodes.mean(axis=0)
+    B = np.zeros((cmap.n_reduced, 6))
+    node = cmap.free_node_dofs // 3
+    comp = cmap.free_node_dofs % 3
+    full = np.zeros((len(nodes), 3, 6))
+    full[:, :, :3] = np.eye(3)
+    full[:, :, 3:] = -skew(nodes - origin)
+    B[: cmap.free_node_dofs.size] = full[node, comp]
+    for coupling, master in zip(couplings, cmap.master_dofs):
+        if master is not None:
+            B[master[:3], :3] = np.eye(3)
+            B[master[:3], 3:] = -skew(coupling.reference_point - origin)
+            B[master[3:], 3:] = np.eye(3)
+    return B
+
+
+def solve_hinge(
+    mesh,
+    material: Material,
+    fixed_plane: Plane,
+    free_plane: Plane,
+    free_point: np.ndarray,
+    *,
+    frame: np.ndarray | None = None,
+    relative_tolerance: float = DEFAULT_PLANE_TOLERANCE,
+    method: str = "auto",
+    stiffness: sp.spmatrix | None = None,
+) -> HingeSolution:
+    """Clamp the face on ``fixed_plane``, couple the face on ``free_plane`` rigidly to
+    ``free_point`` [m] and solve the six unit loads there (one factorization).
+
+    Planes are (point (3,), normal (3,)) [m]; face nodes within ``relative_tolerance``
+    times the median edge length (``flexcal.fem.coupling``). ``stiffness``: a K already
+    assembled for this mesh and material (else assembled here). ``frame``: express the
+    compliance in these axes (fields stay in mesh axes, loads in ``frame`` axes)."""
+    fixed_nodes = select_plane_nodes(mesh, fixed_plane, relative_tolerance=relative_tolerance)
+    free_nodes = select_plane_nodes(mesh, free_plane, relative_tolerance=relative_tolerance)
+    free_point = np.asarray(free_point, float).reshape(3)
+    couplings = [
+        RigidCoupling(nodes=fixed_nodes, reference_point=np.asarray(fixed_plane[0], float), fixed=True),
+        RigidCoupling(nodes=free_nodes, reference_point=free_point),
+    ]
+    nodes, cmap, K_r = _reduced(mesh, material, couplings, stiffness)
+    master = cmap.master_dofs[1]
+    A = np.eye(6) if frame is None else twist_transform(frame)
+    rhs = np.zeros((cmap.n_reduced, 6))
+    rhs[master] = A.T  # column k: unit load k given in frame axes, in mesh axes
+    near_null = _reduced_rigid_modes(nodes, cmap, couplings) if method == "amg" else None
+    U_r = solve_spd(K_r, rhs, method=method, near_null_space=near_null)
+    compliance = A @ U_r[master]
+    fields = (cmap.transform @ U_r).T.reshape(6, len(nodes), 3)
+    return HingeSolution(
+        compliance=compliance,
+        unit_load_fields=fields,
+        fixed_nodes=fixed_nodes,
+        free_nodes=free_nodes,
+        free_point=free_point,
+        n_reduced_dofs=cmap.n_reduced,
+    )
+
+
+def hinge_compliance(
+    mesh,
+    material: Material,
+    fixed_plane: Plane,
+    free_plane: Plane,
+    free_point: np.ndarray,
+    **options,
+) -> np.ndarray:
+    """Compliance (6, 6) at ``free_point`` with the ``fixed_plane`` face clamped
+    (rows ux, uy, uz, rx, ry, rz; columns Fx, Fy, Fz, Mx, My, Mz; SI). Options as in
+    ``solve_hinge``."""
+    return solve_hinge(mesh, material, fixed_plane, free_plane, free_point, **options).compliance
+
+
+def hinge_displacement(solution: HingeSolution, wrench: np.ndarray) -> np.ndarray:
+    """Displacement (..., n_nodes, 3) [m] for wrenches (..., 6) [N, N m] at the free
+    reference point (same axes as the compliance)."""
+    return np.einsum("...k,kni->...ni", np.asarray(wrench, float), solution.unit_load_fields)
+
+
+def solve_chain(
+    mesh,
+    material: Material,
+    plane_a: Plane,
+    point_a: np.ndarray,
+    plane_b: Plane,
+    point_b: np.ndarray,
+    *,
+    frame: np.ndarray | None = None,
+    relative_tolerance: float = DEFAULT_PLANE_TOLERANCE,
+    method: str = "auto",
+    stiffness: sp.spmatrix | None = None,
+) -> ChainSolution:
+    """Condense the part onto the reference points A and B (faces on ``plane_a`` and
+    ``plane_b`` rigidly coupled to them): stiffness (12, 12) and the unit-motion fields.
+    Options as in ``solve_hinge``; ``frame`` rotates both points' DOFs."""
+    nodes_a = select_plane_nodes(mesh, plane_a, relative_tolerance=relative_tolerance)
+    nodes_b = select_plane_nodes(mesh, plane_b, relative_tolerance=relative_tolerance)
+    point_a = np.asarray(point_a, float).reshape(3)
+    point_b = np.asarray(point_b, float).reshape(3)
+    couplings = [RigidCoupling(nodes=nodes_a, reference_point=point_a), RigidCoupling(nodes=nodes_b, reference_point=point_b)]
+    nodes, cmap, K_r = _reduced(mesh, material, couplings, stiffness)
+    n_i = cmap.free_node_dofs.size
+    m = np.concatenate(cmap.master_dofs)  # the last 12 reduced DOFs, A then B
+    assert np.array_equal(m, np.arange(n_i, n_i + 12))
+    i = np.arange(n_i)
+    K_ii = K_r[:n_i, :n_i].tocsr()
+    K_im = K_r[:n_i, n_i:].toarray()
+    K_mm = K_r[n_i:, n_i:].toarray()
+    near_null = None
+    if method == "amg":
+        near_null = _reduced_rigid_modes(nodes, cmap, couplings)[i]
+    X = solve_spd(K_ii, K_im, method=method, near_null_space=near_null)  # K_ii^-1 K_im
+    K_c = K_mm - K_im.T @ X
+    u_r = np.zeros((cmap.n_reduced, 12))
+    u_r[i] = -X
+    u_r[m] = np.eye(12)
+    fields = (cmap.transform @ u_r).T.reshape(12, len(nodes), 3)
+    if frame is not None:
+        A = np.kron(np.eye(2), twist_transform(frame))
+        K_c = A @ K_c @ A.T
+        fields = np.einsum("kl,lni->kni", A, fields)
+    return ChainSolution(
+        stiffness=K_c,
+        unit_motion_fields=fields,
+        nodes_a=nodes_a,
+        nodes_b=nodes_b,
+        point_a=point_a,
+        point_b=point_b,
+        n_reduced_dofs=cmap.n_reduced,
+    )
+
+
+def chain_stiffness(
+    mesh,
+    material: Material,
+    plane_a: Plane,
+    point_a: np.ndarray,
+    plane_b: Plane,
+    point_b: np.ndarray,
+    **options,
+) -> np.ndarray:
+    """Stiffness (12, 12) [SI] between reference points A and B (ux, uy, uz, rx, ry, rz at
+    A then at B). Options as in ``solve_chain``."""
+    return solve_chain(mesh, material, plane_a, point_a, plane_b, point_b, **options).stiffness
+
+
+def chain_displacement(solution: ChainSolution, motions: np.ndarray) -> np.ndarray:
+    """Displacement (..., n_nodes, 3) [m] for master motions (..., 12) [m, rad] (A then B)."""
+    return np.einsum("...k,kni->...ni", np.asarray(motions, float), solution.unit_motion_fields)

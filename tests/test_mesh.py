@@ -1,0 +1,372 @@
+"""Tet meshing: the TetMesh contract, sizing, snapping onto exact surfaces, pytetwild.
+
+Snapping is tested first on structured meshes whose boundary nodes were pushed off the
+surfaces at random (fast, no pytetwild); then one coarse pytetwild mesh of the reference
+notch hinge is checked end to end. Heavier meshes are marked slow.
+"""
+
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from flexcal.geometry.exact import exact_volume, thin_sections
+from flexcal.geometry.surfaces import CylinderPatch, boundary_patches
+from flexcal.geometry.params import CircularNotchHinge, FlexureChain, LeafHinge
+from flexcal.fem.mesh_projection import boundary_faces, project_onto, tangent_pairs
+from flexcal.fem.mesh_quality import EDGES, corner_volumes, p2_volumes, radius_ratio
+from flexcal.fem.mesh_sizing import kuhn_tets, sizing_grid, target_size
+from flexcal.fem.mesh_snap import boundary_node_sets, snap_to_part
+from flexcal.fem.mesh_tets import TetMesh, linear_to_quadratic
+
+NOTCH = CircularNotchHinge(radius=5e-3, thickness=1e-3, width=10e-3, block_length=5e-3)
+LEAF = LeafHinge(length=20e-3, thickness=4e-3, width=40e-3, fillet=6e-3, block_length=10e-3)
+STEPPED = LeafHinge(length=20e-3, thickness=4e-3, width=12e-3, fillet=0.0, block_length=6e-3, block_height=10e-3)
+
+
+# ----------------------------------------------------------------------------------------
+# structured test meshes
+
+
+def grid_mesh(xs, ys, zs):
+    """Linear tet mesh of a tensor grid (positive volumes)."""
+    nodes = np.stack(np.meshgrid(xs, ys, zs, indexing="ij"), axis=-1).reshape(-1, 3)
+    tets = kuhn_tets((len(xs), len(ys), len(zs)))
+    flip = corner_volumes(nodes, tets) < 0
+    tets[flip] = tets[flip][:, [0, 2, 1, 3]]
+    return nodes, tets
+
+
+def compact(nodes, tets):
+    used, inverse = np.unique(tets, return_inverse=True)
+    return nodes[used], inverse.reshape(-1, 4)
+
+
+def notch_mesh(n_thickness=4):
+    """Mapped mesh of NOTCH: y = s * h(x), s in [-1/2, 1/2]; boundary nodes exact."""
+    R, e = NOTCH.radius, NOTCH.block_length
+    phi = np.linspace(-np.pi / 2, np.pi / 2, 33)  # equal arcs of the notch circle
+    xs = np.concatenate([np.linspace(-R - e, -R, 4)[:-1], R * np.sin(phi), np.linspace(R, R + e, 4)[1:]])
+    nodes, tets = grid_mesh(xs, np.linspace(-0.5, 0.5, n_thickness + 1), np.linspace(-5e-3, 5e-3, 6))
+    (section,) = thin_sections(NOTCH)
+    x = nodes[:, 0]
+    height = np.where(np.abs(x) < R, section.thickness(x), NOTCH.height)
+    nodes[:, 1] *= height
+    return nodes, tets
+
+
+def stepped_leaf_mesh():
+    """STEPPED (plain leaf between taller blocks): grid through every edge, cells
+    outside the part removed. Sharp convex and concave edges, no curves."""
+    l, t, e, h, w = STEPPED.length, STEPPED.thickness, STEPPED.block_length, STEPPED.height, STEPPED.width
+    xs = np.unique(np.concatenate([np.linspace(-l / 2 - e, -l / 2, 4), np.linspace(-l / 2, l / 2, 9),
+                                   np.linspace(l / 2, l / 2 + e, 4)]))
+    ys = np.unique(np.concatenate([np.linspace(-h / 2, -t / 2, 3), np.linspace(-t / 2, t / 2, 4),
+                                   np.linspace(t / 2, h / 2, 3)]))
+    nodes, tets = grid_mesh(xs, ys, np.linspace(-w / 2, w / 2, 5))
+    c = nodes[tets].mean(axis=1)
+    keep = ~((np.abs(c[:, 0]) < l / 2) & (np.abs(c[:, 1]) > t / 2))
+    return compact(nodes, tets[keep])
+
+
+def perturb_boundary(nodes, tets, size, seed=0):
+    """Push boundary nodes off the surfaces by up to ``size`` [m] in every direction."""
+    rng = np.random.default_rng(seed)
+    out = nodes.copy()
+    b = np.unique(boundary_faces(tets))
+    out[b] += rng.uniform(-size, size, (len(b), 3))
+    assert corner_volumes(out, tets).min() > 0
+    return out
+
+
+# ----------------------------------------------------------------------------------------
+# TetMesh and quadratic nodes
+
+
+def test_tetmesh_contract():
+    nodes, tets4 = grid_mesh([0, 1.0], [0, 1.0], [0, 1.0])
+    nodes10, tets10, edges = linear_to_quadratic(nodes, tets4)
+    mesh = TetMesh(nodes10, tets10)  # positional, as the FEM builds it
+    assert (mesh.n_nodes, mesh.n_tets, mesh.n_dof) == (len(nodes10), 6, 3 * len(nodes10))
+    np.testing.assert_array_equal(mesh.corner_tets, tets4)
+    assert mesh.volume == pytest.approx(1.0, rel=1e-14)
+    with pytest.raises(ValueError):
+        mesh.nodes[0, 0] = 5.0  # read-only
+    with pytest.raises(ValueError, match=r"\(n_tets, 10\)"):
+        TetMesh(nodes=nodes, tets=tets4)
+    with pytest.raises(ValueError, match="non-positive volume"):
+        TetMesh(nodes=nodes10, tets=tets10[:, [0, 2, 1, 3, 6, 5, 4, 7, 9, 8]])
+    with pytest.raises(ValueError, match="outside"):
+        TetMesh(nodes=nodes10, tets=tets10 + 100)
+
+
+def test_mid_nodes_are_shared_edge_midpoints():
+    nodes, tets4 = grid_mesh(np.linspace(0, 1, 3), np.linspace(0, 2, 4), np.linspace(0, 1, 3))
+    nodes10, tets10, edges = linear_to_quadratic(nodes, tets4)
+    for m, (a, b) in enumerate(EDGES):
+        np.testing.assert_array_equal(nodes10[tets10[:, 4 + m]], 0.5 * (nodes10[tets10[:, a]] + nodes10[tets10[:, b]]))
+    # one node per edge: (sorted corner pair) -> mid-node is a function and one-to-one
+    pairs = np.sort(tets10[:, EDGES], axis=2).reshape(-1, 2)
+    mids = tets10[:, 4:].ravel()
+    table = {}
+    for pair, mid in zip(map(tuple, pairs), mids):
+        assert table.setdefault(pair, mid) == mid
+    assert len(set(table.values())) == len(table) == len(edges) == len(nodes10) - len(nodes)
+
+
+def test_unique_rows_equals_numpy_unique():
+    from flexcal.fem.mesh_quality import unique_rows
+
+    rows = np.random.default_rng(0).integers(0, 40, (2000, 3))
+    fast = unique_rows(rows, 40, return_inverse=True, return_counts=True)
+    plain = np.unique(rows, axis=0, return_index=True, return_inverse=True, return_counts=True)
+    for a, b in zip(fast, plain):
+        np.testing.assert_array_equal(np.ravel(a), np.ravel(b))
+
+
+def test_kuhn_grid_is_conforming():
+    nodes, tets = grid_mesh(np.linspace(0, 3, 4), np.linspace(0, 2, 3), np.linspace(0, 1, 2))
+    assert corner_volumes(nodes, tets).sum() == pytest.approx(6.0, rel=1e-14)
+    # a conforming mesh has exactly the surface triangles of the box: 2 per cell face
+    assert len(boundary_faces(tets)) == 2 * 2 * (3 * 2 + 3 * 1 + 2 * 1)
+    assert radius_ratio(nodes, tets).min() > 0.5
+
+
+# ----------------------------------------------------------------------------------------
+# sizing
+
+
+def test_target_size_fine_in_the_neck_coarse_elsewhere():
+    n, h_max = 3, 2.5e-3
+    t, R = NOTCH.thickness, NOTCH.radius
+    size = target_size(NOTCH, np.array([[0, 0, 0], [0, 0.4e-3, 4e-3], [2e-3, 0, 0], [-9e-3, 0, 0],
+                                        [0, 3e-3, 0]]), n_through=n, h_max=h_max)
+    t_2mm = t + 2 * R - 2 * np.sqrt(R**2 - 4e-6)
+    np.testing.assert_allclose(size[:3], [t / n, t / n, t_2mm / n], rtol=1e-12)
+    assert size[3] == h_max  # in a block
+    # inside the notch's cut-out (outside the material) the size grows with the distance
+    np.testing.assert_allclose(size[4], t / n + 0.5 * (3e-3 - t / 2), rtol=1e-12)
+
+
+def test_sizing_grid_covers_the_part_with_positive_tets():
+    points, tets, values = sizing_grid(FlexureChain(length=0.15, thickness_1=3e-3, thickness_2=3e-3),
+                                       n_through=3, h_max=0.02)
+    assert corner_volumes(points, tets).min() > 0
+    assert values.min() == pytest.approx(1e-3, rel=1e-12) and values.max() == pytest.approx(0.02)
+    assert points[:, 0].min() < 0 and points[:, 0].max() > 0.15
+
+
+# ----------------------------------------------------------------------------------------
+# projection
+
+
+def test_project_onto_edge_of_plane_and_cylinder():
+    patches = {p.name: p for p in boundary_patches(NOTCH)}
+    top, notch = patches["block_free:+y"], patches["hinge:+ynotch"]
+    point = np.array([[5.02e-3, 5.47e-3, 1e-3]])
+    edge = project_onto(point, [top, notch])
+    assert top.surface_distance(edge)[0] == 0.0
+    assert notch.surface_distance(edge)[0] < 1e-18
+    np.testing.assert_allclose(edge, [[5e-3, 5.5e-3, 1e-3]], atol=1e-17)
+
+
+def test_tangent_pairs_are_leaf_to_fillet_only():
+    names = lambda params: {tuple(sorted((boundary_patches(params)[i].name, boundary_patches(params)[j].name)))
+                            for i, j in tangent_pairs(boundary_patches(params))}
+    assert names(NOTCH) == set()  # the notch meets the block top at a right angle
+    leaf = names(LEAF)
+    assert ("hinge:+y", "hinge:+yfillet0") in leaf and ("hinge:-y", "hinge:-yfillet1") in leaf
+    assert len(leaf) == 4
+
+
+def test_snap_restores_sharp_edges_exactly():
+    """Plain leaf between taller blocks (convex and concave edges, corners): after
+    snapping, every surface is exact and so is the volume (all faces planar)."""
+    nodes, tets = stepped_leaf_mesh()
+    tol = 0.1e-3
+    off = perturb_boundary(nodes, tets, 0.3 * tol)
+    mesh, measured = snap_to_part(STEPPED, off, tets, tolerance=tol)
+    assert measured["volume_error_raw"] != 0.0  # the perturbation did change the volume
+    assert abs(measured["volume_error"]) < 1e-13  # planar faces: exact up to round-off
+    assert measured["max_surface_deviation"] < 1e-18
+    assert measured["end_plane_deviation"] == 0.0
+    assert (measured["n_demoted"], measured["n_unsnapped"], measured["n_unassigned"]) == (0, 0, 0)
+    # nodes on three faces (vertices of the solid) are back exactly where they were
+    half = np.array([STEPPED.total_length / 2, STEPPED.height / 2, STEPPED.width / 2])
+    corners = np.nonzero(np.all(np.isclose(np.abs(nodes), half, rtol=0, atol=1e-15), axis=1))[0]
+    assert len(corners) == 8
+    np.testing.assert_allclose(mesh.nodes[corners], nodes[corners], rtol=0, atol=1e-18)
+    (neck,) = measured["necks"]
+    assert neck.thickness_mesh == pytest.approx(STEPPED.thickness, rel=1e-14)
+
+
+def test_snap_puts_corner_and_mid_nodes_on_the_notch():
+    nodes, tets = notch_mesh()
+    tol = 20e-6
+    off = perturb_boundary(nodes, tets, 0.3 * tol, seed=1)
+    mesh, measured = snap_to_part(NOTCH, off, tets, tolerance=tol)
+    patches, node_sets = boundary_node_sets(NOTCH, nodes, tets, tol)
+    notch_ids = {k for k, p in enumerate(patches) if isinstance(p, CylinderPatch)}
+    on_notch = np.array([i for i, ks in node_sets.items() if notch_ids.intersection(ks)])
+    radius = np.hypot(mesh.nodes[on_notch, 0], np.abs(mesh.nodes[on_notch, 1]) - NOTCH.height / 2)
+    np.testing.assert_allclose(radius, NOTCH.radius, rtol=1e-14)
+    # mid-nodes of boundary edges on the notch lie on the circle too (not on the chord)
+    mids = mesh.tets[:, 4:][np.isin(mesh.tets[:, EDGES[:, 0]], on_notch)
+                            & np.isin(mesh.tets[:, EDGES[:, 1]], on_notch)]
+    p = mesh.nodes[np.unique(mids)]
+    on_circle = np.abs(np.hypot(p[:, 0], np.abs(p[:, 1]) - NOTCH.height / 2) - NOTCH.radius) < 1e-12
+    assert on_circle.mean() > 0.5  # boundary edges; the rest are interior chords between notch nodes
+    assert measured["max_surface_deviation"] < 1e-17
+    assert measured["end_plane_deviation"] == 0.0
+    (neck,) = measured["necks"]
+    assert abs(neck.thickness_error) < 1e-12
+    # Arcs of pi/32 rad are exact to 5e-8 R as quadratics, but the mapped cells next to the
+    # blocks are 24 um wide and 2.5 mm tall: curving their edges would fold them, so they
+    # stay straight (n_straight_mid). Their chords cut <= R (1 - cos(pi/64)) = 6 um over
+    # <= 2 cells x 4 ends x 0.5 mm x 10 mm of notch surface: <= 0.16 mm^3 = 1.1e-4 of the volume.
+    assert 0 < measured["n_straight_mid"] < 0.1 * len(on_notch)
+    assert abs(measured["volume_error"]) < 1.1e-4 < abs(measured["volume_error_raw"])
+    interior = np.setdiff1d(np.arange(len(nodes)), np.unique(boundary_faces(tets)))
+    assert np.abs(mesh.nodes[interior] - off[interior]).max() > 0  # the interior followed (morph)
+
+
+def test_snap_without_projection_keeps_the_nodes():
+    nodes, tets = notch_mesh()
+    off = perturb_boundary(nodes, tets, 5e-6, seed=2)
+    mesh, measured = snap_to_part(NOTCH, off, tets, tolerance=20e-6, project=False)
+    np.testing.assert_array_equal(mesh.nodes[: len(off)], off)
+    # unprojected, the mid-nodes sit on chords: at least as far off as the corners
+    assert measured["max_surface_deviation"] >= measured["max_surface_deviation_raw"] > 1e-6
+
+
+# ----------------------------------------------------------------------------------------
+# pytetwild
+
+
+def test_temporary_directory_is_restored_and_removed(tmp_path, monkeypatch):
+    from flexcal.fem.mesh import _inside_temporary_directory
+
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(RuntimeError):
+        with _inside_temporary_directory() as folder:
+            assert Path(os.getcwd()).resolve() == Path(folder).resolve()
+            Path("__tracked_surface.stl").write_text("x")
+            raise RuntimeError("boom")
+    assert Path(os.getcwd()).resolve() == tmp_path.resolve()
+    assert not Path(folder).exists()
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.fixture(scope="module")
+def coarse_notch(tmp_path_factory):
+    pytest.importorskip("pytetwild")
+    from flexcal.fem.mesh import mesh_part
+    from flexcal.geometry.solids import hinge_solid
+
+    folder = tmp_path_factory.mktemp("cwd")
+    previous = os.getcwd()
+    os.chdir(folder)
+    try:
+        mesh, report = mesh_part(hinge_solid(NOTCH), elements_through_thickness=2)
+    finally:
+        os.chdir(previous)
+    return mesh, report, folder
+
+
+def test_pytetwild_leaves_nothing_in_the_working_directory(coarse_notch):
+    _, _, folder = coarse_notch
+    assert list(Path(folder).iterdir()) == []
+
+
+def test_coarse_notch_mesh_is_valid_and_exact_where_it_matters(coarse_notch):
+    mesh, report, _ = coarse_notch
+    assert isinstance(mesh, TetMesh) and mesh.tets.shape[1] == 10
+    assert corner_volumes(mesh.nodes, mesh.tets).min() > 0
+    assert report.min_jacobian_ratio > 0  # curved elements are not folded either
+    assert (report.n_nodes, report.n_tets) == (mesh.n_nodes, mesh.n_tets)
+    length = NOTCH.total_length
+    for point, normal in (((-length / 2, 0, 0), (-1, 0, 0)), ((length / 2, 0, 0), (1, 0, 0))):
+        distance = (mesh.nodes - np.array(point)) @ np.array(normal, float)
+        face = np.abs(distance) < 1e-3 * NOTCH.thickness  # well inside an element
+        assert face.sum() >= 3
+        assert np.abs(distance[face]).max() <= 1e-12 * length
+    assert report.end_plane_deviation <= 1e-12 * length
+    # fTetWild alone leaves the surface tens of um off; snapped, it is exact to round-off
+    assert report.max_surface_deviation_raw > 1e-6
+    assert report.max_surface_deviation < 1e-12 * length
+    # what remains is the quadratic interpolation of arcs of <= 0.5 rad (curvature cap):
+    # radial error <= 1.2e-4 R over the notch surfaces (2 pi R b) -> 1.3e-4 of the volume
+    assert abs(report.volume_error) < 1.3e-4
+    assert mesh.volume == pytest.approx(exact_volume(NOTCH), rel=1.3e-4)
+    (neck,) = report.necks
+    assert abs(neck.thickness_error) < 1e-9
+    assert neck.thickness_min == pytest.approx(NOTCH.thickness, rel=1e-9)
+
+
+def test_coarse_notch_has_the_requested_elements_through_the_neck(coarse_notch):
+    _, report, _ = coarse_notch
+    (neck,) = report.necks
+    # fTetWild splits edges longer than 4/3 and collapses those shorter than 4/5 of the
+    # target, so the median edge is within [0.75, 1.33] x target: elements across >= 0.75 n
+    assert neck.elements_across >= 0.75 * report.options["elements_through_thickness"]
+    assert neck.tets_crossed >= 2
+
+
+def test_coarse_notch_mid_nodes(coarse_notch):
+    mesh, report, _ = coarse_notch
+    n_corner = report.n_corner_nodes
+    mids = mesh.nodes[mesh.tets[:, 4:]]
+    chord = 0.5 * (mesh.nodes[mesh.tets[:, EDGES[:, 0]]] + mesh.nodes[mesh.tets[:, EDGES[:, 1]]])
+    offset = np.linalg.norm(mids - chord, axis=2)
+    curved = offset > 1e-12 * NOTCH.total_length
+    # only mid-nodes on the notch surfaces leave their chord, and by at most the sagitta
+    # of an arc of <= 0.5 rad: R (1 - cos 0.25) = 0.031 R
+    assert curved.any()
+    p = mids[curved]
+    on_circle = np.hypot(p[:, 0], np.abs(p[:, 1]) - NOTCH.height / 2)
+    np.testing.assert_allclose(on_circle, NOTCH.radius, rtol=1e-12)
+    assert offset.max() < 0.031 * NOTCH.radius
+    assert mesh.tets[:, 4:].min() >= n_corner
+
+
+def test_mesh_part_rejects_bad_options():
+    from flexcal.fem.mesh import mesh_part
+    from flexcal.geometry.solids import hinge_solid
+
+    part = hinge_solid(NOTCH)
+    for options, word in ((dict(elements_through_thickness=0), "elements_through_thickness"),
+                          (dict(max_element_size=-1.0), "max_element_size"),
+                          (dict(epsilon=0.5), "epsilon"), (dict(grading=0), "grading")):
+        with pytest.raises(ValueError, match=word):
+            mesh_part(part, **options)
+
+
+# ----------------------------------------------------------------------------------------
+# slow: reference leaf hinge and driving chain
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("params, n", [(LEAF, 3), (FlexureChain(length=0.150, thickness_1=0.003, thickness_2=0.003), 2)],
+                         ids=["leaf", "driving_chain"])
+def test_reference_parts_mesh_exactly(params, n, tmp_path, monkeypatch):
+    from flexcal.fem.mesh import mesh_part
+    from flexcal.geometry.solids import chain_solid, hinge_solid
+
+    monkeypatch.chdir(tmp_path)
+    part = chain_solid(params) if isinstance(params, FlexureChain) else hinge_solid(params)
+    mesh, report = mesh_part(part, elements_through_thickness=n)
+    assert list(tmp_path.iterdir()) == []
+    size = float(np.ptp(mesh.nodes, axis=0).max())
+    assert report.end_plane_deviation <= 1e-12 * size
+    assert report.max_surface_deviation < 1e-12 * size
+    assert report.min_jacobian_ratio > 0
+    # fillet arcs of <= 0.5 rad: radial error <= 1.2e-4 a on the fillet surfaces
+    assert abs(report.volume_error) < 1.2e-4
+    assert len(report.necks) == len(thin_sections(params))
+    for neck in report.necks:
+        # nodes next to the tangent line of a flat leaf face and its fillet sit on the
+        # nearer of the two, which differ by dx^2 / 2a there: measured <= 1e-6 of t
+        assert abs(neck.thickness_error) < 1e-5
+        assert 0.75 * n <= neck.elements_across <= 1.34 * n  # fTetWild's 4/5 .. 4/3 band
+    assert p2_volumes(mesh.nodes, mesh.tets).min() > 0

@@ -1,0 +1,66 @@
+"""``flexcal hinge``: FEM vs closed-form 6 x 6 compliance of one flexure hinge.
+
+Writes DIR/report.json (``compliance_fem``, ``compliance_analytic``, per-entry %
+difference, mesh size and quality, timings), DIR/report.md, DIR/hinge.vtu and DIR/hinge.png.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+__all__ = ["configure", "run"]
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--type", choices=("circular", "leaf"), required=True,
+                        help="circular notch hinge, or corner-filleted leaf hinge (paper Fig. 5c)")
+    parser.add_argument("--thickness-mm", type=float, required=True, help="minimum thickness t [mm]")
+    parser.add_argument("--width-mm", type=float, required=True, help="width b / w [mm]")
+    parser.add_argument("--radius-mm", type=float, help="notch radius R [mm] (circular)")
+    parser.add_argument("--length-mm", type=float, help="segment length l including fillets [mm] (leaf)")
+    parser.add_argument("--fillet-mm", type=float, default=0.0, help="fillet radius a [mm] (leaf; default 0)")
+    parser.add_argument("--block-mm", type=float, default=None,
+                        help="length of the rigid block at each end [mm] (default: R, or l/2 for a leaf)")
+    parser.add_argument("--elements-through", type=float, default=3,
+                        help="quadratic tets through the thinnest section (default 3: ~0.3 %% of converged)")
+    parser.add_argument("--out", required=True, help="output folder")
+
+
+def build_hinge(args: argparse.Namespace):
+    from flexcal.geometry.params import CircularNotchHinge, LeafHinge
+
+    mm = 1e-3
+    if args.type == "circular":
+        if args.radius_mm is None:
+            raise ValueError("--type circular needs --radius-mm")
+        block = args.radius_mm if args.block_mm is None else args.block_mm
+        hinge = CircularNotchHinge(radius=args.radius_mm * mm, thickness=args.thickness_mm * mm,
+                                   width=args.width_mm * mm, block_length=block * mm)
+        params = {"radius": args.radius_mm, "thickness": args.thickness_mm, "width": args.width_mm, "block": block}
+    else:
+        if args.length_mm is None:
+            raise ValueError("--type leaf needs --length-mm")
+        block = args.length_mm / 2 if args.block_mm is None else args.block_mm
+        hinge = LeafHinge(length=args.length_mm * mm, thickness=args.thickness_mm * mm, width=args.width_mm * mm,
+                          fillet=args.fillet_mm * mm, block_length=block * mm)
+        params = {"length": args.length_mm, "thickness": args.thickness_mm, "width": args.width_mm,
+                  "fillet": args.fillet_mm, "block": block}
+    return hinge, params
+
+
+def run(args: argparse.Namespace) -> int:
+    from .fem_report import compare_hinge, write_comparison
+    from .output import staged_output
+
+    if not args.elements_through > 0:
+        raise ValueError(f"--elements-through={args.elements_through} must be > 0")
+    hinge, params = build_hinge(args)  # validates before any CAD or meshing
+    result = compare_hinge(hinge, elements_through_thickness=args.elements_through)
+    with staged_output(args.out) as staging:
+        data = write_comparison(result, staging, params)
+    c_fem, c_ana = result.compliance_fem[5, 5], result.compliance_analytic[5, 5]
+    print(f"flexcal hinge: C_rz,Mz FEM {c_fem:.6g} rad/(N m), closed form {c_ana:.6g} "
+          f"({100 * (c_fem - c_ana) / c_ana:+.2f} %); largest diagonal difference "
+          f"{data['max_abs_percent_difference_diagonal']:.1f} %; {data['mesh']['n_dof']} DOF, "
+          f"{sum(result.timings.values()):.1f} s; wrote {args.out}/report.json, report.md, hinge.vtu, hinge.png")
+    return 0
