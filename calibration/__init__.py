@@ -1,1 +1,68 @@
-"""flexcal.calibration."""
+"""flexcal.calibration: Sobol screening, the improved multi-subgroup PSO, polish, identifiability, the identification problem.
+
+Public names are imported on first use (PEP 562), so importing the package stays
+cheap and never pulls in a heavy dependency a caller does not need.
+"""
+
+from __future__ import annotations
+
+import importlib
+
+_EXPORTS = {
+    "CalibrationProblem": "problem",
+    "EvaluationLog": "problem",
+    "SobolResult": "sensitivity",
+    "make_problem": "sensitivity",
+    "sobol_indices": "sensitivity",
+    "analyze_outputs": "sensitivity",
+    "ranked_table": "sensitivity",
+    "format_ranked_table": "sensitivity",
+    "select_parameters": "sensitivity",
+    "ConvergenceReport": "sensitivity_checks",
+    "sobol_convergence": "sensitivity_checks",
+    "IndexViolation": "sensitivity_checks",
+    "check_index_properties": "sensitivity_checks",
+    "CrossValidation": "sensitivity_checks",
+    "cross_validate": "sensitivity_checks",
+    "PSOSettings": "pso",
+    "SubgroupRecord": "pso",
+    "PSOResult": "pso",
+    "MultiSubgroupPSO": "pso",
+    "identify": "pso",
+    "plain_settings": "pso",
+    "PolishResult": "polish",
+    "least_squares_polish": "polish",
+    "polish_candidates": "polish",
+    "batched_jacobian_fd": "polish",
+    "EvaluationCounter": "polish",
+    "IdentifiabilityReport": "identifiability",
+    "identifiability": "identifiability",
+    "analyze_jacobian": "identifiability",
+    "plot_sensitivity": "plots",
+    "plot_convergence": "plots",
+    "ishigami": "testfunctions",
+    "ishigami_indices": "testfunctions",
+    "ISHIGAMI_BOUNDS": "testfunctions",
+    "sobol_g": "testfunctions",
+    "sobol_g_indices": "testfunctions",
+    "OptimizationProblem": "testfunctions",
+    "sphere": "testfunctions",
+    "rosenbrock": "testfunctions",
+    "rastrigin": "testfunctions",
+    "ackley": "testfunctions",
+    "schwefel": "testfunctions",
+    "LeastSquaresProblem": "testfunctions",
+    "curve_fit_problem": "testfunctions",
+}
+
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str):
+    if name in _EXPORTS:
+        return getattr(importlib.import_module(f"{__name__}.{_EXPORTS[name]}"), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__():
+    return __all__

@@ -1,1 +1,59 @@
-"""flexcal.geometry."""
+"""flexcal.geometry: parametric flexure hinges, chains and the reference mechanism (CadQuery solids load lazily).
+
+Public names are imported on first use (PEP 562), so importing the package stays
+cheap and never pulls in a heavy dependency a caller does not need.
+"""
+
+from __future__ import annotations
+
+import importlib
+
+_EXPORTS = {
+    "Material": "params",
+    "STEEL": "params",
+    "CircularNotchHinge": "params",
+    "LeafHinge": "params",
+    "FlexureChain": "params",
+    "ChainSegment": "params",
+    "ChainPlacement": "params",
+    "MechanismParams": "params",
+    "reference_mechanism": "params",
+    "chain_rotation": "params",
+    "BoxPiece": "exact",
+    "LeafPiece": "exact",
+    "NotchPiece": "exact",
+    "ThinSection": "exact",
+    "pieces": "exact",
+    "piece_label": "exact",
+    "thin_sections": "exact",
+    "exact_volume": "exact",
+    "end_names": "exact",
+    "end_planes": "exact",
+    "reference_points": "exact",
+    "bounding_box": "exact",
+    "PlanePatch": "surfaces",
+    "CylinderPatch": "surfaces",
+    "Patch": "surfaces",
+    "boundary_patches": "surfaces",
+    "Part": "solids",
+    "hinge_solid": "solids",
+    "chain_solid": "solids",
+    "segment_solid": "solids",
+    "mechanism_assembly": "solids",
+    "MIN_FEATURE_SIZE": "solids",
+    "export_step": "export",
+    "export_stl": "export",
+    "import_step": "export",
+}
+
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str):
+    if name in _EXPORTS:
+        return getattr(importlib.import_module(f"{__name__}.{_EXPORTS[name]}"), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__():
+    return __all__
