@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 
 from flexcal.calibration.identifiability import identifiability
-from flexcal.calibration.polish import least_squares_polish
+from flexcal.calibration.polish import polish_candidates
 from flexcal.calibration.problem import CalibrationProblem
 from flexcal.calibration.pso import identify
 from flexcal.calibration.pso_settings import PSOSettings
@@ -158,7 +158,10 @@ def run_verify(measurement: Measurement, space: ParameterSpace, settings: Verify
     polish = None
     if settings.polish:
         start = time.perf_counter()
-        polish = least_squares_polish(problem.residuals, x_best)
+        # polish the swarm's distinct good points (overall, global swarm, subgroups: the
+        # paper's Fig. 11 "relatively optimal solutions"), keep the best; budget: as many
+        # rows as the swarm used, so the polish never more than doubles the cost
+        polish, _, _ = polish_candidates(problem.residuals, pso.candidates(), max_evaluations=pso.n_evaluations)
         if problem.fitness(polish.x[None])[0] <= pso.f_best:
             x_best = polish.x
         log(f"verify: polish {time.perf_counter() - start:.1f} s")
