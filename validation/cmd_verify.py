@@ -25,6 +25,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--provider", choices=("fem", "analytic"), default="fem",
                         help="prototype segment stiffness (default fem; analytic only for quick checks)")
     parser.add_argument("--sobol-n", type=int, default=512, help="Sobol base sample N (power of two; default 512)")
+    parser.add_argument("--sobol-threshold", type=float, default=0.01,
+                        help="identify sources whose total Sobol index reaches this on any output (default 0.01; "
+                             "0 identifies all 45)")
     parser.add_argument("--particles", type=int, default=300, help="PSO particles (paper: 300)")
     parser.add_argument("--iterations", type=int, default=150, help="PSO iterations (paper: 150)")
     parser.add_argument("--no-polish", action="store_true", help="skip the least-squares polish")
@@ -127,7 +130,9 @@ def run(args: argparse.Namespace) -> int:
         found = measurement.metadata.get("preset_errors")
         if found:
             presets = space.build_values({e["name"]: e["value"] for e in found}, display_units=True)
-    settings = VerifySettings(sobol_n=args.sobol_n, seed=args.calibration_seed, polish=not args.no_polish,
+    if not 0.0 <= args.sobol_threshold <= 1.0:
+        raise ValueError(f"--sobol-threshold={args.sobol_threshold} must be in [0, 1]")
+    settings = VerifySettings(sobol_n=args.sobol_n, sobol_threshold=args.sobol_threshold, seed=args.calibration_seed, polish=not args.no_polish,
                               remove_offset=args.remove_offset,
                               noise_urad=args.noise_urad if args.noise_urad else None,
                               pso=dataclasses.replace(PSOSettings(), n_particles=args.particles,
