@@ -199,8 +199,10 @@ def mechanism_matrices(values, space: ParameterSpace, *, candidate_offset: int =
     pivot_distance = length - 2.0 * end_block - 2.0 * l - connector
     span_y = length - 2.0 * end_block - l
     span_z = length - 2.0 * end_block - 3.0 * l - 2.0 * connector
-    rows_y = frame_to_point_transform(rotation, pivot_y)[:, :, 1, :] * np.sqrt(pivot_distance / span_y)[..., None]
-    rows_z = frame_to_point_transform(rotation, pivot_z)[:, :, 2, :] * np.sqrt(pivot_distance / span_z)[..., None]
+    # local-e displacement of point p under X_C = [d, theta]: e.(d + theta x p) = [e, p x e] . X_C
+    y_axis, z_axis = rotation[..., :, 1], rotation[..., :, 2]
+    rows_y = np.concatenate([y_axis, np.cross(pivot_y, y_axis)], axis=-1) * np.sqrt(pivot_distance / span_y)[..., None]
+    rows_z = np.concatenate([z_axis, np.cross(pivot_z, z_axis)], axis=-1) * np.sqrt(pivot_distance / span_z)[..., None]
     parasitic_rows = np.concatenate([rows_y, rows_z], axis=1)
     parasitic_gain = parasitic_rows @ input_gain
     parasitic_gravity = np.einsum("ckd,cd->ck", parasitic_rows, gravity_pose)
