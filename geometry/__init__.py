@@ -6,7 +6,7 @@ cheap and never pulls in a heavy dependency a caller does not need.
 
 from __future__ import annotations
 
-import importlib
+from flexcal.geometry._lazy import lazy_exports
 
 _EXPORTS = {
     "Material": "params",
@@ -46,14 +46,4 @@ _EXPORTS = {
     "import_step": "export",
 }
 
-__all__ = sorted(_EXPORTS)
-
-
-def __getattr__(name: str):
-    if name in _EXPORTS:
-        return getattr(importlib.import_module(f"{__name__}.{_EXPORTS[name]}"), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-def __dir__():
-    return __all__
+__getattr__, __dir__, __all__ = lazy_exports(__name__, _EXPORTS)

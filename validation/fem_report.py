@@ -58,21 +58,27 @@ class ComparisonResult:
     timings: dict[str, float]
 
 
+def _solid_and_mesh(build, params, elements_through_thickness: float):
+    """(part, mesh, mesh report, timings) for a part built by ``build(params)``."""
+    from flexcal.fem.mesh import mesh_part
+
+    start = time.perf_counter()
+    part = build(params)
+    timings = {"geometry": time.perf_counter() - start}
+    start = time.perf_counter()
+    mesh, report = mesh_part(part, elements_through_thickness=elements_through_thickness)
+    timings["mesh"] = time.perf_counter() - start
+    return part, mesh, report, timings
+
+
 def compare_hinge(hinge: CircularNotchHinge | LeafHinge, material: Material = STEEL, *,
                   elements_through_thickness: float = 3) -> ComparisonResult:
     """FEM and closed-form 6 x 6 compliance of a hinge at its free end."""
     from flexcal.fem.condense import hinge_displacement, solve_hinge
-    from flexcal.fem.mesh import mesh_part
     from flexcal.geometry.solids import hinge_solid
     from flexcal.model.chain import hinge_part_compliance
 
-    timings = {}
-    start = time.perf_counter()
-    part = hinge_solid(hinge)
-    timings["geometry"] = time.perf_counter() - start
-    start = time.perf_counter()
-    mesh, report = mesh_part(part, elements_through_thickness=elements_through_thickness)
-    timings["mesh"] = time.perf_counter() - start
+    part, mesh, report, timings = _solid_and_mesh(hinge_solid, hinge, elements_through_thickness)
     start = time.perf_counter()
     solution = solve_hinge(mesh, material, part.end_planes["fixed"], part.end_planes["free"],
                            part.reference_points["free"])
@@ -95,17 +101,10 @@ def compare_chain(chain: FlexureChain, material: Material = STEEL, *,
                   elements_through_thickness: float = 2) -> ComparisonResult:
     """FEM and analytic (Eq. 1) stiffness of a chain between its end faces A and B."""
     from flexcal.fem.condense import chain_displacement, solve_chain
-    from flexcal.fem.mesh import mesh_part
     from flexcal.geometry.solids import chain_solid
     from flexcal.model.chain import chain_stiffness_matrix
 
-    timings = {}
-    start = time.perf_counter()
-    part = chain_solid(chain)
-    timings["geometry"] = time.perf_counter() - start
-    start = time.perf_counter()
-    mesh, report = mesh_part(part, elements_through_thickness=elements_through_thickness)
-    timings["mesh"] = time.perf_counter() - start
+    part, mesh, report, timings = _solid_and_mesh(chain_solid, chain, elements_through_thickness)
     start = time.perf_counter()
     solution = solve_chain(mesh, material, part.end_planes["A"], part.reference_points["A"], part.end_planes["B"],
                            part.reference_points["B"])
