@@ -6,7 +6,8 @@ DOF index = 3 * node + component (x, y, z). A mesh is any object with ``nodes``
 
 Assembly is vectorized: element matrices for a chunk of elements at once (no loop over
 elements), summed into the 3x3 node blocks of a precomputed pattern. Chunks bound the
-memory (a chunk holds ~ 20 kB per element of temporaries).
+memory and keep the temporaries in cache: a chunk of 256 elements (~5 MB of
+temporaries) measured 3x faster per element than 2048 (14-19 vs 52-84 us per curved tet).
 """
 
 from __future__ import annotations
@@ -28,7 +29,7 @@ from .elements import (
 
 __all__ = ["check_mesh", "element_dofs", "node_pattern", "assemble_stiffness", "assemble_body_force", "n_dofs"]
 
-DEFAULT_CHUNK = 2048
+DEFAULT_CHUNK = 256
 
 
 def check_mesh(mesh) -> tuple[np.ndarray, np.ndarray]:

@@ -3,7 +3,9 @@
 A result is stored under the SHA-256 of a canonical JSON description of everything it
 depends on: the geometry parameters, the mesh settings, the material, the load/coupling
 description the caller adds, and the code version (the package version plus a hash of
-the FEM numerics sources, so a change of the numerics never serves a stale matrix).
+the sources of ``flexcal.fem`` except output and cache modules and of
+``flexcal.geometry``, so a change of the numerics, the mesher or the solids never serves
+a stale matrix).
 A repeated run finds the file and costs one ``np.load``.
 
 Location: ``$FLEXCAL_CACHE_DIR`` if set, else ``~/.cache/flexcal``. Files are written
@@ -21,6 +23,7 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import importlib.util
 import json
 import math
 import os
@@ -44,17 +47,10 @@ __all__ = [
 
 CACHE_ENV = "FLEXCAL_CACHE_DIR"
 
-# The modules whose numerics determine a cached result. Editing any of them changes
-# the code version and therefore every key.
-_NUMERICS_MODULES = (
-    "elements.py",
-    "assembly.py",
-    "coupling.py",
-    "condense.py",
-    "solve.py",
-    "structured.py",
-    "mesh.py",
-)
+# Every module of flexcal.fem determines cached results except these (output and the
+# cache itself). Editing any other one changes the code version and therefore every key;
+# new numerics modules (the mesher's helpers) are included automatically.
+_NOT_NUMERICS = frozenset({"__init__.py", "cache.py", "results.py"})
 
 
 def cache_dir(path: str | os.PathLike | None = None) -> Path:
@@ -67,7 +63,8 @@ def cache_dir(path: str | os.PathLike | None = None) -> Path:
 
 
 def code_version() -> str:
-    """Package version + SHA-256 (first 16 hex) of the FEM numerics sources."""
+    """Package version + SHA-256 (first 16 hex) of the sources that determine results:
+    ``flexcal.fem`` (all but ``__init__``, ``cache``, ``results``) and ``flexcal.geometry``."""
     try:
         from importlib.metadata import version
 
@@ -75,12 +72,13 @@ def code_version() -> str:
     except Exception:  # not installed (running from a source tree)
         package = "unknown"
     digest = hashlib.sha256()
-    here = Path(__file__).parent
-    for name in _NUMERICS_MODULES:
-        source = here / name
-        if source.exists():
-            digest.update(name.encode())
-            digest.update(source.read_bytes())
+    sources = [p for p in Path(__file__).parent.glob("*.py") if p.name not in _NOT_NUMERICS]
+    spec = importlib.util.find_spec("flexcal.geometry")  # the solids the mesher meshes
+    for folder in (spec.submodule_search_locations or []) if spec else []:
+        sources += [p for p in Path(folder).glob("*.py") if p.name != "__init__.py"]
+    for source in sorted(sources, key=lambda p: (p.parent.name, p.name)):
+        digest.update(f"{source.parent.name}/{source.name}".encode())
+        digest.update(source.read_bytes())
     return f"{package}+{digest.hexdigest()[:16]}"
 
 

@@ -38,6 +38,8 @@ __all__ = [
     "chain_stiffness",
     "chain_displacement",
     "twist_transform",
+    "reduced_system",
+    "reduced_rigid_body_modes",
 ]
 
 Plane = tuple[np.ndarray, np.ndarray]
@@ -85,7 +87,12 @@ def twist_transform(frame: np.ndarray) -> np.ndarray:
     return A
 
 
-def _reduced(mesh, material: Material, couplings: list[RigidCoupling], stiffness: sp.spmatrix | None):
+def reduced_system(
+    mesh, material: Material, couplings: list[RigidCoupling], stiffness: sp.spmatrix | None = None
+) -> tuple[np.ndarray, CouplingMap, sp.csr_matrix]:
+    """Assemble K (unless ``stiffness`` is given) and eliminate the couplings' slave DOFs:
+    returns nodes (n_nodes, 3) [m], the ``CouplingMap`` and K_r = T^T K T
+    (n_reduced, n_reduced) [SI]."""
     nodes, _ = check_mesh(mesh)
     K = assemble_stiffness(mesh, material) if stiffness is None else sp.csr_matrix(stiffness)
     if K.shape != (3 * len(nodes),) * 2:
@@ -96,8 +103,9 @@ def _reduced(mesh, material: Material, couplings: list[RigidCoupling], stiffness
     return nodes, cmap, K_r
 
 
-def _reduced_rigid_modes(nodes: np.ndarray, cmap: CouplingMap, couplings: list[RigidCoupling]) -> np.ndarray:
-    """Rigid-body modes (n_reduced, 6) in reduced DOFs (near-null space for AMG)."""
+def reduced_rigid_body_modes(nodes: np.ndarray, cmap: CouplingMap, couplings: list[RigidCoupling]) -> np.ndarray:
+    """Rigid-body modes (n_reduced, 6) in the reduced DOFs of ``reduced_system`` (the
+    near-null space for AMG): translations, then rotations about the nodes' centroid."""
     origin = nodes.mean(axis=0)
     B = np.zeros((cmap.n_reduced, 6))
     node = cmap.free_node_dofs // 3
@@ -140,12 +148,12 @@ def solve_hinge(
         RigidCoupling(nodes=fixed_nodes, reference_point=np.asarray(fixed_plane[0], float), fixed=True),
         RigidCoupling(nodes=free_nodes, reference_point=free_point),
     ]
-    nodes, cmap, K_r = _reduced(mesh, material, couplings, stiffness)
+    nodes, cmap, K_r = reduced_system(mesh, material, couplings, stiffness)
     master = cmap.master_dofs[1]
     A = np.eye(6) if frame is None else twist_transform(frame)
     rhs = np.zeros((cmap.n_reduced, 6))
     rhs[master] = A.T  # column k: unit load k given in frame axes, in mesh axes
-    near_null = _reduced_rigid_modes(nodes, cmap, couplings) if method == "amg" else None
+    near_null = reduced_rigid_body_modes(nodes, cmap, couplings) if method == "amg" else None
     U_r = solve_spd(K_r, rhs, method=method, near_null_space=near_null)
     compliance = A @ U_r[master]
     fields = (cmap.transform @ U_r).T.reshape(6, len(nodes), 3)
@@ -200,7 +208,7 @@ def solve_chain(
     point_a = np.asarray(point_a, float).reshape(3)
     point_b = np.asarray(point_b, float).reshape(3)
     couplings = [RigidCoupling(nodes=nodes_a, reference_point=point_a), RigidCoupling(nodes=nodes_b, reference_point=point_b)]
-    nodes, cmap, K_r = _reduced(mesh, material, couplings, stiffness)
+    nodes, cmap, K_r = reduced_system(mesh, material, couplings, stiffness)
     n_i = cmap.free_node_dofs.size
     m = np.concatenate(cmap.master_dofs)  # the last 12 reduced DOFs, A then B
     assert np.array_equal(m, np.arange(n_i, n_i + 12))
@@ -210,7 +218,7 @@ def solve_chain(
     K_mm = K_r[n_i:, n_i:].toarray()
     near_null = None
     if method == "amg":
-        near_null = _reduced_rigid_modes(nodes, cmap, couplings)[i]
+        near_null = reduced_rigid_body_modes(nodes, cmap, couplings)[i]
     X = solve_spd(K_ii, K_im, method=method, near_null_space=near_null)  # K_ii^-1 K_im
     K_c = K_mm - K_im.T @ X
     u_r = np.zeros((cmap.n_reduced, 12))
