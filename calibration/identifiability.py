@@ -132,8 +132,12 @@ def analyze_jacobian(J: np.ndarray, names: Sequence[str], *, noise: np.ndarray |
     std = None
     meaningful = ~confounded
     if noise is not None:
-        with np.errstate(over="ignore", divide="ignore"):
-            var = (Vt.T**2) @ (1.0 / np.maximum(s_full, 1e-300) ** 2)
+        # var_j = sum_k V_jk^2 / s_k^2; a null direction (s_k = 0) makes every parameter
+        # that takes part in it (V_jk != 0) unbounded, and leaves the others alone
+        weight = Vt.T ** 2
+        with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
+            inverse = np.where(s_full > 0, 1.0 / s_full**2, np.inf)
+            var = np.sum(np.where(weight > 0, weight * inverse, 0.0), axis=1)
         std = np.sqrt(var)
         meaningful &= std <= max_std
     return IdentifiabilityReport(
