@@ -108,3 +108,20 @@ def test_truth_command_writes_files_and_rejects_bad_input(tmp_path, capsys):
     assert cli.main(["truth", "--scenario", "table1", "--noise-urad", "-1", "--out", str(bad)]) == 2
     assert "must be >= 0" in capsys.readouterr().err
     assert not bad.exists()
+
+
+@pytest.mark.slow
+def test_fem_prototype_matches_model_within_the_chain_discrepancy(tmp_path):
+    """Issue 4's check with the FEM segments: no errors, no clearance. The prototype then
+    differs from the model by the chain-stiffness gap of docs/model-vs-fem.md (axial
+    +37..41 %, torsion -77..81 %, working bending <= 3 %) plus the kinematic terms above.
+    Measured 13.5 / 10.5 / 2.8 urad max; the bound 25 urad is under 1 % of the standard
+    trajectory's theta_y travel (+-3.2 mrad) and would catch a wrong segment frame or DOF
+    order, which give hundreds of urad."""
+    from flexcal.validation.fem_provider import fem_provider
+
+    truth = make_truth(load_scenario("nominal"), fem_provider(cache_directory=tmp_path, progress=False))
+    model = forward(SPACE.nominal_full, truth.measurement.inputs).angles[0]
+    difference = np.abs(truth.measurement.angles - model).max(axis=0)
+    assert np.all(difference < 25e-6), difference * 1e6
+    assert np.max(truth.run.force_residual) < 1e-4

@@ -44,9 +44,8 @@ def _plots(result, measurement, directory) -> None:
 
     mis = measurement.angles - result.ideal_angles
     fitted = result.fitted_angles - result.ideal_angles
-    classes = ["S1"] * measurement.n_points
-    plot_misalignment_curves(directory / "fit.png", mis, classes, leg=measurement.leg, fitted=fitted,
-                             title="misalignment (measured − ideal) and the calibrated model's fit (Fig. 7a-c)")
+    plot_misalignment_curves(directory / "fit.png", mis, result.point_class, leg=measurement.leg, fitted=fitted,
+                             title="misalignment (measured − ideal), calibrated model's fit and its point classes (Fig. 7a-c, 12)")
     plot_convergence(result.pso, directory / "convergence.png", ylabel="Eq. 13 fitness [rad]")
     plot_sensitivity(result.sobol, directory / "sensitivity.png")
     plt = _pyplot()

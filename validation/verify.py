@@ -76,6 +76,7 @@ class VerifyResult:
     problem: CalibrationProblem
     fitted_angles: np.ndarray
     ideal_angles: np.ndarray
+    point_class: tuple[str, ...]
 
 
 def _parameter_rows(space: ParameterSpace, identified: np.ndarray, presets: np.ndarray | None,
@@ -134,7 +135,7 @@ def run_verify(measurement: Measurement, space: ParameterSpace, settings: Verify
                presets: np.ndarray | None = None, progress: bool = True) -> VerifyResult:
     """Screen, identify and report on one measurement; ``presets`` (45,) [SI] are the
     true values when the data are synthetic (for the error columns)."""
-    from flexcal.model.forward import ideal_angles
+    from flexcal.model.forward import CLASS_NAMES, forward, ideal_angles
 
     log = print if progress else (lambda *a, **k: None)
     t0 = time.perf_counter()
@@ -171,6 +172,7 @@ def run_verify(measurement: Measurement, space: ParameterSpace, settings: Verify
     noise = settings.noise_urad * 1e-6 if settings.noise_urad else max(fit_rms, 1e-9)
     ident = identifiability(problem.residuals, x_best, sub.names, noise=noise)
     identified = sub.full_values(sub.from_unit(x_best))
+    classes = tuple(CLASS_NAMES[int(c)] for c in forward(identified, measurement.inputs, space=space).point_class[0])
     rows = _parameter_rows(space, identified, presets, selected, set(ident.meaningful_names))
     per_point = np.linalg.norm(residual, axis=1)
     report: dict[str, Any] = {
@@ -199,8 +201,10 @@ def run_verify(measurement: Measurement, space: ParameterSpace, settings: Verify
         "polish": None if polish is None else {"n_evaluations": polish.n_evaluations, "rms_urad": polish.rms * 1e6,
                                                "used": bool(np.array_equal(x_best, polish.x))},
         "offset_removed": settings.remove_offset,
+        "point_class": list(classes),
     }
     if presets is not None:
         report["paper_comparison"] = _paper_comparison(rows, report["fit_max_urad"])
     return VerifyResult(report=report, sobol=sobol, pso=pso, polish=polish, identifiability=ident, problem=problem,
-                        fitted_angles=fitted, ideal_angles=ideal_angles(measurement.inputs, space))
+                        fitted_angles=fitted, ideal_angles=ideal_angles(measurement.inputs, space),
+                        point_class=classes)
