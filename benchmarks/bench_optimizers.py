@@ -186,7 +186,36 @@ def median_table(rows: list[dict]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def mechanism_problem():
+    """The mount itself: the nine Table 1 drive sources from the table-1 curve of the virtual
+    prototype (analytic segment stiffness: no FEM needed; truth still has exact kinematics
+    and the breakaway band), the structural sources held at their true values. Sensitive =
+    the sources the trajectory can see (D1/D2 are compressed throughout: their CL and mu
+    leave no trace, see docs/verification-table1.md)."""
+    from types import SimpleNamespace
+
+    from flexcal.calibration.problem import CalibrationProblem
+    from flexcal.model.parameters import parameter_space
+    from flexcal.validation.scenario import load_scenario
+    from flexcal.validation.segments import analytic_provider
+    from flexcal.validation.truth import make_truth
+    from flexcal.validation.verify import TABLE1_NAMES
+
+    scenario = load_scenario("table1")
+    measurement = make_truth(scenario, analytic_provider()).measurement
+    space = parameter_space()
+    sub = space.subset(TABLE1_NAMES, fixed=dict(zip(space.all_names, scenario.values)))
+    problem = CalibrationProblem(space=sub, inputs=measurement.inputs, angles=measurement.angles)
+    truth = np.array([scenario.values[space.index(n)] for n in sub.names])
+    blind = {"D1.CL", "D1.mu", "D2.CL", "D2.mu"}
+    return SimpleNamespace(name="mechanism-table1 (9 drive sources, prototype truth)", n_dims=sub.n_params,
+                           residuals=problem.residuals, fitness=problem.fitness, x_true=sub.to_unit(truth),
+                           sensitive=np.array([n not in blind for n in sub.names]),
+                           x_nominal=np.clip(sub.to_unit(sub.nominal_vector), 0.0, 1.0))
+
+
 PROBLEMS = {
+    "mechanism-table1": mechanism_problem,
     "curve20-ripple": lambda: curve_fit_problem(20, n_insensitive=3, screw_ripple=0.05),
     "curve20": lambda: curve_fit_problem(20, n_insensitive=3),
     "curve45": lambda: curve_fit_problem(45, n_insensitive=3),
