@@ -1,7 +1,6 @@
 """flexcal.fem: tet meshes (pytetwild), quadratic-tet linear elasticity, rigid coupling, condensation, cache, VTU.
 
-Public names are imported on first use (PEP 562), so importing the package stays
-cheap and never pulls in a heavy dependency a caller does not need.
+Public names load on first use (``flexcal.geometry._lazy``).
 """
 
 from __future__ import annotations

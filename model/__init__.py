@@ -1,7 +1,6 @@
 """flexcal.model: the paper's analytic model (Eq. 1-8), forward and inverse, batched; the 45 error sources.
 
-Public names are imported on first use (PEP 562), so importing the package stays
-cheap and never pulls in a heavy dependency a caller does not need.
+Public names load on first use (``flexcal.geometry._lazy``).
 """
 
 from __future__ import annotations

@@ -1,7 +1,6 @@
 """flexcal.validation: the virtual prototype, measurement files, scenarios, reports and the flexcal command line.
 
-Public names are imported on first use (PEP 562), so importing the package stays
-cheap and never pulls in a heavy dependency a caller does not need.
+Public names load on first use (``flexcal.geometry._lazy``).
 """
 
 from __future__ import annotations
