@@ -361,13 +361,14 @@ def _segment_entries(c, rho, t, w, e, g, kappa, nodes, weights, out):
     out[7] = m0j / g
 
 
-@njit(cache=True, nogil=True, fastmath=_FAST)
+@njit(cache=True, nogil=True, parallel=True, fastmath=_FAST)
 def chain_entries(length, hinge, width, fillet, thick1, thick2, section, connector, end_block, actuator_compliance,
                   e, g, kappa, nodes, weights, out):
-    """chain.chain_compliance_entries for flat arrays (n,): out (n, 8), Eq. 1 along the axis."""
-    parts = np.zeros((5, 8))  # block, leaf1, connector, leaf2 (turned), strut
+    """chain.chain_compliance_entries for flat arrays (n,): out (n, 8), Eq. 1 along the axis.
+    Chains in parallel (numba threads; each iteration has its own scratch)."""
     kinds = (0, 1, 2, 3, 4, 3, 2, 1, 0)  # A -> B
-    for k in range(length.shape[0]):
+    for k in prange(length.shape[0]):
+        parts = np.zeros((5, 8))  # block, leaf1, connector, leaf2 (turned), strut
         strut = length[k] - 2.0 * end_block[k] - 4.0 * hinge[k] - 2.0 * connector[k]
         flat_leaf = max(0.5 * hinge[k] - fillet[k], 0.0)
         _segment_entries(0.5 * end_block[k], 0.0, section[k], section[k], e, g, kappa, nodes, weights, parts[0])
