@@ -399,7 +399,7 @@ def chain_entries(length, hinge, width, fillet, thick1, thick2, section, connect
         out[k, 0] += actuator_compliance[k]
 
 
-@njit(cache=True, nogil=True, fastmath=_FAST)
+@njit(cache=True, nogil=True, parallel=True, fastmath=_FAST)
 def assemble(stiffness, rotation, point_b, centre, wrench, transform, frame_stiffness, axial_gain, input_gain,
              gravity_pose, parasitic_rows, parasitic_gain, parasitic_gravity):
     """assembly.mechanism_matrices' linear algebra per candidate (same formulas, in place).
@@ -408,10 +408,10 @@ def assemble(stiffness, rotation, point_b, centre, wrench, transform, frame_stif
     wrench (6,); outputs J_i, K_CC, G, H = K_CC^-1 G, X_g = K_CC^-1 F_C, P, Q = P H, P X_g.
     """
     n_c = stiffness.shape[0]
-    kj = np.zeros((6, 6))
-    rhs = np.zeros((6, 7))
-    low = np.zeros((6, 6))
-    for cand in range(n_c):
+    for cand in prange(n_c):  # candidates in parallel, each with its own scratch
+        kj = np.zeros((6, 6))
+        rhs = np.zeros((6, 7))
+        low = np.zeros((6, 6))
         kcc = frame_stiffness[cand]
         kcc[:, :] = 0.0
         for i in range(6):
