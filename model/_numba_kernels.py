@@ -263,40 +263,47 @@ def torsion(thick, width):
     return long * short * short * short * (1.0 / 3.0 - 0.21 * ratio * (1.0 - ratio2 * ratio2 / 12.0))
 
 
+@njit(cache=True, nogil=True, fastmath=_FAST, inline="always")
+def _arc_sums(r, t, w, nodes, weights):
+    """(int u^2/t, int u^2/t^3, int 1/J) over one circular arc of radius r from thickness t,
+    Gauss-Legendre in sigma = asinh(v) (split where the torsion formula switches sides)."""
+    s0 = s1 = s2 = 0.0
+    tau = np.sqrt(t / (t + 4.0 * r))
+    v_end = 1.0 / tau
+    split = v_end
+    if w > t and w < t + 2.0 * r:
+        split = np.sqrt((w - t) / (t - w * tau * tau))
+    n_panels = 2 if split < v_end else 1
+    two_r_tau = 2.0 * r * tau
+    for panel in range(n_panels):
+        lo = 0.0 if panel == 0 else np.arcsinh(split)
+        hi = np.arcsinh(split) if panel == 0 else np.arcsinh(v_end)
+        half = 0.5 * (hi - lo)
+        for n in range(nodes.shape[0]):
+            e = np.exp(lo + half * (nodes[n] + 1.0))
+            inv_e = 1.0 / e
+            v = 0.5 * (e - inv_e)  # sinh(sigma)
+            cosh = 0.5 * (e + inv_e)  # dv/dsigma
+            tv2p1 = 1.0 + (tau * v) ** 2
+            inv = 1.0 / tv2p1
+            u = two_r_tau * v * inv
+            du = half * weights[n] * cosh * two_r_tau * (2.0 - tv2p1) * inv * inv
+            thick = t * cosh * cosh * inv  # 1 + v^2 = cosh^2
+            inv_thick = 1.0 / thick
+            u2_t = u * u * du * inv_thick
+            s0 += u2_t
+            s1 += u2_t * inv_thick * inv_thick
+            s2 += du / torsion(thick, w)
+    return s0, s1, s2
+
+
 @njit(cache=True, nogil=True, fastmath=_FAST)
 def arc_quadrature(radius, thickness, width, nodes, weights, out):
     """hinge._arc_quadrature for flat arrays (n,): out (n, 3) = int u^2/t, int u^2/t^3, int 1/J."""
     for k in range(radius.shape[0]):
-        r, t, w = radius[k], thickness[k], width[k]
         out[k, 0] = out[k, 1] = out[k, 2] = 0.0
-        if r <= 0.0:
-            continue
-        tau = np.sqrt(t / (t + 4.0 * r))
-        v_end = 1.0 / tau
-        split = v_end
-        if w > t and w < t + 2.0 * r:
-            split = np.sqrt((w - t) / (t - w * tau * tau))
-        n_panels = 2 if split < v_end else 1
-        two_r_tau = 2.0 * r * tau
-        for panel in range(n_panels):
-            lo = 0.0 if panel == 0 else np.arcsinh(split)
-            hi = np.arcsinh(split) if panel == 0 else np.arcsinh(v_end)
-            half = 0.5 * (hi - lo)
-            for n in range(nodes.shape[0]):
-                e = np.exp(lo + half * (nodes[n] + 1.0))
-                inv_e = 1.0 / e
-                v = 0.5 * (e - inv_e)  # sinh(sigma)
-                cosh = 0.5 * (e + inv_e)  # dv/dsigma
-                tv2p1 = 1.0 + (tau * v) ** 2
-                inv = 1.0 / tv2p1
-                u = two_r_tau * v * inv
-                du = half * weights[n] * cosh * two_r_tau * (2.0 - tv2p1) * inv * inv
-                thick = t * cosh * cosh * inv  # 1 + v^2 = cosh^2
-                inv_thick = 1.0 / thick
-                u2_t = u * u * du * inv_thick
-                out[k, 0] += u2_t
-                out[k, 1] += u2_t * inv_thick * inv_thick
-                out[k, 2] += du / torsion(thick, w)
+        if radius[k] > 0.0:
+            out[k, 0], out[k, 1], out[k, 2] = _arc_sums(radius[k], thickness[k], width[k], nodes, weights)
 
 
 @njit(cache=True, nogil=True, fastmath=_FAST, inline="always")
@@ -315,32 +322,7 @@ def _segment_entries(c, rho, t, w, e, g, kappa, nodes, weights, out):
         big_t = t + 2.0 * rho  # first moments: elementary antiderivatives
         a1t1 = 0.25 * (big_t * np.log1p(2.0 * rho / t) - 2.0 * rho)
         a1t3 = 0.25 * (0.5 * big_t * (inv_t * inv_t - 1.0 / (big_t * big_t)) - (inv_t - 1.0 / big_t))
-        tau = np.sqrt(t / (t + 4.0 * rho))
-        v_end = 1.0 / tau
-        split = v_end
-        if w > t and w < t + 2.0 * rho:
-            split = np.sqrt((w - t) / (t - w * tau * tau))
-        n_panels = 2 if split < v_end else 1
-        two_r_tau = 2.0 * rho * tau
-        for panel in range(n_panels):
-            lo = 0.0 if panel == 0 else np.arcsinh(split)
-            hi = np.arcsinh(split) if panel == 0 else np.arcsinh(v_end)
-            half = 0.5 * (hi - lo)
-            for n in range(nodes.shape[0]):
-                ex = np.exp(lo + half * (nodes[n] + 1.0))
-                inv_e = 1.0 / ex
-                v = 0.5 * (ex - inv_e)
-                cosh = 0.5 * (ex + inv_e)
-                tv2p1 = 1.0 + (tau * v) ** 2
-                inv = 1.0 / tv2p1
-                u = two_r_tau * v * inv
-                du = half * weights[n] * cosh * two_r_tau * (2.0 - tv2p1) * inv * inv
-                thick = t * cosh * cosh * inv
-                inv_thick = 1.0 / thick
-                u2_t = u * u * du * inv_thick
-                a2t1 += u2_t
-                a2t3 += u2_t * inv_thick * inv_thick
-                a0j += du / torsion(thick, w)
+        a2t1, a2t3, a0j = _arc_sums(rho, t, w, nodes, weights)
     m0t1 = 2.0 * c * flat_t1 + 2.0 * a0t1
     m0t3 = 2.0 * c * flat_t3 + 2.0 * a0t3
     m0j = 2.0 * c * flat_j + 2.0 * a0j

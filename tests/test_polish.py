@@ -9,15 +9,7 @@ from flexcal.calibration import testfunctions as tf
 from flexcal.calibration.polish import batched_jacobian_fd, least_squares_polish
 from flexcal.calibration.pso import PSOSettings, identify
 
-
-class Counting:
-    def __init__(self, function):
-        self.function, self.calls, self.rows = function, 0, 0
-
-    def __call__(self, x):
-        self.calls += 1
-        self.rows += x.shape[0]
-        return self.function(x)
+from helpers import Counting
 
 
 def quadratic_residuals(x):

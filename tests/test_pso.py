@@ -21,15 +21,7 @@ from flexcal.calibration.pso_local import (
     velocity_limits,
 )
 
-
-class Counting:
-    def __init__(self, function):
-        self.function, self.calls, self.rows = function, 0, 0
-
-    def __call__(self, x):
-        self.calls += 1
-        self.rows += x.shape[0]
-        return self.function(x)
+from helpers import Counting
 
 
 def test_defaults_are_the_papers():

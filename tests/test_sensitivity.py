@@ -16,6 +16,9 @@ from flexcal.calibration.sensitivity import (
 )
 from flexcal.calibration.sensitivity_checks import check_index_properties, cross_validate, sobol_convergence
 
+from helpers import Counting
+
+
 # Sobol-G with six important, nine minor and thirty negligible inputs (45 like the mechanism).
 G_A = np.array([0.0, 0.0, 0.5, 1.0, 2.0, 4.5] + [9.0] * 9 + [99.0] * 30)
 G_BOUNDS = np.array([[0.0, 1.0]] * G_A.size)
@@ -25,16 +28,6 @@ def g_function(x):
     return tf.sobol_g(x, G_A)
 
 
-class Counting:
-    """Batched function wrapper counting calls and rows."""
-
-    def __init__(self, function):
-        self.function, self.calls, self.rows = function, 0, 0
-
-    def __call__(self, x):
-        self.calls += 1
-        self.rows += x.shape[0]
-        return self.function(x)
 
 
 def test_exact_ishigami_indices_match_the_literature():
