@@ -164,8 +164,11 @@ def mechanism_matrices(values, space: ParameterSpace, *, candidate_offset: int =
         raise ValueError(f"candidate {cand + candidate_offset}: chain {CHAIN_NAMES[chain]} has no strut left (hinge length "
                          f"l={l[cand, chain] * 1e3:.4g} mm too long for the chain length {length[cand, chain] * 1e3:.4g} mm)")
     compliance = chain_compliance_entries(length, l, w, a, t1, t2, section=section, connector_length=connector,
-                                          end_block_length=end_block, material=mech.material,
-                                          actuator_stiffness=actuator)
+                                          end_block_length=end_block, material=mech.material)
+    if space.compliance_factors:  # measured correction of the closed-form chains (docs/model.md 7)
+        factors = np.asarray(space.compliance_factors, dtype=float)
+        compliance = {key: entry * factors[:, i] for i, (key, entry) in enumerate(compliance.items())}
+    compliance["ux_Fx"] = compliance["ux_Fx"] + 1.0 / actuator  # actuator spring in series (1/inf = 0 for loads)
     stiffness = stiffness_from_entries(compliance)
     # (the compiled kernel also returns parasitic rows of one centre point; they are
     # replaced below by the per-direction pivots)

@@ -104,7 +104,10 @@ class ParameterSpace:
 
     mechanism: the nominal design; parameters: all 45 ``Parameter`` in the fixed order;
     active: names of the parameters that vary (all by default), in space order;
-    base_values: (45,) SI values of the others (nominal by default). Vectors in the
+    base_values: (45,) SI values of the others (nominal by default);
+    compliance_factors: (n_chains, 8) factors on the eight chain-compliance entries
+    (``model.hinge.ENTRY_INDEX`` order) of the closed-form chains, empty = all 1 -- a
+    correction measured once against a richer model (FEM, docs/model.md section 7). Vectors in the
     methods below are over the *active* parameters, ``(..., n_active)``, except
     ``full_values`` / ``build_values`` which return all 45 (what ``forward`` takes).
     """
@@ -113,8 +116,14 @@ class ParameterSpace:
     parameters: tuple[Parameter, ...] = ()
     active: tuple[str, ...] = ()
     base_values: tuple[float, ...] = ()
+    compliance_factors: tuple[tuple[float, ...], ...] = ()
 
     def __post_init__(self) -> None:
+        if self.compliance_factors:
+            factors = np.asarray(self.compliance_factors, dtype=float)
+            if factors.shape != (len(self.mechanism.chains), 8) or not np.all(np.isfinite(factors) & (factors > 0)):
+                raise ValueError(f"compliance_factors must be {len(self.mechanism.chains)} x 8 finite values > 0 "
+                                 f"(one per chain and compliance entry), got shape {factors.shape}")
         if not self.parameters:
             object.__setattr__(self, "parameters", _build_parameters(self.mechanism))
         names = tuple(p.name for p in self.parameters)
