@@ -40,7 +40,7 @@ from typing import Callable
 
 import numpy as np
 
-from flexcal.calibration.polish import EvaluationCounter, least_squares_polish, polish_candidates
+from flexcal.calibration.polish import EvaluationCounter, least_squares_polish, norm_sum_polish, polish_candidates
 from flexcal.calibration.pso import PSOSettings, identify
 from flexcal.calibration.testfunctions import curve_fit_problem
 
@@ -56,9 +56,12 @@ def run_improved(problem, budget: int, seed: int, *, polish: bool, settings: PSO
     counter = _capped(problem.fitness, budget)
     result = identify(counter, problem.n_dims, s, rng=seed)
     if polish:
-        best, _, used = polish_candidates(problem.residuals, result.candidates(),
-                                          max_evaluations=budget - counter.n_evaluations)
-        return best.x, counter.n_evaluations + used
+        left = budget - counter.n_evaluations
+        best, _, used = polish_candidates(problem.residuals, result.candidates(), max_evaluations=(2 * left) // 3)
+        # finish on Eq. 13 itself (IRLS) with what is left: the sum of squares' minimizer is
+        # not the fitness minimizer when the model cannot fit exactly
+        refined = norm_sum_polish(problem.residuals, best.x, max_evaluations=left - used)
+        return refined.x, counter.n_evaluations + used + refined.n_evaluations  # refined: never above its start
     return result.x_best, counter.n_evaluations
 
 

@@ -1,23 +1,33 @@
 """The ``flexcal`` command line.
 
 Each sub-command lives in its own module ``flexcal.validation.cmd_<name>`` exposing
-``configure(parser)`` (adds its arguments) and ``run(args) -> int``. The module is
-imported only when its command runs, so ``flexcal --help`` stays fast and a command
-never pays for another's heavy imports (CadQuery, pyvista).
+``configure(parser)`` (adds its arguments) and ``run(args) -> int``, and optionally
+``EXAMPLES`` (command lines shown in its ``--help``) and ``DEFAULT_CONFIG`` (TOML-able
+settings, giving it ``--config FILE`` and ``--print-config``). The module is imported
+only when its command runs, so ``flexcal --help`` stays fast and a command never pays
+for another's heavy imports (CadQuery, pyvista). The options every command shares
+(``-v/-q``, ``--debug``, ``--json``, ``--config``) are added here
+(``flexcal.validation.cli_common``; the convention: docs/cli.md).
 
-Errors the user can fix (``ValueError``, ``FileNotFoundError``) print one line on
-stderr and exit with status 2; commands write their outputs only after the work
-succeeded (see ``flexcal.validation.output``), so a failed run leaves nothing partial.
+Errors about the input (``ValueError``, ``OSError``, a solver or mesher that fails,
+a bad option) print one line on stderr and exit with status 2; Ctrl-C exits 130; a bug
+prints one line and exits 1; ``--debug`` adds the traceback. Commands write their outputs
+only after the work succeeded (``flexcal.validation.output``), so a failed or
+interrupted run leaves nothing partial.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import importlib.util
+import json
+import os
 import sys
+import traceback
 
-__all__ = ["main", "COMMANDS"]
+__all__ = ["main", "COMMANDS", "build_parser"]
 
 # name -> (module, one-line help)
 COMMANDS: dict[str, tuple[str, str]] = {
@@ -26,11 +36,22 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "forward": ("cmd_forward", "analytic model: actuator inputs -> pose, chain states, point class"),
     "inverse": ("cmd_inverse", "analytic model: target angles -> actuator inputs"),
     "truth": ("cmd_truth", "virtual prototype: synthetic misalignment curves with preset errors"),
+    "sensitivity": ("cmd_sensitivity", "Sobol screening of the 45 error sources on a measurement or scenario"),
+    "identify": ("cmd_identify", "identify error sources from a measurement (improved PSO + polish)"),
     "verify": ("cmd_verify", "Section 3.3 regression run: truth -> Sobol -> identification -> report"),
     "compensate": ("cmd_compensate", "closed-loop compensation and Table 2-3 style report"),
     "diagnose": ("cmd_diagnose", "sim-to-real gap diagnosis of a measurement file"),
     "diagnose-benchmark": ("cmd_diagnose_benchmark", "blind benchmark of the gap diagnosis"),
+    "sweep": ("cmd_sweep", "parameter sweep over scenarios or designs, locally or on Dask"),
+    "report": ("cmd_report", "turn a run folder into one self-contained HTML page"),
 }
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line usage errors ('flexcal hinge: error: ...', exit 2)."""
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: error: {message} (see '{self.prog} --help')\n")
 
 
 def _available() -> dict[str, tuple[str, str]]:
@@ -41,36 +62,98 @@ def _available() -> dict[str, tuple[str, str]]:
     return found
 
 
+def _description(text: str, module) -> str:
+    doc = (module.__doc__ or "").replace("``", "").strip()
+    body = doc.split("\n\n", 1)[1] if "\n\n" in doc else ""
+    return f"{text}.\n\n{body}".rstrip()
+
+
 def build_parser(only: str | None = None) -> argparse.ArgumentParser:
     """The argument parser; with ``only`` set, only that sub-command is configured."""
-    parser = argparse.ArgumentParser(
+    from .cli_common import examples_epilog, install_common_options
+
+    parser = _Parser(
         prog="flexcal",
         description="flexcal: finite-element verification of flexure-based precision adjustment "
         "mechanisms (error model, calibration and sim-to-real diagnosis of a heavy-optics mount).",
-        epilog="Run 'flexcal <command> --help' for the options of a command.",
+        epilog="Run 'flexcal <command> --help' for the options and examples of a command; "
+               "'flexcal <command> --print-config' for its settings. Start with: "
+               "flexcal verify --scenario table1 --out runs/table1 && flexcal report runs/table1",
     )
     sub = parser.add_subparsers(dest="command", metavar="<command>")
-    for name, (module, text) in _available().items():
-        command_parser = sub.add_parser(name, help=text, description=text)
-        if name == only:
-            importlib.import_module(f"flexcal.validation.{module}").configure(command_parser)
+    for name, (module_name, text) in _available().items():
+        if name != only:
+            sub.add_parser(name, help=text, description=text)
+            continue
+        module = importlib.import_module(f"flexcal.validation.{module_name}")
+        command_parser = sub.add_parser(name, help=text, description=_description(text, module),
+                                        epilog=examples_epilog(module),
+                                        formatter_class=argparse.RawDescriptionHelpFormatter)
+        module.configure(command_parser)
+        install_common_options(command_parser, module)
     return parser
+
+
+def _command_of(argv: list[str]) -> str | None:
+    return next((a for a in argv if not a.startswith("-")), None)
 
 
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
-    command = next((a for a in argv if not a.startswith("-")), None)
-    parser = build_parser(only=command if command in COMMANDS else None)
-    args = parser.parse_args(argv)
-    if args.command is None:
+    command = _command_of(argv)
+    if command is not None and command not in COMMANDS:
+        print(f"flexcal: error: unknown command {command!r}; 'flexcal --help' lists them", file=sys.stderr)
+        return 2
+    debug = "--debug" in argv
+    try:
+        return _main(argv, command)
+    except SystemExit as stop:  # argparse: --help (0) or a usage error (2)
+        return stop.code if isinstance(stop.code, int) else 2
+    except BrokenPipeError:  # stdout closed early ('flexcal ... | head'): the reader wanted no more
+        with contextlib.suppress(OSError, ValueError, AttributeError):
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error at exit
+        return 0
+    except KeyboardInterrupt:
+        if debug:
+            traceback.print_exc()
+        print(f"flexcal {command}: interrupted; nothing was written to --out", file=sys.stderr)
+        return 130
+    except Exception as error:  # noqa: BLE001 - the one place that turns errors into exit codes
+        from .cli_common import error_line, is_user_error
+
+        if debug:
+            traceback.print_exc()
+        print(error_line(command or "", error), file=sys.stderr)
+        return 2 if is_user_error(error) else 1
+
+
+def _main(argv: list[str], command: str | None) -> int:
+    from .cli_common import apply_config, configure_logging, effective_config, print_config, summary_of
+
+    parser = build_parser(only=command)
+    if command is None:
+        parser.parse_args(argv)  # --help exits here
         parser.print_help()
         return 2
-    module = importlib.import_module(f"flexcal.validation.{COMMANDS[args.command][0]}")
-    try:
-        return int(module.run(args) or 0)
-    except (ValueError, FileNotFoundError) as error:
-        print(f"flexcal {args.command}: error: {error}", file=sys.stderr)
-        return 2
+    command_parser = parser._subparsers._group_actions[0].choices[command]
+    module = importlib.import_module(f"flexcal.validation.{COMMANDS[command][0]}")
+    merged = apply_config(command_parser, module, argv[argv.index(command) + 1:])
+    if merged is not None and "--print-config" in argv:
+        print_config(command_parser, module, argv[argv.index(command) + 1:], merged, command)
+        return 0
+    args = parser.parse_args(argv)
+    if merged is not None:
+        args.config = effective_config(command_parser, args, merged)
+    configure_logging(args.verbose, args.quiet)
+    central_json = "json" in args._central and args.json
+    with contextlib.ExitStack() as stack:
+        if central_json or args.quiet:
+            devnull = stack.enter_context(open(os.devnull, "w"))
+            stack.enter_context(contextlib.redirect_stdout(devnull))
+        status = int(module.run(args) or 0)
+    if central_json and status == 0 and args.out:
+        print(json.dumps(summary_of(args.out), sort_keys=True))
+    return status
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -10,7 +10,16 @@ from __future__ import annotations
 import argparse
 import dataclasses
 
-__all__ = ["configure", "run"]
+from .cli_common import add_out
+
+__all__ = ["configure", "run", "EXAMPLES", "DEFAULT_CONFIG"]
+
+EXAMPLES = (
+    "flexcal chain --reference D1 --out runs/chain-d1          # ~1 min",
+    "flexcal chain --length-mm 150 --t1-mm 3 --out runs/chain",
+    "flexcal report runs/chain-d1",
+)
+DEFAULT_CONFIG = {"elements_through": 2.0}
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -23,10 +32,10 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--t1-mm", type=float, help="thickness of leaf 1, thin in local y [mm] (default 4)")
     parser.add_argument("--t2-mm", type=float, help="thickness of leaf 2, thin in local z [mm] (default 4)")
     parser.add_argument("--section-mm", type=float, help="square section of blocks and strut [mm] (default 50)")
-    parser.add_argument("--elements-through", type=float, default=2,
-                        help="quadratic tets through the thinnest leaf (default 2: ~1 %% of converged, "
+    parser.add_argument("--elements-through", type=float,
+                        help="quadratic tets through the thinnest leaf (default %(default)s: ~1 %% of converged, "
                              "a 150 mm chain then has ~50k nodes)")
-    parser.add_argument("--out", required=True, help="output folder")
+    add_out(parser, what="report.json, report.md, chain.png, chain.vtu")
 
 
 _FIELDS = {"length_mm": "length", "hinge_length_mm": "hinge_length", "width_mm": "width", "fillet_mm": "fillet",

@@ -1,10 +1,11 @@
 """``flexcal forward``: the analytic model at one posture (inputs -> pose, chain states, class).
 
-    flexcal forward --inputs-mm 0.5,0,0 [--directions +1,+1,+1] [--params FILE] [--json]
+    flexcal forward --inputs-mm 0.5,0,0 [--directions +1,+1,+1] [--params FILE] [--json] [--out DIR]
 
 Inputs are the commanded actuator displacements x_A1..x_A3 [mm] (positive pushes the
 payload frame); a negative first value needs the ``=`` form: ``--inputs-mm=-0.5,0,0``.
 ``--params`` is a TOML or JSON file of error sources in display units (docs/parameters.md).
+With ``--out DIR`` the point is also written as DIR/report.json and DIR/report.md.
 """
 
 from __future__ import annotations
@@ -15,7 +16,13 @@ import json
 import numpy as np
 
 __all__ = ["configure", "run", "parse_triple", "parse_directions", "load_values", "add_model_options",
-           "point_report", "print_point"]
+           "point_report", "print_point", "write_point", "EXAMPLES"]
+
+EXAMPLES = (
+    "flexcal forward --inputs-mm 0.5,0,0",
+    "flexcal forward --inputs-mm=-0.4,0.2,0.1 --directions=-1,1,1 --params errors.toml --json",
+    "flexcal forward --inputs-mm 0.5,0,0 --out runs/forward      # report.json + report.md",
+)
 
 
 def parse_triple(text: str, what: str) -> np.ndarray:
@@ -51,6 +58,8 @@ def add_model_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--clearance-mode", choices=("force_only", "directional"), default="force_only",
                         help="how the travel direction enters the clearance (docs/model.md); default force_only")
     parser.add_argument("--json", action="store_true", help="print one JSON object instead of text")
+    parser.add_argument("--out", metavar="DIR",
+                        help="also write the point as DIR/report.json and DIR/report.md (optional)")
 
 
 def load_values(path: str | None):
@@ -104,6 +113,23 @@ def print_point(report: dict, title: str) -> None:
           f"S3 mixed, no clearance)")
 
 
+def write_point(out: str, report: dict, title: str, extra_lines: tuple[str, ...] = ()) -> None:
+    """DIR/report.json (``report``) and DIR/report.md (the text output), whole or not at all."""
+    import contextlib
+    import io
+
+    from .output import staged_output, write_json
+
+    text = io.StringIO()
+    with contextlib.redirect_stdout(text):
+        print_point(report, title)
+        for line in extra_lines:
+            print(line)
+    with staged_output(out) as staging:
+        write_json(staging / "report.json", report)
+        (staging / "report.md").write_text(f"# {title}\n\n```\n{text.getvalue()}```\n")
+
+
 def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--inputs-mm", required=True, metavar="X1,X2,X3",
                         help="actuator inputs x_A1,x_A2,x_A3 [mm]; use --inputs-mm=-0.5,0,0 for a negative first value")
@@ -124,6 +150,8 @@ def run(args: argparse.Namespace) -> int:
     except ConvergenceError as error:
         raise ValueError(f"the model did not converge: {error}") from None
     report = point_report(result, 0, overrides)
+    if args.out:
+        write_point(args.out, report, "flexcal forward (analytic model, paper Eq. 1-8)")
     if args.json:
         print(json.dumps(report))
     else:

@@ -8,7 +8,16 @@ from __future__ import annotations
 
 import argparse
 
-__all__ = ["configure", "run"]
+from .cli_common import add_out
+
+__all__ = ["configure", "run", "EXAMPLES", "DEFAULT_CONFIG"]
+
+EXAMPLES = (
+    "flexcal hinge --type circular --radius-mm 5 --thickness-mm 1 --width-mm 10 --out runs/hinge",
+    "flexcal hinge --type leaf --length-mm 20 --thickness-mm 4 --width-mm 40 --fillet-mm 6 --out runs/leaf",
+    "flexcal report runs/hinge        # -> runs/hinge/report.html",
+)
+DEFAULT_CONFIG = {"elements_through": 3.0}
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -21,9 +30,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--fillet-mm", type=float, default=0.0, help="fillet radius a [mm] (leaf; default 0)")
     parser.add_argument("--block-mm", type=float, default=None,
                         help="length of the rigid block at each end [mm] (default: R, or l/2 for a leaf)")
-    parser.add_argument("--elements-through", type=float, default=3,
-                        help="quadratic tets through the thinnest section (default 3: ~0.3 %% of converged)")
-    parser.add_argument("--out", required=True, help="output folder")
+    parser.add_argument("--elements-through", type=float,
+                        help="quadratic tets through the thinnest section (default %(default)s: ~0.3 %% of converged)")
+    add_out(parser, what="report.json, report.md, hinge.png, hinge.vtu")
 
 
 def build_hinge(args: argparse.Namespace):

@@ -1,6 +1,6 @@
 """``flexcal inverse``: the analytic model's inputs for target angles at one posture.
 
-    flexcal inverse --target-urad 100,-500,200 [--directions +1,+1,+1] [--params FILE] [--json]
+    flexcal inverse --target-urad 100,-500,200 [--directions +1,+1,+1] [--params FILE] [--json] [--out DIR]
 
 Targets are the absolute angles theta_x, theta_y, theta_z [urad] relative to the unloaded
 design pose (the gravity sag is part of them; docs/conventions.md). A negative first value
@@ -12,9 +12,16 @@ from __future__ import annotations
 import argparse
 import json
 
-from .cmd_forward import add_model_options, load_values, parse_directions, parse_triple, point_report, print_point
+from .cmd_forward import (add_model_options, load_values, parse_directions, parse_triple, point_report, print_point,
+                          write_point)
 
-__all__ = ["configure", "run"]
+__all__ = ["configure", "run", "EXAMPLES"]
+
+EXAMPLES = (
+    "flexcal inverse --target-urad 100,-500,200",
+    "flexcal inverse --target-urad=-100,0,0 --params errors.toml --json",
+    "flexcal inverse --target-urad 100,-500,200 --out runs/inverse",
+)
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -40,9 +47,12 @@ def run(args: argparse.Namespace) -> int:
     report = point_report(result.forward, 0, overrides)
     report["target_urad"] = (target * 1e6).tolist()
     report["residual_urad"] = (result.residual[0] * 1e6).tolist()
+    residual_line = "  angle residual [urad]: " + ", ".join(f"{v:.2e}" for v in report["residual_urad"])
+    if args.out:
+        write_point(args.out, report, "flexcal inverse (analytic model, paper Eq. 1-8)", (residual_line,))
     if args.json:
         print(json.dumps(report))
     else:
         print_point(report, "flexcal inverse (analytic model, paper Eq. 1-8)")
-        print("  angle residual [urad]: " + ", ".join(f"{v:.2e}" for v in report["residual_urad"]))
+        print(residual_line)
     return 0

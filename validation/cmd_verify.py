@@ -12,29 +12,53 @@ import dataclasses
 
 import numpy as np
 
-__all__ = ["configure", "run"]
+from .cli_common import add_out, add_scenario, add_seed
+
+__all__ = ["configure", "run", "add_calibration_options", "EXAMPLES", "DEFAULT_CONFIG", "CALIBRATION_DEFAULTS"]
+
+EXAMPLES = (
+    "flexcal verify --scenario table1 --out runs/table1          # paper Sec. 3.3, ~1-2 min with a warm FEM cache",
+    "flexcal verify --data curves.csv --remove-offset --out runs/measured",
+    "flexcal verify --scenario table1 --particles 60 --iterations 40 --sobol-n 128 --out runs/quick",
+    "flexcal verify --print-config > verify.toml; flexcal verify --config verify.toml --scenario table1 --out runs/t1",
+    "flexcal report runs/table1                                   # -> runs/table1/report.html",
+)
+CALIBRATION_DEFAULTS = {"sobol_n": 512, "sobol_threshold": 0.01, "particles": 300, "iterations": 150,
+                        "polish": True, "remove_offset": False, "calibration_seed": 0, "model_stiffness": "fem"}
+DEFAULT_CONFIG = {"provider": "fem", **CALIBRATION_DEFAULTS}
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
     source = parser.add_mutually_exclusive_group(required=True)
-    source.add_argument("--scenario", help="make the data with the virtual prototype: table1, nominal or a TOML file")
-    source.add_argument("--data", help="a measurement CSV (synthetic or real); its JSON sidecar's presets, if any, "
-                                       "give the error columns")
-    parser.add_argument("--seed", type=int, default=None, help="scenario seed (drawn errors, noise)")
+    add_scenario(parser, group=source)
+    source.add_argument("--data", metavar="CSV", help="a measurement CSV (synthetic or real); its JSON sidecar's "
+                                                      "presets, if any, give the error columns")
+    add_seed(parser, what="the scenario's drawn errors and noise (default: the scenario's)")
     parser.add_argument("--noise-urad", type=float, default=None, help="sensor noise of the scenario [urad]")
-    parser.add_argument("--provider", choices=("fem", "analytic"), default="fem",
-                        help="prototype segment stiffness (default fem; analytic only for quick checks)")
-    parser.add_argument("--sobol-n", type=int, default=512, help="Sobol base sample N (power of two; default 512)")
-    parser.add_argument("--sobol-threshold", type=float, default=0.01,
-                        help="identify sources whose total Sobol index reaches this on any output (default 0.01; "
-                             "0 identifies all 45)")
-    parser.add_argument("--particles", type=int, default=300, help="PSO particles (paper: 300)")
-    parser.add_argument("--iterations", type=int, default=150, help="PSO iterations (paper: 150)")
-    parser.add_argument("--no-polish", action="store_true", help="skip the least-squares polish")
-    parser.add_argument("--remove-offset", action="store_true", help="remove return offsets first (paper Sec. 4.2)")
-    parser.add_argument("--calibration-seed", type=int, default=0, help="seed of the Sobol sample and the PSO")
-    parser.add_argument("--out", required=True, help="output folder")
-    parser.add_argument("--quiet", action="store_true")
+    parser.add_argument("--provider", choices=("fem", "analytic"),
+                        help="prototype segment stiffness (default %(default)s; analytic only for quick checks)")
+    add_calibration_options(parser)
+    add_out(parser, what="report.json, report.md, fit/convergence/residuals/sensitivity PNGs, curves.csv")
+
+
+def add_calibration_options(parser: argparse.ArgumentParser) -> None:
+    """The screening and identification settings (``verify``, ``sensitivity``, ``identify``);
+    their defaults come from the command's DEFAULT_CONFIG."""
+    parser.add_argument("--sobol-n", type=int, metavar="N", help="Sobol base sample N (power of two; default %(default)s)")
+    parser.add_argument("--sobol-threshold", type=float, metavar="S",
+                        help="identify sources whose total Sobol index reaches this on any output "
+                             "(default %(default)s; 0 identifies all 45)")
+    parser.add_argument("--particles", type=int, help="PSO particles (paper: 300; default %(default)s)")
+    parser.add_argument("--iterations", type=int, help="PSO iterations (paper: 150; default %(default)s)")
+    parser.add_argument("--polish", action=argparse.BooleanOptionalAction,
+                        help="least-squares polish of the swarm's best points (default: on)")
+    parser.add_argument("--remove-offset", action=argparse.BooleanOptionalAction,
+                        help="remove each leg's return offset first (paper Sec. 4.2; default: off)")
+    parser.add_argument("--calibration-seed", type=int, metavar="N",
+                        help="seed of the Sobol sample and the PSO (default %(default)s)")
+    parser.add_argument("--model-stiffness", choices=("fem", "closed-form"),
+                        help="the model's chain compliance: closed-form (the paper's Eq. 1) or corrected by the FEM "
+                             "at the nominal design (docs/model.md 7; default %(default)s)")
 
 
 def _plots(result, measurement, directory) -> None:
@@ -77,12 +101,17 @@ def _markdown(report) -> str:
         lines += ["Groups the trajectory cannot tell apart: " +
                   "; ".join(", ".join(g) for g in report["identifiability"]["groups"]), ""]
     if "paper_comparison" in report:
-        lines += ["## Against the paper's Table 1", "", "| figure | paper | ours | beats paper |", "|---|---:|---:|---|"]
+        lines += ["## Against the paper's Table 1", "",
+                  "| figure | paper | ours (all identified) | beats paper | ours (identifiable only) | beats paper "
+                  "| not identifiable from this trajectory |", "|---|---:|---:|---|---:|---|---|"]
         for row in report["paper_comparison"]:
             ours = "n/a (none identified)" if row["ours"] is None else f"{row['ours']:.4g}"
-            lines.append(f"| {row['figure']} | {row['paper']:g} | {ours} | "
-                         f"{'yes' if row['beats_paper'] else 'NO'} |")
-        lines.append("")
+            meaningful = "n/a (none identifiable)" if row["ours_identifiable"] is None else \
+                f"{row['ours_identifiable']:.4g}"
+            lines.append(f"| {row['figure']} | {row['paper']:g} | {ours} | {'yes' if row['beats_paper'] else 'NO'} | "
+                         f"{meaningful} | {'yes' if row['beats_paper_identifiable'] else 'NO'} | "
+                         f"{', '.join(row['not_identifiable']) or '-'} |")
+        lines += ["", f"Model chain stiffness: {report.get('model_stiffness', 'closed-form')}.", ""]
     has_preset = "preset" in report["parameters"][0]
     header = "| parameter | unit | " + ("preset | " if has_preset else "") + "identified | " + \
         ("abs error | rel error | " if has_preset else "") + "identified? | identifiable? |"
@@ -105,38 +134,29 @@ def run(args: argparse.Namespace) -> int:
     from flexcal.calibration.pso_settings import PSOSettings
     from flexcal.model.parameters import parameter_space
 
-    from .measurements import read_measurement, write_measurement
+    from .cmd_sensitivity import check_sobol_options, load_source
+    from .measurements import write_measurement
     from .output import staged_output, write_json
     from .verify import VerifySettings, run_verify
 
     if args.particles < 2 or args.iterations < 1:
-        raise ValueError("--particles must be >= 2 and --iterations >= 1")
-    if args.sobol_n < 2 or args.sobol_n & (args.sobol_n - 1):
-        raise ValueError(f"--sobol-n={args.sobol_n} must be a power of two (e.g. 512)")
-    space = parameter_space()
-    presets = None
-    if args.scenario is not None:
-        from .cmd_truth import stiffness_provider
-        from .scenario import load_scenario
-        from .truth import make_truth
-
-        scenario = load_scenario(args.scenario, seed=args.seed, noise_urad=args.noise_urad)
-        measurement = make_truth(scenario, stiffness_provider(args.provider, progress=not args.quiet),
-                                 progress=not args.quiet).measurement
-        presets = scenario.values
-    else:
-        measurement = read_measurement(args.data)
-        found = measurement.metadata.get("preset_errors")
-        if found:
-            presets = space.build_values({e["name"]: e["value"] for e in found}, display_units=True)
-    if not 0.0 <= args.sobol_threshold <= 1.0:
-        raise ValueError(f"--sobol-threshold={args.sobol_threshold} must be in [0, 1]")
-    settings = VerifySettings(sobol_n=args.sobol_n, sobol_threshold=args.sobol_threshold, seed=args.calibration_seed, polish=not args.no_polish,
-                              remove_offset=args.remove_offset,
+        raise ValueError(f"--particles={args.particles} must be >= 2 and --iterations={args.iterations} >= 1")
+    check_sobol_options(args)
+    settings = VerifySettings(sobol_n=args.sobol_n, sobol_threshold=args.sobol_threshold, seed=args.calibration_seed,
+                              polish=args.polish, remove_offset=args.remove_offset,
                               noise_urad=args.noise_urad if args.noise_urad else None,
                               pso=dataclasses.replace(PSOSettings(), n_particles=args.particles,
                                                       max_iterations=args.iterations))
+    space = parameter_space()
+    measurement, presets = load_source(args, space, progress=not args.quiet)
+    if args.model_stiffness == "fem":
+        from .fem_provider import fem_provider
+        from .model_correction import corrected_space
+
+        space = corrected_space(space, fem_provider(progress=not args.quiet))
     result = run_verify(measurement, space, settings, presets=presets, progress=not args.quiet)
+    result.report["model_stiffness"] = ("closed-form chains scaled by FEM factors at the nominal design "
+                                        "(docs/model.md 7)" if space.compliance_factors else "closed-form (paper Eq. 1)")
     with staged_output(args.out) as staging:
         write_json(staging / "report.json", result.report)
         (staging / "report.md").write_text(_markdown(result.report))

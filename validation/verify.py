@@ -26,13 +26,14 @@ from typing import Any
 import numpy as np
 
 from flexcal.calibration.identifiability import identifiability
-from flexcal.calibration.polish import polish_candidates
+from flexcal.calibration.polish import norm_sum_polish, polish_candidates
 from flexcal.calibration.problem import CalibrationProblem
 from flexcal.calibration.pso import identify
 from flexcal.calibration.pso_settings import PSOSettings
 from flexcal.calibration.sensitivity import select_parameters, sobol_indices
 from flexcal.model.parameters import ParameterSpace
 
+from .cli_common import progress_bar, with_progress
 from .measurements import Measurement
 
 __all__ = ["VerifySettings", "VerifyResult", "run_verify", "PAPER_TABLE1", "TABLE1_NAMES"]
@@ -167,8 +168,10 @@ def run_verify(measurement: Measurement, space: ParameterSpace, settings: Verify
     angles = remove_return_offsets(measurement) if settings.remove_offset else measurement.angles
     screening = CalibrationProblem(space=space, inputs=measurement.inputs, angles=angles)
     start = time.perf_counter()
-    sobol = sobol_indices(lambda X: screening.deviation_from_ideal(X), [[0.0, 1.0]] * space.n_params,
-                          settings.sobol_n, seed=settings.seed, names=space.names, outputs=OUTPUTS)
+    with progress_bar(settings.sobol_n * (space.n_params + 2), "Sobol", enabled=progress, unit="run") as bar:
+        sobol = sobol_indices(with_progress(screening.deviation_from_ideal, bar), [[0.0, 1.0]] * space.n_params,
+                              settings.sobol_n, seed=settings.seed, names=space.names, outputs=OUTPUTS,
+                              chunk_size=max(64, settings.sobol_n))  # chunks only so that the bar moves
     sobol_s = time.perf_counter() - start
     log(f"verify: Sobol screening, {sobol.n_evaluations} model runs in {sobol_s:.1f} s")
     selected = select_parameters(sobol, threshold=settings.sobol_threshold, always=TABLE1_NAMES)
@@ -178,7 +181,9 @@ def run_verify(measurement: Measurement, space: ParameterSpace, settings: Verify
     log(f"verify: identifying {len(selected)} of {space.n_params} sources with the improved PSO "
         f"({settings.pso.n_particles} particles x {settings.pso.max_iterations} iterations)")
     start = time.perf_counter()
-    pso = identify(problem.fitness, sub.n_params, settings.pso, rng=settings.seed, sensitivity=st)
+    with progress_bar(settings.pso.max_iterations, "PSO", enabled=progress, unit="iteration") as bar:
+        pso = identify(problem.fitness, sub.n_params, settings.pso, rng=settings.seed, sensitivity=st,
+                       callback=lambda _: bar.update(1))
     pso_s = time.perf_counter() - start
     x_best = pso.x_best
     polish = None
@@ -190,6 +195,12 @@ def run_verify(measurement: Measurement, space: ParameterSpace, settings: Verify
         polish, _, _ = polish_candidates(problem.residuals, pso.candidates(), max_evaluations=pso.n_evaluations)
         if problem.fitness(polish.x[None])[0] <= pso.f_best:
             x_best = polish.x
+        # the sum of squares' minimizer is not Eq. 13's when the model cannot fit exactly:
+        # finish on Eq. 13 itself (IRLS), within what the polish left of its budget
+        left = max(pso.n_evaluations - polish.n_evaluations, 4 * (sub.n_params + 1))
+        refined = norm_sum_polish(problem.residuals, x_best, max_evaluations=left)
+        if problem.fitness(refined.x[None])[0] < problem.fitness(x_best[None])[0]:
+            x_best = refined.x
         log(f"verify: polish {time.perf_counter() - start:.1f} s")
     fitted = problem.model_angles(x_best[None])[0][0]
     residual = fitted - angles

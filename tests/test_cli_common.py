@@ -1,0 +1,138 @@
+"""The options every command shares: help with examples, --config / --print-config,
+--json, -q, and byte-identical reports for the same seed."""
+
+import json
+import re
+import tomllib
+
+import pytest
+
+from flexcal.validation import cli
+from flexcal.validation.cli_common import TIMING_KEYS, without_timings
+from flexcal.validation.config import check_default_config, merge_config
+
+HEADER = "point,time_s,leg,xa1_mm,xa2_mm,xa3_mm,theta_x_urad,theta_y_urad,theta_z_urad"
+
+
+@pytest.fixture
+def small_csv(tmp_path):
+    """Five postures of a plausible curve (the commands only need valid data)."""
+    rows = [f"{k + 1},{k},0,{0.1 * k:.1f},{-0.05 * k:.2f},0.02,{1.0 + k},{-2.0 * k},{0.5 * k}" for k in range(5)]
+    path = tmp_path / "curves.csv"
+    path.write_text("\n".join([HEADER, *rows]) + "\n")
+    return path
+
+
+def test_merge_config_checks_keys_and_types():
+    defaults = {"n": 3, "x": 0.5, "flag": False, "name": "a", "table": {"w": 0.9}, "grid": [1.0, 2.0]}
+    merged = merge_config(defaults, {"x": 1, "table": {"w": 2}, "grid": [3, 4]}, source="f.toml")
+    assert merged == {"n": 3, "x": 1.0, "flag": False, "name": "a", "table": {"w": 2.0}, "grid": [3.0, 4.0]}
+    assert isinstance(merged["x"], float) and defaults["table"] == {"w": 0.9}  # defaults untouched
+    for bad, words in [({"m": 1}, "unknown key 'm'"), ({"n": 1.5}, "n = 1.5 must be an integer"),
+                       ({"flag": 0}, "boolean"), ({"table": 3}, "must be a table"),
+                       ({"table": {"v": 1}}, "unknown key 'table.v'"), ({"grid": ["a"]}, "every entry")]:
+        with pytest.raises(ValueError, match=words):
+            merge_config(defaults, bad, source="f.toml")
+
+
+def test_default_config_must_be_toml():
+    with pytest.raises(ValueError, match="TOML has no NoneType"):
+        check_default_config({"seed": None})
+
+
+def available_commands():
+    return list(cli._available())
+
+
+@pytest.mark.parametrize("command", available_commands())
+def test_every_help_has_examples_and_common_options(command, capsys):
+    assert cli.main([command, "--help"]) == 0
+    out = capsys.readouterr().out
+    assert f"usage: flexcal {command}" in out
+    assert "examples:" in out and f"flexcal {command} " in out.split("examples:")[1]
+    assert "--quiet" in out and "--debug" in out
+
+
+def test_top_level_help_lists_every_available_command(capsys):
+    assert cli.main(["--help"]) == 0
+    out = capsys.readouterr().out
+    for command in available_commands():
+        assert re.search(rf"^ +{re.escape(command)}(\s|$)", out, flags=re.MULTILINE), command
+
+
+def test_print_config_round_trips_and_precedence(tmp_path, capsys):
+    from flexcal.validation.cmd_verify import DEFAULT_CONFIG
+
+    assert cli.main(["verify", "--print-config"]) == 0  # no required option needed
+    assert tomllib.loads(capsys.readouterr().out) == DEFAULT_CONFIG
+    config = tmp_path / "v.toml"
+    config.write_text("particles = 60\niterations = 40\npolish = false\n")
+    assert cli.main(["verify", "--config", str(config), "--iterations", "7", "--print-config"]) == 0
+    effective = tomllib.loads(capsys.readouterr().out)
+    # command line (iterations) > file (particles, polish) > defaults (sobol_n)
+    assert effective == {**DEFAULT_CONFIG, "particles": 60, "iterations": 7, "polish": False}
+
+
+def test_config_file_sets_option_defaults(tmp_path, small_csv, capsys):
+    config = tmp_path / "s.toml"
+    config.write_text("sobol_n = 8\ncalibration_seed = 5\n")
+    out = tmp_path / "out"
+    assert cli.main(["sensitivity", "--data", str(small_csv), "--config", str(config), "--out", str(out), "-q"]) == 0
+    report = json.loads((out / "report.json").read_text())
+    assert report["summary"]["n_base"] == 8 and report["summary"]["seed"] == 5
+    assert report["config"]["sobol_n"] == 8 and report["config"]["provider"] == "fem"
+
+
+def test_json_prints_only_the_summary(tmp_path, small_csv, capsys):
+    out = tmp_path / "out"
+    assert cli.main(["sensitivity", "--data", str(small_csv), "--sobol-n", "4", "--out", str(out), "--json"]) == 0
+    lines = capsys.readouterr().out.strip().splitlines()
+    assert len(lines) == 1
+    summary = json.loads(lines[0])
+    assert summary["n_base"] == 4 and summary["out"] == str(out)
+    assert summary["files"] == ["report.json", "report.md", "sensitivity.png"]
+
+
+def test_quiet_prints_nothing_on_stdout(tmp_path, capsys):
+    assert cli.main(["forward", "--inputs-mm", "0.1,0,0", "-q"]) == 0
+    assert capsys.readouterr().out == ""
+
+
+def test_without_timings_removes_only_timing_keys():
+    report = {"wall_s": 3.0, "fit": 1.0, "pso": {"timings_s": {"a": 1}, "n": 2}, "rows": [{"elapsed_s": 1, "x": 0}]}
+    assert without_timings(report) == {"fit": 1.0, "pso": {"n": 2}, "rows": [{"x": 0}]}
+    assert TIMING_KEYS == {"wall_s", "timings_s", "elapsed_s"}
+
+
+def run_twice(tmp_path, argv, names):
+    """The files ``names`` of two runs of ``argv`` (with --out appended)."""
+    runs = []
+    for k in range(2):
+        out = tmp_path / f"run{k}"
+        assert cli.main([*argv, "--out", str(out), "-q"]) == 0
+        runs.append({n: (out / n).read_bytes() for n in names})
+    return runs
+
+
+def test_same_seed_same_report_identify(tmp_path, small_csv):
+    first, second = run_twice(tmp_path, ["identify", "--data", str(small_csv), "--sources", "D1.x0,D1.CL,D1.mu",
+                                         "--particles", "40", "--iterations", "5", "--calibration-seed", "3"],
+                              ["report.json", "report.md"])
+    a, b = (without_timings(json.loads(r["report.json"])) for r in (first, second))
+    assert json.dumps(a, sort_keys=True) == json.dumps(b, sort_keys=True)
+    assert first["report.md"] == second["report.md"]  # the markdown holds no timing
+
+
+def test_same_seed_same_report_sensitivity_and_forward(tmp_path, small_csv):
+    first, second = run_twice(tmp_path, ["sensitivity", "--data", str(small_csv), "--sobol-n", "8"],
+                              ["report.json", "report.md"])
+    assert first == second  # no timings in this report: byte-identical as a whole
+    first, second = run_twice(tmp_path / "fw", ["forward", "--inputs-mm", "0.3,0.1,0"], ["report.json", "report.md"])
+    assert first == second
+
+
+def test_same_seed_same_truth_curves(tmp_path):
+    # the brief's example: the analytic virtual prototype with noise, same seed -> same bytes
+    first, second = run_twice(tmp_path, ["truth", "--scenario", "table1", "--provider", "analytic", "--seed", "4",
+                                         "--noise-urad", "0.3"], ["curves.csv", "curves.json"])
+    assert first == second
