@@ -57,7 +57,8 @@ def run_improved(problem, budget: int, seed: int, *, polish: bool, settings: PSO
     result = identify(counter, problem.n_dims, s, rng=seed)
     if polish:
         left = budget - counter.n_evaluations
-        best, _, used = polish_candidates(problem.residuals, result.candidates(), max_evaluations=(2 * left) // 3)
+        best, _, used = polish_candidates(problem.residuals, result.candidates(), max_evaluations=(2 * left) // 3,
+                                          select=problem.fitness)
         # finish on Eq. 13 itself (IRLS) with what is left: the sum of squares' minimizer is
         # not the fitness minimizer when the model cannot fit exactly
         refined = norm_sum_polish(problem.residuals, best.x, max_evaluations=left - used)

@@ -230,13 +230,17 @@ def norm_sum_polish(residuals: Residuals, x0_unit: np.ndarray, *, point_size: in
 
 
 def polish_candidates(residuals: Residuals, candidates: np.ndarray, *, max_evaluations: int | None = None,
+                      select: Callable[[np.ndarray], np.ndarray] | None = None,
                       **options) -> tuple[PolishResult, tuple[PolishResult, ...], int]:
     """Polish several start points (k, d) in turn and keep the lowest cost.
 
     candidates: e.g. ``PSOResult.candidates()`` (best first); max_evaluations: budget for
     all polishes together (each gets what the previous left; the rest are skipped when it
-    runs out); options: passed to ``least_squares_polish``. Returns (best result, every
-    result, total residual evaluations).
+    runs out); select: a batched objective ``f(X (k, d)) -> (k,)`` that picks the winner
+    (e.g. the Eq. 13 fitness, whose best basin need not be the sum of squares'; its k
+    evaluations are added to the count), default the lowest sum of squares; options:
+    passed to ``least_squares_polish``. Returns (best result, every result, total
+    evaluations).
     """
     candidates = np.atleast_2d(np.asarray(candidates, float))
     if candidates.shape[0] == 0:
@@ -249,6 +253,11 @@ def polish_candidates(residuals: Residuals, candidates: np.ndarray, *, max_evalu
         result = least_squares_polish(residuals, x0, max_evaluations=left, **options)
         used += result.n_evaluations
         results.append(result)
-    best = min(results, key=lambda r: r.cost)
+    if select is None:
+        best = min(results, key=lambda r: r.cost)
+    else:
+        scores = np.asarray(select(np.array([r.x for r in results])), float)
+        used += len(results)
+        best = results[int(np.argmin(scores))]
     return best, tuple(results), used
 

@@ -167,3 +167,20 @@ def test_norm_sum_polish_respects_the_budget():
 
     result = norm_sum_polish(residuals, np.array([0.5, 0.5]), point_size=2, max_evaluations=40)
     assert sum(calls) <= 40 and result.n_evaluations == sum(calls)
+
+
+def test_polish_candidates_can_select_by_another_objective():
+    # two basins of r(x) = (x - 0.2)(x - 0.8) + offset: the sum of squares prefers the
+    # basin at 0.8 (tilted), a different objective (distance to 0.2) the one at 0.2
+    from flexcal.calibration.polish import polish_candidates
+
+    def residuals(X):
+        x = np.atleast_2d(X)[:, 0]
+        return np.stack([(x - 0.2) * (x - 0.8), 0.05 * (x - 0.8)], axis=1)
+
+    default, _, used_default = polish_candidates(residuals, np.array([[0.15], [0.85]]))
+    assert default.x[0] == pytest.approx(0.8, abs=1e-6)
+    chosen, results, used = polish_candidates(residuals, np.array([[0.15], [0.85]]),
+                                              select=lambda X: np.abs(X[:, 0] - 0.2))
+    assert len(results) == 2 and chosen.x[0] < 0.5
+    assert used == used_default + 2  # the two selection evaluations are counted

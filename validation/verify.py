@@ -192,7 +192,8 @@ def run_verify(measurement: Measurement, space: ParameterSpace, settings: Verify
         # polish the swarm's distinct good points (overall, global swarm, subgroups: the
         # paper's Fig. 11 "relatively optimal solutions"), keep the best; budget: as many
         # rows as the swarm used, so the polish never more than doubles the cost
-        polish, _, _ = polish_candidates(problem.residuals, pso.candidates(), max_evaluations=pso.n_evaluations)
+        polish, _, _ = polish_candidates(problem.residuals, pso.candidates(), max_evaluations=pso.n_evaluations,
+                                         select=problem.fitness)
         if problem.fitness(polish.x[None])[0] <= pso.f_best:
             x_best = polish.x
         # the sum of squares' minimizer is not Eq. 13's when the model cannot fit exactly:
