@@ -1,7 +1,8 @@
 """``flexcal truth``: synthetic misalignment curves from the virtual prototype.
 
-Writes ``DIR/curves.csv`` (the measurement format), ``DIR/curves.json`` (provenance: the
-scenario, every preset error, injected effects, solver residuals) and
+Writes ``DIR/curves.csv`` (the measurement format, with the room temperature as column
+``temperature_c``), ``DIR/curves.json`` (provenance: the scenario, every preset error, the
+injected effects of its ``[[effects]]`` tables, solver residuals) and
 ``DIR/curves.png`` (the three misalignment curves, measured minus the ideal
 small-deflection model, each point coloured by its class S1/S2/S3).
 """
@@ -12,20 +13,27 @@ import argparse
 
 import numpy as np
 
-__all__ = ["configure", "run"]
+from .cli_common import add_out, add_scenario, add_seed
+
+__all__ = ["configure", "run", "EXAMPLES", "DEFAULT_CONFIG"]
+
+EXAMPLES = (
+    "flexcal truth --scenario table1 --out runs/truth                      # FEM prototype, ~5 s with a warm cache",
+    "flexcal truth --scenario table1 --provider analytic --seed 3 --out runs/quick",
+    "flexcal truth --scenario my-mount.toml --noise-urad 0.5 --out runs/noisy",
+)
+DEFAULT_CONFIG = {"provider": "fem"}
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--scenario", required=True,
-                        help="built-in scenario (table1, nominal) or a scenario TOML file")
-    parser.add_argument("--seed", type=int, default=None, help="seed for drawn errors and sensor noise")
+    add_scenario(parser)
+    add_seed(parser, what="drawn errors and sensor noise (default: the scenario's)")
     parser.add_argument("--noise-urad", type=float, default=None,
                         help="sensor noise standard deviation per channel [urad] (default: the scenario's; table1: 0)")
-    parser.add_argument("--provider", choices=("fem", "analytic"), default="fem",
+    parser.add_argument("--provider", choices=("fem", "analytic"),
                         help="segment stiffness: FEM condensation of the as-built solids (default) or the "
                              "closed-form compliance (fast, for checks only: then truth shares the model's hinge formulas)")
-    parser.add_argument("--out", required=True, help="output folder")
-    parser.add_argument("--quiet", action="store_true", help="no progress output")
+    add_out(parser, what="curves.csv, curves.json, curves.png")
 
 
 def stiffness_provider(kind: str, *, progress: bool = True):
@@ -61,7 +69,9 @@ def run(args: argparse.Namespace) -> int:
                                  title=f"virtual prototype, scenario {scenario.name} (seed {scenario.seed}): "
                                        f"measured − ideal model")
     classes, counts = np.unique(result.run.point_class, return_counts=True)
-    print(f"flexcal truth: {measurement.n_points} points, classes "
+    injected = [e["name"] for e in result.run.provenance.get("effects", [])]
+    print(f"flexcal truth: {measurement.n_points} points, "
+          + (f"effects {', '.join(injected)}, " if injected else "") + "classes "
           + ", ".join(f"{c} {n}" for c, n in zip(classes, counts))
           + f"; max |misalignment| = {', '.join(f'{v:.1f}' for v in np.abs(misalignment).max(axis=0) * 1e6)} urad; "
           f"max residual {np.max(result.run.force_residual):.1e} N; wrote {args.out}/curves.csv, curves.json, curves.png")

@@ -38,7 +38,7 @@ from flexcal.geometry.params import MechanismParams
 
 from .blas_threads import single_blas_thread
 from .kinematics import pose, so3_log, translation_pose
-from .prototype_effects import EffectContext, PointConditions, PointResult, effect_record
+from .prototype_effects import EffectContext, PointConditions, PointResult, effect_record, room_temperature
 from .prototype_equilibrium import (Assembly, Loads, NonConvergenceError, SolverSettings, build_assembly,
                                     solve_equilibrium)
 from .segments import StiffnessProvider, end_stiffness, rigid_mode_defect, section_nodes
@@ -261,22 +261,42 @@ def _hook(effects, name):
 
 
 def simulate(prototype: Prototype, inputs: np.ndarray, *, effects: Iterable[Any] = (),
-             progress: bool = False) -> PrototypeRun:
+             progress: bool = False, time: np.ndarray | None = None,
+             temperature: np.ndarray | None = None) -> PrototypeRun:
     """Walk the trajectory ``inputs`` (n_points, 3) [m] (commands of D1..D3, positive A -> B).
 
+    time (n_points,) [s] non-decreasing, default 1 s per point (0, 1, 2, ...); temperature
+    (n_points,) [degC] of the room, default ``room_temperature(time, seed=0)``. Both only
+    reach the effects (``EffectContext``); the nominal physics is isothermal and static.
     Returns a ``PrototypeRun``. Raises ``ValueError`` for bad inputs and
     ``NonConvergenceError`` if an equilibrium or the nut offsets do not converge. Runs on
     one BLAS thread (``flexcal.validation.blas_threads``: small factorizations are far
     faster that way on a loaded machine).
     """
     with single_blas_thread():
-        return _simulate(prototype, inputs, tuple(effects), progress)
+        return _simulate(prototype, inputs, tuple(effects), progress, time, temperature)
 
 
-def _simulate(prototype: Prototype, inputs: np.ndarray, effects: tuple, progress: bool) -> PrototypeRun:
+def _time_and_temperature(n: int, time, temperature) -> tuple[np.ndarray, np.ndarray]:
+    times = np.arange(n, dtype=float) if time is None else np.array(time, dtype=float)
+    if times.shape != (n,) or not np.all(np.isfinite(times)) or np.any(np.diff(times) < 0):
+        raise ValueError(f"time must be a finite, non-decreasing ({n},) array in s, got shape {times.shape}")
+    temps = room_temperature(times) if temperature is None else np.array(temperature, dtype=float)
+    if temps.shape != (n,) or not np.all(np.isfinite(temps)):
+        raise ValueError(f"temperature must be a finite ({n},) array in degC, got shape {temps.shape}")
+    return times, temps
+
+
+def _simulate(prototype: Prototype, inputs: np.ndarray, effects: tuple, progress: bool, time_s, temperature
+              ) -> PrototypeRun:
     inputs = np.asarray(inputs, dtype=float)
     if inputs.ndim != 2 or inputs.shape[1] != 3 or not np.all(np.isfinite(inputs)):
         raise ValueError(f"inputs must be a finite (n_points, 3) array in m, got shape {inputs.shape}")
+    times, temps = _time_and_temperature(len(inputs), time_s, temperature)
+    commands = inputs.copy()
+    for array in (commands, times, temps):
+        array.setflags(write=False)  # effects see slices of these
+    history: list[PointResult] = []
     records = [effect_record(e) for e in effects]
     mech, settings, tr = prototype.mechanism, prototype.settings, prototype.transmissions
     x0 = np.array([t.initial_position for t in tr])
@@ -296,7 +316,7 @@ def _simulate(prototype: Prototype, inputs: np.ndarray, effects: tuple, progress
     points = range(n)
     if progress:
         from tqdm import tqdm
-        points = tqdm(points, desc="prototype", unit="point")
+        points = tqdm(points, desc="prototype", unit="point", disable=None, leave=False)
     start = time.perf_counter()
     for k in points:
         command = inputs[k]
@@ -307,7 +327,10 @@ def _simulate(prototype: Prototype, inputs: np.ndarray, effects: tuple, progress
         direction = np.where(moved, np.sign(move), direction)
         last_command = command
         context = EffectContext(point_index=k, command=command.copy(), direction=direction.copy(),
-                                previous=previous_result)
+                                previous=previous_result, time=float(times[k]),
+                                dwell=float(times[k] - times[k - 1]) if k else 0.0, temperature=float(temps[k]),
+                                past_commands=commands[:k + 1], past_times=times[:k + 1],
+                                past_temperatures=temps[:k + 1], history=tuple(history))
         screw = command + x0
         for hook in _hook(effects, "modify_screw_position"):
             screw = np.array([float(hook(i, float(command[i]), float(screw[i]), context)) for i in range(3)])
@@ -352,6 +375,7 @@ def _simulate(prototype: Prototype, inputs: np.ndarray, effects: tuple, progress
         previous_offsets = offsets.copy()
         previous_result = PointResult(angles=rotation_vector, pose=out["pose"][k].copy(), axial_loads=tension,
                                       nut_offsets=offsets.copy())
+        history.append(previous_result)
     wall = time.perf_counter() - start
     provenance = {
         "generator": "flexcal.validation.prototype.simulate",

@@ -21,9 +21,15 @@ the order the effects are given:
     reports (offsets, scale errors, cross-talk). Noise belongs to the scenario, not here.
 
 ``context`` is an ``EffectContext``: point index, command (3,) [m], travel direction of
-each actuator (+1/-1, docs/conventions.md) and the previous point's result (or None).
+each actuator (+1/-1, docs/conventions.md), the previous point's result (or None), the
+time [s] and dwell since the previous point [s], the room temperature [degC], and the
+history (commands and times up to this point, results of the earlier points) from which
+path-dependent effects (friction memory, creep, lost steps) compute their state.
 Effects must be deterministic functions of their parameters and the context (seeded
 randomness is drawn at construction), so equal inputs give equal runs.
+
+``room_temperature(time, seed)`` is the slowly varying room temperature of a run: the
+same function feeds the context and the ``temperature_c`` column of ``flexcal truth``.
 """
 
 from __future__ import annotations
@@ -34,7 +40,10 @@ from typing import Any, Mapping, Protocol, runtime_checkable
 
 import numpy as np
 
-__all__ = ["Effect", "EffectContext", "PointConditions", "PointResult", "effect_record"]
+__all__ = ["Effect", "EffectContext", "PointConditions", "PointResult", "effect_record", "room_temperature",
+           "REFERENCE_TEMPERATURE_C"]
+
+REFERENCE_TEMPERATURE_C = 20.0  # [degC] temperature at which the mechanism has its nominal dimensions
 
 
 @runtime_checkable
@@ -61,12 +70,26 @@ class PointResult:
 
 @dataclass(frozen=True, kw_only=True, eq=False)
 class EffectContext:
-    """point_index; command (3,) [m]; direction (3,) of +1/-1; previous: ``PointResult`` or None."""
+    """What an effect sees at one point.
+
+    point_index; command (3,) [m]; direction (3,) of +1/-1; previous: ``PointResult`` or
+    None; time [s] of the point; dwell [s] since the previous point (0 at the first);
+    temperature [degC] of the room; past_commands (k + 1, 3) [m], past_times (k + 1,) [s]
+    and past_temperatures (k + 1,) [degC] of points 0..k (this one last); history:
+    ``PointResult`` of points 0..k-1.
+    """
 
     point_index: int
     command: np.ndarray
     direction: np.ndarray
     previous: PointResult | None
+    time: float = 0.0
+    dwell: float = 0.0
+    temperature: float = REFERENCE_TEMPERATURE_C
+    past_commands: np.ndarray | None = None
+    past_times: np.ndarray | None = None
+    past_temperatures: np.ndarray | None = None
+    history: tuple = ()
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -104,3 +127,24 @@ def effect_record(effect: Any) -> dict[str, Any]:
     if parameters is None and dataclasses.is_dataclass(effect):
         parameters = {f.name: getattr(effect, f.name) for f in dataclasses.fields(effect) if f.name != "name"}
     return {"name": name, "parameters": dict(parameters or {})}
+
+
+def room_temperature(time: np.ndarray, seed: int = 0) -> np.ndarray:
+    """Room temperature (n,) [degC] at the times (n,) [s] of a run with ``seed``.
+
+    A lab's slow thermal weather: a linear trend (|rate| <= 1 K/h), an air-conditioning
+    cycle (period 150..400 s, amplitude 0.1..0.3 K) and a slower swing (period 0.5..2 h,
+    amplitude <= 0.3 K) around ``REFERENCE_TEMPERATURE_C`` + an offset within +-0.5 K.
+    Deterministic in (seed, time), drawn from its own stream of the seed (stream 3;
+    streams 1 and 2 are the scenario's error draws and sensor noise), so the same seed
+    gives the same column whatever effects are injected.
+    """
+    t = np.asarray(time, dtype=float)
+    rng = np.random.default_rng([int(seed), 3])
+    offset, rate = rng.uniform(-0.5, 0.5), rng.uniform(-1.0, 1.0) / 3600.0
+    cycle_period, cycle_amplitude = rng.uniform(150.0, 400.0), rng.uniform(0.1, 0.3)
+    slow_period, slow_amplitude = rng.uniform(1800.0, 7200.0), rng.uniform(0.0, 0.3)
+    cycle_phase, slow_phase = rng.uniform(0.0, 2 * np.pi, size=2)
+    return (REFERENCE_TEMPERATURE_C + offset + rate * t
+            + cycle_amplitude * np.sin(2 * np.pi * t / cycle_period + cycle_phase)
+            + slow_amplitude * np.sin(2 * np.pi * t / slow_period + slow_phase))

@@ -17,9 +17,13 @@ A scenario file::
     kind = "standard"          # or "file" with file = "inputs.csv" (columns xa1_mm, xa2_mm, xa3_mm[, leg])
     n_points = 77
     dwell_s = 2.0              # time between points
-    [[effects]]                # injected unmodelled effects (gap diagnosis)
+    [[effects]]                # injected unmodelled effects (gap diagnosis, docs/effects.md)
     name = "drift"
-    rate_urad_per_point = [0.1, 0.1, 0.3]
+    rate = [5e-8, 5e-8, 1.5e-7]  # injector fields in SI (flexcal.validation.effect_injectors)
+    [[effects]]
+    name = "lead_error"
+    magnitude_urad = 8.0       # or: a drawn injector of that size (effect_library.make_injector)
+    seed = 3
 
 The built-in scenario ``table1`` uses the paper's Table 1 presets (initial positions
 −0.20, 0.32, 0.40 mm; CL 0.42, 0.25, 0.10 mm; μ 0.83, 0.87, 0.93) and draws every other

@@ -20,6 +20,7 @@ from flexcal.model.parameters import ParameterSpace
 
 from .measurements import Measurement
 from .prototype import PrototypeRun, build_prototype, simulate
+from .prototype_effects import room_temperature
 from .scenario import Scenario
 
 __all__ = ["as_built", "make_truth", "TruthResult"]
@@ -61,14 +62,24 @@ def make_truth(scenario: Scenario, provider: Callable, *, effects: tuple = (), p
     """Drive the as-built prototype of ``scenario`` along its trajectory and measure.
 
     provider: segment stiffness provider (FEM or analytic, ``flexcal.validation.segments``);
-    effects: effect objects injected into the physics (gap diagnosis). Sensor noise is
+    effects: effect objects injected into the physics (gap diagnosis), after the ones the
+    scenario's ``[[effects]]`` tables name (``effect_library.effects_from_scenario``). The
+    points are ``scenario.dwell`` apart in time; the room temperature
+    (``prototype_effects.room_temperature`` of the scenario seed) reaches the effects and is
+    written as column ``temperature_c`` whatever effects are injected. Sensor noise is
     Gaussian per channel from its own stream of the scenario seed, so the same seed
     gives the same file; offsets are added as given.
     """
+    from .effect_library import effects_from_scenario
+
     mechanism, offsets, drives = as_built(scenario.space, scenario.values)
     transmissions = [(x0, cl, mu, scenario.breakaway_force) for x0, cl, mu in drives]
     prototype = build_prototype(mechanism, transmissions, provider, mount_offsets=offsets)
-    run = simulate(prototype, scenario.inputs, effects=effects, progress=progress)
+    time = np.arange(scenario.inputs.shape[0]) * scenario.dwell
+    temperature = room_temperature(time, scenario.seed)
+    effects = effects_from_scenario(scenario.effects) + tuple(effects)
+    run = simulate(prototype, scenario.inputs, effects=effects, progress=progress, time=time,
+                   temperature=temperature)
     noise_rng = np.random.default_rng([scenario.seed, 2])  # stream 2: sensors (stream 1 drew the errors)
     angles = run.angles + scenario.offset + noise_rng.normal(size=run.angles.shape) * scenario.noise
     metadata: dict[str, Any] = {
@@ -85,10 +96,11 @@ def make_truth(scenario: Scenario, provider: Callable, *, effects: tuple = (), p
     }
     measurement = Measurement(
         point=np.arange(1, scenario.inputs.shape[0] + 1),
-        time=np.arange(scenario.inputs.shape[0]) * scenario.dwell,
+        time=time,
         leg=np.asarray(scenario.leg, dtype=int),
         inputs=np.asarray(scenario.inputs, dtype=float),
         angles=angles,
+        extras={"temperature_c": temperature},
         metadata=metadata,
     )
     return TruthResult(measurement=measurement, run=run)

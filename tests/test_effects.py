@@ -1,0 +1,179 @@
+"""Effect library (issue #7): injectors in the virtual prototype, model terms, registry,
+scenario [[effects]] and the temperature column. Short trajectories, analytic segments;
+the fits along the standard trajectory are in test_effect_fits.py."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from flexcal.model.trajectory import standard_trajectory
+from flexcal.validation.effect_injectors import Drift, LeadError, SensorScale, StepLoss
+from flexcal.validation.effect_library import (EFFECT_IDS, LIBRARY, NONE, OUT_OF_LIBRARY_IDS, effects_from_scenario,
+                                               make_injector, model_term)
+from flexcal.validation.effect_magnitude import standard_setting
+from flexcal.validation.prototype import build_prototype, simulate
+from flexcal.validation.prototype_effects import EffectContext, room_temperature
+from flexcal.validation.scenario import load_scenario
+from flexcal.validation.segments import analytic_provider
+from flexcal.validation.truth import as_built, make_truth
+
+SHORT = standard_trajectory(n_points=17)  # both turning points of every leg, ~0.6 s per run
+
+
+@pytest.fixture(scope="module")
+def prototype():
+    scenario = load_scenario("table1")  # clearances and friction: the effects meet the full transmission
+    mechanism, offsets, drives = as_built(scenario.space, scenario.values)
+    return build_prototype(mechanism, [(x0, cl, mu, 2.0) for x0, cl, mu in drives], analytic_provider(),
+                           mount_offsets=offsets)
+
+
+@pytest.fixture(scope="module")
+def baseline(prototype):
+    return simulate(prototype, SHORT.inputs, time=2.0 * np.arange(SHORT.n_points))
+
+
+def _run(prototype, effect):
+    return simulate(prototype, SHORT.inputs, effects=[effect], time=2.0 * np.arange(SHORT.n_points))
+
+
+def test_registry_has_every_id():
+    assert set(EFFECT_IDS) | set(OUT_OF_LIBRARY_IDS) == set(LIBRARY)
+    assert NONE not in LIBRARY and not set(EFFECT_IDS) & set(OUT_OF_LIBRARY_IDS)
+    for effect_id in EFFECT_IDS:
+        assert model_term(effect_id).id == effect_id
+    for effect_id in OUT_OF_LIBRARY_IDS:
+        assert LIBRARY[effect_id].term is None
+        with pytest.raises(ValueError, match="no model term"):
+            model_term(effect_id)
+
+
+@pytest.mark.parametrize("effect_id", EFFECT_IDS + OUT_OF_LIBRARY_IDS)
+def test_every_injector_changes_the_prototype_finitely(prototype, baseline, effect_id):
+    effect = make_injector(effect_id, 10.0, 4)
+    assert effect.name == effect_id
+    run = _run(prototype, effect)
+    change = np.abs(run.angles - baseline.angles)
+    assert np.all(np.isfinite(run.angles))
+    # 10 urad RMS asked on the standard trajectory: on this 17-point version any real effect
+    # moves some angle by > 0.1 urad, and none by more than 1 mrad (a blown-up physics)
+    assert 1e-7 < change.max() < 1e-3, change.max()
+    assert run.provenance["effects"][0]["name"] == effect_id
+
+
+@pytest.mark.parametrize("effect_id", EFFECT_IDS + OUT_OF_LIBRARY_IDS)
+def test_injectors_are_deterministic_for_a_seed(effect_id):
+    assert make_injector(effect_id, 5.0, 11) == make_injector(effect_id, 5.0, 11)
+    assert make_injector(effect_id, 5.0, 11) != make_injector(effect_id, 5.0, 12)
+
+
+def test_sensor_scale_exactly_scales_the_measured_angles(prototype, baseline):
+    scale = np.array([1e-3, -2e-3, 3e-3])
+    run = _run(prototype, SensorScale(scale=scale))
+    np.testing.assert_array_equal(run.true_angles, baseline.true_angles)  # sensor side only
+    np.testing.assert_allclose(run.angles, baseline.angles * (1 + scale), rtol=1e-14, atol=0)
+
+
+def test_drift_grows_linearly_in_time_and_steps_at_reversals(prototype, baseline):
+    rate = np.array([1e-7, -2e-7, 5e-8])  # [rad/s]
+    run = _run(prototype, Drift(rate=rate))
+    time = 2.0 * np.arange(SHORT.n_points)
+    np.testing.assert_allclose(run.angles - run.true_angles, np.outer(time, rate), rtol=0, atol=1e-18)
+    stepped = _run(prototype, Drift(reversal_step=(1e-6, 0, 0)))
+    offsets = (stepped.angles - stepped.true_angles)[:, 0]
+    reversals = np.sum(np.diff(SHORT.directions, axis=0) != 0, axis=1)
+    np.testing.assert_allclose(offsets, 1e-6 * np.r_[0, np.cumsum(reversals)], rtol=0, atol=1e-18)
+    assert offsets[-1] == pytest.approx(6e-6)  # each actuator reverses twice (at +A and at -A)
+
+
+def test_step_loss_is_persistent_whole_steps(prototype, baseline):
+    effect = StepLoss(events=((1, 0.5e-3, 2),))  # D2 loses 2 steps 0.5 mm into its travel
+    run = _run(prototype, effect)
+    lost = run.screw_positions[:, 1] - baseline.screw_positions[:, 1]
+    path = np.r_[0, np.cumsum(np.abs(np.diff(SHORT.inputs[:, 1])))]
+    after = path > 0.5e-3
+    assert after.any() and not after.all()
+    np.testing.assert_array_equal(lost[~after], 0.0)
+    # moving + when it happened (D2 starts upwards): 2 x 5 um against the travel, kept to the end
+    np.testing.assert_allclose(lost[after], -2 * effect.step_size, rtol=1e-12)
+    assert np.all(run.screw_positions[:, [0, 2]] == baseline.screw_positions[:, [0, 2]])
+
+
+def test_lead_error_is_periodic_in_the_screw_revolution():
+    effect = LeadError(slope=(2e-4, 0, 0), amplitude=(1e-6, 0, 0), phase=(0.7, 0, 0), second=(3e-7, 0, 0))
+    context = EffectContext(point_index=0, command=np.zeros(3), direction=np.ones(3), previous=None)
+    s = np.linspace(-1e-3, 1e-3, 41)
+    error = np.array([effect.modify_screw_position(0, 0.0, x, context) - x for x in s])
+    shifted = np.array([effect.modify_screw_position(0, 0.0, x + effect.lead, context) - x - effect.lead for x in s])
+    # one revolution later only the linear part has grown (slope x lead); round-off ~1e-19 m
+    np.testing.assert_allclose(shifted - error, 2e-4 * effect.lead, rtol=0, atol=1e-15)
+    assert effect.modify_screw_position(0, 0.0, 0.0, context) == 0.0  # zero at the home position
+    assert np.ptp(error - 2e-4 * s) > 1e-6  # and the periodic part is there
+
+
+@pytest.mark.parametrize("effect_id", EFFECT_IDS)
+def test_model_terms_are_zero_at_zero_and_have_the_right_shape(effect_id):
+    data = standard_setting().data
+    term = model_term(effect_id)
+    assert term.n_params == len(term.parameter_units) == term.scale.shape[0] and 1 <= term.n_params <= 9
+    assert set(term.requires) <= set(data.extras)
+    zero = term.evaluate(np.zeros(term.n_params), data)
+    assert zero.shape == (len(data.time), 3) and np.all(zero == 0.0)
+    some = term.evaluate(term.scale, data)
+    assert np.all(np.isfinite(some)) and np.abs(some).max() > 0
+    with pytest.raises(ValueError, match="parameters"):
+        term.evaluate(np.zeros(term.n_params + 1), data)
+
+
+def test_effects_from_scenario_builds_and_rejects():
+    drift, lead = effects_from_scenario(({"name": "drift", "rate": [1e-8, 0, 0]},
+                                         {"name": "lead_error", "magnitude_urad": 5.0, "seed": 2}))
+    assert isinstance(drift, Drift) and drift.rate == (1e-8, 0.0, 0.0)
+    assert lead == make_injector("lead_error", 5.0, 2)
+    for entry, words in [({"name": "wobble"}, ["unknown effect name", "wobble"]),
+                         ({"name": "drift", "speed": 1.0}, ["unknown parameter", "speed"]),
+                         ({"name": "drift", "magnitude_urad": 1.0, "rate": 1.0}, ["magnitude_urad", "rate"]),
+                         ({"name": "drift", "rate": [1.0, 2.0]}, ["rate"])]:
+        with pytest.raises(ValueError) as info:
+            effects_from_scenario((entry,))
+        for word in words:
+            assert word in str(info.value)
+
+
+def test_scenario_effects_reach_the_truth_and_temperature_is_written(tmp_path):
+    path = tmp_path / "s.toml"
+    plain = 'name = "t"\nseed = 5\ndraw_unset = false\n[trajectory]\nn_points = 13\n'
+    path.write_text(plain)
+    without = make_truth(load_scenario(str(path)), analytic_provider()).measurement
+    path.write_text(plain + '[[effects]]\nname = "lead_error"\nmagnitude_urad = 10.0\nseed = 1\n')
+    with_effect = make_truth(load_scenario(str(path)), analytic_provider())
+    difference = np.abs(with_effect.measurement.angles - without.angles).max()
+    assert difference > 1e-6, difference  # 10 urad RMS asked: > 1 urad somewhere on 13 points
+    assert with_effect.measurement.metadata["injected_effects"][0]["name"] == "lead_error"
+    # the column is there with or without effects and is the same: it gives nothing away
+    np.testing.assert_array_equal(with_effect.measurement.extras["temperature_c"], without.extras["temperature_c"])
+    np.testing.assert_array_equal(without.extras["temperature_c"], room_temperature(without.time, 5))
+
+
+def test_room_temperature_is_seeded_and_slow():
+    time = np.arange(0.0, 3600.0, 2.0)
+    first, again, other = room_temperature(time, 1), room_temperature(time, 1), room_temperature(time, 2)
+    np.testing.assert_array_equal(first, again)
+    assert not np.allclose(first, other)
+    # a room, not an oven: within 20 +- 2 K, and < 0.01 K/s (the AC cycle: 0.3 K x 2 pi / 150 s)
+    assert np.all(np.abs(first - 20.0) < 2.0) and np.abs(np.diff(first) / 2.0).max() < 0.015
+
+
+def test_simulate_checks_time(prototype):
+    with pytest.raises(ValueError, match="non-decreasing"):
+        simulate(prototype, SHORT.inputs[:3], time=[0.0, 2.0, 1.0])
+
+
+def test_thermal_follows_the_given_temperature(prototype):
+    effect = dataclasses.replace(make_injector("thermal", 10.0, 1), time_constant=0.0)
+    inputs = np.zeros((3, 3))
+    hot = simulate(prototype, inputs, effects=[effect], temperature=[20.0, 21.0, 22.0])
+    cold = simulate(prototype, inputs, effects=[effect], temperature=[20.0, 20.0, 20.0])
+    np.testing.assert_allclose(hot.screw_positions - cold.screw_positions,
+                               np.outer([0.0, 1.0, 2.0], effect.expansion), rtol=1e-12, atol=1e-18)
