@@ -51,7 +51,7 @@ def run(args: argparse.Namespace) -> int:
     from flexcal.model.forward import ideal_angles
 
     from .measurements import write_measurement
-    from .output import staged_output
+    from .output import staged_output, write_json
     from .plots import plot_misalignment_curves
     from .scenario import load_scenario
     from .truth import make_truth
@@ -63,16 +63,36 @@ def run(args: argparse.Namespace) -> int:
     result = make_truth(scenario, provider, progress=not args.quiet)
     measurement = result.measurement
     misalignment = measurement.angles - ideal_angles(measurement.inputs, scenario.space)
+    classes, counts = np.unique(result.run.point_class, return_counts=True)
+    injected = [e["name"] for e in result.run.provenance.get("effects", [])]
+    max_misalignment = np.abs(misalignment).max(axis=0) * 1e6
+    report = {
+        "summary": {"n_points": int(measurement.n_points), "scenario": scenario.name, "seed": int(scenario.seed),
+                    "effects": injected, **{f"n_{c}": int(n) for c, n in zip(classes, counts)},
+                    **{f"max_misalignment_{a}_urad": float(v) for a, v in zip(("theta_x", "theta_y", "theta_z"),
+                                                                                max_misalignment)},
+                    "max_force_residual_n": float(np.max(result.run.force_residual))},
+        "metadata": measurement.metadata,
+        "wall_s": float(result.run.wall_time),
+    }
     with staged_output(args.out) as staging:
         write_measurement(staging / "curves.csv", measurement)
+        write_json(staging / "report.json", report)
+        (staging / "report.md").write_text(
+            f"# Virtual prototype: scenario {scenario.name} (seed {scenario.seed})\n\n"
+            f"{measurement.n_points} points; classes " + ", ".join(f"{c} {n}" for c, n in zip(classes, counts))
+            + (f"; injected effects: {', '.join(injected)}" if injected else "; no injected effects")
+            + ".\n\nMax |measured − ideal model| [urad]: "
+            + ", ".join(f"{a} {v:.2f}" for a, v in zip(("θx", "θy", "θz"), max_misalignment))
+            + ".\n\n![curves](curves.png)\n\nData: `curves.csv` with its sidecar `curves.json` "
+              "(docs/prototype.md).\n")
         plot_misalignment_curves(staging / "curves.png", misalignment, result.run.point_class, leg=measurement.leg,
                                  title=f"virtual prototype, scenario {scenario.name} (seed {scenario.seed}): "
                                        f"measured − ideal model")
-    classes, counts = np.unique(result.run.point_class, return_counts=True)
-    injected = [e["name"] for e in result.run.provenance.get("effects", [])]
     print(f"flexcal truth: {measurement.n_points} points, "
           + (f"effects {', '.join(injected)}, " if injected else "") + "classes "
           + ", ".join(f"{c} {n}" for c, n in zip(classes, counts))
           + f"; max |misalignment| = {', '.join(f'{v:.1f}' for v in np.abs(misalignment).max(axis=0) * 1e6)} urad; "
-          f"max residual {np.max(result.run.force_residual):.1e} N; wrote {args.out}/curves.csv, curves.json, curves.png")
+          f"max residual {np.max(result.run.force_residual):.1e} N; wrote {args.out}/curves.csv, curves.json, curves.png, "
+          "report.json, report.md")
     return 0
