@@ -9,8 +9,12 @@ a stale matrix).
 A repeated run finds the file and costs one ``np.load``.
 
 Location: ``$FLEXCAL_CACHE_DIR`` if set, else ``~/.cache/flexcal``. Files are written
-whole or not at all (temporary file in the same folder, then ``os.replace``); a
-damaged file is treated as a miss and rewritten.
+whole or not at all (temporary file in the same folder, then ``os.replace``). Each file
+also stores its own key and a SHA-256 of its arrays (entries ``__key__``, ``__digest__``);
+a file that cannot be read whole (truncated, garbage), holds a different key (copied or
+renamed by hand, written for other inputs) or whose bytes no longer match the digest
+(flipped bits) is a miss: it is recomputed and rewritten. Files written before keys were
+stored carry neither and are trusted when they read whole.
 
 Usage::
 
@@ -27,8 +31,10 @@ import importlib.util
 import json
 import math
 import os
+import struct
 import tempfile
 import zipfile
+import zlib
 from pathlib import Path
 from typing import Any, Callable, Mapping
 
@@ -43,6 +49,7 @@ __all__ = [
     "load_cached",
     "store_cached",
     "cached",
+    "arrays_digest",
 ]
 
 CACHE_ENV = "FLEXCAL_CACHE_DIR"
@@ -51,6 +58,18 @@ CACHE_ENV = "FLEXCAL_CACHE_DIR"
 # cache itself). Editing any other one changes the code version and therefore every key;
 # new numerics modules (the mesher's helpers) are included automatically.
 _NOT_NUMERICS = frozenset({"__init__.py", "cache.py", "results.py"})
+_KEY_ENTRY = "__key__"  # the key stored inside each file, checked on every load
+_DIGEST_ENTRY = "__digest__"  # SHA-256 of the arrays (names, dtypes, shapes, bytes)
+
+
+def arrays_digest(arrays: Mapping[str, np.ndarray]) -> str:
+    """SHA-256 hex digest of named arrays: names, dtypes, shapes and bytes."""
+    digest = hashlib.sha256()
+    for name in sorted(arrays):
+        value = np.ascontiguousarray(arrays[name])
+        digest.update(f"{name}|{value.dtype.str}|{value.shape}|".encode())
+        digest.update(value.tobytes())
+    return digest.hexdigest()
 
 
 def cache_dir(path: str | os.PathLike | None = None) -> Path:
@@ -119,13 +138,20 @@ def _path(key: str, directory: Path) -> Path:
 
 
 def load_cached(key: str, directory: str | os.PathLike | None = None) -> dict[str, np.ndarray] | None:
-    """The arrays stored under ``key``, or ``None`` (missing or unreadable file)."""
+    """The arrays stored under ``key``, or ``None``: missing file, unreadable or truncated
+    file, a file holding another key, or arrays whose digest does not match."""
     path = _path(key, cache_dir(directory))
     try:
         with np.load(path, allow_pickle=False) as data:
-            return {name: data[name] for name in data.files}
-    except (FileNotFoundError, OSError, ValueError, zipfile.BadZipFile, EOFError):
+            arrays = {name: data[name] for name in data.files}
+    except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile, zlib.error, struct.error):
         return None
+    stored_key, stored_digest = arrays.pop(_KEY_ENTRY, None), arrays.pop(_DIGEST_ENTRY, None)
+    if stored_key is not None and str(stored_key) != key:
+        return None
+    if stored_key is not None and (stored_digest is None or str(stored_digest) != arrays_digest(arrays)):
+        return None
+    return arrays
 
 
 def store_cached(key: str, arrays: Mapping[str, np.ndarray], directory: str | os.PathLike | None = None) -> Path:
@@ -136,7 +162,11 @@ def store_cached(key: str, arrays: Mapping[str, np.ndarray], directory: str | os
     handle, tmp = tempfile.mkstemp(prefix=f".{key[:16]}.", suffix=".tmp", dir=folder)
     try:
         with os.fdopen(handle, "wb") as stream:
-            np.savez(stream, **{name: np.asarray(a) for name, a in arrays.items()})
+            if {_KEY_ENTRY, _DIGEST_ENTRY} & set(arrays):
+                raise ValueError(f"array names {_KEY_ENTRY!r} and {_DIGEST_ENTRY!r} are reserved by the cache; "
+                                 f"rename that array")
+            values = {name: np.asarray(a) for name, a in arrays.items()}
+            np.savez(stream, **values, **{_KEY_ENTRY: np.array(key), _DIGEST_ENTRY: np.array(arrays_digest(values))})
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
@@ -149,7 +179,8 @@ def cached(
     compute: Callable[[], Mapping[str, np.ndarray]],
     directory: str | os.PathLike | None = None,
 ) -> dict[str, np.ndarray]:
-    """Arrays for ``parts`` from the cache, or ``compute()`` them and store them."""
+    """Arrays for ``parts`` from the cache, or ``compute()`` them and store them (also
+    when the stored file is damaged or stale, see ``load_cached``)."""
     key = cache_key(parts)
     found = load_cached(key, directory)
     if found is not None:

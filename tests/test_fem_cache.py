@@ -81,3 +81,72 @@ def test_failed_write_leaves_nothing(tmp_path):
     with pytest.raises(RuntimeError):
         cache.store_cached(cache.cache_key(PARTS), {"a": Unwritable()}, tmp_path)
     assert list(tmp_path.iterdir()) == []
+
+
+def _counting(value):
+    calls = []
+
+    def compute():
+        calls.append(1)
+        return {"compliance": np.full((6, 6), value)}
+
+    return compute, calls
+
+
+def test_truncated_file_is_recomputed(tmp_path):
+    cache.cached(PARTS, lambda: {"compliance": np.arange(36.0).reshape(6, 6)}, tmp_path)
+    path = tmp_path / f"{cache.cache_key(PARTS)}.npz"
+    for keep in (len(path.read_bytes()) // 2, 100, 0):  # cut inside the data, inside the header, empty
+        data = path.read_bytes()
+        path.write_bytes(data[:keep])
+        compute, calls = _counting(float(keep))
+        result = cache.cached(PARTS, compute, tmp_path)
+        assert calls == [1]
+        assert result["compliance"][0, 0] == float(keep)
+        assert cache.load_cached(cache.cache_key(PARTS), tmp_path)["compliance"][0, 0] == float(keep)  # rewritten
+
+
+def test_entry_of_another_key_is_recomputed(tmp_path):
+    other = dict(PARTS, mesh={"n_thickness": 5, "curved": True})
+    cache.cached(other, lambda: {"compliance": np.ones((6, 6))}, tmp_path)
+    key, other_key = cache.cache_key(PARTS), cache.cache_key(other)
+    # a file copied (or renamed) onto the wrong name holds results of other inputs
+    (tmp_path / f"{key}.npz").write_bytes((tmp_path / f"{other_key}.npz").read_bytes())
+    assert cache.load_cached(key, tmp_path) is None
+    compute, calls = _counting(2.0)
+    assert cache.cached(PARTS, compute, tmp_path)["compliance"][0, 0] == 2.0
+    assert calls == [1]
+    assert cache.load_cached(other_key, tmp_path)["compliance"][0, 0] == 1.0  # the right file is untouched
+
+
+def test_flipped_bits_in_the_data_are_detected(tmp_path):
+    values = np.linspace(1.0, 2.0, 36).reshape(6, 6)
+    cache.cached(PARTS, lambda: {"compliance": values}, tmp_path)
+    path = tmp_path / f"{cache.cache_key(PARTS)}.npz"
+    data = bytearray(path.read_bytes())
+    offset = bytes(data).index(values.tobytes()) + 17  # inside the stored float64s (uncompressed NPZ)
+    data[offset] ^= 0x40
+    path.write_bytes(bytes(data))
+    assert cache.load_cached(cache.cache_key(PARTS), tmp_path) is None
+    compute, calls = _counting(3.0)
+    assert cache.cached(PARTS, compute, tmp_path)["compliance"][0, 0] == 3.0 and calls == [1]
+
+
+def test_entries_without_stored_key_are_still_served(tmp_path):
+    # files written before the key was stored in them: trusted when they read whole
+    key = cache.cache_key(PARTS)
+    np.savez(tmp_path / f"{key}.npz", compliance=np.eye(6))
+    found = cache.load_cached(key, tmp_path)
+    assert set(found) == {"compliance"}
+    np.testing.assert_array_equal(found["compliance"], np.eye(6))
+
+
+def test_stored_files_hold_key_and_digest_but_loads_do_not(tmp_path):
+    path = cache.store_cached(cache.cache_key(PARTS), {"a": np.ones(3)}, tmp_path)
+    with np.load(path) as data:
+        assert str(data["__key__"]) == cache.cache_key(PARTS)
+        assert set(data.files) == {"a", "__key__", "__digest__"}
+    assert set(cache.load_cached(cache.cache_key(PARTS), tmp_path)) == {"a"}
+    with pytest.raises(ValueError, match="reserved"):
+        cache.store_cached(cache.cache_key(PARTS), {"__key__": np.ones(1)}, tmp_path)
+    assert [p.name for p in tmp_path.iterdir()] == [path.name]

@@ -42,7 +42,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "compensate": ("cmd_compensate", "closed-loop compensation and Table 2-3 style report"),
     "diagnose": ("cmd_diagnose", "sim-to-real gap diagnosis of a measurement file"),
     "diagnose-benchmark": ("cmd_diagnose_benchmark", "blind benchmark of the gap diagnosis"),
-    "sweep": ("cmd_sweep", "parameter sweep over scenarios or designs, locally or on Dask"),
+    "sweep": ("cmd_sweep", "FEM vs closed form over a grid or Latin hypercube of hinge/chain dimensions, locally or on Dask"),
     "report": ("cmd_report", "turn a run folder into one self-contained HTML page"),
 }
 
@@ -116,7 +116,8 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         if debug:
             traceback.print_exc()
-        print(f"flexcal {command}: interrupted; nothing was written to --out", file=sys.stderr)
+        kept = "; finished designs are kept in --out and a rerun resumes" if command == "sweep" else "; nothing was written to --out"
+        print(f"flexcal {command}: interrupted{kept}", file=sys.stderr)
         return 130
     except Exception as error:  # noqa: BLE001 - the one place that turns errors into exit codes
         from .cli_common import error_line, is_user_error
