@@ -22,7 +22,7 @@ from flexcal.geometry.params import Material
 from .assembly import check_mesh
 from .elements import elasticity_matrix, element_strain_at_nodes
 
-__all__ = ["nodal_stress", "von_mises", "to_pyvista", "write_vtu", "render_deformed_png"]
+__all__ = ["nodal_stress", "von_mises", "to_pyvista", "write_vtu", "render_deformed_png", "render_mesh_png"]
 
 VTK_QUADRATIC_TETRA = 24
 
@@ -158,6 +158,28 @@ def render_deformed_png(
     plotter.add_mesh(deformed, scalars=scalars, show_edges=False, cmap="viridis")
     plotter.add_text(f"deformation x {scale:.3g}", font_size=10)
     plotter.view_isometric()
+    return _save_screenshot(plotter, path)
+
+
+def render_mesh_png(mesh, path: str | os.PathLike, *, window_size: tuple[int, int] = (1200, 800)) -> Path:
+    """Render the undeformed tet mesh off-screen to a PNG: its surface with the element
+    edges drawn, so the density through the necks can be checked by eye."""
+    import pyvista as pv
+
+    pv.OFF_SCREEN = True
+    path = Path(path)
+    if path.suffix.lower() != ".png":
+        raise ValueError(f"{path} must end in .png")
+    surface = to_pyvista(mesh).extract_surface()
+    plotter = pv.Plotter(off_screen=True, window_size=list(window_size))
+    plotter.add_mesh(surface, color="lightsteelblue", show_edges=True, edge_color="black", line_width=0.5)
+    plotter.add_text(f"mesh: {len(mesh.nodes)} nodes, {len(mesh.tets)} quadratic tets", font_size=10)
+    plotter.view_isometric()
+    return _save_screenshot(plotter, path)
+
+
+def _save_screenshot(plotter, path: Path) -> Path:
+    """Screenshot to a temporary name, then rename (whole or nothing); closes the plotter."""
     tmp = _atomic_target(path, ".png")
     try:
         plotter.screenshot(str(tmp))

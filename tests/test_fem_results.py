@@ -71,3 +71,15 @@ def test_render_png(tmp_path):
     data = path.read_bytes()
     assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 10_000
     assert [p.name for p in tmp_path.iterdir()] == ["deformed.png"]
+
+
+def test_render_mesh_png(tmp_path):
+    from flexcal.fem.results import render_mesh_png
+
+    path = render_mesh_png(MESH, tmp_path / "mesh.png")
+    data = path.read_bytes()
+    # a real picture (PNG signature, more than a blank frame compresses to) and no temp file left
+    assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 10_000
+    assert [p.name for p in tmp_path.iterdir()] == ["mesh.png"]
+    with pytest.raises(ValueError, match=".png"):
+        render_mesh_png(MESH, tmp_path / "mesh.jpg")

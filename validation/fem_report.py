@@ -161,7 +161,7 @@ def report_data(result: ComparisonResult, params_mm: dict[str, float]) -> dict[s
 
 def write_comparison(result: ComparisonResult, directory: Path, params_mm: dict[str, float]) -> dict[str, Any]:
     """Write report.json, report.md, <kind>.vtu and <kind>.png into ``directory``."""
-    from flexcal.fem.results import render_deformed_png, write_vtu
+    from flexcal.fem.results import render_deformed_png, render_mesh_png, write_vtu
 
     from .output import write_json
 
@@ -179,8 +179,11 @@ def write_comparison(result: ComparisonResult, directory: Path, params_mm: dict[
              f"radius ratio min {result.mesh_report.radius_ratio_min:.3f} / median "
              f"{result.mesh_report.radius_ratio_median:.3f}, volume error {result.mesh_report.volume_error:+.2e}.", "",
              "Timings [s]: " + ", ".join(f"{k} {v:.2f}" for k, v in result.timings.items()), "",
-             f"Picture: {result.kind}.png, {result.load_case}; fields in {result.kind}.vtu (ParaView)."]
+             f"Deformed shape ({result.load_case}), coloured by von Mises stress:", "",
+             f"![deformed shape]({result.kind}.png)", "", "Mesh:", "", f"![mesh]({result.kind}-mesh.png)", "",
+             f"Fields (displacement, stress, von Mises) in {result.kind}.vtu for ParaView."]
     (directory / "report.md").write_text("\n".join(lines) + "\n")
     write_vtu(result.mesh, directory / f"{result.kind}.vtu", result.displacement, result.material)
     render_deformed_png(result.mesh, result.displacement, directory / f"{result.kind}.png", material=result.material)
+    render_mesh_png(result.mesh, directory / f"{result.kind}-mesh.png")
     return data
