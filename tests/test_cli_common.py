@@ -129,6 +129,7 @@ def test_same_seed_same_report_sensitivity_and_forward(tmp_path, small_csv):
     assert first == second  # no timings in this report: byte-identical as a whole
     first, second = run_twice(tmp_path / "fw", ["forward", "--inputs-mm", "0.3,0.1,0"], ["report.json", "report.md"])
     assert first == second
+    assert (tmp_path / "fw" / "run0" / "point.png").is_file()  # every --out holds a picture
 
 
 def test_same_seed_same_truth_curves(tmp_path):
