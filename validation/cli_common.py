@@ -222,6 +222,20 @@ def progress_bar(total: int | None, desc: str, *, enabled: bool = True, unit: st
                 dynamic_ncols=True)
 
 
+def stage_advancer(bar) -> Callable[[str], None]:
+    """``stage(name)`` for staged jobs (CAD -> mesh -> solve -> report): each call closes
+    the previous stage on ``bar`` and shows the new one's name."""
+    started = [False]
+
+    def stage(name: str) -> None:
+        if started[0]:
+            bar.update(1)
+        started[0] = True
+        bar.set_description(name)
+
+    return stage
+
+
 def with_progress(function: Callable[[np.ndarray], Any], bar) -> Callable[[np.ndarray], Any]:
     """A batched function ``(n, d) -> ...`` that advances ``bar`` by n rows per call."""
 

@@ -59,17 +59,22 @@ def build_hinge(args: argparse.Namespace):
 
 def run(args: argparse.Namespace) -> int:
     from .fem_report import compare_hinge, write_comparison
+    from .cli_common import progress_bar, show_progress, stage_advancer
     from .output import staged_output
 
     if not args.elements_through > 0:
         raise ValueError(f"--elements-through={args.elements_through} must be > 0")
     hinge, params = build_hinge(args)  # validates before any CAD or meshing
-    result = compare_hinge(hinge, elements_through_thickness=args.elements_through)
-    with staged_output(args.out) as staging:
-        data = write_comparison(result, staging, params)
+    with progress_bar(4, "hinge", enabled=show_progress(args), unit="stage") as bar:
+        stage = stage_advancer(bar)
+        result = compare_hinge(hinge, elements_through_thickness=args.elements_through, stage=stage)
+        stage("VTU, pictures, report")
+        with staged_output(args.out) as staging:
+            data = write_comparison(result, staging, params)
+        bar.update(1)
     c_fem, c_ana = result.compliance_fem[5, 5], result.compliance_analytic[5, 5]
     print(f"flexcal hinge: C_rz,Mz FEM {c_fem:.6g} rad/(N m), closed form {c_ana:.6g} "
           f"({100 * (c_fem - c_ana) / c_ana:+.2f} %); largest diagonal difference "
           f"{data['max_abs_percent_difference_diagonal']:.1f} %; {data['mesh']['n_dof']} DOF, "
-          f"{sum(result.timings.values()):.1f} s; wrote {args.out}/report.json, report.md, hinge.vtu, hinge.png")
+          f"{sum(result.timings.values()):.1f} s; wrote {args.out}/report.json, report.md, hinge.vtu, hinge.png, hinge-mesh.png")
     return 0

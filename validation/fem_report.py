@@ -12,7 +12,7 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
@@ -58,27 +58,35 @@ class ComparisonResult:
     timings: dict[str, float]
 
 
-def _solid_and_mesh(build, params, elements_through_thickness: float):
+def _solid_and_mesh(build, params, elements_through_thickness: float, stage):
     """(part, mesh, mesh report, timings) for a part built by ``build(params)``."""
     from flexcal.fem.mesh import mesh_part
 
+    stage("CadQuery solid")
     start = time.perf_counter()
     part = build(params)
     timings = {"geometry": time.perf_counter() - start}
+    stage("pytetwild mesh")
     start = time.perf_counter()
     mesh, report = mesh_part(part, elements_through_thickness=elements_through_thickness)
     timings["mesh"] = time.perf_counter() - start
     return part, mesh, report, timings
 
 
+def _no_stage(name: str) -> None:
+    return None
+
+
 def compare_hinge(hinge: CircularNotchHinge | LeafHinge, material: Material = STEEL, *,
-                  elements_through_thickness: float = 3) -> ComparisonResult:
-    """FEM and closed-form 6 x 6 compliance of a hinge at its free end."""
+                  elements_through_thickness: float = 3, stage: Callable[[str], None] = _no_stage) -> ComparisonResult:
+    """FEM and closed-form 6 x 6 compliance of a hinge at its free end; ``stage(name)`` is
+    called as each stage starts (progress display)."""
     from flexcal.fem.condense import hinge_displacement, solve_hinge
     from flexcal.geometry.solids import hinge_solid
     from flexcal.model.chain import hinge_part_compliance
 
-    part, mesh, report, timings = _solid_and_mesh(hinge_solid, hinge, elements_through_thickness)
+    part, mesh, report, timings = _solid_and_mesh(hinge_solid, hinge, elements_through_thickness, stage)
+    stage("FEM solve + condensation")
     start = time.perf_counter()
     solution = solve_hinge(mesh, material, part.end_planes["fixed"], part.end_planes["free"],
                            part.reference_points["free"])
@@ -98,13 +106,15 @@ def _clamped_a_compliance(stiffness_12: np.ndarray) -> np.ndarray:
 
 
 def compare_chain(chain: FlexureChain, material: Material = STEEL, *,
-                  elements_through_thickness: float = 2) -> ComparisonResult:
-    """FEM and analytic (Eq. 1) stiffness of a chain between its end faces A and B."""
+                  elements_through_thickness: float = 2, stage: Callable[[str], None] = _no_stage) -> ComparisonResult:
+    """FEM and analytic (Eq. 1) stiffness of a chain between its end faces A and B;
+    ``stage(name)`` as in ``compare_hinge``."""
     from flexcal.fem.condense import chain_displacement, solve_chain
     from flexcal.geometry.solids import chain_solid
     from flexcal.model.chain import chain_stiffness_matrix
 
-    part, mesh, report, timings = _solid_and_mesh(chain_solid, chain, elements_through_thickness)
+    part, mesh, report, timings = _solid_and_mesh(chain_solid, chain, elements_through_thickness, stage)
+    stage("FEM solve + condensation")
     start = time.perf_counter()
     solution = solve_chain(mesh, material, part.end_planes["A"], part.reference_points["A"], part.end_planes["B"],
                            part.reference_points["B"])
