@@ -1,0 +1,220 @@
+"""Closed-loop compensation: the pure loop (calibration.compensation), the target set, the
+return-offset removal, and the model-side pieces of validation.compensate (no prototype)."""
+
+import numpy as np
+import pytest
+
+from flexcal.calibration.compensation import (LoopSettings, closed_loop, correction_step, iterate,
+                                              within_tolerance)
+from flexcal.model.forward import forward, ideal_angles
+from flexcal.model.parameters import parameter_space
+from flexcal.model.trajectory import WORKSPACE, standard_trajectory
+from flexcal.validation.compensate import (calibrated_inputs, model_input_jacobian, model_states,
+                                           model_zero_angles, return_offsets, small_deflection_inputs)
+from flexcal.validation.measurements import Measurement
+from flexcal.validation.scenario import load_scenario
+from flexcal.validation.targets import default_targets, read_targets, write_targets
+from flexcal.validation.verify import remove_return_offsets
+
+GAIN = np.array([[-1.0, -1.0, -1.6], [-3.2, -3.2, 0.1], [-0.8, 0.8, 0.0]])  # [rad/m], the mount's order
+
+
+def toy_plant(x):
+    """A smooth nonlinear 'mechanism': theta = G x + quadratic coupling [rad], x [m]."""
+    return x @ GAIN.T + 50.0 * np.stack([x[:, 0] * x[:, 1], x[:, 1] ** 2, x[:, 2] * x[:, 0]], axis=1)
+
+
+def toy_model_jacobian(x):
+    """The 'calibrated model' Jacobian: the linear part only, 10 % off in gain (a wrong model)."""
+    return np.broadcast_to(1.1 * GAIN, (len(x), 3, 3))
+
+
+def toy_targets(n=12, seed=0):
+    rng = np.random.default_rng(seed)
+    return toy_plant(rng.uniform(-1e-3, 1e-3, (n, 3)))
+
+
+def test_loop_converges_to_tolerance_with_an_approximate_jacobian():
+    targets = toy_targets()
+    first = np.linalg.solve(GAIN, targets.T).T  # the linear model's inverse: misses the quadratic part
+    settings = LoopSettings(tolerance=1e-10, max_rounds=30)
+    result = iterate(targets, first, toy_plant, toy_model_jacobian, settings)
+    assert result.converged
+    assert np.all(np.abs(result.final.error) <= settings.tolerance)
+    assert np.max(np.abs(result.first.error)) > 100 * settings.tolerance  # there was something to correct
+    # contraction |1 - 1/1.1| ~ 0.09 per round plus the quadratic term: errors of ~1e-5 rad
+    # reach 1e-10 in about 5-6 rounds; 12 allows for the nonlinearity without hiding a stall
+    assert 1 <= result.n_corrections <= 12
+    # the max error decreases every round (a contraction, not luck)
+    maxima = [np.max(np.abs(r.error)) for r in result.rounds]
+    assert all(b < a for a, b in zip(maxima, maxima[1:]))
+
+
+def test_loop_stops_after_max_rounds_when_noise_exceeds_the_tolerance():
+    targets = toy_targets(5)
+    rng = np.random.default_rng(1)
+
+    def noisy(x):  # readings 10x noisier than the tolerance can never all pass
+        return toy_plant(x) + rng.normal(scale=1e-8, size=x.shape)
+
+    settings = LoopSettings(tolerance=1e-9, max_rounds=3)
+    result = iterate(targets, np.zeros((5, 3)), noisy, toy_model_jacobian, settings)
+    assert not result.converged
+    assert len(result.rounds) == 4 and result.n_corrections == 3
+
+
+def test_only_points_outside_the_tolerance_are_corrected():
+    x_true = np.random.default_rng(2).uniform(-1e-3, 1e-3, (4, 3))
+    targets = toy_plant(x_true)
+    first = np.linalg.solve(GAIN, targets.T).T
+    first[0] = x_true[0]  # point 0 starts exactly on target
+    result = iterate(targets, first, toy_plant, toy_model_jacobian, LoopSettings(tolerance=1e-12, max_rounds=2))
+    assert result.rounds[0].corrected.all()
+    assert not result.rounds[1].corrected[0] and result.rounds[1].corrected[1:].all()
+    np.testing.assert_array_equal(result.rounds[1].inputs[0], first[0])
+
+
+def test_correction_step_is_the_newton_step_and_refuses_a_singular_jacobian():
+    jac = np.broadcast_to(GAIN, (3, 3, 3)).copy()
+    error = np.array([[1e-6, 0, 0], [0, 2e-6, 0], [0, 0, -1e-6]])
+    step = correction_step(jac, error)
+    np.testing.assert_allclose(np.einsum("nij,nj->ni", jac, step), -error, rtol=0, atol=1e-18)  # rounding of 1e-6
+    jac[1] = 0.0
+    with pytest.raises(ValueError, match="singular at point 1"):
+        correction_step(jac, error)
+
+
+def test_closed_loop_runs_the_fig9_steps_in_order():
+    calls = []
+    targets = toy_targets(3)
+
+    def identify():
+        calls.append("identify")
+        return "model"
+
+    def inverse(model, t):
+        calls.append(f"inverse:{model}")
+        return np.linalg.solve(GAIN, t.T).T
+
+    model, result = closed_loop(targets, identify=identify, inverse=inverse, drive_and_measure=toy_plant,
+                                input_jacobian=lambda m, x: toy_model_jacobian(x),
+                                settings=LoopSettings(tolerance=1e-11))
+    assert model == "model" and calls == ["identify", "inverse:model"]
+    assert result.converged
+
+
+@pytest.mark.parametrize("kwargs", [dict(tolerance=0.0), dict(max_rounds=-1), dict(gain=0.0), dict(gain=1.5)])
+def test_loop_settings_are_checked(kwargs):
+    with pytest.raises(ValueError):
+        LoopSettings(**kwargs)
+
+
+def test_within_tolerance_is_per_point_all_angles():
+    error = np.array([[1e-7, -1e-7, 0.0], [1e-7, 2e-6, 0.0]])
+    np.testing.assert_array_equal(within_tolerance(error, 1e-6), [True, False])
+
+
+# --- targets ---------------------------------------------------------------------------------
+
+def test_default_targets_spread_over_the_workspace_off_the_calibration_axes():
+    targets = default_targets()
+    assert targets.shape == (30, 3)
+    np.testing.assert_array_equal(targets, default_targets())  # deterministic
+    assert np.all(np.abs(targets) <= 0.8 * WORKSPACE + 1e-18)
+    # spread: every angle covers most of its +-80 % range, both signs
+    assert np.all(targets.max(axis=0) > 0.6 * WORKSPACE) and np.all(targets.min(axis=0) < -0.6 * WORKSPACE)
+    # validation points, not sampling points: the calibration sweeps move one actuator at a
+    # time, so their inputs have one non-zero entry; the targets' inputs never do
+    inputs = small_deflection_inputs(targets, parameter_space())
+    assert np.all(np.sum(np.abs(inputs) > 1e-6, axis=1) >= 2)
+
+
+def test_targets_file_round_trip_and_errors(tmp_path):
+    targets = default_targets(5)
+    path = tmp_path / "t.csv"
+    write_targets(path, targets)
+    np.testing.assert_allclose(read_targets(path), targets, rtol=0, atol=1e-12)  # 6 decimals of urad
+    (tmp_path / "bad.csv").write_text("theta_x_urad,theta_y_urad\n1,2\n")
+    with pytest.raises(ValueError, match="theta_z_urad"):
+        read_targets(tmp_path / "bad.csv")
+    (tmp_path / "far.csv").write_text("theta_x_urad,theta_y_urad,theta_z_urad\n0,0,0\n2000,0,0\n")
+    with pytest.raises(ValueError, match="target 2"):
+        read_targets(tmp_path / "far.csv")
+    (tmp_path / "nan.csv").write_text("theta_x_urad,theta_y_urad,theta_z_urad\n0,x,0\n")
+    with pytest.raises(ValueError, match="row 2"):
+        read_targets(tmp_path / "nan.csv")
+    with pytest.raises(FileNotFoundError):
+        read_targets(tmp_path / "missing.csv")
+
+
+# --- return-offset removal (paper Sec. 4.2) ---------------------------------------------------
+
+def _curve(angles, dwell=2.0):
+    trajectory = standard_trajectory()
+    n = trajectory.n_points
+    return Measurement(point=np.arange(1, n + 1), time=np.arange(n) * dwell, leg=trajectory.leg,
+                       inputs=trajectory.inputs, angles=angles)
+
+
+def test_return_offset_removal_recovers_an_injected_linear_drift():
+    trajectory = standard_trajectory()
+    clean = ideal_angles(trajectory.inputs)  # memoryless: each leg returns exactly to its start
+    curve = _curve(clean)
+    rate = np.array([-10.0, -11.0, 25.0]) * 1e-6 / curve.time[-1]  # the paper's return offsets over one run
+    drifted = _curve(clean + rate * curve.time[:, None])
+    recovered = remove_return_offsets(drifted)
+    # exact up to rounding of ~1e-3 rad angles (1e-19) summed over three legs
+    np.testing.assert_allclose(recovered, clean, rtol=0, atol=1e-15)
+    assert np.max(np.abs(drifted.angles - clean)) > 20e-6  # the drift was there
+    offsets = return_offsets(drifted)  # each leg's share: rate x its duration
+    assert sorted(offsets) == [1, 2, 3]
+    for leg, offset in offsets.items():
+        index = np.flatnonzero(drifted.leg == leg)
+        duration = drifted.time[index[-1]] - drifted.time[index[0] - 1]
+        np.testing.assert_allclose(offset, rate * duration, rtol=0, atol=1e-15)
+
+
+def test_return_offset_removal_leaves_a_drift_free_curve_alone():
+    clean = ideal_angles(standard_trajectory().inputs)
+    np.testing.assert_allclose(remove_return_offsets(_curve(clean)), clean, rtol=0, atol=1e-18)
+
+
+# --- the calibrated model's side -------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def table1():
+    scenario = load_scenario("table1")
+    return scenario.space, scenario.values
+
+
+def test_small_deflection_inputs_reach_the_targets_on_the_ideal_model():
+    space = parameter_space()
+    targets = default_targets(8)
+    inputs = small_deflection_inputs(targets, space)
+    relative = ideal_angles(inputs, space) - ideal_angles(np.zeros((1, 3)), space)
+    np.testing.assert_allclose(relative, targets, rtol=0, atol=1e-15)  # linear model: exact to rounding
+
+
+def test_calibrated_inputs_drive_the_model_exactly_to_target(table1):
+    space, values = table1
+    targets = default_targets(12)
+    inputs = calibrated_inputs(values, targets, space)
+    reached = np.stack([forward(values, x[None], space=space).angles[0, 0] for x in inputs])  # each from zero
+    # the inverse's Newton tolerance is 1e-12 rad
+    np.testing.assert_allclose(reached - model_zero_angles(values, space), targets, rtol=0, atol=2e-12)
+    classes, release = model_states(values, inputs, space)
+    assert set(classes) <= {"S1", "S2", "S3"} and release.shape == (12, 3)
+
+
+def test_model_input_jacobian_matches_finite_differences(table1):
+    space, values = table1
+    inputs = calibrated_inputs(values, default_targets(4), space)
+    jac = model_input_jacobian(values, inputs, space)
+    h = 1e-8  # [m]: 1e-8 of the ~1 mm inputs, well above the model's 1e-13 m fixed-point tolerance
+    for j in range(3):
+        step = np.zeros(3)
+        step[j] = h
+        plus = np.stack([forward(values, (x + step)[None], space=space).angles[0, 0] for x in inputs])
+        minus = np.stack([forward(values, (x - step)[None], space=space).angles[0, 0] for x in inputs])
+        # central difference: O(h^2) truncation, ~1e-13 rad rounding / 2h -> ~1e-5 relative
+        np.testing.assert_allclose(jac[:, :, j], (plus - minus) / (2 * h), rtol=1e-4, atol=1e-4)
