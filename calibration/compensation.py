@@ -9,7 +9,10 @@ module knows nothing about the model or the prototype:
    ``inverse(model, targets (n, 3) [rad]) -> inputs (n, 3) [m]``;
 4. drive the mechanism and measure: ``drive_and_measure(inputs (n, 3) [m]) -> angles (n, 3) [rad]``;
 5. iterate: while a point's error exceeds the tolerance and rounds remain, correct its
-   inputs with the measured error through the calibrated model's input Jacobian,
+   inputs with the measured error through the calibrated model's input Jacobian (with
+   backtracking: a point whose error grew goes half way back to its best inputs and
+   halves its later steps; each point's Jacobian is corrected by Broyden's secant update
+   from what the mechanism did in the previous round),
 
        x_{k+1} = x_k + g J(x_k)^-1 (target - measured_k),    J = d theta / d x  [rad/m]
 
@@ -27,8 +30,8 @@ from typing import Any, Callable
 
 import numpy as np
 
-__all__ = ["LoopSettings", "LoopRound", "LoopResult", "within_tolerance", "correction_step", "iterate",
-           "closed_loop"]
+__all__ = ["LoopSettings", "LoopRound", "LoopResult", "within_tolerance", "correction_step", "broyden_update",
+           "iterate", "closed_loop"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -113,6 +116,21 @@ def correction_step(jacobian: np.ndarray, error: np.ndarray, gain: float = 1.0) 
                          f"error there; drop the target or recalibrate") from None
 
 
+def broyden_update(jacobian: np.ndarray, dx: np.ndarray, dtheta: np.ndarray, min_change: float) -> np.ndarray:
+    """Broyden's rank-one secant update of per-point Jacobians (n, 3, 3) [rad/m] with the
+    last input change dx (n, 3) [m] and the measured angle change dtheta (n, 3) [rad]:
+    ``J + (dtheta - J dx) dx^T / (dx^T dx)``, so J reproduces what the mechanism did.
+    Points that did not move, or whose measured change is below ``min_change`` [rad] (it
+    would be mostly noise), keep their Jacobian."""
+    jacobian = np.array(jacobian, dtype=float)
+    moved = (np.einsum("ni,ni->n", dx, dx) > 0) & (np.max(np.abs(dtheta), axis=1) > min_change)
+    if np.any(moved):
+        d, t, j = dx[moved], dtheta[moved], jacobian[moved]
+        miss = t - np.einsum("nij,nj->ni", j, d)
+        jacobian[moved] = j + miss[:, :, None] * d[:, None, :] / np.einsum("ni,ni->n", d, d)[:, None, None]
+    return jacobian
+
+
 def iterate(targets: np.ndarray, inputs: np.ndarray, drive_and_measure: Callable[[np.ndarray], np.ndarray],
             input_jacobian: Callable[[np.ndarray], np.ndarray], settings: LoopSettings = LoopSettings()) -> LoopResult:
     """Steps 4-5 of Fig. 9 from the first inputs (n, 3) [m] (the model's inverse).
@@ -127,6 +145,10 @@ def iterate(targets: np.ndarray, inputs: np.ndarray, drive_and_measure: Callable
         raise ValueError(f"targets and inputs must both be (n, 3), got {targets.shape} and {x.shape}")
     corrected = np.ones(len(x), dtype=bool)
     rounds = []
+    best_x, best_size = x.copy(), np.full(len(x), np.inf)
+    gain = np.full(len(x), float(settings.gain))
+    jacobian = None  # per point, from the model, then Broyden-updated by what was measured
+    last_x = last_measured = None
     while True:
         measured = np.asarray(drive_and_measure(x.copy()), dtype=float)
         if measured.shape != targets.shape:
@@ -136,8 +158,24 @@ def iterate(targets: np.ndarray, inputs: np.ndarray, drive_and_measure: Callable
         todo = ~within_tolerance(error, settings.tolerance)
         if not np.any(todo) or len(rounds) > settings.max_rounds:
             break
+        if jacobian is None:
+            jacobian = np.array(input_jacobian(x), dtype=float)
+        else:
+            jacobian = broyden_update(jacobian, x - last_x, measured - last_measured, settings.tolerance)
+        # backtracking: a point whose error grew (a clearance or friction kink the model's
+        # Jacobian does not see) goes back half way to its best inputs, and its later
+        # steps are halved; a point that improved takes the (relaxed) Newton step
+        size = np.max(np.abs(error), axis=1)
+        improved = size < best_size
+        best_x[improved], best_size[improved] = x[improved], size[improved]
+        newton = todo & improved
+        retreat = todo & ~improved
+        gain[retreat] *= 0.5
         step = np.zeros_like(x)
-        step[todo] = correction_step(np.asarray(input_jacobian(x[todo]), dtype=float), error[todo], settings.gain)
+        if np.any(newton):
+            step[newton] = correction_step(jacobian[newton], error[newton], 1.0) * gain[newton, None]
+        step[retreat] = 0.5 * (best_x[retreat] - x[retreat])
+        last_x, last_measured = x.copy(), measured
         x = x + step
         corrected = todo
     return LoopResult(targets=targets, rounds=tuple(rounds), converged=not np.any(todo), settings=settings)

@@ -218,3 +218,70 @@ def test_model_input_jacobian_matches_finite_differences(table1):
         minus = np.stack([forward(values, (x - step)[None], space=space).angles[0, 0] for x in inputs])
         # central difference: O(h^2) truncation, ~1e-13 rad rounding / 2h -> ~1e-5 relative
         np.testing.assert_allclose(jac[:, :, j], (plus - minus) / (2 * h), rtol=1e-4, atol=1e-4)
+
+
+def test_backtracking_tames_a_jacobian_three_times_too_small():
+    # the mechanism is 3x stiffer-to-rotate than the model says on one side of a kink
+    # (a drive chain leaving its clearance): a full Newton step on the model's Jacobian
+    # overshoots by 2x per round and diverges (error -> -2 error); the backtracking halves
+    # the step until it contracts (1 - 3 / 2 = -0.5 per round) and reaches the tolerance
+    from flexcal.calibration.compensation import LoopSettings, iterate
+
+    model_jacobian = np.diag([2.0e-3, 1.0e-3, 1.5e-3])  # [rad/m]
+
+    def drive(x):
+        scale = np.where(x[:, :1] > 0, 3.0, 1.0)
+        return scale * (x @ model_jacobian.T)
+
+    targets = np.array([[3e-6, 0.0, 0.0]])
+    first = np.array([[0.2e-3, 0.0, 0.0]])  # short of the solution x = 0.5 mm (3 * 2e-3 * x = 3e-6)
+    result = iterate(targets, first, drive, lambda x: np.broadcast_to(model_jacobian, (len(x), 3, 3)),
+                     LoopSettings(tolerance=1e-9, max_rounds=40))
+    assert result.converged
+    sizes = [float(np.max(np.abs(r.error))) for r in result.rounds]
+    # one overshoot (2x, the first full step) before the retreat, never more
+    assert sizes[-1] <= 1e-9 and max(sizes) <= 2.01 * sizes[0]
+
+
+def test_without_backtracking_that_case_never_converges():
+    # the control for the test above: the plain Newton update on the same kink overshoots
+    # and ends in a 2-cycle at 3.3x the starting error
+    model_jacobian = np.diag([2.0e-3, 1.0e-3, 1.5e-3])
+    x = np.array([0.2e-3, 0.0, 0.0])
+    errors = []
+    for _ in range(10):
+        measured = (3.0 if x[0] > 0 else 1.0) * model_jacobian @ x
+        error = measured - np.array([3e-6, 0.0, 0.0])
+        errors.append(abs(error[0]))
+        x = x - np.linalg.solve(model_jacobian, error)
+    assert min(errors[3:]) > 3 * errors[0]
+
+
+def test_broyden_update_reproduces_the_measured_change():
+    from flexcal.calibration.compensation import broyden_update
+
+    rng = np.random.default_rng(0)
+    jacobian = rng.normal(size=(4, 3, 3)) * 1e-3
+    dx = rng.normal(size=(4, 3)) * 1e-4
+    dtheta = rng.normal(size=(4, 3)) * 1e-6
+    dx[3] = 0.0  # a point that did not move keeps its Jacobian
+    updated = broyden_update(jacobian, dx, dtheta, min_change=1e-9)
+    # the secant condition, to rounding (values ~1e-7, products of ~1e-3 and ~1e-4)
+    np.testing.assert_allclose(np.einsum("nij,nj->ni", updated[:3], dx[:3]), dtheta[:3], rtol=0, atol=1e-18)
+    np.testing.assert_array_equal(updated[3], jacobian[3])
+    # a change below min_change (noise) leaves the Jacobian alone
+    np.testing.assert_array_equal(broyden_update(jacobian, dx, dtheta, min_change=1.0), jacobian)
+
+
+def test_secant_updates_speed_up_a_sluggish_point():
+    # a point in a drive's clearance answers only 0.2 of what the model predicts: the
+    # relaxed Newton contracts by 0.8 per round (14 rounds to 1e-2 of the start); with the
+    # Broyden update the second correction already uses the measured slope
+    from flexcal.calibration.compensation import LoopSettings, iterate
+
+    model_jacobian = np.diag([2.0e-3, 1.0e-3, 1.5e-3])
+    targets = np.array([[4e-6, -2e-6, 1e-6]])
+    result = iterate(targets, np.zeros((1, 3)), lambda x: 0.2 * x @ model_jacobian.T,
+                     lambda x: np.broadcast_to(model_jacobian, (len(x), 3, 3)),
+                     LoopSettings(tolerance=1e-9, max_rounds=10))
+    assert result.converged and result.n_corrections <= 3
