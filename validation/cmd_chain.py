@@ -59,20 +59,14 @@ def build_chain(args: argparse.Namespace):
 
 
 def run(args: argparse.Namespace) -> int:
-    from .fem_report import compare_chain, write_comparison
-    from .cli_common import progress_bar, show_progress, stage_advancer
-    from .output import staged_output
+    from .cli_common import show_progress
+    from .fem_report import compare_chain, run_comparison
 
     if not args.elements_through > 0:
         raise ValueError(f"--elements-through={args.elements_through} must be > 0")
-    chain, params = build_chain(args)
-    with progress_bar(4, "chain", enabled=show_progress(args), unit="stage") as bar:
-        stage = stage_advancer(bar)
-        result = compare_chain(chain, elements_through_thickness=args.elements_through, stage=stage)
-        stage("VTU, pictures, report")
-        with staged_output(args.out) as staging:
-            data = write_comparison(result, staging, params)
-        bar.update(1)
+    chain, params = build_chain(args)  # validates before any CAD or meshing
+    result, data = run_comparison(compare_chain, chain, params, args.out,
+                                  elements_through_thickness=args.elements_through, progress=show_progress(args))
     print(f"flexcal chain: largest diagonal compliance difference FEM vs Eq. 1 "
           f"{data['max_abs_percent_difference_diagonal']:.1f} %; {data['mesh']['n_dof']} DOF, "
           f"{sum(result.timings.values()):.1f} s; wrote {args.out}/report.json, report.md, chain.vtu, chain.png")

@@ -58,20 +58,14 @@ def build_hinge(args: argparse.Namespace):
 
 
 def run(args: argparse.Namespace) -> int:
-    from .fem_report import compare_hinge, write_comparison
-    from .cli_common import progress_bar, show_progress, stage_advancer
-    from .output import staged_output
+    from .cli_common import show_progress
+    from .fem_report import compare_hinge, run_comparison
 
     if not args.elements_through > 0:
         raise ValueError(f"--elements-through={args.elements_through} must be > 0")
     hinge, params = build_hinge(args)  # validates before any CAD or meshing
-    with progress_bar(4, "hinge", enabled=show_progress(args), unit="stage") as bar:
-        stage = stage_advancer(bar)
-        result = compare_hinge(hinge, elements_through_thickness=args.elements_through, stage=stage)
-        stage("VTU, pictures, report")
-        with staged_output(args.out) as staging:
-            data = write_comparison(result, staging, params)
-        bar.update(1)
+    result, data = run_comparison(compare_hinge, hinge, params, args.out,
+                                  elements_through_thickness=args.elements_through, progress=show_progress(args))
     c_fem, c_ana = result.compliance_fem[5, 5], result.compliance_analytic[5, 5]
     print(f"flexcal hinge: C_rz,Mz FEM {c_fem:.6g} rad/(N m), closed form {c_ana:.6g} "
           f"({100 * (c_fem - c_ana) / c_ana:+.2f} %); largest diagonal difference "

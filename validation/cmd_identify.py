@@ -31,16 +31,13 @@ DEFAULT_CONFIG = {"provider": "fem", "sources": "table1", "particles": 300, "ite
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
+    from .cmd_verify import add_identification_options
+
     add_source_options(parser)
     parser.add_argument("--sources", metavar="NAMES",
                         help="comma-separated error sources to identify (docs/parameters.md), 'table1' (the nine "
                              "drive sources x0, CL, mu) or 'all' (default %(default)s)")
-    parser.add_argument("--particles", type=int, help="PSO particles (paper: 300; default %(default)s)")
-    parser.add_argument("--iterations", type=int, help="PSO iterations (paper: 150; default %(default)s)")
-    parser.add_argument("--polish", action=argparse.BooleanOptionalAction,
-                        help="least-squares polish of the swarm's best points (default: on)")
-    parser.add_argument("--remove-offset", action=argparse.BooleanOptionalAction,
-                        help="remove each leg's return offset first (paper Sec. 4.2; default: off)")
+    add_identification_options(parser)
     parser.add_argument("--calibration-seed", type=int, metavar="N", help="seed of the PSO (default %(default)s)")
     add_out(parser, what="report.json, report.md, fit.png, convergence.png")
 

@@ -12,9 +12,9 @@ import dataclasses
 
 import numpy as np
 
-from .cli_common import add_out, add_scenario, add_seed
+from .cli_common import add_out
 
-__all__ = ["configure", "run", "add_calibration_options", "EXAMPLES", "DEFAULT_CONFIG", "CALIBRATION_DEFAULTS"]
+__all__ = ["configure", "run", "add_calibration_options", "add_identification_options", "EXAMPLES", "DEFAULT_CONFIG", "CALIBRATION_DEFAULTS"]
 
 EXAMPLES = (
     "flexcal verify --scenario table1 --out runs/table1          # paper Sec. 3.3, ~1-2 min with a warm FEM cache",
@@ -29,16 +29,21 @@ DEFAULT_CONFIG = {"provider": "fem", **CALIBRATION_DEFAULTS}
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
-    source = parser.add_mutually_exclusive_group(required=True)
-    add_scenario(parser, group=source)
-    source.add_argument("--data", metavar="CSV", help="a measurement CSV (synthetic or real); its JSON sidecar's "
-                                                      "presets, if any, give the error columns")
-    add_seed(parser, what="the scenario's drawn errors and noise (default: the scenario's)")
-    parser.add_argument("--noise-urad", type=float, default=None, help="sensor noise of the scenario [urad]")
-    parser.add_argument("--provider", choices=("fem", "analytic"),
-                        help="prototype segment stiffness (default %(default)s; analytic only for quick checks)")
+    from .cmd_sensitivity import add_source_options
+
+    add_source_options(parser)
     add_calibration_options(parser)
     add_out(parser, what="report.json, report.md, fit/convergence/residuals/sensitivity PNGs, curves.csv")
+
+
+def add_identification_options(parser: argparse.ArgumentParser) -> None:
+    """PSO size, polish and offset removal (``verify``, ``identify``); defaults from DEFAULT_CONFIG."""
+    parser.add_argument("--particles", type=int, help="PSO particles (paper: 300; default %(default)s)")
+    parser.add_argument("--iterations", type=int, help="PSO iterations (paper: 150; default %(default)s)")
+    parser.add_argument("--polish", action=argparse.BooleanOptionalAction,
+                        help="least-squares polish of the swarm's best points (default: on)")
+    parser.add_argument("--remove-offset", action=argparse.BooleanOptionalAction,
+                        help="remove each leg's return offset first (paper Sec. 4.2; default: off)")
 
 
 def add_calibration_options(parser: argparse.ArgumentParser) -> None:
@@ -48,12 +53,7 @@ def add_calibration_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--sobol-threshold", type=float, metavar="S",
                         help="identify sources whose total Sobol index reaches this on any output "
                              "(default %(default)s; 0 identifies all 45)")
-    parser.add_argument("--particles", type=int, help="PSO particles (paper: 300; default %(default)s)")
-    parser.add_argument("--iterations", type=int, help="PSO iterations (paper: 150; default %(default)s)")
-    parser.add_argument("--polish", action=argparse.BooleanOptionalAction,
-                        help="least-squares polish of the swarm's best points (default: on)")
-    parser.add_argument("--remove-offset", action=argparse.BooleanOptionalAction,
-                        help="remove each leg's return offset first (paper Sec. 4.2; default: off)")
+    add_identification_options(parser)
     parser.add_argument("--calibration-seed", type=int, metavar="N",
                         help="seed of the Sobol sample and the PSO (default %(default)s)")
     parser.add_argument("--model-stiffness", choices=("fem", "closed-form"),

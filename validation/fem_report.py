@@ -197,3 +197,22 @@ def write_comparison(result: ComparisonResult, directory: Path, params_mm: dict[
     render_deformed_png(result.mesh, result.displacement, directory / f"{result.kind}.png", material=result.material)
     render_mesh_png(result.mesh, directory / f"{result.kind}-mesh.png")
     return data
+
+
+def run_comparison(compare: Callable[..., ComparisonResult], part, params_mm: dict[str, float], out: str, *,
+                   elements_through_thickness: float, progress: bool) -> tuple[ComparisonResult, dict[str, Any]]:
+    """``compare(part, ...)`` with a stage progress bar, then every output into ``out``
+    (whole or not at all). Returns (result, report data). Shared by ``flexcal hinge`` and
+    ``flexcal chain``."""
+    from .cli_common import progress_bar, stage_advancer
+    from .output import staged_output
+
+    with progress_bar(4, type(part).__name__, enabled=progress, unit="stage") as bar:
+        stage = stage_advancer(bar)
+        result = compare(part, elements_through_thickness=elements_through_thickness, stage=stage)
+        stage("VTU, pictures, report")
+        with staged_output(out) as staging:
+            data = write_comparison(result, staging, params_mm)
+        bar.update(1)
+    return result, data
+
