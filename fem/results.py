@@ -170,7 +170,7 @@ def render_mesh_png(mesh, path: str | os.PathLike, *, window_size: tuple[int, in
     path = Path(path)
     if path.suffix.lower() != ".png":
         raise ValueError(f"{path} must end in .png")
-    surface = to_pyvista(mesh).extract_surface()
+    surface = to_pyvista(mesh).extract_surface(algorithm="dataset_surface")
     plotter = pv.Plotter(off_screen=True, window_size=list(window_size))
     plotter.add_mesh(surface, color="lightsteelblue", show_edges=True, edge_color="black", line_width=0.5)
     plotter.add_text(f"mesh: {len(mesh.nodes)} nodes, {len(mesh.tets)} quadratic tets", font_size=10)
