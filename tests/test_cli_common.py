@@ -137,3 +137,17 @@ def test_same_seed_same_truth_curves(tmp_path):
     first, second = run_twice(tmp_path, ["truth", "--scenario", "table1", "--provider", "analytic", "--seed", "4",
                                          "--noise-urad", "0.3"], ["curves.csv", "curves.json"])
     assert first == second
+
+
+def test_same_seed_same_diagnosis_and_compensation(tmp_path):
+    # a noisy analytic-prototype curve, then the two long jobs twice each: their reports
+    # must agree to the byte once the timing keys are removed (the markdown has no timings)
+    assert cli.main(["truth", "--scenario", "table1", "--provider", "analytic", "--noise-urad", "0.5",
+                     "--out", str(tmp_path / "t"), "-q"]) == 0
+    curves = str(tmp_path / "t" / "curves.csv")
+    for argv, name in ((["diagnose", curves], "diag"),
+                       (["compensate", "--data", curves, "--particles", "60", "--iterations", "10",
+                         "--sobol-n", "32", "--max-rounds", "2"], "comp")):
+        first, second = run_twice(tmp_path / name, argv, ["report.json", "report.md"])
+        assert first["report.md"] == second["report.md"]
+        assert without_timings(json.loads(first["report.json"])) == without_timings(json.loads(second["report.json"]))
