@@ -32,6 +32,7 @@ from flexcal.geometry.params import MechanismParams
 
 from . import kernel
 from .chain import chain_compliance_entries, stiffness_from_entries
+from .second_order import preload_geometric_stiffness
 from .frames import axis_rotation, frame_to_point_transform
 from .parameters import CHAIN_NAMES, ParameterSpace
 
@@ -58,7 +59,9 @@ class MechanismMatrices:
     the local-z displacement of its B-side leaf-2 hinge, scaled by sqrt(L_d/L_z), per unit X_C;
     parasitic_gain Q = P H (n_c, 12, 6); parasitic_gravity P X_g (n_c, 12) [m];
     parasitic_coefficient K_L = 1/(2 L_d) (n_c, 6) [1/m]; hysteresis mu (n_c, 3) [-];
-    clearance CL (n_c, 3) [m]; initial_position x0 (n_c, 3) [m].
+    clearance CL (n_c, 3) [m]; initial_position x0 (n_c, 3) [m]; point_b (n_c, 6, 3) [m] the
+    chains' frame-side ends; second_order (n_c,) bool: apply ``model.second_order`` (the
+    frame stiffness then holds the preload P-delta).
     """
 
     chain_stiffness: np.ndarray
@@ -81,6 +84,8 @@ class MechanismMatrices:
     mu: np.ndarray
     clearance: np.ndarray
     initial_position: np.ndarray
+    point_b: np.ndarray
+    second_order: np.ndarray
 
     @property
     def n_candidates(self) -> int:
@@ -130,6 +135,22 @@ def _mechanism_constants(mech: MechanismParams) -> dict[str, np.ndarray]:
         "actuator": np.array([mech.actuator_stiffness if c.is_driving else np.inf for c in mech.chains]),
         "wrench": payload_wrench(mech),
     }
+
+
+def _parasitic_rows(rotation, point_b, end_block, l, connector, length) -> np.ndarray:
+    """(n_c, 12, 6): per chain the scaled lateral-displacement rows (y then z) of its B-side
+    pivots under a frame twist X_C (Eq. 4-5 with per-direction pivots, docs/model.md)."""
+    axis = rotation[..., :, 0]
+    pivot_y = point_b - (end_block + 0.5 * l)[..., None] * axis
+    pivot_z = point_b - (end_block + 1.5 * l + connector)[..., None] * axis
+    pivot_distance = length - 2.0 * end_block - 2.0 * l - connector
+    span_y = length - 2.0 * end_block - l
+    span_z = length - 2.0 * end_block - 3.0 * l - 2.0 * connector
+    # local-e displacement of point p under X_C = [d, theta]: e.(d + theta x p) = [e, p x e] . X_C
+    y_axis, z_axis = rotation[..., :, 1], rotation[..., :, 2]
+    rows_y = np.concatenate([y_axis, np.cross(pivot_y, y_axis)], axis=-1) * np.sqrt(pivot_distance / span_y)[..., None]
+    rows_z = np.concatenate([z_axis, np.cross(pivot_z, z_axis)], axis=-1) * np.sqrt(pivot_distance / span_z)[..., None]
+    return np.concatenate([rows_y, rows_z], axis=1)
 
 
 def mechanism_matrices(values, space: ParameterSpace, *, candidate_offset: int = 0) -> MechanismMatrices:
@@ -190,23 +211,25 @@ def mechanism_matrices(values, space: ParameterSpace, *, candidate_offset: int =
         rhs = np.concatenate([axial_gain, np.broadcast_to(fixed["wrench"][:, None], (n_c, 6, 1))], axis=-1)
         solved = np.linalg.solve(frame_stiffness, rhs)
         input_gain, gravity_pose = solved[..., :6], solved[..., 6]
+    if space.second_order:
+        # the chains' weight preload tilts with their swing: P-delta stiffness (model.second_order)
+        rows = _parasitic_rows(rotation, point_b, end_block, l, connector, length)
+        pivot = length - 2.0 * end_block - 2.0 * l - connector
+        rhs = np.concatenate([axial_gain, np.broadcast_to(fixed["wrench"][:, None], (n_c, 6, 1))], axis=-1)
+        linear_stiffness = frame_stiffness
+        for _ in range(3):  # the preload depends on the stiffness: fixed point, converged to ~1e-6 relative
+            preload = np.einsum("cdi,cd->ci", axial_gain, gravity_pose)  # (n_c, 6) [N], tension +
+            frame_stiffness = linear_stiffness + preload_geometric_stiffness(preload, rows, pivot)
+            solved = np.linalg.solve(frame_stiffness, rhs)
+            input_gain, gravity_pose = solved[..., :6], solved[..., 6]
     # Eq. 4-5 with the paper's "distance between the corresponding flexure hinges": a
     # local-y swing turns the strut about its two leaf-1 hinges (thin in y), a local-z
     # swing about its two leaf-2 hinges, so each direction has its own pivot pair (the
     # paper's points C4 and C3). The rows give the B-side pivot's lateral displacement,
     # scaled by sqrt(L_d / L_y) and sqrt(L_d / L_z) so that one K_L = 1/(2 L_d) per chain
     # yields r = -(dy^2 / (2 L_y) + dz^2 / (2 L_z)). See docs/model.md.
-    axis = rotation[..., :, 0]
-    pivot_y = point_b - (end_block + 0.5 * l)[..., None] * axis
-    pivot_z = point_b - (end_block + 1.5 * l + connector)[..., None] * axis
     pivot_distance = length - 2.0 * end_block - 2.0 * l - connector
-    span_y = length - 2.0 * end_block - l
-    span_z = length - 2.0 * end_block - 3.0 * l - 2.0 * connector
-    # local-e displacement of point p under X_C = [d, theta]: e.(d + theta x p) = [e, p x e] . X_C
-    y_axis, z_axis = rotation[..., :, 1], rotation[..., :, 2]
-    rows_y = np.concatenate([y_axis, np.cross(pivot_y, y_axis)], axis=-1) * np.sqrt(pivot_distance / span_y)[..., None]
-    rows_z = np.concatenate([z_axis, np.cross(pivot_z, z_axis)], axis=-1) * np.sqrt(pivot_distance / span_z)[..., None]
-    parasitic_rows = np.concatenate([rows_y, rows_z], axis=1)
+    parasitic_rows = _parasitic_rows(rotation, point_b, end_block, l, connector, length)
     parasitic_gain = parasitic_rows @ input_gain
     parasitic_gravity = np.einsum("ckd,cd->ck", parasitic_rows, gravity_pose)
     coupling = np.swapaxes(axial_gain, -1, -2) @ input_gain
@@ -225,4 +248,6 @@ def mechanism_matrices(values, space: ParameterSpace, *, candidate_offset: int =
         parasitic_rows=parasitic_rows, parasitic_gain=parasitic_gain, parasitic_gravity=parasitic_gravity,
         parasitic_coefficient=0.5 / pivot_distance,
         mu=values[:, 36::3].copy(), clearance=values[:, 37::3].copy(), initial_position=values[:, 38::3].copy(),
+        point_b=np.broadcast_to(point_b, (n_c,) + point_b.shape).copy(),
+        second_order=np.full(n_c, bool(space.second_order)),
     )

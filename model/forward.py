@@ -31,10 +31,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .assembly import DRIVING, MechanismMatrices, mechanism_matrices
 from . import kernel, solver
+from .assembly import DRIVING, MechanismMatrices, mechanism_matrices
 from .clearance import ConvergenceError
 from .parameters import ParameterSpace, parameter_space
+from .second_order import second_order_pose
 from .trajectory import travel_directions
 
 __all__ = ["ForwardResult", "forward", "solve_matrices", "ideal_pose", "ideal_angles", "ConvergenceError",
@@ -159,7 +160,7 @@ def solve_matrices(matrices: MechanismMatrices, inputs: np.ndarray, directions: 
                                            **options)
         _raise_for_codes(out.pop("codes"), max_iter, tol, candidate_offset)
         out["n_iterations"] = int(out.pop("iterations").max(initial=0))
-        return out
+        return _with_second_order(m, out)
     parts = [solver.solve_points(_candidate_slice(m, s, s + chunk_size), inputs, d,
                                  candidate_offset=candidate_offset + s, **options)
              for s in range(0, m.n_candidates, max(1, int(chunk_size)))]
@@ -170,8 +171,24 @@ def solve_matrices(matrices: MechanismMatrices, inputs: np.ndarray, directions: 
     release = d[None] * (loads[..., DRIVING] + s * c) / s
     limit = np.broadcast_to(m.clearance[:, None, :], c.shape)
     states, classes = _states_and_classes(c, limit, loads[..., DRIVING])
-    return {"pose": pose, "loads": loads, "clearance": c, "release": release, "parasitic": r,
-            "states": states, "point_class": classes, "n_iterations": max(p[3] for p in parts)}
+    return _with_second_order(m, {"pose": pose, "loads": loads, "clearance": c, "release": release, "parasitic": r,
+                                  "states": states, "point_class": classes, "n_iterations": max(p[3] for p in parts)})
+
+
+def _with_second_order(m: MechanismMatrices, out: dict) -> dict:
+    """``out`` with its poses corrected by ``model.second_order`` where the candidates ask for it."""
+    which = np.flatnonzero(m.second_order)
+    if which.size:
+        pose = out["pose"].copy()
+        pose[which] = second_order_pose(_candidate_rows(m, which), pose[which], out["loads"][which])
+        out["pose"] = pose
+    return out
+
+
+def _candidate_rows(matrices: MechanismMatrices, rows: np.ndarray) -> MechanismMatrices:
+    if rows.size == matrices.n_candidates:
+        return matrices
+    return MechanismMatrices(**{f.name: getattr(matrices, f.name)[rows] for f in dataclasses.fields(matrices)})
 
 
 def _concatenate(blocks: list[MechanismMatrices]) -> MechanismMatrices:

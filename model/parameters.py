@@ -107,7 +107,9 @@ class ParameterSpace:
     base_values: (45,) SI values of the others (nominal by default);
     compliance_factors: (n_chains, 8) factors on the eight chain-compliance entries
     (``model.hinge.ENTRY_INDEX`` order) of the closed-form chains, empty = all 1 -- a
-    correction measured once against a richer model (FEM, docs/model.md section 7). Vectors in the
+    correction measured once against a richer model (FEM, docs/model.md section 7);
+    second_order: add the second-order geometric terms (chain-force P-delta, rigid
+    second-order frame kinematics; ``model.second_order``, docs/model.md section 8). Vectors in the
     methods below are over the *active* parameters, ``(..., n_active)``, except
     ``full_values`` / ``build_values`` which return all 45 (what ``forward`` takes).
     """
@@ -117,6 +119,7 @@ class ParameterSpace:
     active: tuple[str, ...] = ()
     base_values: tuple[float, ...] = ()
     compliance_factors: tuple[tuple[float, ...], ...] = ()
+    second_order: bool = False
 
     def __post_init__(self) -> None:
         if self.compliance_factors:

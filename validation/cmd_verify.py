@@ -24,7 +24,8 @@ EXAMPLES = (
     "flexcal report runs/table1                                   # -> runs/table1/report.html",
 )
 CALIBRATION_DEFAULTS = {"sobol_n": 512, "sobol_threshold": 0.01, "particles": 300, "iterations": 150,
-                        "polish": True, "remove_offset": False, "calibration_seed": 0, "model_stiffness": "fem"}
+                        "polish": True, "remove_offset": False, "calibration_seed": 0, "model_stiffness": "fem",
+                        "second_order": True}
 DEFAULT_CONFIG = {"provider": "fem", **CALIBRATION_DEFAULTS}
 
 
@@ -56,6 +57,9 @@ def add_calibration_options(parser: argparse.ArgumentParser) -> None:
     add_identification_options(parser)
     parser.add_argument("--calibration-seed", type=int, metavar="N",
                         help="seed of the Sobol sample and the PSO (default %(default)s)")
+    parser.add_argument("--second-order", action=argparse.BooleanOptionalAction,
+                        help="the model's second-order geometric terms: chain-force P-delta and rigid second-order "
+                             "frame kinematics (docs/model.md 8; default: on; --no-second-order = the paper's model)")
     parser.add_argument("--model-stiffness", choices=("fem", "closed-form"),
                         help="the model's chain compliance: closed-form (the paper's Eq. 1) or corrected by the FEM "
                              "at the nominal design (docs/model.md 7; default %(default)s)")
@@ -111,7 +115,8 @@ def _markdown(report) -> str:
             lines.append(f"| {row['figure']} | {row['paper']:g} | {ours} | {'yes' if row['beats_paper'] else 'NO'} | "
                          f"{meaningful} | {'yes' if row['beats_paper_identifiable'] else 'NO'} | "
                          f"{', '.join(row['not_identifiable']) or '-'} |")
-        lines += ["", f"Model chain stiffness: {report.get('model_stiffness', 'closed-form')}.", ""]
+        lines += ["", f"Model chain stiffness: {report.get('model_stiffness', 'closed-form')}; second-order "
+                  f"geometric terms: {'on' if report.get('model_second_order') else 'off (the paper model)'}.", ""]
     has_preset = "preset" in report["parameters"][0]
     header = "| parameter | unit | " + ("preset | " if has_preset else "") + "identified | " + \
         ("abs error | rel error | " if has_preset else "") + "identified? | identifiable? |"
@@ -137,6 +142,7 @@ def run(args: argparse.Namespace) -> int:
     from .cmd_sensitivity import check_sobol_options, load_source
     from .measurements import write_measurement
     from .output import staged_output, write_json
+    from .model_correction import model_space
     from .verify import VerifySettings, run_verify
 
     if args.particles < 2 or args.iterations < 1:
@@ -149,14 +155,11 @@ def run(args: argparse.Namespace) -> int:
                                                       max_iterations=args.iterations))
     space = parameter_space()
     measurement, presets = load_source(args, space, progress=not args.quiet)
-    if args.model_stiffness == "fem":
-        from .fem_provider import fem_provider
-        from .model_correction import corrected_space
-
-        space = corrected_space(space, fem_provider(progress=not args.quiet))
+    space = model_space(args.model_stiffness, args.second_order, progress=not args.quiet)
     result = run_verify(measurement, space, settings, presets=presets, progress=not args.quiet)
     result.report["model_stiffness"] = ("closed-form chains scaled by FEM factors at the nominal design "
                                         "(docs/model.md 7)" if space.compliance_factors else "closed-form (paper Eq. 1)")
+    result.report["model_second_order"] = bool(space.second_order)
     with staged_output(args.out) as staging:
         write_json(staging / "report.json", result.report)
         (staging / "report.md").write_text(_markdown(result.report))

@@ -29,7 +29,7 @@ from flexcal.model.parameters import ParameterSpace
 
 from .segments import StiffnessProvider, end_stiffness, section_nodes
 
-__all__ = ["provider_chain_compliance", "compliance_factors", "corrected_space"]
+__all__ = ["provider_chain_compliance", "compliance_factors", "corrected_space", "model_space"]
 
 
 def provider_chain_compliance(chain: FlexureChain, provider: StiffnessProvider) -> np.ndarray:
@@ -68,3 +68,21 @@ def corrected_space(space: ParameterSpace, provider: StiffnessProvider) -> Param
     """``space`` whose model uses ``compliance_factors(space, provider)``."""
     factors = compliance_factors(space, provider)
     return dataclasses.replace(space, compliance_factors=tuple(tuple(float(v) for v in row) for row in factors))
+
+
+def model_space(stiffness: str = "fem", second_order: bool = True, *, progress: bool = False) -> ParameterSpace:
+    """The reference mechanism's parameter space with the model options the calibration
+    commands share: stiffness "fem" (FEM-informed chain compliance, FEM solves cached) or
+    "closed-form" (the paper's Eq. 1); second_order: the geometric second-order terms
+    (``flexcal.model.second_order``)."""
+    from flexcal.model.parameters import parameter_space
+
+    if stiffness not in ("fem", "closed-form"):
+        raise ValueError(f"model stiffness {stiffness!r} must be 'fem' or 'closed-form'")
+    space = parameter_space()
+    if stiffness == "fem":
+        from .fem_provider import fem_provider
+
+        space = corrected_space(space, fem_provider(progress=progress))
+    return dataclasses.replace(space, second_order=bool(second_order))
+
