@@ -17,6 +17,8 @@ _EXPORTS = {
     "ForwardResult": "forward",
     "forward": "forward",
     "solve_matrices": "forward",
+    "second_order_pose": "second_order",
+    "preload_geometric_stiffness": "second_order",
     "ideal_pose": "forward",
     "ideal_angles": "forward",
     "ConvergenceError": "forward",
