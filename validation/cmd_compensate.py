@@ -36,7 +36,8 @@ EXAMPLES = (
 # all 45 cut the first-round mean error by 92 / 92 / 81 % against 73 / 71 / 72 % with the
 # 9 Table 1 sources that the 0.01 screening keeps (verify's default), at ~10x the identification time.
 DEFAULT_CONFIG = {"sobol_n": 512, "sobol_threshold": 0.0, "particles": 300, "iterations": 150, "polish": True,
-                  "calibration_seed": 0, "readings": 10, "tolerance_urad": 1.0, "max_rounds": 8, "gain": 1.0}
+                  "calibration_seed": 0, "readings": 10, "tolerance_urad": 1.0, "max_rounds": 8, "gain": 1.0,
+                  "model_stiffness": "fem", "second_order": True}
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -54,6 +55,10 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--max-rounds", type=int, default=c["max_rounds"], metavar="N",
                         help="corrective rounds after the first (default %(default)s)")
     parser.add_argument("--gain", type=float, default=c["gain"], help="fraction of each correction applied (0, 1]")
+    parser.add_argument("--model-stiffness", choices=("fem", "closed-form"), default=c["model_stiffness"],
+                        help="the calibrated model's chain compliance (docs/model.md 7; default %(default)s)")
+    parser.add_argument("--second-order", action=argparse.BooleanOptionalAction, default=c["second_order"],
+                        help="the model's second-order geometric terms (docs/model.md 8; default: on)")
     parser.add_argument("--sobol-n", type=int, default=c["sobol_n"], metavar="N",
                         help="Sobol base sample N (power of two; default %(default)s)")
     parser.add_argument("--sobol-threshold", type=float, default=c["sobol_threshold"], metavar="S",
@@ -102,11 +107,10 @@ def _write_inputs(path, targets: np.ndarray, inputs: np.ndarray, final: np.ndarr
 
 def run(args: argparse.Namespace) -> int:
     from flexcal.model.forward import ideal_angles
-    from flexcal.model.parameters import parameter_space
-
     from .compensate import bench_from_metadata, run_compensation
     from .compensation_report import build_report, plot_fit, plot_first_round, plot_iterated, report_markdown
     from .measurements import read_measurement
+    from .model_correction import model_space
     from .output import staged_output, write_json
     from .targets import default_targets, read_targets, write_targets
 
@@ -114,7 +118,7 @@ def run(args: argparse.Namespace) -> int:
     settings = _settings(args)
     measurement = read_measurement(args.data)
     targets = read_targets(args.targets) if args.targets else default_targets()
-    space = parameter_space()
+    space = model_space(args.model_stiffness, args.second_order, progress=not quiet)
     dwell = float(np.median(np.diff(measurement.time))) if measurement.n_points > 1 else 2.0
     bench = bench_from_metadata(measurement.metadata, space, n_readings=args.readings, seed=args.seed,
                                 dwell=dwell if dwell > 0 else 2.0, end_time=float(measurement.time[-1]),
@@ -125,7 +129,8 @@ def run(args: argparse.Namespace) -> int:
                           "readings": args.readings, "tolerance_urad": args.tolerance_urad,
                           "max_rounds": args.max_rounds, "gain": args.gain, "sobol_n": args.sobol_n,
                           "particles": args.particles, "iterations": args.iterations,
-                          "calibration_seed": args.calibration_seed}
+                          "calibration_seed": args.calibration_seed, "model_stiffness": args.model_stiffness,
+                          "second_order": args.second_order}
     ideal = ideal_angles(measurement.inputs, space)
     with staged_output(args.out) as staging:
         write_json(staging / "report.json", report)
