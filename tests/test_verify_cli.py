@@ -36,15 +36,15 @@ def test_verify_writes_the_report_with_the_required_keys(tmp_path):
 @pytest.mark.slow
 def test_full_table1_run_on_the_fem_prototype(tmp_path):
     # the README's main job with the paper's settings (Sobol N = 512, PSO 300 x 150, polish,
-    # FEM-informed model stiffness). Measured 2026-11-22: initial positions 1.26 um (paper
-    # 2.7 um), D3 clearance 0.95 um, fit RMS 3.0 urad; the bounds below leave ~2x headroom
-    # for fTetWild's run-to-run mesh differences (~0.05 % in the compliances)
+    # FEM-informed second-order model). Measured 2026-11-22: initial positions 1.53 um (paper
+    # 2.7 um), D3 clearance 1.8 um, fit RMS 4.0 urad; the bounds leave ~2x headroom for
+    # fTetWild's run-to-run mesh differences (~0.05 % in the compliances) and the PSO seed
     out = tmp_path / "table1"
     assert cli.main(["verify", "--scenario", "table1", "--out", str(out), "-q"]) == 0
     report = json.loads((out / "report.json").read_text())
     figures = {r["figure"]: r for r in report["paper_comparison"]}
     assert figures["initial_position_max_abs_error_um"]["ours"] < 2.7  # beats the paper's Table 1
     rows = {r["name"]: r for r in report["parameters"]}
-    assert rows["D3.CL"]["abs_error"] < 0.002  # [mm]
+    assert rows["D3.CL"]["abs_error"] < 0.004  # [mm]
     assert report["fit_rms_urad"] < 6.0  # the closed-form model left 5.1 urad (session 1)
     assert report["timings_s"]["sobol"] < 60 and report["timings_s"]["pso"] < 60  # targets 30 s, loaded CI slack
