@@ -19,17 +19,20 @@ from flexcal.validation.truth import make_truth
 MAGNITUDE_URAD = 10.0
 SEED = 1
 # Terms whose injector differs only by its "richer" parts (second harmonic, load-dependent
-# friction, thermal lag, two creep times, sensor rotation vs. linear matrix, per-chain
-# stiffening): measured 0.79-1.00 of the RMS removed at seed 1, so 0.7 (the issue's "most
-# of it") has >= 0.09 margin.
+# friction, thermal lag, sensor rotation vs. linear matrix, per-chain stiffening): measured
+# 0.79-1.00 of the RMS removed at seed 1, so 0.7 (the issue's "most of it") has >= 0.09 margin.
 WELL_DESCRIBED = ("drift", "sensor_crosstalk", "sensor_scale", "lead_error", "friction_hysteresis",
-                  "coupling_windup", "large_deflection", "thermal", "creep")
+                  "coupling_windup", "large_deflection", "thermal")
 FAST = ("lead_error", "friction_hysteresis", "coupling_windup", "thermal", "creep", "sensor_crosstalk")
-# Two are only partly described by a few-parameter term (docs/effects.md): step_loss (a
-# jump at an unknown place, approximated by a quadratic in the travelled path; 0.79 at
-# seed 1) and gravity_sag (Hertz contact stiffness with a one-point load lag against load
-# polynomials of the *model's* loads; 0.53). Bounds sit ~0.1 under those values.
-PARTLY_DESCRIBED = {"step_loss": 0.65, "gravity_sag": 0.4}
+# Terms with a fitted place or time constant (nonlinear, fitted from the diagnosis's starts):
+# step_loss (a one-move ramp at a fitted path fraction; measured 0.999 at seed 1, 0.997-0.999
+# at seeds 1-5, the rest is the transmission's play and friction) and creep (one free time
+# constant against the injector's two; 0.980 at seed 1, 0.970-0.982 at seeds 1-5). Bound 0.9:
+# ~0.08-0.1 under the measured values; the former fixed-shape terms reached 0.79 and 0.81.
+FITTED_SHAPE = {"step_loss": 0.9, "creep": 0.9}
+# gravity_sag is only partly described (Hertz contact stiffness with a one-point load lag
+# against load polynomials of the *model's* loads; 0.53 at seed 1): bound ~0.1 under it.
+PARTLY_DESCRIBED = {"gravity_sag": 0.4, **FITTED_SHAPE}
 
 
 @pytest.fixture(scope="module")
@@ -53,7 +56,11 @@ def _removed(nominal, effect_id, signature):
     def residual(p):  # in urad: least_squares' default tolerances are absolute on the gradient
         return (term.evaluate(p * term.scale, data) - signature).ravel() * 1e6
 
-    fit = least_squares(residual, np.zeros(term.n_params))
+    # the diagnosis's starts (diagnose_which.fit_terms): zero, +-1 scale and two seeded draws;
+    # a linear term reaches the same optimum from each
+    k = term.n_params
+    starts = [np.zeros(k), np.ones(k), -np.ones(k), *np.random.default_rng(0).normal(size=(2, k))]
+    fit = min((least_squares(residual, s0) for s0 in starts), key=lambda f: f.cost)
     return 1.0 - np.linalg.norm(fit.fun) / np.linalg.norm(signature.ravel() * 1e6)
 
 

@@ -12,6 +12,7 @@ from flexcal.validation.effect_injectors import Drift, LeadError, SensorScale, S
 from flexcal.validation.effect_library import (EFFECT_IDS, LIBRARY, NONE, OUT_OF_LIBRARY_IDS, effects_from_scenario,
                                                make_injector, model_term)
 from flexcal.validation.effect_magnitude import standard_setting
+from flexcal.validation.effect_terms import TERM_CREEP_TIME, path_fraction, relaxed
 from flexcal.validation.prototype import build_prototype, simulate
 from flexcal.validation.prototype_effects import EffectContext, room_temperature
 from flexcal.validation.scenario import load_scenario
@@ -124,6 +125,34 @@ def test_model_terms_are_zero_at_zero_and_have_the_right_shape(effect_id):
     assert np.all(np.isfinite(some)) and np.abs(some).max() > 0
     with pytest.raises(ValueError, match="parameters"):
         term.evaluate(np.zeros(term.n_params + 1), data)
+
+
+def test_step_loss_term_is_a_whole_step_at_a_move_and_slides_between_moves():
+    data = standard_setting().data
+    term = model_term("step_loss")
+    fraction, move = path_fraction(data.inputs)
+    m = int(np.flatnonzero(np.diff(fraction[:, 1]) > 0)[10]) + 1  # actuator D2's 11th move ends at point m
+    lost = 5e-6  # [m] one motor step
+    at = np.array([0.0, lost, 0.0, 0.0, fraction[m - 1, 1] - 0.5, 0.0])  # place at the point before the move
+    expected = np.einsum("nai,n->na", data.input_jacobian[:, :, 1:2], lost * (np.arange(len(data.time)) >= m))
+    np.testing.assert_allclose(term.evaluate(at, data), expected, rtol=1e-9, atol=1e-18)
+    # half a move later: the point after the move carries half the step (the place is continuous)
+    half = term.evaluate(at + np.array([0, 0, 0, 0, move[1] / 2, 0]), data)
+    np.testing.assert_allclose(half[m], expected[m] / 2, rtol=1e-9, atol=1e-18)
+    np.testing.assert_allclose(half[m + 1:], expected[m + 1:], rtol=1e-9, atol=1e-18)
+
+
+def test_creep_term_has_a_free_time_constant():
+    data = standard_setting().data
+    term = model_term("creep")
+    kappa = np.array([1e-6, -1e-6, 5e-7])  # [m/kN]
+    load = data.axial_loads[:, 3:] / 1e3
+    for log_tau in (-1.0, 0.0, 1.0):
+        tau = TERM_CREEP_TIME * np.exp(log_tau)
+        expected = np.einsum("nai,ni->na", data.input_jacobian, kappa * (relaxed(load, data.time, tau) - load[0]))
+        np.testing.assert_allclose(term.evaluate(np.append(kappa, log_tau), data), expected, rtol=1e-12, atol=1e-20)
+    # an absurd time constant is clipped, not overflowed: tau = 20 s e^5 at most
+    assert np.all(np.isfinite(term.evaluate(np.append(kappa, 1e4), data)))
 
 
 def test_effects_from_scenario_builds_and_rejects():

@@ -200,6 +200,8 @@ def cross_validate(problem: FitProblem, ids: Sequence[str], folds: Sequence[np.n
 def principal_cosines(A: np.ndarray, B: np.ndarray) -> np.ndarray:
     """Cosines of the principal angles between the column spaces of A (m, a) and B (m, b),
     largest first (1 = a shared direction)."""
+    A = A[:, np.linalg.norm(A, axis=0) > 0]  # a zero column (a parameter with no effect at zero) spans nothing
+    B = B[:, np.linalg.norm(B, axis=0) > 0]
     qa = np.linalg.qr(A)[0] if A.shape[1] else np.zeros((A.shape[0], 0))
     qb = np.linalg.qr(B)[0] if B.shape[1] else np.zeros((B.shape[0], 0))
     if qa.shape[1] == 0 or qb.shape[1] == 0:

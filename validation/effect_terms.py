@@ -21,11 +21,12 @@ import numpy as np
 from .prototype_effects import REFERENCE_TEMPERATURE_C
 
 __all__ = ["TermData", "ModelTerm", "build_term_data", "TERMS", "reversal_counts", "travel_since_reversal",
-           "path_length", "SCREW_LEAD", "TERM_DAHL_LENGTH", "TERM_CREEP_TIME"]
+           "path_length", "path_fraction", "SCREW_LEAD", "TERM_DAHL_LENGTH", "TERM_CREEP_TIME"]
 
 SCREW_LEAD = 1e-3  # [m/rev] ball-screw lead of D1..D3 (the code has none; issue #7 guidance)
 TERM_DAHL_LENGTH = 50e-6  # [m] fixed transition length of the friction term (injectors draw 20..80 um)
-TERM_CREEP_TIME = 20.0  # [s] fixed relaxation time of the creep term (injectors draw 5..60 s)
+TERM_CREEP_TIME = 20.0  # [s] the creep term's relaxation time at zero parameters (free: x exp(log_tau))
+CREEP_LOG_TAU_LIMIT = 5.0  # [-] |ln(tau / TERM_CREEP_TIME)| is clipped here: tau in 0.13..3000 s, no overflow
 ANGLE_SCALE = 1e-3  # [rad] the frame rotates by a few mrad on the standard trajectory
 LOAD_SCALE = 1e3  # [N] chain loads are ~1 kN (docs/prototype.md): per-newton parameters are scaled by it
 
@@ -127,6 +128,16 @@ def path_length(inputs: np.ndarray) -> np.ndarray:
     """(n, 3) [m] distance travelled by each actuator up to each point (sum of |steps|)."""
     x = np.asarray(inputs, dtype=float)
     return np.cumsum(np.abs(np.diff(x, axis=0, prepend=x[:1])), axis=0)
+
+
+def path_fraction(inputs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(s (n, 3), move (3,)): each actuator's travelled path as a fraction of its whole path
+    [-] (0 for one that never moves) and its median nonzero move in that unit [-]."""
+    path = path_length(inputs)
+    fraction = path / np.where(path[-1] > 0, path[-1], 1.0)
+    steps = np.diff(fraction, axis=0)
+    move = np.array([np.median(c[c > 1e-12]) if np.any(c > 1e-12) else 1.0 for c in steps.T])
+    return fraction, move
 
 
 def travel_since_reversal(inputs: np.ndarray, direction: np.ndarray) -> np.ndarray:
@@ -231,15 +242,19 @@ def _thermal(p, data):  # k_a [rad/K] of T - T_ref, l_a [rad s/K] of dT/dt per c
     return np.outer(temperature - REFERENCE_TEMPERATURE_C, p[:3]) + np.outer(rate, p[3:6])
 
 
-def _creep(p, data):  # kappa_i [m/kN] of the relaxed change of the driving load (tau = TERM_CREEP_TIME)
+def _creep(p, data):  # kappa_i [m/kN] of the relaxed change of the driving load; ln(tau / 20 s) [-]
+    tau = TERM_CREEP_TIME * np.exp(np.clip(p[3], -CREEP_LOG_TAU_LIMIT, CREEP_LOG_TAU_LIMIT))
     load = data.axial_loads[:, 3:] / LOAD_SCALE
-    return _to_angles(p[:3] * (relaxed(load, data.time, TERM_CREEP_TIME) - load[0]), data)
+    return _to_angles(p[:3] * (relaxed(load, data.time, tau) - load[0]), data)
 
 
-def _step_loss(p, data):  # a_i, b_i [m]: lost motion growing with the travelled fraction u (a u + b u^2)
-    path = path_length(data.inputs)
-    fraction = path / np.where(path[-1] > 0, path[-1], 1.0)
-    return _to_angles(p[:3] * fraction + p[3:6] * fraction**2, data)
+def _step_loss(p, data):  # lost motion a_i [m] (3); place c_i = 0.5 + p_{3+i} [path fraction] (3)
+    """A persistent step of a_i in actuator i's screw position once its travelled path
+    fraction s passes c_i, as a one-move ramp clip((s - c_i) / move_i, 0, 1): c_i between two
+    moves interpolates between a step at the one and at the next, so the fit can slide the
+    step along the path (nonlinear in c_i; the diagnosis fits it by variable projection)."""
+    fraction, move = path_fraction(data.inputs)
+    return _to_angles(p[:3] * np.clip((fraction - (0.5 + p[3:6])) / move, 0.0, 1.0), data)
 
 
 def _term(effect_id, names, units, scale, evaluate, requires=()):
@@ -271,7 +286,10 @@ TERMS: dict[str, ModelTerm] = {t.id: t for t in (
           [1e-6] * 3 + [1e-6] * 3, _gravity_sag),
     _term("thermal", [f"k_{c}" for c in _XYZ] + [f"lag_{c}" for c in _XYZ], ["rad/K"] * 3 + ["rad s/K"] * 3,
           [1e-5] * 3 + [1e-4] * 3, _thermal, requires=("temperature_c",)),
-    _term("creep", [f"creep_{d}" for d in _D], ["m/kN"] * 3, [1e-6] * 3, _creep),
-    _term("step_loss", [f"linear_{d}" for d in _D] + [f"quadratic_{d}" for d in _D], ["m"] * 6, [5e-6] * 6,
-          _step_loss),
+    # ln(tau/20 s) at +-1 scale (the fit's extra starts) is tau = 7.4 s and 54 s: the injectors' 5-60 s
+    _term("creep", [f"creep_{d}" for d in _D] + ["log_time_constant"], ["m/kN"] * 3 + ["ln(tau/20 s)"],
+          [1e-6] * 3 + [1.0], _creep),
+    # lost motion at the 5 um motor step; place at +-1 scale (the fit's extra starts) 0.25 and 0.75 of the path
+    _term("step_loss", [f"lost_{d}" for d in _D] + [f"place_{d}" for d in _D], ["m"] * 3 + ["-"] * 3,
+          [5e-6] * 3 + [0.25] * 3, _step_loss),
 )}
