@@ -149,8 +149,9 @@ def test_sweep_on_a_local_cluster_then_resume(tmp_path, fem_cache):
     assert thin["stress_per_rad_fem"] < thick["stress_per_rad_fem"]
     rows = list(csv.DictReader((tmp_path / "sweep.csv").open()))
     assert [r["id"] for r in rows] == ids
-    assert {p.name for p in tmp_path.iterdir()} >= {"designs", "sweep.csv", "report.json", "discrepancy.png",
-                                                     "stress.png"}
+    assert {p.name for p in tmp_path.iterdir()} >= {"designs", "sweep.csv", "report.json", "report.md",
+                                                     "discrepancy.png", "stress.png"}
+    assert "![discrepancy.png](discrepancy.png)" in (tmp_path / "report.md").read_text()
     # resume: delete one finished design, run again, only that one is computed
     kept = tmp_path / "designs" / f"{ids[0]}.json"
     kept_bytes = kept.read_bytes()

@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from .output import atomic_path, write_json
+from .output import atomic_path, write_json, write_text
 from .sweep_job import DIAGONAL
 from .sweep_space import DEFAULT_CONFIG, resolve_config, varied_names
 
@@ -126,6 +126,22 @@ def write_tables(result, config: dict[str, Any], out: Path) -> None:
         "computed_this_run": list(result.computed),
         "failures": result.failures,
         "wall_s": result.wall_s,
-        "files": ["sweep.csv", *figures, "designs/<id>.json"],
+        "files": ["sweep.csv", "report.md", *figures, "designs/<id>.json"],
         "columns": columns,
     })
+    write_text(out / "report.md", sweep_markdown(rows, kind, figures, len(done), len(result.failures)))
+
+
+def sweep_markdown(rows: list[dict[str, Any]], kind: str, figures: list[str], n_finished: int, n_failed: int) -> str:
+    """report.md: the table of the designs (the CSV's leading columns) and the plots."""
+    lines = [f"# Sweep of {kind} designs", "",
+             f"{len(rows)} designs, {n_finished} finished, {n_failed} failed. Full table: `sweep.csv`.", ""]
+    if rows:
+        shown = [c for c in rows[0] if not c.startswith("C_")][:12]
+        lines += ["| " + " | ".join(shown) + " |", "|" + "---|" * len(shown)]
+        for row in rows:
+            cells = [f"{row.get(c, ''):.4g}" if isinstance(row.get(c), float) else str(row.get(c, "")) for c in shown]
+            lines.append("| " + " | ".join(cells) + " |")
+        lines.append("")
+    lines += [f"![{name}]({name})" for name in figures]
+    return "\n".join(lines) + "\n"
