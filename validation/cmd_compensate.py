@@ -55,10 +55,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--max-rounds", type=int, default=c["max_rounds"], metavar="N",
                         help="corrective rounds after the first (default %(default)s)")
     parser.add_argument("--gain", type=float, default=c["gain"], help="fraction of each correction applied (0, 1]")
-    parser.add_argument("--model-stiffness", choices=("fem", "closed-form"), default=c["model_stiffness"],
-                        help="the calibrated model's chain compliance (docs/model.md 7; default %(default)s)")
-    parser.add_argument("--second-order", action=argparse.BooleanOptionalAction, default=c["second_order"],
-                        help="the model's second-order geometric terms (docs/model.md 8; default: on)")
+    from .cmd_verify import add_model_options
+
+    add_model_options(parser)
     parser.add_argument("--sobol-n", type=int, default=c["sobol_n"], metavar="N",
                         help="Sobol base sample N (power of two; default %(default)s)")
     parser.add_argument("--sobol-threshold", type=float, default=c["sobol_threshold"], metavar="S",

@@ -26,18 +26,19 @@ EXAMPLES = (
     "flexcal identify --data curves.csv --sources D1.x0,D1.CL,D1.mu --remove-offset --out runs/d1",
     "flexcal identify --scenario table1 --provider analytic --particles 40 --iterations 20 --out runs/quick",
 )
-DEFAULT_CONFIG = {"provider": "fem", "sources": "table1", "particles": 300, "iterations": 150, "polish": True,
+DEFAULT_CONFIG = {"model_stiffness": "fem", "second_order": True, "provider": "fem", "sources": "table1", "particles": 300, "iterations": 150, "polish": True,
                   "remove_offset": False, "calibration_seed": 0}
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
-    from .cmd_verify import add_identification_options
+    from .cmd_verify import add_identification_options, add_model_options
 
     add_source_options(parser)
     parser.add_argument("--sources", metavar="NAMES",
                         help="comma-separated error sources to identify (docs/parameters.md), 'table1' (the nine "
                              "drive sources x0, CL, mu) or 'all' (default %(default)s)")
     add_identification_options(parser)
+    add_model_options(parser)
     parser.add_argument("--calibration-seed", type=int, metavar="N", help="seed of the PSO (default %(default)s)")
     add_out(parser, what="report.json, report.md, fit.png, convergence.png")
 
@@ -68,17 +69,18 @@ def run(args: argparse.Namespace) -> int:
     from flexcal.model.parameters import parameter_space
 
     from .cli_common import progress_bar, show_progress
+    from .model_correction import model_space
     from .output import staged_output, write_json
     from .plots import plot_misalignment_curves
     from .verify import _parameter_rows, remove_return_offsets
 
     if args.particles < 2 or args.iterations < 1:
         raise ValueError(f"--particles={args.particles} must be >= 2 and --iterations={args.iterations} >= 1")
-    space = parameter_space()
-    selected = parse_sources(args.sources, space.names)
+    selected = parse_sources(args.sources, parameter_space().names)
     settings = dataclasses.replace(PSOSettings(), n_particles=args.particles, max_iterations=args.iterations)
     progress = show_progress(args)
-    measurement, presets = load_source(args, space, progress=progress)
+    measurement, presets = load_source(args, parameter_space(), progress=progress)
+    space = model_space(args.model_stiffness, args.second_order, progress=progress)
     angles = remove_return_offsets(measurement) if args.remove_offset else measurement.angles
     sub = space.subset(selected)
     problem = CalibrationProblem(space=sub, inputs=measurement.inputs, angles=angles)

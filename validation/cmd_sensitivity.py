@@ -20,7 +20,7 @@ EXAMPLES = (
     "flexcal sensitivity --data curves.csv --sobol-n 128 --out runs/sobol-quick",
     "flexcal sensitivity --scenario table1 --provider analytic --sobol-n 64 --json --out runs/s",
 )
-DEFAULT_CONFIG = {"provider": "fem", "sobol_n": 512, "sobol_threshold": 0.01, "calibration_seed": 0}
+DEFAULT_CONFIG = {"model_stiffness": "fem", "second_order": True, "provider": "fem", "sobol_n": 512, "sobol_threshold": 0.01, "calibration_seed": 0}
 
 
 def add_source_options(parser: argparse.ArgumentParser) -> None:
@@ -41,6 +41,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--sobol-threshold", type=float, metavar="S",
                         help="report the sources whose total index reaches S on any output (default %(default)s)")
     parser.add_argument("--calibration-seed", type=int, metavar="N", help="seed of the Sobol sample (default %(default)s)")
+    from .cmd_verify import add_model_options
+
+    add_model_options(parser)
     add_out(parser, what="report.json, report.md, sensitivity.png")
 
 
@@ -97,13 +100,14 @@ def run(args: argparse.Namespace) -> int:
     from flexcal.model.parameters import parameter_space
 
     from .cli_common import show_progress
+    from .model_correction import model_space
     from .output import staged_output, write_json
     from .verify import TABLE1_NAMES
 
     check_sobol_options(args)
-    space = parameter_space()
     progress = show_progress(args)
-    measurement, _ = load_source(args, space, progress=progress)
+    measurement, _ = load_source(args, parameter_space(), progress=progress)
+    space = model_space(args.model_stiffness, args.second_order, progress=progress)
     sobol = screen(measurement, space, n_base=args.sobol_n, seed=args.calibration_seed, progress=progress)
     selected = select_parameters(sobol, threshold=args.sobol_threshold, always=TABLE1_NAMES)
     report = {

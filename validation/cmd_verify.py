@@ -14,7 +14,8 @@ import numpy as np
 
 from .cli_common import add_out
 
-__all__ = ["configure", "run", "add_calibration_options", "add_identification_options", "EXAMPLES", "DEFAULT_CONFIG", "CALIBRATION_DEFAULTS"]
+__all__ = ["configure", "run", "add_calibration_options", "add_identification_options", "add_model_options",
+           "MODEL_DEFAULTS", "EXAMPLES", "DEFAULT_CONFIG", "CALIBRATION_DEFAULTS"]
 
 EXAMPLES = (
     "flexcal verify --scenario table1 --out runs/table1          # paper Sec. 3.3, ~1-2 min with a warm FEM cache",
@@ -23,9 +24,9 @@ EXAMPLES = (
     "flexcal verify --print-config > verify.toml; flexcal verify --config verify.toml --scenario table1 --out runs/t1",
     "flexcal report runs/table1                                   # -> runs/table1/report.html",
 )
+MODEL_DEFAULTS = {"model_stiffness": "fem", "second_order": True}
 CALIBRATION_DEFAULTS = {"sobol_n": 512, "sobol_threshold": 0.01, "particles": 300, "iterations": 150,
-                        "polish": True, "remove_offset": False, "calibration_seed": 0, "model_stiffness": "fem",
-                        "second_order": True}
+                        "polish": True, "remove_offset": False, "calibration_seed": 0, **MODEL_DEFAULTS}
 DEFAULT_CONFIG = {"provider": "fem", **CALIBRATION_DEFAULTS}
 
 
@@ -35,6 +36,17 @@ def configure(parser: argparse.ArgumentParser) -> None:
     add_source_options(parser)
     add_calibration_options(parser)
     add_out(parser, what="report.json, report.md, fit/convergence/residuals/sensitivity PNGs, curves.csv")
+
+
+def add_model_options(parser: argparse.ArgumentParser) -> None:
+    """Which model the calibration uses (``verify``, ``sensitivity``, ``identify``,
+    ``compensate``); defaults from the command's DEFAULT_CONFIG (``MODEL_DEFAULTS``)."""
+    parser.add_argument("--second-order", action=argparse.BooleanOptionalAction,
+                        help="the model's second-order geometric terms: chain-force P-delta and rigid second-order "
+                             "frame kinematics (docs/model.md 8; default: on; --no-second-order = the paper's model)")
+    parser.add_argument("--model-stiffness", choices=("fem", "closed-form"),
+                        help="the model's chain compliance: closed-form (the paper's Eq. 1) or corrected by the FEM "
+                             "at the nominal design (docs/model.md 7; default %(default)s)")
 
 
 def add_identification_options(parser: argparse.ArgumentParser) -> None:
@@ -57,12 +69,7 @@ def add_calibration_options(parser: argparse.ArgumentParser) -> None:
     add_identification_options(parser)
     parser.add_argument("--calibration-seed", type=int, metavar="N",
                         help="seed of the Sobol sample and the PSO (default %(default)s)")
-    parser.add_argument("--second-order", action=argparse.BooleanOptionalAction,
-                        help="the model's second-order geometric terms: chain-force P-delta and rigid second-order "
-                             "frame kinematics (docs/model.md 8; default: on; --no-second-order = the paper's model)")
-    parser.add_argument("--model-stiffness", choices=("fem", "closed-form"),
-                        help="the model's chain compliance: closed-form (the paper's Eq. 1) or corrected by the FEM "
-                             "at the nominal design (docs/model.md 7; default %(default)s)")
+    add_model_options(parser)
 
 
 def _plots(result, measurement, directory) -> None:
