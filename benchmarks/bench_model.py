@@ -14,6 +14,7 @@ equilibrium, same physics) timed in the same run on a few candidates.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import os
 import time
 
@@ -70,6 +71,15 @@ def main() -> None:
             rates[(engine, threads)] = n_evals / wall
             print(f"  {engine:5s} {threads} thread(s): {wall * 1e3:7.2f} ms best ({median * 1e3:7.2f} median), "
                   f"{cpu * 1e3:7.2f} ms CPU -> {n_evals / wall / 1e6:5.2f} M postures/s")
+
+    # the second-order geometric terms (docs/model.md 8) against the paper's linear model, same run
+    second = dataclasses.replace(space, second_order=True)
+    forward(values, trajectory.inputs, space=second)
+    wall_second, median_second, _ = best_of(lambda: forward(values, trajectory.inputs, space=second), args.repeat)
+    wall_linear = n_evals / rates[(engines[0], 1)]
+    print(f"  second-order model, {engines[0]} 1 thread: {wall_second * 1e3:7.2f} ms best ({median_second * 1e3:7.2f} "
+          f"median) -> {n_evals / wall_second / 1e6:5.2f} M postures/s = {wall_second / wall_linear:.2f}x the "
+          f"linear model's time")
 
     subset = list(range(min(args.baseline_candidates, args.candidates)))
     matrices = mechanism_matrices(values[subset], space)

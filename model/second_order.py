@@ -51,18 +51,23 @@ def second_order_pose(matrices, pose: np.ndarray, loads: np.ndarray) -> np.ndarr
     """
     m = matrices
     pose = np.asarray(pose, float)
+    n_c, n_p = pose.shape[:2]
     pivot = 0.5 / m.parasitic_coefficient  # L_d (n_c, 6) [m]
     weight = (np.asarray(loads, float) - m.gravity_loads[:, None, :]) / pivot[:, None, :]  # (n_c, n_p, 6)
-    rows = m.parasitic_rows.reshape(m.parasitic_rows.shape[0], 2, 6, 6)  # (n_c, y/z, chain, dof)
-    swing = np.einsum("cqjd,cpd->cpqj", rows, pose, optimize=True)  # pivot swings (n_c, n_p, y/z, chain)
-    force = np.einsum("cpqj,cqjd->cpd", swing * weight[:, :, None, :], rows, optimize=True)
-    # rigid second order: the chain ends' extra displacement 1/2 theta x (theta x p) [m], in
-    # world axes, turned into the frame wrench it causes: sum_j J_j^T K_j [R_j^T e_j; 0]
-    th = pose[..., None, 3:]
-    ends = m.point_b[:, None, :, :]  # (n_c, 1, 6, 3)
-    extra = 0.5 * np.cross(th, np.cross(th, ends))  # (n_c, n_p, 6, 3)
+    rows = m.parasitic_rows  # (n_c, 12, 6): y rows of the six chains, then z rows
+    swing = pose @ np.swapaxes(rows, 1, 2)  # pivot swings (n_c, n_p, 12)
+    force = (swing * np.concatenate([weight, weight], axis=-1)) @ rows  # (n_c, n_p, 6)
+    # rigid second order: the chain ends' extra displacement 1/2 theta x (theta x p) =
+    # 1/2 (theta (theta . p) - p |theta|^2) [m] (world axes), as the frame wrench it causes,
+    # sum_j J_j^T K_j [R_j^T e_j; 0] = 1/2 (theta^T Q theta - |theta|^2 W p) with the
+    # per-candidate Q_a = sum_j W_j,a p_j^T and W p = sum_j W_j p_j (no per-point cross products)
+    theta = pose[..., 3:]
     to_wrench = np.einsum("cjba,cjbk,cjlk->cjal", m.frame_transform, m.chain_stiffness[..., :3], m.rotation,
                           optimize=True)  # (n_c, 6 chains, 6, 3)
-    force += np.einsum("cjal,cpjl->cpa", to_wrench, extra, optimize=True)
+    quadratic = np.einsum("cjal,cjk->calk", to_wrench, m.point_b, optimize=True).reshape(n_c, 18, 3)
+    linear = np.einsum("cjal,cjl->ca", to_wrench, m.point_b, optimize=True)  # (n_c, 6)
+    q_theta = (theta @ np.swapaxes(quadratic, 1, 2)).reshape(n_c, n_p, 6, 3)  # Q_a theta (n_c, n_p, 6, 3)
+    force += 0.5 * (np.sum(q_theta * theta[:, :, None, :], axis=-1)
+                    - np.sum(theta * theta, axis=-1)[..., None] * linear[:, None, :])
     compliance = np.linalg.inv(m.frame_stiffness)
-    return pose - np.einsum("cab,cpb->cpa", compliance, force, optimize=True)
+    return pose - force @ np.swapaxes(compliance, 1, 2)
