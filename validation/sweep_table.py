@@ -55,48 +55,42 @@ def table_rows(records: list[dict[str, Any] | None], designs_ids: list[str], kin
 
 def plot_sweep(rows: list[dict[str, Any]], names: list[str], folder: Path) -> list[str]:
     """discrepancy.png and stress.png against each swept dimension; returns file names."""
-    from .plots import _pyplot
-
     done = [r for r in rows if "n_nodes" in r]
     if not done or not names:
         return []
+    discrepancy = [(f"discrepancy_{entry}_percent", f"C {entry.replace('_', ',')}") for entry in DIAGONAL]
+    stress = [(f"stress_per_rotation_{key}_MPa_per_mrad", label)
+              for key, label in (("fem", "FEM peak von Mises"), ("nominal", "beam theory 6/(b t² C_rz,Mz)"))]
+    _plot_against(done, names, discrepancy, "FEM vs closed form [%]",
+                  "Compliance discrepancy FEM vs closed form (diagonal entries)", folder / "discrepancy.png", zero=True)
+    _plot_against(done, names, stress, "stress per rotation [MPa/mrad]", "Peak stress per unit rotation about z",
+                  folder / "stress.png")
+    return ["discrepancy.png", "stress.png"]
+
+
+def _plot_against(done: list[dict[str, Any]], names: list[str], series: list[tuple[str, str]], ylabel: str,
+                  title: str, path: Path, *, zero: bool = False) -> None:
+    """One panel per swept dimension, each ``(column, label)`` of ``series`` against it."""
+    from .plots import _pyplot
+
     plt = _pyplot()
-    written = []
     fig, axes = plt.subplots(1, len(names), figsize=(5.5 * len(names), 4), squeeze=False)
     for ax, name in zip(axes[0], names):
         order = np.argsort([r[name] for r in done])
         x = np.array([done[i][name] for i in order])
-        for entry in DIAGONAL:
-            y = [done[i][f"discrepancy_{entry}_percent"] for i in order]
-            ax.plot(x, y, marker="o", lw=1, label=f"C {entry.replace('_', ',')}")
-        ax.axhline(0.0, color="k", lw=0.6)
+        for column, label in series:
+            ax.plot(x, [done[i][column] for i in order], marker="o", lw=1, label=label)
+        if zero:
+            ax.axhline(0.0, color="k", lw=0.6)
         ax.set_xlabel(name)
-        ax.set_ylabel("FEM vs closed form [%]")
+        ax.set_ylabel(ylabel)
         ax.grid(alpha=0.3)
     axes[0, 0].legend(fontsize=8)
-    fig.suptitle("Compliance discrepancy FEM vs closed form (diagonal entries)")
+    fig.suptitle(title)
     fig.tight_layout()
-    with atomic_path(folder / "discrepancy.png") as tmp:
+    with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=110)
     plt.close(fig)
-    written.append("discrepancy.png")
-    fig, axes = plt.subplots(1, len(names), figsize=(5.5 * len(names), 4), squeeze=False)
-    for ax, name in zip(axes[0], names):
-        order = np.argsort([r[name] for r in done])
-        x = np.array([done[i][name] for i in order])
-        for key, label in (("fem", "FEM peak von Mises"), ("nominal", "beam theory 6/(b t² C_rz,Mz)")):
-            ax.plot(x, [done[i][f"stress_per_rotation_{key}_MPa_per_mrad"] for i in order], marker="o", label=label)
-        ax.set_xlabel(name)
-        ax.set_ylabel("stress per rotation [MPa/mrad]")
-        ax.grid(alpha=0.3)
-    axes[0, 0].legend(fontsize=8)
-    fig.suptitle("Peak stress per unit rotation about z")
-    fig.tight_layout()
-    with atomic_path(folder / "stress.png") as tmp:
-        fig.savefig(tmp, dpi=110)
-    plt.close(fig)
-    written.append("stress.png")
-    return written
 
 
 def write_tables(result, config: dict[str, Any], out: Path) -> None:
