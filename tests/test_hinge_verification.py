@@ -22,8 +22,8 @@ LEAVES = [h for h in hinge_series() if not isinstance(h, CircularNotchHinge)]
 
 def _ratios(hinge):
     result = compare_hinge(hinge, STEEL, elements_through_thickness=3)
-    ratio = result.compliance_fem / result.compliance_analytic
-    return ratio[5, 5], ratio[1, 1], ratio[1, 5]
+    entries = ((5, 5), (1, 1), (1, 5))  # only these: other entries are zero in closed form
+    return tuple(result.compliance_fem[e] / result.compliance_analytic[e] for e in entries)
 
 
 @pytest.mark.parametrize("hinge", NOTCHES, ids=lambda h: f"t/R={h.thickness / h.radius:.2f}")
