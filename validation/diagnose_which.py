@@ -169,7 +169,8 @@ def fit_terms(problem: FitProblem, ids: Sequence[str], train: np.ndarray | None 
         # zero (effect absent) is often a saddle of a nonlinear term (amplitude 0 hides the
         # rate), so start also from +-1 scale and two seeded draws, keep the best
         starts = [u, u + 1.0, u - 1.0, *np.random.default_rng(0).normal(size=(2, u.size))]
-        fits = [least_squares(lambda v: np.concatenate(solve(v)[1:]), s0, method="trf") for s0 in starts]
+        fits = [least_squares(lambda v: np.concatenate([*solve(v)[1:], v / TERM_PRIOR]), s0, method="trf")
+                for s0 in starts]
         u = min(fits, key=lambda f: f.cost).x
     x, res, _ = solve(u)
     params, start_lin, start_non = {}, p, 0
