@@ -145,7 +145,7 @@ def test_same_seed_same_diagnosis_and_compensation(tmp_path):
     assert cli.main(["truth", "--scenario", "table1", "--provider", "analytic", "--noise-urad", "0.5",
                      "--out", str(tmp_path / "t"), "-q"]) == 0
     curves = str(tmp_path / "t" / "curves.csv")
-    for argv, name in ((["diagnose", curves], "diag"),
+    for argv, name in ((["diagnose", curves, "--model-stiffness", "closed-form"], "diag"),
                        (["compensate", "--data", curves, "--particles", "60", "--iterations", "10",
                          "--sobol-n", "32", "--max-rounds", "2"], "comp")):
         first, second = run_twice(tmp_path / name, argv, ["report.json", "report.md"])

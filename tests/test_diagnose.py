@@ -72,7 +72,7 @@ def test_diagnose_command_writes_report_and_rejects_bad_file(tmp_path, none_case
     data = tmp_path / "curves.csv"
     write_measurement(data, none_case.measurement)
     out = tmp_path / "run"
-    assert cli.main(["diagnose", str(data), "--out", str(out), "--quiet"]) == 0
+    assert cli.main(["diagnose", str(data), "--out", str(out), "--quiet", "--model-stiffness", "closed-form"]) == 0
     report = json.loads((out / "report.json").read_text())
     assert REQUIRED_KEYS <= set(report)
     assert report["top_effect"] in {"none", *[r["effect"] for r in report["ranking"]]}

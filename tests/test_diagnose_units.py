@@ -159,7 +159,7 @@ def test_strata_cover_the_requested_groupings():
 
 
 def test_baseline_escapes_the_false_clearance_mode():
-    """One 80 x 60 swarm on this `none` file (table1 draw 1001, baseline seed 3) ends in a
+    """One 80 x 60 swarm on this `none` file (table1 draw 1000, baseline seed 0) ends in a
     false clearance mode: a ~80 urad spike at a stroke end (measured 2026-11-22). The
     default baseline (best of several starts after the 45-source polish) must not; its good
     mode leaves ~2.4 urad at most (noise 0.5 urad plus the model gap)."""
@@ -167,10 +167,10 @@ def test_baseline_escapes_the_false_clearance_mode():
     from flexcal.validation.diagnose_baseline import BaselineSettings, calibrate_baseline
     from flexcal.validation.diagnose_benchmark import benchmark_measurement
 
-    measurement = benchmark_measurement("none", 0.0, 1, stiffness_provider("analytic", progress=False)).measurement
+    measurement = benchmark_measurement("none", 0.0, 0, stiffness_provider("analytic", progress=False)).measurement
 
     def worst(settings):
-        fit = calibrate_baseline(measurement, rng=3, settings=settings)
+        fit = calibrate_baseline(measurement, rng=0, settings=settings)
         return np.abs(measurement.angles - fit.model_angles).max()
 
     assert worst(BaselineSettings(starts=1)) > 30e-6  # the file exercises the false mode at all

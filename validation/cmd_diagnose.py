@@ -14,7 +14,9 @@ import argparse
 
 import numpy as np
 
-__all__ = ["configure", "run", "EXAMPLES", "markdown"]
+__all__ = ["configure", "run", "EXAMPLES", "DEFAULT_CONFIG", "markdown"]
+
+DEFAULT_CONFIG = {"model_stiffness": "fem", "second_order": True}
 
 EXAMPLES = ("flexcal diagnose curves.csv --out runs/diagnosis",
             "flexcal truth --scenario table1 --provider analytic --noise-urad 0.5 --out runs/t && "
@@ -23,11 +25,13 @@ EXAMPLES = ("flexcal diagnose curves.csv --out runs/diagnosis",
 
 def configure(parser: argparse.ArgumentParser) -> None:
     from .cli_common import add_out, add_seed
+    from .cmd_verify import add_model_options
 
     parser.add_argument("data", metavar="DATA.csv", help="measurement CSV (format: flexcal.validation.measurements)")
     add_seed(parser, what="the baseline calibration's optimizer", default=0)
     parser.add_argument("--particles", type=int, default=80, help="PSO particles of the baseline (default 80)")
     parser.add_argument("--iterations", type=int, default=60, help="PSO iterations of the baseline (default 60)")
+    add_model_options(parser)
     add_out(parser, what="report.json, report.md, residual.png, strata.png, heldout.png")
 
 
@@ -89,15 +93,19 @@ def run(args: argparse.Namespace) -> int:
     from .diagnose_baseline import BaselineSettings, calibrate_baseline
     from .diagnose_plots import plot_heldout, plot_residual, plot_strata
     from .measurements import read_measurement
+    from .model_correction import model_space
     from .output import staged_output, write_json
 
     if args.particles < 2 or args.iterations < 1:
         raise ValueError("--particles must be >= 2 and --iterations >= 1")
     measurement = read_measurement(args.data)
-    baseline = partial(calibrate_baseline, settings=BaselineSettings(particles=args.particles,
-                                                                      iterations=args.iterations))
+    space = model_space(args.model_stiffness, args.second_order, progress=show_progress(args))
+    baseline = partial(calibrate_baseline, space=space,
+                       settings=BaselineSettings(particles=args.particles, iterations=args.iterations))
     diagnosis = run_diagnosis(measurement, baseline=baseline, rng=args.seed, progress=show_progress(args))
     report = diagnosis.report
+    report["baseline"]["model_stiffness"] = args.model_stiffness
+    report["baseline"]["second_order"] = bool(args.second_order)
     with staged_output(args.out) as staging:
         write_json(staging / "report.json", report)
         (staging / "report.md").write_text(markdown(report))

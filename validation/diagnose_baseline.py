@@ -27,7 +27,7 @@ from typing import Callable
 
 import numpy as np
 
-from flexcal.model.parameters import ParameterSpace, parameter_space
+from flexcal.model.parameters import ParameterSpace
 
 from .measurements import Measurement
 
@@ -102,15 +102,21 @@ def input_jacobian(values: np.ndarray, inputs: np.ndarray, directions: np.ndarra
 def calibrate_baseline(measurement: Measurement, rng=None, progress: bool = False,
                        settings: BaselineSettings = BaselineSettings(),
                        space: ParameterSpace | None = None) -> BaselineFit:
-    """The default baseline (module docstring). rng seeds the PSO. Runs on one BLAS thread
-    (small SVDs are ~100x slower multi-threaded on a loaded machine, see blas_threads)."""
+    """The default baseline (module docstring). rng seeds the PSO; space: the model (default
+    the closed-form chains with the second-order terms, docs/model.md 8; ``flexcal diagnose``
+    passes the FEM-informed one like ``verify``). Runs on one BLAS thread (small SVDs are
+    ~100x slower multi-threaded on a loaded machine, see blas_threads)."""
     import scipy.linalg  # noqa: F401  (loaded before the limit, which only reaches loaded libraries)
     import scipy.optimize  # noqa: F401
 
     from .blas_threads import single_blas_thread
 
+    if space is None:
+        from .model_correction import model_space
+
+        space = model_space("closed-form", second_order=True)
     with single_blas_thread():
-        return _calibrate(measurement, rng, settings, space or parameter_space())
+        return _calibrate(measurement, rng, settings, space)
 
 
 def _calibrate(measurement: Measurement, rng, settings: BaselineSettings, space: ParameterSpace) -> BaselineFit:
@@ -159,8 +165,8 @@ def _calibrate(measurement: Measurement, rng, settings: BaselineSettings, space:
                        point_class=tuple(CLASS_NAMES[int(c)] for c in result.point_class[0]),
                        input_jacobian=input_jacobian(values, measurement.inputs, directions, space),
                        jacobian=J.reshape(n, 3, -1), prior_sd=np.full(len(broad.names), settings.prior_sd),
-                       description=(f"PSO ({settings.particles} x {settings.iterations}, best of {settings.starts} starts) on "
-                                    f"the 9 drive sources, "
-                                    f"least-squares polish over {len(broad.names)} sources, linearized "
-                                    f"(ridge prior {settings.prior_sd:g} of each range)"),
+                       description=(f"{'second-order' if space.second_order else 'first-order'} model; PSO "
+                                    f"({settings.particles} x {settings.iterations}, best of {settings.starts} starts) "
+                                    f"on the 9 drive sources, least-squares polish over {len(broad.names)} sources, "
+                                    f"linearized (ridge prior {settings.prior_sd:g} of each range)"),
                        wall_s=time.perf_counter() - start)

@@ -221,7 +221,7 @@ class CriterionSettings:
 
     min_delta_bic: float = 10.0
     min_closure: float = 0.25
-    min_gain_noise: float = 3.0
+    min_gain_noise: float = 1.0
     group_ratio: float = 0.9
     confident_closure: float = 0.7
 
