@@ -13,11 +13,12 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from flexcal.fem.elements import EDGES, elasticity_matrix, element_stiffness, element_strain_at_nodes, element_volumes
+from flexcal.fem.elements import elasticity_matrix, element_stiffness, element_strain_at_nodes, element_volumes
 from flexcal.geometry.exact import end_planes, exact_volume, thin_sections
 from flexcal.geometry.params import STEEL, CircularNotchHinge, FlexureChain, LeafHinge, Material
 from flexcal.model import hinge as closed_form
 from flexcal.model.chain import chain_compliance_matrix, hinge_part_compliance
+from helpers import well_shaped_p2_tets
 
 mm = 1e-3
 FAST = settings(max_examples=25, deadline=None)
@@ -181,15 +182,8 @@ def test_forward_batched_equals_looped_and_inverse_round_trips(seed, n_candidate
 # ----------------------------------------------------------------------------- FEM element
 
 def _tet(rng, curved: bool) -> np.ndarray:
-    """A well-shaped P2 tet (10, 3) [m], ~1 cm, mid-edge nodes moved by up to 5 % if curved."""
-    base = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
-    corners = 0.01 * (base + 0.15 * rng.standard_normal((4, 3)))
-    mids = 0.5 * (corners[EDGES[:, 0]] + corners[EDGES[:, 1]])
-    if curved:
-        mids = mids + 0.05 * 0.01 * rng.uniform(-1, 1, mids.shape)
-    coords = np.concatenate([corners, mids])
-    assume(element_volumes(coords[None])[0] > 1e-8)  # skip the rare flat draw (~1e-6 m^3 is typical)
-    return coords
+    """One well-shaped P2 tet (10, 3) [m] (tests/helpers.py)."""
+    return well_shaped_p2_tets(rng, 1, curved)[0]
 
 
 @FAST
