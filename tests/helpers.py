@@ -3,7 +3,7 @@ counters they check)."""
 
 import numpy as np
 
-from flexcal.fem.elements import EDGES, element_volumes
+from flexcal.fem.elements import EDGES, REFERENCE_NODES, TET_14POINT, element_volumes, jacobians, shape_gradients
 
 
 class Counting:
@@ -24,25 +24,32 @@ def well_shaped_p2_tets(rng: np.random.Generator, n: int, curved: bool) -> np.nd
     """n well-shaped P2 tets (n, 10, 3) [m] of size ~ 1 cm; curved ones have their
     mid-edge nodes moved by up to 5 % of their edge's length.
 
-    Well-shaped means a mean-ratio quality 6*sqrt(2) V / l_rms^3 of at least 0.5
-    (1 for the regular tet): random corners are redrawn until they pass, since a
-    sliver would fold under the 5 % mid-node move (a real mesher rejects slivers too).
+    Well-shaped: a mean-ratio quality 6 sqrt(2) V / l_rms^3 of at least 0.5 (1 for the
+    regular tet) and, if curved, det J of the quadratic map at the ten nodes and the 14
+    quadrature points at least a quarter of the straight tet's. Draws that fail are
+    redrawn: a sliver, or a curved tet folding at a corner node, is what a mesher rejects
+    too, and the element code rightly refuses it (tested separately).
     """
     base = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
-    corners = np.empty((n, 4, 3))
-    for k in range(n):
-        while True:
-            candidate = 0.01 * (base + 0.15 * rng.standard_normal((4, 3)))
-            edges = candidate[EDGES[:, 1]] - candidate[EDGES[:, 0]]
-            volume = np.linalg.det(candidate[1:] - candidate[0]) / 6.0
-            rms_edge = np.sqrt((edges**2).sum(axis=1).mean())
-            if 6.0 * np.sqrt(2.0) * volume / rms_edge**3 >= 0.5:
-                corners[k] = candidate
-                break
-    mids = 0.5 * (corners[:, EDGES[:, 0]] + corners[:, EDGES[:, 1]])
-    if curved:
-        lengths = np.linalg.norm(corners[:, EDGES[:, 1]] - corners[:, EDGES[:, 0]], axis=-1)
-        mids = mids + 0.05 * lengths[..., None] * rng.uniform(-1, 1, mids.shape)
-    coords = np.concatenate([corners, mids], axis=1)
-    assert (element_volumes(coords) > 0).all()
-    return coords
+    checked_points = np.vstack([REFERENCE_NODES, TET_14POINT.points])
+    out = np.empty((n, 10, 3))
+    k = 0
+    while k < n:
+        corners = 0.01 * (base + 0.15 * rng.standard_normal((4, 3)))
+        edges = corners[EDGES[:, 1]] - corners[EDGES[:, 0]]
+        straight_det = np.linalg.det(corners[1:] - corners[0])  # 6 V
+        rms_edge = np.sqrt((edges**2).sum(axis=1).mean())
+        if np.sqrt(2.0) * straight_det / rms_edge**3 < 0.5:  # 6 sqrt(2) V / l_rms^3
+            continue
+        mids = 0.5 * (corners[EDGES[:, 0]] + corners[EDGES[:, 1]])
+        if curved:
+            lengths = np.linalg.norm(edges, axis=1)
+            mids = mids + 0.05 * lengths[:, None] * rng.uniform(-1, 1, mids.shape)
+        coords = np.concatenate([corners, mids])
+        det = np.linalg.det(jacobians(coords[None], shape_gradients(checked_points)))
+        if det.min() < 0.25 * straight_det:
+            continue
+        out[k] = coords
+        k += 1
+    assert (element_volumes(out) > 0).all()
+    return out
