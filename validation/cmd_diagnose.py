@@ -16,7 +16,7 @@ import numpy as np
 
 __all__ = ["configure", "run", "EXAMPLES", "DEFAULT_CONFIG", "markdown"]
 
-DEFAULT_CONFIG = {"model_stiffness": "fem", "second_order": True}
+DEFAULT_CONFIG = {"model_stiffness": "fem", "second_order": True, "particles": 80, "iterations": 60}
 
 EXAMPLES = ("flexcal diagnose curves.csv --out runs/diagnosis",
             "flexcal truth --scenario table1 --provider analytic --noise-urad 0.5 --out runs/t && "
@@ -29,8 +29,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
     parser.add_argument("data", metavar="DATA.csv", help="measurement CSV (format: flexcal.validation.measurements)")
     add_seed(parser, what="the baseline calibration's optimizer", default=0)
-    parser.add_argument("--particles", type=int, default=80, help="PSO particles of the baseline (default 80)")
-    parser.add_argument("--iterations", type=int, default=60, help="PSO iterations of the baseline (default 60)")
+    parser.add_argument("--particles", type=int, help="PSO particles of each baseline start (default %(default)s)")
+    parser.add_argument("--iterations", type=int, help="PSO iterations of each baseline start (default %(default)s)")
     add_model_options(parser)
     add_out(parser, what="report.json, report.md, residual.png, strata.png, heldout.png")
 
