@@ -73,10 +73,10 @@ class BaselineSettings:
     (False: only the nine); prior_sd: ridge prior [unit box] of the linear correction in the
     term fits (0.3: a source may move by ~a third of its range).
 
-    Why several starts: one 80 x 60 swarm ends in a false clearance mode (a ~80 urad spike
-    at a stroke end, RMS ~18 urad instead of ~1-2) on 2 of 4 seeds on some benchmark files
-    and on 1 of 4 on a ``none`` file (measured 2026-11-22, docs/diagnosis.md); four starts
-    make a miss of all four unlikely at ~2 s each."""
+    Why several starts: one 80 x 60 swarm plus the polishes ends in a false clearance mode
+    (a 50-100 urad spike at a stroke end instead of ~2 urad at most) on 6 of 36 (file, seed)
+    pairs of ``none`` benchmark files; six starts, the best kept after the 45-source polish,
+    on 0 of the same 36 (measured 2026-11-22, docs/diagnosis.md), ~10 s per baseline."""
 
     particles: int = 80
     iterations: int = 60
