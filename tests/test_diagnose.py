@@ -114,10 +114,9 @@ def test_benchmark_command_tiny_grid(tmp_path):
 def test_full_benchmark_grid_on_the_fem_prototype(tmp_path):
     """The full grid on the FEM prototype (hours on 2 cores): the goals of issue #7.
 
-    The detection goal (>= 0.90 correct at >= 3x noise) is not met yet (0.682 on the small
-    analytic grid, docs/diagnosis.md): it is checked as its own expected failure, so that
-    the run, the false-alarm and the closure goals stay enforced and a fix shows up as an
-    XPASS."""
+    The detection goal (>= 0.90 correct at >= 3x noise) is not met yet (measured figures in
+    docs/diagnosis.md): it is checked as its own expected failure, so that the run, the
+    false-alarm and the closure goals stay enforced and a fix shows up as an XPASS."""
     out = tmp_path / "bench"
     assert cli.main(["diagnose-benchmark", "--grid", "full", "--provider", "fem", "--out", str(out), "--quiet"]) == 0
     goals = json.loads((out / "report.json").read_text())["summary"]["goals"]
