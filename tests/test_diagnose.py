@@ -116,7 +116,7 @@ def test_full_benchmark_grid_on_the_fem_prototype(tmp_path):
 
     The detection goal (>= 0.90 correct at >= 3x noise) is not met yet (measured figures in
     docs/diagnosis.md): it is checked as its own expected failure, so that the run, the
-    false-alarm and the closure goals stay enforced and a fix shows up as an XPASS."""
+    false-alarm and the closure goals stay enforced; once the goal is met the test passes."""
     out = tmp_path / "bench"
     assert cli.main(["diagnose-benchmark", "--grid", "full", "--provider", "fem", "--out", str(out), "--quiet"]) == 0
     goals = json.loads((out / "report.json").read_text())["summary"]["goals"]
