@@ -41,14 +41,12 @@ def configure(parser: argparse.ArgumentParser) -> None:
     add_out(parser, what="report.json, report.md, answers.json, diagnosis_*.png")
 
 
-def baseline_model(provider_name: str):
-    """The diagnosis baseline's model for a prototype provider: the second-order model with
-    the chain stiffness the prototype's segments have (closed form for ``analytic``,
+def baseline_stiffness(provider_name: str) -> str:
+    """The chain stiffness of the diagnosis baseline's (second-order) model for a prototype
+    provider: the one the prototype's segments have (closed form for ``analytic``,
     FEM-informed for ``fem``). What is withheld from the diagnosis is the effect, not the
     mechanism's stiffness model; a user calibrates with the best model of their mount."""
-    from .model_correction import model_space
-
-    return model_space("closed-form" if provider_name == "analytic" else "fem", second_order=True)
+    return "closed-form" if provider_name == "analytic" else "fem"
 
 
 def run_benchmark(ids, grid, provider, *, noise_urad, cycles, seed, progress, scenario_seed=None, space=None):
@@ -58,9 +56,8 @@ def run_benchmark(ids, grid, provider, *, noise_urad, cycles, seed, progress, sc
 
     from tqdm import tqdm
 
-    from .diagnose_baseline import calibrate_baseline
-
     from .diagnose import run_diagnosis
+    from .diagnose_baseline import calibrate_baseline
     from .diagnose_benchmark import GRIDS, benchmark_measurement, run_case
     from .effect_library import NONE
 
@@ -119,6 +116,7 @@ def run(args: argparse.Namespace) -> int:
     from .diagnose_benchmark import summarize
     from .diagnose_plots import plot_benchmark
     from .effect_library import EFFECT_IDS, LIBRARY, NONE, OUT_OF_LIBRARY_IDS
+    from .model_correction import model_space
     from .output import staged_output, write_json
 
     if args.noise_urad <= 0:
@@ -135,11 +133,10 @@ def run(args: argparse.Namespace) -> int:
     provider = stiffness_provider(args.provider, progress=progress)
     rows, answers = run_benchmark(ids, args.grid, provider, noise_urad=args.noise_urad, cycles=args.cycles,
                                   seed=args.seed, progress=progress, scenario_seed=args.scenario_seed,
-                                  space=baseline_model(args.provider))
+                                  space=model_space(baseline_stiffness(args.provider), second_order=True))
     summary = summarize(rows)
     report = {"grid": args.grid, "provider": args.provider, "scenario_seed": args.scenario_seed,
-              "baseline_model": {"stiffness": "closed-form" if args.provider == "analytic" else "fem",
-                                 "second_order": True},
+              "baseline_model": {"stiffness": baseline_stiffness(args.provider), "second_order": True},
               "noise_urad": args.noise_urad, "cycles": args.cycles,
               "out_of_library": list(OUT_OF_LIBRARY_IDS), "rows": rows, "summary": summary,
               "note": "answers.json holds what was injected; the diagnosis only received the measurement"}

@@ -68,10 +68,11 @@ Baseline = Callable[..., BaselineFit]
 
 @dataclass(frozen=True, kw_only=True)
 class BaselineSettings:
-    """particles, iterations: PSO on the nine drive sources; starts: independent PSO runs
-    (each polished on the nine), the best kept; polish_all: polish all 45 sources afterwards
-    (False: only the nine); prior_sd: ridge prior [unit box] of the linear correction in the
-    term fits (0.3: a source may move by ~a third of its range).
+    """particles, iterations: PSO on the nine drive sources; starts: independent PSO runs,
+    each polished on the nine and then (polish_all) over all 45, the one with the smallest
+    final sum of squares kept; polish_all: polish all 45 sources (False: only the nine);
+    prior_sd: ridge prior [unit box] of the linear correction in the term fits (0.3: a
+    source may move by ~a third of its range).
 
     Why several starts: one 80 x 60 swarm plus the polishes ends in a false clearance mode
     (a 50-100 urad spike at a stroke end instead of ~2 urad at most) on 6 of 36 (file, seed)
