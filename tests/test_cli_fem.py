@@ -56,3 +56,22 @@ def test_chain_command_report(tmp_path):
     rigid[6 + 2, 4] = -L  # rotation about y moves B along -z
     assert np.abs(stiffness @ rigid).max() < 1e-6 * np.abs(stiffness).max() * max(1.0, L)
     assert abs(report["percent_difference"][5][5]) < 10  # leaf-1 bending, see docs/model-vs-fem.md
+
+
+def test_hinge_mesher_failure_exits_2_without_output(tmp_path, capsys, monkeypatch):
+    """A mesher that gives up (fTetWild returning no tets) is an input problem: one line, exit 2,
+    no output folder. A fresh cache so that the FEM result cannot come from an earlier run."""
+    import flexcal.fem.mesh as mesh
+
+    def no_tets(*args, **kwargs):
+        raise RuntimeError("pytetwild returned no tets; the surface triangulation may not be closed")
+
+    monkeypatch.setattr(mesh, "_tetrahedralize", no_tets)
+    monkeypatch.setenv("FLEXCAL_CACHE_DIR", str(tmp_path / "cache"))
+    out = tmp_path / "nothing"
+    args = ["hinge", "--type", "circular", "--radius-mm", "5", "--thickness-mm", "1", "--width-mm", "10",
+            "--out", str(out)]
+    assert cli.main(args) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "no tets" in err and "Traceback" not in err
+    assert not out.exists()
