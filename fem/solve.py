@@ -37,6 +37,7 @@ RESIDUAL_LIMIT = 1e-6
 
 
 _PARDISO_LOCK = threading.Lock()
+PARDISO_OUT_OF_MEMORY = -2  # MKL PARDISO error code "not enough memory" (-4 is a zero pivot)
 
 
 def _point_pypardiso_at_mkl() -> None:
@@ -94,6 +95,11 @@ def _solve_pardiso(K: sp.csr_matrix, rhs: np.ndarray) -> np.ndarray:
             solver.factorize(upper)
             x = solver.solve(upper, np.asfortranarray(rhs))
         except pypardiso.pardiso_wrapper.PyPardisoError as error:
+            if getattr(error, "value", None) == PARDISO_OUT_OF_MEMORY:
+                raise RuntimeError(
+                    f"PARDISO failed ({error}): not enough memory for the factorization of "
+                    f"{K.shape[0]} DOF (a coarser mesh or a machine with more memory)"
+                ) from error
             raise ValueError(
                 f"PARDISO failed ({error}); K is probably not positive definite: a body part is not "
                 "held (check the clamps and couplings)"

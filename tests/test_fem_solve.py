@@ -63,3 +63,24 @@ def test_free_body_is_reported_as_singular():
     for method in ("splu", "pardiso") if pardiso_available() else ("splu",):
         with pytest.raises(ValueError, match="not held"):
             solve_spd(K, load, method=method)
+
+
+def test_pardiso_out_of_memory_is_named(monkeypatch):
+    """MKL PARDISO's error -2 is 'not enough memory', not an unconstrained body: the message
+    must say so (the diagnosis benchmark once failed with the wrong advice)."""
+    if not pardiso_available():
+        pytest.skip("pypardiso / MKL not available")
+    import pypardiso
+
+    import flexcal.fem.solve as solve
+
+    class OutOfMemory:
+        def factorize(self, matrix):
+            raise pypardiso.pardiso_wrapper.PyPardisoError(-2)
+
+        def free_memory(self, everything=False):
+            pass
+
+    monkeypatch.setattr(solve, "_pardiso_solver", lambda: OutOfMemory())
+    with pytest.raises(RuntimeError, match="not enough memory"):
+        solve_spd(_laplacian_3d(3), np.ones(27), method="pardiso")
