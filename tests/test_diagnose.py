@@ -97,13 +97,38 @@ def test_diagnose_command_writes_report_and_rejects_bad_file(tmp_path, none_case
     assert "at least 20" in capsys.readouterr().err
 
 
-def test_benchmark_command_tiny_grid(tmp_path):
+def test_benchmark_command_tiny_grid_survives_a_failed_case_and_resumes(tmp_path, monkeypatch, capsys):
+    """A case that raises is listed and the command exits 1 with the others' figures; the
+    finished case is kept in DIR/cases and a rerun computes only the failed one."""
+    import flexcal.validation.diagnose_benchmark as bench
+
     out = tmp_path / "bench"
-    assert cli.main(["diagnose-benchmark", "--grid", "tiny", "--effects", "drift,none", "--out", str(out),
-                     "--quiet"]) == 0
+    command = ["diagnose-benchmark", "--grid", "tiny", "--effects", "drift,none", "--out", str(out), "--quiet"]
+    measure = bench.benchmark_measurement
+
+    def none_runs_out_of_memory(effect_id, *args, **kwargs):
+        if effect_id == "none":
+            raise RuntimeError("PARDISO error -2: not enough memory")
+        return measure(effect_id, *args, **kwargs)
+
+    monkeypatch.setattr(bench, "benchmark_measurement", none_runs_out_of_memory)
+    assert cli.main(command) == 1
+    first = json.loads((out / "report.json").read_text())
+    assert list(first["failures"]) == ["none 0x seed 0"] and "not enough memory" in first["failures"]["none 0x seed 0"]
+    assert [r["effect"] for r in first["rows"]] == ["drift"]
+    assert len(list((out / "cases").glob("*.json"))) == 1
+
+    def only_none(effect_id, *args, **kwargs):
+        assert effect_id == "none", f"{effect_id} was finished already and must not be run again"
+        return measure(effect_id, *args, **kwargs)
+
+    monkeypatch.setattr(bench, "benchmark_measurement", only_none)
+    assert cli.main(command) == 0
     report = json.loads((out / "report.json").read_text())
     answers = json.loads((out / "answers.json").read_text())
     assert [a["effect"] for a in answers] == ["drift", "none"]
+    assert report["failures"] == {}
+    assert report["rows"][0] == first["rows"][0]
     assert report["summary"]["confusion"]["drift"] == {"drift": 1}
     assert report["summary"]["false_alarm_rate_none"] == 0.0
     for name in ("diagnosis_confusion.png", "diagnosis_detection.png", "diagnosis_closure.png"):

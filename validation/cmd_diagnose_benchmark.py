@@ -6,6 +6,12 @@ injected, the answer kept in ``DIR/answers.json`` (never given to the diagnosis)
 diagnosis, the score. Writes DIR/report.json (rows, confusion matrix, goals), report.md,
 answers.json, diagnosis_confusion.png, diagnosis_detection.png, diagnosis_closure.png.
 
+Each finished case is written at once to DIR/cases/<id>.json (row and answer; the id
+hashes the case and the settings, not the code version: use a new DIR after a code
+change). A case already there is not run again, so an interrupted or partly failed grid
+resumes where it stopped; a case that raises is listed in the report and the command
+exits 1 after writing the figures of the others.
+
     flexcal diagnose-benchmark --out runs/bench                 # small grid, analytic prototype
     flexcal diagnose-benchmark --grid full --provider fem --out runs/bench-full
 """
@@ -13,7 +19,9 @@ answers.json, diagnosis_confusion.png, diagnosis_detection.png, diagnosis_closur
 from __future__ import annotations
 
 import argparse
+import sys
 import time
+from pathlib import Path
 
 __all__ = ["configure", "run", "EXAMPLES"]
 
@@ -49,16 +57,19 @@ def baseline_stiffness(provider_name: str) -> str:
     return "closed-form" if provider_name == "analytic" else "fem"
 
 
-def run_benchmark(ids, grid, provider, *, noise_urad, cycles, seed, progress, scenario_seed=None, space=None):
-    """(rows, answers) of every case of the grid; space: the baseline's model (default: the
-    baseline's own default)."""
-    from functools import partial
+def case_spec(effect_id, magnitude, case_seed, *, provider_name, noise_urad, cycles, seed, scenario_seed) -> dict:
+    """Everything that decides one case's row: its id (``design_id`` of this) keys the
+    case store, so a rerun with other settings never reuses a row."""
+    return {"effect": effect_id, "magnitude_noise": float(magnitude), "seed": int(case_seed),
+            "provider": provider_name, "baseline_model": {"stiffness": baseline_stiffness(provider_name),
+                                                          "second_order": True},
+            "noise_urad": float(noise_urad), "cycles": int(cycles), "baseline_seed": int(seed),
+            "scenario_seed": scenario_seed}
 
-    from tqdm import tqdm
 
-    from .diagnose import run_diagnosis
-    from .diagnose_baseline import calibrate_baseline
-    from .diagnose_benchmark import GRIDS, benchmark_measurement, run_case
+def grid_cases(ids, grid) -> list[tuple[str, float, int]]:
+    """(effect id, magnitude [x noise], case seed) of every case of a grid, in run order."""
+    from .diagnose_benchmark import GRIDS
     from .effect_library import NONE
 
     magnitudes, seeds, none_seeds = GRIDS[grid]
@@ -68,17 +79,51 @@ def run_benchmark(ids, grid, provider, *, noise_urad, cycles, seed, progress, sc
             cases += [(NONE, 0.0, s) for s in range(none_seeds)]
         else:
             cases += [(effect_id, m, s) for m in magnitudes for s in seeds]
-    rows, answers = [], []
-    for effect_id, magnitude, case_seed in tqdm(cases, desc="diagnose-benchmark", unit="case",
+    return cases
+
+
+def run_benchmark(ids, grid, provider, *, noise_urad, cycles, seed, progress, scenario_seed=None, space=None,
+                  provider_name="analytic", store=None, log=None):
+    """(rows, answers, failures) of every case of the grid; space: the baseline's model
+    (default: the baseline's own default); store: a ``DesignStore`` of finished cases (each
+    saved as it finishes; a case already in it is not run again); failures: {case label:
+    error text} of the cases that raised (one bad case must not sink a two-hour grid)."""
+    from functools import partial
+
+    from tqdm import tqdm
+
+    from .diagnose import run_diagnosis
+    from .diagnose_baseline import calibrate_baseline
+    from .diagnose_benchmark import benchmark_measurement, run_case
+    from .sweep_space import design_id
+
+    log = log or (lambda text: None)
+    rows, answers, failures = [], [], {}
+    for effect_id, magnitude, case_seed in tqdm(grid_cases(ids, grid), desc="diagnose-benchmark", unit="case",
                                                 disable=None if progress else True):
-        case = benchmark_measurement(effect_id, magnitude, case_seed, provider, cycles=cycles,
-                                     noise_urad=noise_urad, scenario_seed=scenario_seed)
-        answers.append(case.answer)
-        start = time.perf_counter()
-        row = run_case(case, lambda m: run_diagnosis(m, rng=seed, baseline=partial(calibrate_baseline, space=space)))
-        row["wall_s"] = time.perf_counter() - start
-        rows.append(row)
-    return rows, answers
+        spec = case_spec(effect_id, magnitude, case_seed, provider_name=provider_name, noise_urad=noise_urad,
+                         cycles=cycles, seed=seed, scenario_seed=scenario_seed)
+        identifier = design_id(spec)
+        record = None if store is None else store.load(identifier)
+        if record is None:
+            start = time.perf_counter()
+            try:
+                case = benchmark_measurement(effect_id, magnitude, case_seed, provider, cycles=cycles,
+                                             noise_urad=noise_urad, scenario_seed=scenario_seed)
+                row = run_case(case, lambda m: run_diagnosis(m, rng=seed,
+                                                             baseline=partial(calibrate_baseline, space=space)))
+            except Exception as error:
+                label = f"{effect_id} {magnitude:g}x seed {case_seed}"
+                failures[label] = f"{type(error).__name__}: {error}"
+                log(f"diagnose-benchmark: case {label} failed: {failures[label]}")
+                continue
+            row["wall_s"] = time.perf_counter() - start
+            record = {"id": identifier, "spec": spec, "row": row, "answer": case.answer}
+            if store is not None:
+                store.save(record)
+        rows.append(record["row"])
+        answers.append(record["answer"])
+    return rows, answers, failures
 
 
 def _markdown(report) -> str:
@@ -99,6 +144,9 @@ def _markdown(report) -> str:
               f"a concentrated stratum named in {s['out_of_library_where_named']}.", "",
               "## Detection by magnitude (x noise)", ""]
     lines += [f"- {m}x: {v:.2f}" for m, v in s["detection_by_magnitude"].items()]
+    if report["failures"]:
+        lines += ["", f"## Failed cases ({len(report['failures'])}; not in the figures)", ""]
+        lines += [f"- {label}: {text}" for label, text in report["failures"].items()]
     lines += ["", "## Cases", "", "| effect | x noise | seed | predicted | group | confidence | correct | "
               "true-term closure | absorbed by baseline |", "|---|---:|---:|---|---|---|---|---:|---:|"]
     for r in report["rows"]:
@@ -118,6 +166,7 @@ def run(args: argparse.Namespace) -> int:
     from .effect_library import EFFECT_IDS, LIBRARY, NONE, OUT_OF_LIBRARY_IDS
     from .model_correction import model_space
     from .output import staged_output, write_json
+    from .sweep import DesignStore
 
     if args.noise_urad <= 0:
         raise ValueError(f"--noise-urad={args.noise_urad} must be > 0 (magnitudes are multiples of it)")
@@ -130,15 +179,28 @@ def run(args: argparse.Namespace) -> int:
         if unknown:
             raise ValueError(f"--effects: unknown id(s) {unknown}; known: {', '.join(LIBRARY)}, none")
     progress = show_progress(args)
+    log = (lambda text: print(text, file=sys.stderr)) if progress else (lambda text: None)
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"--out {out} exists and is not a folder; give a folder name")
+    store = DesignStore(out / "cases")
     provider = stiffness_provider(args.provider, progress=progress)
-    rows, answers = run_benchmark(ids, args.grid, provider, noise_urad=args.noise_urad, cycles=args.cycles,
-                                  seed=args.seed, progress=progress, scenario_seed=args.scenario_seed,
-                                  space=model_space(baseline_stiffness(args.provider), second_order=True))
+    try:
+        rows, answers, failures = run_benchmark(
+            ids, args.grid, provider, noise_urad=args.noise_urad, cycles=args.cycles, seed=args.seed,
+            progress=progress, scenario_seed=args.scenario_seed, provider_name=args.provider, store=store, log=log,
+            space=model_space(baseline_stiffness(args.provider), second_order=True))
+    except KeyboardInterrupt:
+        log(f"diagnose-benchmark: interrupted; finished cases are kept in {store.folder}, run the same command "
+            f"again to resume")
+        raise
+    if not rows:
+        raise RuntimeError(f"every case failed, e.g. {next(iter(failures.values()))}")
     summary = summarize(rows)
     report = {"grid": args.grid, "provider": args.provider, "scenario_seed": args.scenario_seed,
               "baseline_model": {"stiffness": baseline_stiffness(args.provider), "second_order": True},
               "noise_urad": args.noise_urad, "cycles": args.cycles,
-              "out_of_library": list(OUT_OF_LIBRARY_IDS), "rows": rows, "summary": summary,
+              "out_of_library": list(OUT_OF_LIBRARY_IDS), "rows": rows, "failures": failures, "summary": summary,
               "note": "answers.json holds what was injected; the diagnosis only received the measurement"}
     with staged_output(args.out) as staging:
         write_json(staging / "answers.json", answers)
@@ -150,4 +212,9 @@ def run(args: argparse.Namespace) -> int:
         print("flexcal diagnose-benchmark: " + "; ".join(
             f"{k} {g['measured']:.3f} ({'met' if g['met'] else 'missed'} by {abs(g['margin']):.3f})"
             for k, g in goals.items()) + f"; wrote {args.out}/report.json")
+    if failures:
+        print(f"flexcal diagnose-benchmark: {len(failures)} case(s) failed (listed in {args.out}/report.json and "
+              f"report.md; the figures cover the {len(rows)} finished ones); run the same command again to retry "
+              f"them", file=sys.stderr)
+        return 1
     return 0
