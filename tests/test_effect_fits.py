@@ -30,8 +30,9 @@ FAST = ("lead_error", "friction_hysteresis", "coupling_windup", "thermal", "cree
 # constant against the injector's two; 0.980 at seed 1, 0.970-0.982 at seeds 1-5). Bound 0.9:
 # ~0.08-0.1 under the measured values; the former fixed-shape terms reached 0.79 and 0.81.
 FITTED_SHAPE = {"step_loss": 0.9, "creep": 0.9}
-# gravity_sag is only partly described (Hertz contact stiffness with a one-point load lag
-# against load polynomials of the *model's* loads; 0.53 at seed 1): bound ~0.1 under it.
+# gravity_sag is only partly described (Hertz contact stiffness, solved at each point's own loads,
+# against load polynomials of the *model's* loads; 0.67 at seed 1, 0.50-0.67 at seeds 1-5;
+# 0.53 at seed 1 while the injector read the previous point's loads): bound ~0.1 under the lowest.
 PARTLY_DESCRIBED = {"gravity_sag": 0.4, **FITTED_SHAPE}
 
 

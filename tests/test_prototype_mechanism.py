@@ -301,3 +301,31 @@ def test_mount_offsets_build_chains_to_fit_without_prestress():
     assert np.max(np.abs(loaded.angles - nominal.angles)) > 1e-8  # the tripod's geometry changed the sag
     with pytest.raises(ValueError, match="unknown chains"):
         build_prototype(MECH, RIGID_NUTS, PROVIDER, mount_offsets={"L7": (1e-3, 0.0)})
+
+
+def test_load_dependent_effect_is_solved_at_the_points_own_loads():
+    """gravity_sag's stiffness is a function of the chain loads; the prototype solves it
+    with the equilibrium (fixed point), so each point is the equilibrium of the stiffness
+    at its *own* loads: re-solving every point on its own with the stiffness frozen at
+    those loads gives the same angles (to the Newton tolerance's ~1e-11 rad), while the
+    stiffness of the previous point's loads (the former one-point lag) is visibly off."""
+    from flexcal.validation.effect_injectors import GravitySag
+
+    sag = GravitySag(exponent=(0.3, 0.3, 0.3), coefficient=(0.05, 0.05, 0.05, 0.1, 0.1, 0.1))
+    prototype = build_prototype(MECH, RIGID_NUTS, PROVIDER)
+    inputs = np.array([[0.0, 0.0, 0.0], [0.9e-3, 0.0, 0.0], [0.9e-3, -0.9e-3, 0.0], [0.0, 0.0, 0.6e-3]])
+    run = simulate(prototype, inputs, effects=[sag])
+
+    @dataclasses.dataclass(frozen=True)
+    class FrozenAt:
+        loads: np.ndarray
+        name: str = "frozen_gravity_sag"
+
+        def modify_mechanism(self, conditions, context):
+            return sag.modify_loaded_mechanism(conditions, self.loads, context)
+
+    for k in range(1, len(inputs)):
+        own = simulate(prototype, inputs[k:k + 1], effects=[FrozenAt(run.axial_loads[k])])
+        lagged = simulate(prototype, inputs[k:k + 1], effects=[FrozenAt(run.axial_loads[k - 1])])
+        assert np.max(np.abs(own.angles[0] - run.angles[k])) < 1e-10
+        assert np.max(np.abs(lagged.angles[0] - run.angles[k])) > 1e-8

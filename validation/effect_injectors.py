@@ -350,7 +350,7 @@ class GravitySag(_Injector):
     """Load-dependent stiffness of the load path that carries the payload's weight:
     (a) the ball contacts of each drive (Hertz-like): the actuator stiffness k_a becomes
     k_a ((|N_i| + preload) / (load_reference + preload))^exponent_i, N_i the drive's load
-    at the previous point [N]; (b) the hinges: chain c's segment stiffness is scaled by
+    at this point [N] (solved with the equilibrium: ``modify_loaded_mechanism``); (b) the hinges: chain c's segment stiffness is scaled by
     1 + coefficient_c N_c / LOAD_REFERENCE (compressed hinges soften, stretched ones
     stiffen). exponent (3,) [-] (1/3 for a Hertz contact, 0 = linear); preload [N];
     load_reference [N]; coefficient (6,) [-] L1..L3, D1..D3."""
@@ -362,10 +362,8 @@ class GravitySag(_Injector):
     name: str = "gravity_sag"
     _vectors = {"exponent": 3, "coefficient": 6}
 
-    def modify_mechanism(self, conditions, context):
-        if context.previous is None:
-            return conditions
-        loads = np.asarray(context.previous.axial_loads, dtype=float)
+    def modify_loaded_mechanism(self, conditions, axial_loads, context):
+        loads = np.asarray(axial_loads, dtype=float)
         factor = 1.0 + np.asarray(self.coefficient) * loads / LOAD_REFERENCE
         if np.any(factor <= 0.1):
             raise ValueError(f"gravity_sag coefficients {self.coefficient} make a chain stiffness vanish at loads "

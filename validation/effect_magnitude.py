@@ -11,7 +11,8 @@ outputs are mapped to angles to first order:
   segments minus 1) times S_c = w_c ∂θ/∂w_c, the model's angle sensitivity to the hinge
   width of chain c (a hinge's compliance terms scale like 1/w, so a width change stands
   for a stiffness change of the same relative size);
-- mechanism side: a changed actuator stiffness k -> k' as a nut shift N (1/k' - 1/k),
+- mechanism side (``modify_mechanism``; ``modify_loaded_mechanism`` at the model's chain
+  loads of the point): a changed actuator stiffness k -> k' as a nut shift N (1/k' - 1/k),
   a changed segment stiffness as above;
 - sensor side: measure(θ) - θ.
 
@@ -80,16 +81,17 @@ def _contexts(setting: StandardSetting):
                             history=tuple(results[:k]))
 
 
-def _mechanism_change(effect, context, driving_loads: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(Δs (3,) [m], ε (6,)) of a ``modify_mechanism`` hook: a changed actuator stiffness
-    k -> k' moves each nut by N (1/k' - 1/k) (tension N > 0 stretches the contact); a changed
-    segment stiffness is ε as for ``modify_stiffness``. Other changes have no estimate."""
+def _mechanism_change(effect, change, driving_loads: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(Δs (3,) [m], ε (6,)) of a ``modify_mechanism`` or ``modify_loaded_mechanism`` hook
+    (``change``: conditions -> conditions): a changed actuator stiffness k -> k' moves each
+    nut by N (1/k' - 1/k) (tension N > 0 stretches the contact); a changed segment
+    stiffness is ε as for ``modify_stiffness``. Other changes have no estimate."""
     from flexcal.geometry.params import reference_mechanism
 
     k_a = np.full(3, reference_mechanism().actuator_stiffness)
     marker = (np.zeros(3), np.zeros(3))
     before = PointConditions(segment_stiffness=np.ones((6, 5, 6, 6)), frame_forces=(marker,), actuator_stiffness=k_a)
-    after = effect.modify_mechanism(before, context)
+    after = change(before)
     if len(after.frame_forces) != 1 or after.frame_forces[0] is not marker:
         raise ValueError(f"effect {effect.name!r} changes the frame forces: no closed-form estimate")
     shift = driving_loads * (1.0 / np.asarray(after.actuator_stiffness) - 1.0 / k_a)
@@ -109,8 +111,14 @@ def estimate_signature(effect, setting: StandardSetting | None = None) -> np.nda
         if callable(getattr(effect, "modify_stiffness", None)):
             factor = effect.modify_stiffness(np.ones((6, 5, 6, 6)), context)
             stretch[k] = np.mean(factor, axis=(1, 2, 3)) - 1.0
+        changes = []
         if callable(getattr(effect, "modify_mechanism", None)):
-            stiffness = _mechanism_change(effect, context, data.axial_loads[k, 3:])
+            changes.append(lambda c, context=context: effect.modify_mechanism(c, context))
+        if callable(getattr(effect, "modify_loaded_mechanism", None)):  # at the model's loads of this point
+            changes.append(lambda c, k=k, context=context: effect.modify_loaded_mechanism(c, data.axial_loads[k],
+                                                                                          context))
+        for change in changes:
+            stiffness = _mechanism_change(effect, change, data.axial_loads[k, 3:])
             screw[k] += stiffness[0]
             stretch[k] += stiffness[1]
         if callable(getattr(effect, "measure", None)):

@@ -260,6 +260,19 @@ def _hook(effects, name):
     return [getattr(e, name) for e in effects if callable(getattr(e, name, None))]
 
 
+def _with_loads(conditions: PointConditions, axial_loads, hooks, context) -> PointConditions:
+    """``conditions`` after the ``modify_loaded_mechanism`` hooks at ``axial_loads`` (6,)
+    [N] (unchanged while no loads are known: the first iterate of the first point)."""
+    if axial_loads is None:
+        return conditions
+    for hook in hooks:
+        conditions = hook(conditions, np.array(axial_loads, dtype=float), context)
+        if not isinstance(conditions, PointConditions):
+            raise ValueError(f"modify_loaded_mechanism of effect {hook.__self__.name!r} must return PointConditions "
+                             "(use dataclasses.replace on the one it was given)")
+    return conditions
+
+
 def simulate(prototype: Prototype, inputs: np.ndarray, *, effects: Iterable[Any] = (),
              progress: bool = False, time: np.ndarray | None = None,
              temperature: np.ndarray | None = None) -> PrototypeRun:
@@ -344,24 +357,32 @@ def _simulate(prototype: Prototype, inputs: np.ndarray, effects: tuple, progress
             if not isinstance(conditions, PointConditions):
                 raise ValueError(f"modify_mechanism of effect {hook.__self__.name!r} must return PointConditions "
                                  "(use dataclasses.replace on the one it was given)")
-        k_jj = conditions.segment_stiffness.reshape(-1, 6, 6)
+        # load-dependent effects see the loads of this point: first guess the previous
+        # point's, then the iterate's, solved together with the nut offsets below
+        loaded_hooks = _hook(effects, "modify_loaded_mechanism")
+        base, guess = conditions, None if previous_result is None else previous_result.axial_loads
+        conditions = _with_loads(base, guess, loaded_hooks, context)
         offsets = np.zeros(3) if previous_offsets is None else previous_offsets.copy()
         for outer in range(1, settings.max_offset_iterations + 1):
             loads = _loads(prototype, conditions, screw + offsets)
-            poses, info = solve_equilibrium(prototype.assembly, poses, k_jj, loads, settings, where=f"at point {k}",
-                                            tangent=tangent)
+            poses, info = solve_equilibrium(prototype.assembly, poses, conditions.segment_stiffness.reshape(-1, 6, 6),
+                                            loads, settings, where=f"at point {k}", tangent=tangent)
             tangent = info.tangent
             iters[k] += info.iterations
             tension, axial = _axial_state(prototype, info, conditions.actuator_stiffness)
             new = nut_offset(previous_offsets, tension[3:], axial, offsets, mu, clearance, breakaway)
-            if np.max(np.abs(new - offsets)) <= settings.offset_tolerance:
+            load_change = 0.0 if not loaded_hooks else np.inf if guess is None else np.max(np.abs(tension - guess))
+            if np.max(np.abs(new - offsets)) <= settings.offset_tolerance and load_change <= settings.load_tolerance:
                 break
             # plain fixed point; damped once it has not settled (guards a 2-cycle at a wall)
             offsets = new if outer < 10 else 0.5 * (offsets + new)
+            if loaded_hooks:
+                guess = tension
+                conditions = _with_loads(base, guess, loaded_hooks, context)
         else:
-            raise NonConvergenceError(f"nut offsets did not converge at point {k} within "
-                                      f"{settings.max_offset_iterations} iterations (last change "
-                                      f"{np.max(np.abs(new - offsets)):.3g} m)")
+            raise NonConvergenceError(f"nut offsets (and load-dependent effects' loads) did not converge at point {k} "
+                                      f"within {settings.max_offset_iterations} iterations (last change "
+                                      f"{np.max(np.abs(new - offsets)):.3g} m, {load_change:.3g} N)")
         outer_iters[k] = outer
         rotation_vector = so3_log(poses[FRAME_BODY, :3, :3])
         measured = rotation_vector.copy()

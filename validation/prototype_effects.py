@@ -16,6 +16,12 @@ the order the effects are given:
     ``PointConditions`` of the point (stiffness of every segment, dead forces on the
     payload frame, actuator contact stiffness); return a modified copy
     (``dataclasses.replace``) -- thermal softening, an extra cable force, a weaker hinge.
+``modify_loaded_mechanism(conditions, axial_loads, context) -> conditions``
+    the same, for conditions that depend on the point's own loads: axial_loads (6,) [N]
+    (tension positive, L1..L3, D1..D3) of the current iterate; the prototype solves them
+    together with the equilibrium and the nut offsets (fixed point to
+    ``SolverSettings.load_tolerance``), so the result is consistent with this point's
+    loads, not the previous point's (load-dependent stiffness, gravity sag).
 ``measure(angles, context) -> angles``
     sensor side only: the frame's true rotation vector (3,) [rad] -> what the sensor
     reports (offsets, scale errors, cross-talk). Noise belongs to the scenario, not here.
@@ -120,7 +126,7 @@ def effect_record(effect: Any) -> dict[str, Any]:
     name = getattr(effect, "name", None)
     if not isinstance(name, str) or not name:
         raise ValueError(f"effect {effect!r} needs a non-empty string attribute 'name'")
-    hooks = ("modify_screw_position", "modify_stiffness", "modify_mechanism", "measure")
+    hooks = ("modify_screw_position", "modify_stiffness", "modify_mechanism", "modify_loaded_mechanism", "measure")
     if not any(callable(getattr(effect, h, None)) for h in hooks):
         raise ValueError(f"effect {name!r} has none of the hook methods {', '.join(hooks)}")
     parameters = getattr(effect, "parameters", None)

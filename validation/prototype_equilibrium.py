@@ -59,7 +59,10 @@ class SolverSettings:
     turn that into ~1e-6 N of force noise and, over the frame's ~0.6 m lever arms, ~3e-7
     N m of moment noise. The displacement error they allow is < 1e-14 m and < 1e-11 rad;
     max_iterations: Newton iterations per equilibrium; offset_tolerance [m]: the nut
-    offsets' fixed point stops when no offset moves more than this; max_offset_iterations;
+    offsets' fixed point stops when no offset moves more than this; load_tolerance [N]: and,
+    with load-dependent effects, when no chain's axial load moves more than this (10x the
+    force tolerance: the Newton solution's own load noise; 1e-4 N of 3 kN changes a
+    load-dependent stiffness by ~3e-8 of itself); max_offset_iterations;
     step [m or rad]: central-difference step of the tangent.
     """
 
@@ -67,11 +70,12 @@ class SolverSettings:
     moment_tolerance: float = 1e-5
     max_iterations: int = 40
     offset_tolerance: float = 1e-12
+    load_tolerance: float = 1e-4
     max_offset_iterations: int = 30
     step: float = DEFAULT_STEP
 
     def __post_init__(self) -> None:
-        for name in ("force_tolerance", "moment_tolerance", "offset_tolerance", "step"):
+        for name in ("force_tolerance", "moment_tolerance", "offset_tolerance", "load_tolerance", "step"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name}={getattr(self, name)!r} must be > 0")
         for name in ("max_iterations", "max_offset_iterations"):
