@@ -49,6 +49,15 @@ def test_benchmark_keeps_the_answer_from_the_diagnosis(provider, none_case):
     case = benchmark_measurement("sensor_scale", 3.0, 1, provider)
     assert case.measurement.metadata == {}  # no sidecar: the injected effect is nowhere in it
     assert case.answer["effect"] == "sensor_scale" and case.answer["injected"]
+    # achieved magnitude: a scale error's signature is scale * theta, theta the angles without
+    # it; here from the file's angles (table1 has no sensor offsets), whose 0.5 urad noise times
+    # scale ~2e-3 moves the RMS by ~1e-3 urad at most (measured 4e-5 urad)
+    scale = np.asarray(case.answer["injected"][0]["parameters"]["scale"])
+    noisy_signature = case.measurement.angles * scale / (1.0 + scale)
+    expected = np.sqrt(np.mean(noisy_signature**2)) * 1e6
+    assert case.answer["achieved_rms_urad"] == pytest.approx(expected, abs=1e-3)
+    assert case.answer["achieved_magnitude_noise"] == pytest.approx(expected / 0.5, abs=2e-3)
+    assert 1.5 < case.answer["achieved_magnitude_noise"] < 6.0  # the nominal 3x, within the mapping's factor 2
     seen = []
 
     class Stub:

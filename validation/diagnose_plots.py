@@ -99,15 +99,32 @@ def plot_benchmark(directory: Path, rows: list[dict], summary: dict) -> None:
     fig.savefig(Path(directory) / "diagnosis_confusion.png", dpi=110)
     plt.close(fig)
 
-    fig, ax = plt.subplots(figsize=(6, 3.5))
+    fig, (ax, cases) = plt.subplots(1, 2, figsize=(10, 3.8))
     detection = summary["detection_by_magnitude"]
     ax.plot([float(m) for m in detection], list(detection.values()), marker="o", label="correct top effect / group")
     ax.axhline(0.9, color="k", ls="--", lw=0.8, label="goal (>= 3x)")
-    ax.set_xlabel("injected magnitude [x noise]")
+    ax.set_xlabel("injected magnitude (nominal) [x noise]")
     ax.set_ylabel("rate")
     ax.set_ylim(0, 1.05)
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3)
+    # each library case at the magnitude really injected into its file: found or missed
+    from .effect_library import EFFECT_IDS
+
+    measured = [r for r in rows if r.get("achieved_magnitude_noise") is not None and r["effect"] in EFFECT_IDS]
+    for correct, marker, label in ((True, "o", "found"), (False, "x", "missed")):
+        at = [r for r in measured if bool(r["correct"]) == correct]
+        if at:
+            cases.scatter([r["achieved_magnitude_noise"] for r in at],
+                          [truths.index(r["effect"]) for r in at], marker=marker, s=22,
+                          color="C2" if correct else "C3", label=label)
+    library = [t for t in truths if t in EFFECT_IDS]
+    cases.set_yticks([truths.index(t) for t in library], library, fontsize=7)
+    cases.set_xscale("log")
+    cases.axvline(3.0, color="k", ls="--", lw=0.8)
+    cases.set_xlabel("achieved signature RMS on the file [x noise]")
+    cases.legend(fontsize=8)
+    cases.grid(alpha=0.3)
     fig.tight_layout()
     fig.savefig(Path(directory) / "diagnosis_detection.png", dpi=110)
     plt.close(fig)
