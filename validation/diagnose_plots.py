@@ -109,6 +109,8 @@ def plot_benchmark(directory: Path, rows: list[dict], summary: dict) -> None:
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3)
     # each library case at the magnitude really injected into its file: found or missed
+    from matplotlib.ticker import FixedLocator, FuncFormatter, NullFormatter
+
     from .effect_library import EFFECT_IDS
 
     measured = [r for r in rows if r.get("achieved_magnitude_noise") is not None and r["effect"] in EFFECT_IDS]
@@ -121,6 +123,9 @@ def plot_benchmark(directory: Path, rows: list[dict], summary: dict) -> None:
     library = [t for t in truths if t in EFFECT_IDS]
     cases.set_yticks([truths.index(t) for t in library], library, fontsize=7)
     cases.set_xscale("log")
+    cases.xaxis.set_major_locator(FixedLocator([0.5, 1, 2, 3, 5, 10, 20, 50, 100]))
+    cases.xaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+    cases.xaxis.set_minor_formatter(NullFormatter())
     cases.axvline(3.0, color="k", ls="--", lw=0.8)
     cases.set_xlabel("achieved signature RMS on the file [x noise]")
     cases.legend(fontsize=8)
