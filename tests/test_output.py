@@ -109,7 +109,11 @@ def test_ctrl_c_during_the_moves_is_raised_after_them(tmp_path, monkeypatch):
 
 
 def test_interrupts_deferred_without_signal_is_transparent():
+    # the handler before the block is restored (Python's default in a terminal, SIG_IGN when
+    # the run was started in the background by a non-interactive shell)
+    before = signal.getsignal(signal.SIGINT)
     with interrupts_deferred():
         value = 1
+        assert signal.getsignal(signal.SIGINT) is not before  # held back inside the block
     assert value == 1
-    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    assert signal.getsignal(signal.SIGINT) is before
