@@ -43,10 +43,10 @@ USER_ERROR_NAMES = frozenset({"ConvergenceError", "NonConvergenceError", "Invert
                               "BudgetExhausted", "NotInvertibleError", "TOMLDecodeError"})
 
 
-def add_out(parser: argparse.ArgumentParser, *, required: bool = True, what: str = "report.json, report.md, PNGs") -> None:
-    """``--out DIR``: the run folder (written whole or not at all)."""
-    parser.add_argument("--out", metavar="DIR", required=required,
-                        help=f"output folder ({what}); written only when the run succeeds")
+def add_out(parser: argparse.ArgumentParser, *, required: bool = True, what: str = "report.json, report.md, PNGs",
+            when: str = "written only when the run succeeds") -> None:
+    """``--out DIR``: the run folder (by default written whole or not at all)."""
+    parser.add_argument("--out", metavar="DIR", required=required, help=f"output folder ({what}); {when}")
 
 
 def add_seed(parser: argparse.ArgumentParser, *, what: str = "random draws", default: int | None = None) -> None:

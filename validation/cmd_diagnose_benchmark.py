@@ -46,7 +46,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="one as-built mount (table1 draws and noise) for every case (default: 1000 + the case "
                              "seed; a fixed one keeps the FEM cache warm)")
     add_seed(parser, what="the baseline optimizer of every diagnosis", default=0)
-    add_out(parser, what="report.json, report.md, answers.json, diagnosis_*.png")
+    add_out(parser, what="report.json, report.md, answers.json, diagnosis_*.png, cases/",
+            when="each finished case is kept at once in DIR/cases/ and running the same command again resumes; the "
+                 "report is written at the end, also when some cases failed (they are listed, exit status 1)")
 
 
 def baseline_stiffness(provider_name: str) -> str:
