@@ -107,12 +107,15 @@ def test_diagnose_command_writes_report_and_rejects_bad_file(tmp_path, none_case
 
 
 def test_benchmark_command_tiny_grid_survives_a_failed_case_and_resumes(tmp_path, monkeypatch, capsys):
-    """A case that raises is listed and the command exits 1 with the others' figures; the
-    finished case is kept in DIR/cases and a rerun computes only the failed one."""
+    """One case of each kind the benchmark scores (a library effect, none, an effect outside
+    the library) at 10x noise. A case that raises is listed and the command exits 1 with the
+    others' figures; the finished cases are kept in DIR/cases and a rerun computes only the
+    failed one."""
     import flexcal.validation.diagnose_benchmark as bench
 
     out = tmp_path / "bench"
-    command = ["diagnose-benchmark", "--grid", "tiny", "--effects", "drift,none", "--out", str(out), "--quiet"]
+    command = ["diagnose-benchmark", "--grid", "tiny", "--effects", "drift,none,sensor_interpolation", "--out",
+               str(out), "--quiet"]
     measure = bench.benchmark_measurement
 
     def none_runs_out_of_memory(effect_id, *args, **kwargs):
@@ -124,8 +127,8 @@ def test_benchmark_command_tiny_grid_survives_a_failed_case_and_resumes(tmp_path
     assert cli.main(command) == 1
     first = json.loads((out / "report.json").read_text())
     assert list(first["failures"]) == ["none 0x seed 0"] and "not enough memory" in first["failures"]["none 0x seed 0"]
-    assert [r["effect"] for r in first["rows"]] == ["drift"]
-    assert len(list((out / "cases").glob("*.json"))) == 1
+    assert [r["effect"] for r in first["rows"]] == ["drift", "sensor_interpolation"]
+    assert len(list((out / "cases").glob("*.json"))) == 2
 
     def only_none(effect_id, *args, **kwargs):
         assert effect_id == "none", f"{effect_id} was finished already and must not be run again"
@@ -135,11 +138,15 @@ def test_benchmark_command_tiny_grid_survives_a_failed_case_and_resumes(tmp_path
     assert cli.main(command) == 0
     report = json.loads((out / "report.json").read_text())
     answers = json.loads((out / "answers.json").read_text())
-    assert [a["effect"] for a in answers] == ["drift", "none"]
+    assert [a["effect"] for a in answers] == ["drift", "none", "sensor_interpolation"]
     assert report["failures"] == {}
-    assert report["rows"][0] == first["rows"][0]
-    assert report["summary"]["confusion"]["drift"] == {"drift": 1}
-    assert report["summary"]["false_alarm_rate_none"] == 0.0
+    assert report["rows"][0] == first["rows"][0] and report["rows"][2] == first["rows"][1]
+    summary = report["summary"]
+    assert summary["confusion"]["drift"] == {"drift": 1}
+    assert summary["false_alarm_rate_none"] == 0.0
+    # outside the library: no confident claim of a library effect, and the place named
+    assert summary["out_of_library_no_confident_claim"] == 1.0 and summary["out_of_library_where_named"] == 1.0
+    assert summary["detection_at_achieved_3x_or_more"] == 1.0 and answers[0]["achieved_magnitude_noise"] > 3.0
     for name in ("diagnosis_confusion.png", "diagnosis_detection.png", "diagnosis_closure.png"):
         assert (out / name).stat().st_size > 1000
 
