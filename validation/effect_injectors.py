@@ -350,9 +350,9 @@ class GravitySag(_Injector):
     """Load-dependent stiffness of the load path that carries the payload's weight:
     (a) the ball contacts of each drive (Hertz-like): the actuator stiffness k_a becomes
     k_a ((|N_i| + preload) / (load_reference + preload))^exponent_i, N_i the drive's load
-    at this point [N] (solved with the equilibrium: ``modify_loaded_mechanism``); (b) the hinges: chain c's segment stiffness is scaled by
-    1 + coefficient_c N_c / LOAD_REFERENCE (compressed hinges soften, stretched ones
-    stiffen). exponent (3,) [-] (1/3 for a Hertz contact, 0 = linear); preload [N];
+    at this point [N] (solved with the equilibrium: ``modify_loaded_mechanism``); (b) the
+    hinges: chain c's segment stiffness is scaled by 1 + coefficient_c N_c / LOAD_REFERENCE
+    (compressed hinges soften, stretched ones stiffen). exponent (3,) [-] (1/3 for a Hertz contact, 0 = linear); preload [N];
     load_reference [N]; coefficient (6,) [-] L1..L3, D1..D3."""
 
     exponent: tuple = (0.0, 0.0, 0.0)
