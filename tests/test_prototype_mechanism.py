@@ -329,3 +329,15 @@ def test_load_dependent_effect_is_solved_at_the_points_own_loads():
         lagged = simulate(prototype, inputs[k:k + 1], effects=[FrozenAt(run.axial_loads[k - 1])])
         assert np.max(np.abs(own.angles[0] - run.angles[k])) < 1e-10
         assert np.max(np.abs(lagged.angles[0] - run.angles[k])) > 1e-8
+
+
+@pytest.mark.parametrize("hook", ["modify_mechanism", "modify_loaded_mechanism"])
+def test_condition_hook_that_returns_something_else_is_named(hook):
+    class Broken:
+        name = "broken"
+
+    setattr(Broken, hook, lambda self, conditions, *args: None)
+    prototype = build_prototype(MECH, RIGID_NUTS, PROVIDER)
+    # the loaded hook first runs at the first point's second iterate (no loads before)
+    with pytest.raises(ValueError, match=f"{hook} of effect 'broken' must return PointConditions"):
+        simulate(prototype, np.zeros((2, 3)), effects=[Broken()])

@@ -21,7 +21,6 @@ from __future__ import annotations
 import argparse
 import sys
 import time
-from pathlib import Path
 
 __all__ = ["configure", "run", "EXAMPLES"]
 
@@ -174,7 +173,7 @@ def run(args: argparse.Namespace) -> int:
     from .diagnose_plots import plot_benchmark
     from .effect_library import EFFECT_IDS, LIBRARY, NONE, OUT_OF_LIBRARY_IDS
     from .model_correction import model_space
-    from .output import staged_output, write_json
+    from .output import out_folder, staged_output, write_json
     from .sweep import DesignStore
 
     if args.noise_urad <= 0:
@@ -189,10 +188,7 @@ def run(args: argparse.Namespace) -> int:
             raise ValueError(f"--effects: unknown id(s) {unknown}; known: {', '.join(LIBRARY)}, none")
     progress = show_progress(args)
     log = (lambda text: print(text, file=sys.stderr)) if progress else (lambda text: None)
-    out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        raise ValueError(f"--out {out} exists and is not a folder; give a folder name")
-    store = DesignStore(out / "cases")
+    store = DesignStore(out_folder(args.out) / "cases")
     provider = stiffness_provider(args.provider, progress=progress)
     try:
         rows, answers, failures = run_benchmark(

@@ -27,7 +27,7 @@ from typing import Any, Iterator
 
 import numpy as np
 
-__all__ = ["staged_output", "atomic_path", "write_json", "write_text", "to_jsonable", "interrupts_deferred"]
+__all__ = ["out_folder", "staged_output", "atomic_path", "write_json", "write_text", "to_jsonable", "interrupts_deferred"]
 
 _UMASK = os.umask(0o022)  # read the process umask (only settable, not readable) ...
 os.umask(_UMASK)  # ... and put it back: folders made by mkdtemp get the usual permissions
@@ -68,11 +68,17 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
         raise
 
 
-@contextlib.contextmanager
-def staged_output(out_dir: str | os.PathLike) -> Iterator[Path]:
+def out_folder(out_dir: str | os.PathLike) -> Path:
+    """``--out`` as a path; ValueError if it exists and is not a folder."""
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise ValueError(f"--out {out} exists and is not a folder; give a folder name")
+    return out
+
+
+@contextlib.contextmanager
+def staged_output(out_dir: str | os.PathLike) -> Iterator[Path]:
+    out = out_folder(out_dir)
     parent = out.resolve().parent
     parent.mkdir(parents=True, exist_ok=True)
     staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=parent))

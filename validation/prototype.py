@@ -260,17 +260,25 @@ def _hook(effects, name):
     return [getattr(e, name) for e in effects if callable(getattr(e, name, None))]
 
 
+def _apply_condition_hooks(conditions: PointConditions, hooks, name: str, *args) -> PointConditions:
+    """``conditions`` after the hooks ``name`` (``modify_mechanism``: args = (context,);
+    ``modify_loaded_mechanism``: args = (axial_loads, context)), each checked to return
+    ``PointConditions``."""
+    for hook in hooks:
+        conditions = hook(conditions, *args)
+        if not isinstance(conditions, PointConditions):
+            raise ValueError(f"{name} of effect {hook.__self__.name!r} must return PointConditions "
+                             "(use dataclasses.replace on the one it was given)")
+    return conditions
+
+
 def _with_loads(conditions: PointConditions, axial_loads, hooks, context) -> PointConditions:
     """``conditions`` after the ``modify_loaded_mechanism`` hooks at ``axial_loads`` (6,)
     [N] (unchanged while no loads are known: the first iterate of the first point)."""
     if axial_loads is None:
         return conditions
-    for hook in hooks:
-        conditions = hook(conditions, np.array(axial_loads, dtype=float), context)
-        if not isinstance(conditions, PointConditions):
-            raise ValueError(f"modify_loaded_mechanism of effect {hook.__self__.name!r} must return PointConditions "
-                             "(use dataclasses.replace on the one it was given)")
-    return conditions
+    return _apply_condition_hooks(conditions, hooks, "modify_loaded_mechanism",
+                                  np.array(axial_loads, dtype=float), context)
 
 
 def simulate(prototype: Prototype, inputs: np.ndarray, *, effects: Iterable[Any] = (),
@@ -352,11 +360,8 @@ def _simulate(prototype: Prototype, inputs: np.ndarray, effects: tuple, progress
             stiffness = np.asarray(hook(stiffness.copy(), context), dtype=float)
         conditions = PointConditions(segment_stiffness=stiffness, frame_forces=(weight,),
                                      actuator_stiffness=np.full(3, float(mech.actuator_stiffness)))
-        for hook in _hook(effects, "modify_mechanism"):
-            conditions = hook(conditions, context)
-            if not isinstance(conditions, PointConditions):
-                raise ValueError(f"modify_mechanism of effect {hook.__self__.name!r} must return PointConditions "
-                                 "(use dataclasses.replace on the one it was given)")
+        conditions = _apply_condition_hooks(conditions, _hook(effects, "modify_mechanism"), "modify_mechanism",
+                                            context)
         # load-dependent effects see the loads of this point: first guess the previous
         # point's, then the iterate's, solved together with the nut offsets below
         loaded_hooks = _hook(effects, "modify_loaded_mechanism")

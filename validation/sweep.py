@@ -25,7 +25,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
 
-from .output import write_json
+from .output import out_folder, write_json
 from .sweep_space import design_id, designs_from_config
 
 __all__ = ["DesignStore", "SweepResult", "run_sweep", "execute"]
@@ -125,9 +125,7 @@ def run_sweep(config: dict[str, Any], out: str | os.PathLike, *, workers: int | 
     start = time.perf_counter()
     log = (lambda text: print(text, file=sys.stderr)) if progress else (lambda text: None)
     designs = designs_from_config(config, seed=seed)
-    out = Path(out)
-    if out.exists() and not out.is_dir():
-        raise ValueError(f"--out {out} exists and is not a folder; give a folder name")
+    out = out_folder(out)
     store = DesignStore(out / "designs")
     ids = [design_id(d) for d in designs]
     unique = dict(zip(ids, designs))  # a value listed twice is one design
