@@ -59,8 +59,25 @@ def add_seed(parser: argparse.ArgumentParser, *, what: str = "random draws", def
 def add_scenario(parser: argparse.ArgumentParser, *, required: bool = True, group=None) -> None:
     """``--scenario NAME|FILE``: a built-in virtual-prototype scenario or a scenario TOML."""
     (group or parser).add_argument("--scenario", metavar="NAME|FILE", required=required if group is None else False,
-                                   help="virtual-prototype scenario: table1, nominal or a scenario TOML file "
-                                        "(format: flexcal.validation.scenario)")
+                                   help="virtual-prototype scenario: table1, paper (drives pass through their "
+                                        "clearance), nominal or a scenario TOML file (format: "
+                                        "flexcal.validation.scenario)")
+
+
+def add_trajectory(parser: argparse.ArgumentParser) -> None:
+    """``--trajectory CSV``: drive the scenario along a trajectory file instead of its own."""
+    parser.add_argument("--trajectory", metavar="CSV",
+                        help="drive the scenario along this trajectory (flexcal design's trajectory.csv: columns "
+                             "xa1_mm, xa2_mm, xa3_mm[, leg]) instead of the scenario's own")
+
+
+def load_scenario_with_trajectory(args: argparse.Namespace):
+    """The scenario of ``--scenario``/``--seed``/``--noise-urad``, along ``--trajectory`` if given."""
+    from .scenario import load_scenario
+
+    scenario = load_scenario(args.scenario, seed=args.seed, noise_urad=args.noise_urad)
+    trajectory = getattr(args, "trajectory", None)
+    return scenario.with_trajectory(trajectory) if trajectory else scenario
 
 
 def examples_epilog(module) -> str | None:

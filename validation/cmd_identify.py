@@ -80,7 +80,10 @@ def run(args: argparse.Namespace) -> int:
     settings = dataclasses.replace(PSOSettings(), n_particles=args.particles, max_iterations=args.iterations)
     progress = show_progress(args)
     measurement, presets = load_source(args, parameter_space(), progress=progress)
-    space = model_space(args.model_stiffness, args.second_order, progress=progress)
+    from .scenario import mechanism_from_metadata
+
+    space = model_space(args.model_stiffness, args.second_order, progress=progress,
+                        mechanism=mechanism_from_metadata(measurement.metadata))
     angles = remove_return_offsets(measurement) if args.remove_offset else measurement.angles
     sub = space.subset(selected)
     problem = CalibrationProblem(space=sub, inputs=measurement.inputs, angles=angles)

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import argparse
 
-from .cli_common import add_out, add_scenario, add_seed
+from .cli_common import add_out, add_scenario, add_seed, add_trajectory
 
 __all__ = ["configure", "run", "add_source_options", "load_source", "EXAMPLES", "DEFAULT_CONFIG"]
 
@@ -33,6 +33,7 @@ def add_source_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--noise-urad", type=float, default=None, help="sensor noise of the scenario [urad]")
     parser.add_argument("--provider", choices=("fem", "analytic"),
                         help="prototype segment stiffness for --scenario (default %(default)s)")
+    add_trajectory(parser)
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -54,13 +55,15 @@ def load_source(args: argparse.Namespace, space, *, progress: bool):
     if args.noise_urad is not None and args.noise_urad < 0:
         raise ValueError(f"--noise-urad={args.noise_urad} must be >= 0")
     if args.scenario is not None:
+        from .cli_common import load_scenario_with_trajectory
         from .cmd_truth import stiffness_provider
-        from .scenario import load_scenario
         from .truth import make_truth
 
-        scenario = load_scenario(args.scenario, seed=args.seed, noise_urad=args.noise_urad)
+        scenario = load_scenario_with_trajectory(args)
         truth = make_truth(scenario, stiffness_provider(args.provider, progress=progress), progress=progress)
         return truth.measurement, scenario.values
+    if getattr(args, "trajectory", None):
+        raise ValueError("--trajectory drives a --scenario; a --data file already holds its own trajectory")
     try:
         measurement = read_measurement(args.data)
     except ValueError as error:  # name the file in every message (some name only the row)
@@ -107,7 +110,10 @@ def run(args: argparse.Namespace) -> int:
     check_sobol_options(args)
     progress = show_progress(args)
     measurement, _ = load_source(args, parameter_space(), progress=progress)
-    space = model_space(args.model_stiffness, args.second_order, progress=progress)
+    from .scenario import mechanism_from_metadata
+
+    space = model_space(args.model_stiffness, args.second_order, progress=progress,
+                        mechanism=mechanism_from_metadata(measurement.metadata))
     sobol = screen(measurement, space, n_base=args.sobol_n, seed=args.calibration_seed, progress=progress)
     selected = select_parameters(sobol, threshold=args.sobol_threshold, always=TABLE1_NAMES)
     report = {

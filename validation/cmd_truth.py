@@ -13,7 +13,7 @@ import argparse
 
 import numpy as np
 
-from .cli_common import add_out, add_scenario, add_seed
+from .cli_common import add_out, add_scenario, add_seed, add_trajectory
 
 __all__ = ["configure", "run", "EXAMPLES", "DEFAULT_CONFIG"]
 
@@ -21,6 +21,7 @@ EXAMPLES = (
     "flexcal truth --scenario table1 --out runs/truth                      # FEM prototype, ~5 s with a warm cache",
     "flexcal truth --scenario table1 --provider analytic --seed 3 --out runs/quick",
     "flexcal truth --scenario my-mount.toml --noise-urad 0.5 --out runs/noisy",
+    "flexcal truth --scenario paper --trajectory runs/design/trajectory.csv --noise-urad 0.5 --out runs/paper",
 )
 DEFAULT_CONFIG = {"provider": "fem"}
 
@@ -33,6 +34,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--provider", choices=("fem", "analytic"),
                         help="segment stiffness: FEM condensation of the as-built solids (default) or the "
                              "closed-form compliance (fast, for checks only: then truth shares the model's hinge formulas)")
+    add_trajectory(parser)
     add_out(parser, what="curves.csv, curves.json, curves.png")
 
 
@@ -53,12 +55,12 @@ def run(args: argparse.Namespace) -> int:
     from .measurements import write_measurement
     from .output import staged_output, write_json
     from .plots import plot_misalignment_curves
-    from .scenario import load_scenario
+    from .cli_common import load_scenario_with_trajectory
     from .truth import make_truth
 
     if args.noise_urad is not None and args.noise_urad < 0:
         raise ValueError(f"--noise-urad={args.noise_urad} must be >= 0")
-    scenario = load_scenario(args.scenario, seed=args.seed, noise_urad=args.noise_urad)
+    scenario = load_scenario_with_trajectory(args)
     provider = stiffness_provider(args.provider, progress=not args.quiet)
     result = make_truth(scenario, provider, progress=not args.quiet)
     measurement = result.measurement

@@ -70,16 +70,17 @@ def corrected_space(space: ParameterSpace, provider: StiffnessProvider) -> Param
     return dataclasses.replace(space, compliance_factors=tuple(tuple(float(v) for v in row) for row in factors))
 
 
-def model_space(stiffness: str = "fem", second_order: bool = True, *, progress: bool = False) -> ParameterSpace:
-    """The reference mechanism's parameter space with the model options the calibration
-    commands share: stiffness "fem" (FEM-informed chain compliance, FEM solves cached) or
-    "closed-form" (the paper's Eq. 1); second_order: the geometric second-order terms
-    (``flexcal.model.second_order``)."""
+def model_space(stiffness: str = "fem", second_order: bool = True, *, progress: bool = False,
+                mechanism=None) -> ParameterSpace:
+    """The parameter space of ``mechanism`` (the reference one by default) with the model
+    options the calibration commands share: stiffness "fem" (FEM-informed chain compliance,
+    FEM solves cached) or "closed-form" (the paper's Eq. 1); second_order: the geometric
+    second-order terms (``flexcal.model.second_order``)."""
     from flexcal.model.parameters import parameter_space
 
     if stiffness not in ("fem", "closed-form"):
         raise ValueError(f"model stiffness {stiffness!r} must be 'fem' or 'closed-form'")
-    space = parameter_space()
+    space = parameter_space(mechanism)
     if stiffness == "fem":
         from .fem_provider import fem_provider
 

@@ -13,6 +13,9 @@ A scenario file::
     offset_urad = [0, 0, 0]
     [transmission]
     breakaway_force_n = 2.0
+    [mechanism]                # the mount itself, where it differs from the reference one
+    centre_of_gravity_mm = [150, 0, 0]
+    payload_mass_kg = 300
     [trajectory]
     kind = "standard"          # or "file" with file = "inputs.csv" (columns xa1_mm, xa2_mm, xa3_mm[, leg])
     n_points = 77
@@ -29,6 +32,14 @@ The built-in scenario ``table1`` uses the paper's Table 1 presets (initial posit
 −0.20, 0.32, 0.40 mm; CL 0.42, 0.25, 0.10 mm; μ 0.83, 0.87, 0.93) and draws every other
 source within its range from the seed. Like the paper's simulation it is noise-free
 unless a noise level is given.
+
+The built-in scenario ``paper`` is the same mount and presets with the payload's centre of
+gravity at the remote centre O_C instead of 150 mm behind it: the weight then no longer
+preloads the tip/tilt drives D1 and D2, and all three drives pass through their clearance
+on the backward moves, as in the paper's Fig. 12 (chains 1 and 2 enter the clearance
+zone), so every Table 1 drive row can show (docs/verification-table1.md). The mechanism
+of a scenario travels in the measurement's sidecar (``provenance()["mechanism"]``), and
+``mechanism_from_metadata`` gives it back to the commands that model the data.
 """
 
 from __future__ import annotations
@@ -45,7 +56,8 @@ import numpy as np
 from flexcal.model.parameters import ParameterSpace, parameter_space
 from flexcal.model.trajectory import standard_trajectory
 
-__all__ = ["Scenario", "load_scenario", "BUILTIN_SCENARIOS", "scenario_trajectory"]
+__all__ = ["Scenario", "load_scenario", "BUILTIN_SCENARIOS", "scenario_trajectory", "mechanism_from_metadata",
+           "mechanism_overrides"]
 
 TABLE1_PRESETS = {  # paper Table 1, display units (mm, -)
     "D1.x0": -0.20, "D2.x0": 0.32, "D3.x0": 0.40,
@@ -55,8 +67,41 @@ TABLE1_PRESETS = {  # paper Table 1, display units (mm, -)
 BUILTIN_SCENARIOS: dict[str, dict[str, Any]] = {
     "table1": {"name": "table1", "seed": 1, "draw_unset": True, "errors": TABLE1_PRESETS},
     "nominal": {"name": "nominal", "seed": 0, "draw_unset": False, "errors": {}},
+    "paper": {"name": "paper", "seed": 1, "draw_unset": True, "errors": TABLE1_PRESETS,
+              "mechanism": {"centre_of_gravity_mm": [0.0, 0.0, 0.0]}},
 }
-_TOP_KEYS = {"name", "seed", "draw_unset", "errors", "sensors", "transmission", "trajectory", "effects"}
+_TOP_KEYS = {"name", "seed", "draw_unset", "errors", "sensors", "transmission", "trajectory", "effects", "mechanism"}
+_MECHANISM_KEYS = {"centre_of_gravity_mm", "payload_mass_kg"}
+
+
+def mechanism_overrides(table: dict[str, Any]) -> dict[str, Any]:
+    """MechanismParams fields (SI) from a ``[mechanism]`` table (display units), checked."""
+    unknown = set(table) - _MECHANISM_KEYS
+    if unknown:
+        raise ValueError(f"[mechanism] has unknown key(s) {sorted(unknown)}; allowed: {sorted(_MECHANISM_KEYS)}")
+    out: dict[str, Any] = {}
+    if "centre_of_gravity_mm" in table:
+        cog = np.asarray(table["centre_of_gravity_mm"], dtype=float)
+        if cog.shape != (3,) or not np.all(np.isfinite(cog)) or np.any(np.abs(cog) > 2000.0):
+            raise ValueError(f"[mechanism] centre_of_gravity_mm={table['centre_of_gravity_mm']!r} must be three "
+                             f"finite numbers within +-2000 mm of O_C")
+        out["centre_of_gravity"] = tuple(float(v) * 1e-3 for v in cog)
+    if "payload_mass_kg" in table:
+        mass = float(table["payload_mass_kg"])
+        if not (math.isfinite(mass) and 0.0 <= mass <= 1e5):
+            raise ValueError(f"[mechanism] payload_mass_kg={mass} must be in [0, 1e5] kg")
+        out["payload_mass"] = mass
+    return out
+
+
+def mechanism_from_metadata(metadata: dict[str, Any]):
+    """The reference mechanism with a measurement sidecar's ``mechanism`` overrides (if any)."""
+    import dataclasses
+
+    from flexcal.geometry.params import reference_mechanism
+
+    table = dict(metadata.get("mechanism") or {})
+    return dataclasses.replace(reference_mechanism(), **mechanism_overrides(table))
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -81,6 +126,15 @@ class Scenario:
     dwell: float
     effects: tuple[dict[str, Any], ...] = ()
     space: ParameterSpace = field(default_factory=parameter_space)
+    mechanism: dict[str, Any] = field(default_factory=dict)
+
+    def with_trajectory(self, path: str | Path) -> "Scenario":
+        """The scenario driven along the trajectory file ``path`` (``flexcal design``'s
+        trajectory.csv: columns xa1_mm, xa2_mm, xa3_mm[, leg])."""
+        import dataclasses
+
+        inputs, leg = _read_inputs_file(Path(path))
+        return dataclasses.replace(self, inputs=inputs, leg=leg)
 
     def provenance(self) -> dict[str, Any]:
         """The scenario as JSON-ready data (display units), for the sidecar."""
@@ -96,6 +150,7 @@ class Scenario:
             "transmission": {"breakaway_force_n": self.breakaway_force},
             "effects": list(self.effects),
             "n_points": int(self.inputs.shape[0]),
+            "mechanism": dict(self.mechanism),
         }
 
 
@@ -150,6 +205,11 @@ def _from_table(table: dict[str, Any], *, base: Path, seed: int | None, noise_ur
     if unknown:
         raise ValueError(f"scenario has unknown key(s) {sorted(unknown)}; allowed: {sorted(_TOP_KEYS)}")
     seed = int(table.get("seed", 0) if seed is None else seed)
+    mechanism_table = dict(table.get("mechanism", {}))
+    if mechanism_table:
+        import dataclasses
+
+        space = parameter_space(dataclasses.replace(space.mechanism, **mechanism_overrides(mechanism_table)))
     if seed < 0:
         raise ValueError(f"seed={seed} must be >= 0")
     errors = dict(table.get("errors", {}))
@@ -179,7 +239,7 @@ def _from_table(table: dict[str, Any], *, base: Path, seed: int | None, noise_ur
             raise ValueError("every [[effects]] entry needs a name")
     return Scenario(name=str(table.get("name", "scenario")), seed=seed, values=values, preset_names=tuple(errors),
                     noise=noise, offset=offset, breakaway_force=breakaway, inputs=inputs, leg=leg, dwell=dwell,
-                    effects=effects, space=space)
+                    effects=effects, space=space, mechanism=mechanism_table)
 
 
 def load_scenario(name_or_path: str, *, seed: int | None = None, noise_urad: float | None = None,

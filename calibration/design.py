@@ -1,0 +1,154 @@
+"""Designed calibration measurements: D-optimal postures for the MAP identification.
+
+The standard trajectory drives one actuator at a time; its Jacobian has rank 22 of 45 and
+it never unloads the tip/tilt drives. Here the postures are chosen to make the sources
+identifiable, before anything is measured:
+
+- candidates: ``n_candidates`` postures drawn uniformly inside the angular workspace
+  (+-1, +-5, +-3 mrad; ``model.trajectory.WORKSPACE``), mapped to actuator inputs by the
+  nominal linear gain, so every combination of the three actuators is available;
+- each candidate's Jacobian ``J_c`` (3, d) of the model angles with respect to the unit-box
+  sources, at the design point (the prior mean: every source mid-range), divided by the
+  noise: rows in noise units per range;
+- the prior-weighted information matrix ``M = diag(prior precision) + sum_c J_c^T J_c``; the
+  D-criterion ``log det M`` (the log volume of the posterior confidence ellipsoid, negated)
+  is maximized by greedy selection (rank-3 updates: ``log det(I + J_c M^-1 J_c^T)``) and then
+  Fedorov exchange passes until no swap improves it; a posture may be chosen twice
+  (replication is a legitimate optimum);
+- the chosen postures are put in a nearest-neighbour tour from the zero posture, so that each
+  actuator reverses many times and both travel directions occur (the model used here does
+  not depend on the direction, the hardware's backlash does), cut into legs of
+  ``points_per_leg`` for held-out cross-validation.
+
+The design is local (at one parameter point) like any nonlinear D-optimal design; the
+report gives the criterion, sigma_min, the condition number and the expected standard
+error of every source against the standard trajectory at the same point.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+__all__ = ["candidate_postures", "d_criterion", "greedy_d_optimal", "order_postures", "DesignQuality",
+           "design_quality"]
+
+
+def candidate_postures(angle_gain: np.ndarray, workspace: np.ndarray, n_candidates: int,
+                       rng: np.random.Generator | int | None = None) -> np.ndarray:
+    """(n_candidates, 3) actuator inputs [m] whose nominal linear angles fall uniformly inside
+    the box +-workspace (3,) [rad]; angle_gain (3 angles, 3 actuators) [rad/m]."""
+    if n_candidates < 1:
+        raise ValueError(f"n_candidates={n_candidates} must be >= 1")
+    rng = np.random.default_rng(rng)
+    angles = rng.uniform(-1.0, 1.0, size=(n_candidates, 3)) * np.asarray(workspace, float)
+    return np.linalg.solve(np.asarray(angle_gain, float), angles.T).T
+
+
+def d_criterion(J: np.ndarray, prior_precision: np.ndarray) -> float:
+    """log det(J^T J + diag(prior_precision)); J (m, d) in noise units per range."""
+    sign, value = np.linalg.slogdet(J.T @ J + np.diag(prior_precision))
+    return float(value) if sign > 0 else -np.inf
+
+
+def _gains(J_candidates: np.ndarray, M_inverse: np.ndarray) -> np.ndarray:
+    """log det(I_3 + J_c M^-1 J_c^T) for every candidate, (n,)."""
+    S = np.einsum("nid,de,nje->nij", J_candidates, M_inverse, J_candidates)
+    S += np.eye(J_candidates.shape[1])
+    sign, value = np.linalg.slogdet(S)
+    return np.where(sign > 0, value, -np.inf)
+
+
+def greedy_d_optimal(J_candidates: np.ndarray, prior_precision: np.ndarray, n_select: int, *,
+                     fixed: np.ndarray | None = None, max_passes: int = 10,
+                     progress: Callable[[str], None] | None = None) -> tuple[np.ndarray, float]:
+    """Indices (n_select,) of candidates maximizing log det M, and that value.
+
+    J_candidates (n, k, d) [noise units per range]: k rows per candidate posture;
+    prior_precision (d,) [1/range^2 in unit-box units, > 0 keeps M invertible]; fixed
+    (k', d): rows always measured (e.g. the start posture). Greedy forward selection, then
+    Fedorov exchange passes (each selected posture swapped for the best candidate when that
+    raises log det M by more than 1e-9) until a pass changes nothing or ``max_passes``.
+    """
+    J_candidates = np.asarray(J_candidates, float)
+    n, _, d = J_candidates.shape
+    if n_select < 1:
+        raise ValueError(f"n_select={n_select} must be >= 1")
+    precision = np.asarray(prior_precision, float)
+    if precision.shape != (d,) or np.any(precision <= 0):
+        raise ValueError("prior_precision must be (d,) and > 0 (a D-optimal design needs an invertible start)")
+    M = np.diag(precision)
+    if fixed is not None:
+        M = M + fixed.T @ fixed
+    contributions = np.einsum("nkd,nke->nde", J_candidates, J_candidates)  # (n, d, d)
+    chosen = []
+    for _ in range(n_select):
+        gains = _gains(J_candidates, np.linalg.inv(M))
+        best = int(np.argmax(gains))
+        chosen.append(best)
+        M = M + contributions[best]
+    chosen = np.array(chosen)
+    for pass_number in range(max_passes):
+        swaps = 0
+        for position in range(n_select):
+            M_without = M - contributions[chosen[position]]
+            gains = _gains(J_candidates, np.linalg.inv(M_without))
+            best = int(np.argmax(gains))
+            current = gains[chosen[position]]
+            if best != chosen[position] and gains[best] > current + 1e-9:
+                chosen[position] = best
+                M = M_without + contributions[best]
+                swaps += 1
+        if progress is not None:
+            progress(f"exchange pass {pass_number + 1}: {swaps} swaps")
+        if swaps == 0:
+            break
+    sign, value = np.linalg.slogdet(M)
+    return chosen, float(value)
+
+
+def order_postures(inputs: np.ndarray, scale: np.ndarray, start: np.ndarray | None = None) -> np.ndarray:
+    """Visiting order (n,) of the postures inputs (n, 3) [m]: a nearest-neighbour tour (in
+    inputs divided by ``scale`` (3,) [m]) from ``start`` (3,) (default the zero posture)."""
+    points = np.asarray(inputs, float) / np.asarray(scale, float)
+    current = np.zeros(3) if start is None else np.asarray(start, float) / scale
+    left = list(range(points.shape[0]))
+    order = []
+    while left:
+        distance = np.linalg.norm(points[left] - current, axis=1)
+        pick = left.pop(int(np.argmin(distance)))
+        order.append(pick)
+        current = points[pick]
+    return np.array(order, dtype=int)
+
+
+@dataclass(frozen=True, kw_only=True)
+class DesignQuality:
+    """Of one trajectory at the design point: d_criterion log det M; d_efficiency
+    det(M)^(1/d); sigma_min, condition_number of the data-only Jacobian W (noise units per
+    range; inf when rank-deficient); rank of W (relative threshold 1e-6, as in
+    ``identifiability``); expected_std (d,) [fraction of range] sqrt(diag M^-1) with the prior."""
+
+    d_criterion: float
+    d_efficiency: float
+    sigma_min: float
+    condition_number: float
+    rank: int
+    expected_std: np.ndarray
+
+
+def design_quality(W: np.ndarray, prior_precision: np.ndarray) -> DesignQuality:
+    """Quality figures of a trajectory whose data Jacobian is W (m, d) [noise units per range]."""
+    W = np.asarray(W, float)
+    d = W.shape[1]
+    M = W.T @ W + np.diag(prior_precision)
+    s = np.linalg.svd(W, compute_uv=False)
+    s_full = np.zeros(d)
+    s_full[: s.size] = s
+    rank = int(np.sum(s_full > 1e-6 * max(s_full[0], 1e-300)))
+    value = d_criterion(W, prior_precision)
+    return DesignQuality(d_criterion=value, d_efficiency=float(np.exp(value / d)), sigma_min=float(s_full[-1]),
+                         condition_number=float(s_full[0] / s_full[-1]) if s_full[-1] > 0 else float("inf"),
+                         rank=rank, expected_std=np.sqrt(np.diag(np.linalg.inv(M))))

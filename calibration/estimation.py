@@ -1,0 +1,228 @@
+"""Estimation of all error sources with priors (MAP), their standard errors and the prior scale.
+
+The paper identifies a Sobol-screened subset with a PSO and leaves the rest at nominal.
+Here every source is estimated at once, with the paper's ranges (Eq. 9) as a Gaussian
+prior, so that the sources the data cannot see stay at their prior instead of wandering:
+
+- coordinates are the unit box of Eq. 9 (``ParameterSpace.to_unit``); the prior of each
+  source is the Gaussian with the moments of the uniform distribution over its range,
+  mean 0.5 and standard deviation ``scale / sqrt(12)`` [fraction of the range], ``scale``
+  chosen by cross-validation (``choose_prior_scale``); ``scale = inf`` is free least squares;
+- the MAP estimate minimizes ``||r(x)/sigma||^2 + ||(x - mean)/std||^2`` inside the box
+  (``scipy.optimize.least_squares``, trf, batched finite-difference Jacobians:
+  ``calibration.polish.least_squares_polish``);
+- the noise ``sigma`` [rad] is either given (sensor specification) or estimated from the
+  residual, ``sigma^2 = RSS / (m - p_eff)`` with ``p_eff = trace(H)`` the effective number of
+  parameters of the linearized MAP (the hat matrix ``H = J Sigma J^T / sigma^2``), refitted
+  until it settles; with a model-form error the estimate includes it, which is the honest
+  error bar for a model that cannot fit the truth exactly;
+- the Gauss-Newton covariance at the solution, ``Sigma = (J^T J / sigma^2 + diag(1/std^2))^-1``
+  [unit box^2], gives every source's standard error (times its range for SI). At an active
+  bound the covariance is the unconstrained one: a standard error then overstates what the
+  bound already pins down (reported as ``at_bound``).
+
+The prior scale is chosen by K-fold cross-validation over held-out *whole legs* (contiguous
+blocks of the trajectory): random held-out points leak time-correlated information (docs/
+calibration.md). Each fold fits from the prior mean, never from the full-data solution.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Callable, Sequence
+
+import numpy as np
+
+from flexcal.calibration.polish import batched_jacobian_fd, least_squares_polish
+
+__all__ = ["Prior", "uniform_prior", "Estimate", "estimate", "covariance", "choose_prior_scale", "CrossValidation",
+           "held_out_folds", "PRIOR_SCALES"]
+
+Residuals = Callable[[np.ndarray], np.ndarray]
+UNIFORM_STD = 1.0 / math.sqrt(12.0)  # [fraction of range] standard deviation of a uniform distribution
+PRIOR_SCALES = (0.1, 0.3, 1.0, 3.0)  # cross-validation grid [x the range's own spread], strong to weak;
+# free least squares is its own method (``scale = inf``), not a grid point: it is 10-100x slower
+FD_STEP = 1e-6  # [unit box] forward-difference step: 1e-6 of a range is far above the model's fixed-point
+# tolerance (1e-13 m on mm-scale positions) and far below any curvature scale of the model
+
+
+@dataclass(frozen=True, kw_only=True)
+class Prior:
+    """Gaussian prior on the unit box: mean (d,) and std (d,) [fraction of range]; std = inf
+    for a source without prior (free)."""
+
+    mean: np.ndarray
+    std: np.ndarray
+
+    def __post_init__(self) -> None:
+        mean, std = np.asarray(self.mean, float), np.asarray(self.std, float)
+        if mean.shape != std.shape or mean.ndim != 1:
+            raise ValueError(f"prior mean and std must be equal 1-D shapes, got {mean.shape} and {std.shape}")
+        if np.any(~(std > 0)):
+            raise ValueError("prior standard deviations must be > 0 (inf for no prior)")
+        object.__setattr__(self, "mean", mean)
+        object.__setattr__(self, "std", std)
+
+    @property
+    def precision(self) -> np.ndarray:
+        """(d,) 1/std^2 (0 where there is no prior)."""
+        return 1.0 / self.std ** 2
+
+    @property
+    def is_free(self) -> bool:
+        return bool(np.all(np.isinf(self.std)))
+
+
+def uniform_prior(n_params: int, scale: float = 1.0) -> Prior:
+    """The paper's ranges as a Gaussian prior: mean 0.5, std ``scale / sqrt(12)`` [fraction of
+    range] (the moments of a uniform draw over the range, Eq. 9); ``scale = inf``: no prior."""
+    if not scale > 0:
+        raise ValueError(f"prior scale={scale} must be > 0 (inf for free least squares)")
+    return Prior(mean=np.full(n_params, 0.5), std=np.full(n_params, scale * UNIFORM_STD))
+
+
+@dataclass(frozen=True, kw_only=True)
+class Estimate:
+    """x (d,) [unit box] the estimate; std (d,) [fraction of range] standard errors;
+    covariance (d, d) [unit box^2]; noise [residual units] sigma used, noise_source ("given"
+    or "estimated from the residual (RSS / (m - p_eff))"); n_observations m; p_eff effective
+    number of parameters; residual (m,) at x; rss; at_bound (d,) bool; n_evaluations
+    (residual rows, Jacobians included); prior: the prior used."""
+
+    x: np.ndarray
+    std: np.ndarray
+    covariance: np.ndarray
+    noise: float
+    noise_source: str
+    n_observations: int
+    p_eff: float
+    residual: np.ndarray
+    rss: float
+    at_bound: np.ndarray
+    n_evaluations: int
+    prior: Prior
+
+    @property
+    def rms(self) -> float:
+        return float(np.sqrt(self.rss / self.n_observations))
+
+
+def covariance(J: np.ndarray, noise: float, prior: Prior) -> tuple[np.ndarray, float]:
+    """(Sigma (d, d) [unit box^2], p_eff) of the linearized MAP: J (m, d) the data Jacobian
+    [residual units per unit box], noise sigma [residual units]. Sigma = (J^T J/sigma^2 +
+    diag(prior precision))^+ (a pseudo-inverse: a free direction the data do not see has
+    infinite variance, reported as inf); p_eff = trace(J Sigma J^T)/sigma^2."""
+    W = J / noise
+    information = W.T @ W + np.diag(prior.precision)
+    eigenvalues, vectors = np.linalg.eigh(information)
+    floor = max(eigenvalues.max(initial=0.0), 1e-300) * 1e-12  # below this a direction is numerically unseen
+    seen = eigenvalues > floor
+    sigma = (vectors[:, seen] / eigenvalues[seen]) @ vectors[:, seen].T
+    # a source taking part in an unseen direction (free prior, no data) has an unbounded variance
+    unbounded = np.any(vectors[:, ~seen] ** 2 > 1e-12, axis=1)
+    sigma[np.diag_indices_from(sigma)] = np.where(unbounded, np.inf, np.diag(sigma))
+    p_eff = float(np.sum(np.sum((W @ vectors[:, seen]) ** 2, axis=0) / eigenvalues[seen]))
+    return sigma, p_eff
+
+
+def estimate(residuals: Residuals, prior: Prior, *, noise: float | None = None, x0: np.ndarray | None = None,
+             max_noise_rounds: int = 4, noise_rtol: float = 0.05, max_evaluations: int | None = None) -> Estimate:
+    """MAP (or free least squares when ``prior.is_free``) estimate on the unit box.
+
+    residuals: ``r(X (n, d)) -> (n, m)`` [residual units, e.g. rad]; noise: sigma in those
+    units, or None to estimate it from the residual (start: the fit with sigma equal to the
+    prior-mean residual RMS / 10, then RSS/(m - p_eff), refitted until sigma changes by less
+    than ``noise_rtol`` or ``max_noise_rounds`` fits; 5 % moves a standard error by 5 %,
+    below what a z-score test can see); x0: start (default the prior mean); max_evaluations:
+    residual rows per fit (None: until trf's tolerances; free least squares on a rank-deficient
+    problem creeps along its null space for tens of thousands of rows, so cap it there).
+    """
+    d = prior.mean.size
+    x = np.clip(prior.mean if x0 is None else np.asarray(x0, float), 0.0, 1.0)
+    r_start = np.asarray(residuals(x[None]), float)[0]
+    m = r_start.size
+    if m < 1:
+        raise ValueError("no observations to estimate from")
+    given = noise is not None
+    if given and not noise > 0:
+        raise ValueError(f"noise={noise} must be > 0")
+    sigma = float(noise) if given else max(float(np.sqrt(np.mean(r_start ** 2))) / 10.0, 1e-12)
+    n_evaluations = 1
+    finite = np.isfinite(prior.std)
+    for _ in range(1 if given else max_noise_rounds):
+        weight = 1.0 / sigma
+
+        def augmented(X: np.ndarray, weight: float = weight) -> np.ndarray:
+            r = np.asarray(residuals(X), float) * weight
+            return np.concatenate([r, (X[:, finite] - prior.mean[finite]) / prior.std[finite]], axis=1)
+
+        fit = least_squares_polish(augmented, x, fd_step=FD_STEP, ftol=1e-10, xtol=1e-10, gtol=1e-10,
+                                   max_evaluations=max_evaluations)
+        n_evaluations += fit.n_evaluations
+        x = fit.x
+        J, r = batched_jacobian_fd(residuals, x, step=FD_STEP)
+        n_evaluations += d + 1
+        rss = float(r @ r)
+        _, p_eff = covariance(J, sigma, prior)
+        if given:
+            break
+        new = math.sqrt(rss / max(m - p_eff, 1.0))
+        converged = abs(new - sigma) <= noise_rtol * sigma
+        sigma = max(new, 1e-12)
+        if converged:
+            break
+    sigma_matrix, p_eff = covariance(J, sigma, prior)
+    std = np.sqrt(np.diag(sigma_matrix))
+    at_bound = (x <= 1e-9) | (x >= 1.0 - 1e-9)
+    return Estimate(x=x, std=std, covariance=sigma_matrix, noise=sigma,
+                    noise_source="given" if given else "estimated from the residual (RSS / (m - p_eff))",
+                    n_observations=m, p_eff=p_eff, residual=r, rss=rss, at_bound=at_bound,
+                    n_evaluations=n_evaluations, prior=prior)
+
+
+def held_out_folds(leg: Sequence[int], n_folds: int = 5) -> list[np.ndarray]:
+    """Index sets (points) of held-out whole legs: the trajectory's own legs when it has at
+    least 3 (the start point, leg 0, joins the first), else ``n_folds`` contiguous blocks."""
+    leg = np.asarray(leg)
+    labels = [label for label in dict.fromkeys(leg.tolist()) if label != 0]
+    if len(labels) >= 3:
+        return [np.flatnonzero(leg == label) for label in labels]
+    blocks = np.array_split(np.arange(leg.size), min(n_folds, leg.size))
+    return [b for b in blocks if b.size]
+
+
+@dataclass(frozen=True, kw_only=True)
+class CrossValidation:
+    """scales tried; held_out_rms (n_scales,) [residual units] RMS of the held-out residuals
+    over all folds; best: the chosen scale (lowest held-out RMS); n_folds."""
+
+    scales: tuple[float, ...]
+    held_out_rms: np.ndarray
+    best: float
+    n_folds: int
+
+
+def choose_prior_scale(residuals_for: Callable[[np.ndarray], Residuals], n_params: int, folds: Sequence[np.ndarray],
+                       n_points: int, *, scales: Sequence[float] = PRIOR_SCALES, noise: float | None = None,
+                       point_size: int = 3) -> CrossValidation:
+    """The prior scale with the lowest held-out RMS.
+
+    residuals_for(points (k,) int) -> batched residuals on those points only, (n, k *
+    point_size); folds: held-out point sets (``held_out_folds``). For each scale and fold the
+    estimate is fitted on the other points (from the prior mean) and scored on the fold.
+    """
+    all_points = np.arange(n_points)
+    scores = []
+    for scale in scales:
+        squares, count = 0.0, 0
+        for fold in folds:
+            train = np.setdiff1d(all_points, fold)
+            fit = estimate(residuals_for(train), uniform_prior(n_params, scale), noise=noise)
+            r = np.asarray(residuals_for(fold)(fit.x[None]), float)[0]
+            squares += float(r @ r)
+            count += r.size
+        scores.append(math.sqrt(squares / max(count, 1)))
+    scores = np.array(scores)
+    return CrossValidation(scales=tuple(scales), held_out_rms=scores, best=float(scales[int(np.argmin(scores))]),
+                           n_folds=len(folds))
