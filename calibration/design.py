@@ -33,7 +33,7 @@ from typing import Callable
 import numpy as np
 
 __all__ = ["candidate_postures", "d_criterion", "greedy_d_optimal", "order_postures", "DesignQuality",
-           "design_quality"]
+           "design_quality", "Design", "design_trajectory"]
 
 
 def candidate_postures(angle_gain: np.ndarray, workspace: np.ndarray, n_candidates: int,
@@ -152,3 +152,69 @@ def design_quality(W: np.ndarray, prior_precision: np.ndarray) -> DesignQuality:
     return DesignQuality(d_criterion=value, d_efficiency=float(np.exp(value / d)), sigma_min=float(s_full[-1]),
                          condition_number=float(s_full[0] / s_full[-1]) if s_full[-1] > 0 else float("inf"),
                          rank=rank, expected_std=np.sqrt(np.diag(np.linalg.inv(M))))
+
+
+@dataclass(frozen=True, kw_only=True)
+class Design:
+    """A designed trajectory: inputs (n, 3) [m] in visiting order (the zero posture first);
+    leg (n,) legs of ``points_per_leg`` (held-out folds); candidates (n_c, 3) [m]; chosen
+    (n - 1,) indices into them (visiting order); quality and reference_quality: the
+    ``DesignQuality`` of this trajectory and of the reference one (the standard trajectory)
+    at the same design point, noise and prior; noise [rad]; prior_scale; inadequacy (n_c, 3)
+    [rad] or None: the model's expected error at each candidate, added to the noise."""
+
+    inputs: np.ndarray
+    leg: np.ndarray
+    candidates: np.ndarray
+    chosen: np.ndarray
+    quality: DesignQuality
+    reference_quality: DesignQuality
+    noise: float
+    prior_scale: float
+    inadequacy: np.ndarray | None
+
+
+def design_trajectory(jacobian: Callable[[np.ndarray], np.ndarray], angle_gain: np.ndarray, workspace: np.ndarray,
+                      reference_inputs: np.ndarray, *, n_points: int = 77, n_candidates: int = 2000,
+                      noise: float = 0.5e-6, prior_precision: np.ndarray, prior_scale: float = 1.0,
+                      points_per_leg: int = 11, inadequacy: Callable[[np.ndarray], np.ndarray] | None = None,
+                      rng: np.random.Generator | int | None = 0,
+                      progress: Callable[[str], None] | None = None) -> Design:
+    """D-optimal trajectory of ``n_points`` postures (the zero posture first, then n - 1 chosen).
+
+    jacobian(inputs (k, 3) [m]) -> (3 k, d) [rad per unit box] the model's angle Jacobian at
+    the design point, points major; angle_gain (3, 3) [rad/m]; workspace (3,) [rad];
+    reference_inputs (k, 3) [m] the trajectory to compare with; noise [rad] per channel;
+    prior_precision (d,) [1/unit box^2]; inadequacy(inputs) -> (k, 3) [rad] the model's
+    expected error there (None: none), combined with the noise as sqrt(noise^2 + delta^2) so
+    that postures where the model is known to be off weigh less.
+    """
+    if n_points < 2:
+        raise ValueError(f"n_points={n_points} must be >= 2 (the zero posture and at least one more)")
+    if not noise > 0:
+        raise ValueError(f"noise={noise} rad must be > 0")
+    if points_per_leg < 1:
+        raise ValueError(f"points_per_leg={points_per_leg} must be >= 1")
+    say = progress or (lambda _: None)
+    candidates = candidate_postures(angle_gain, workspace, n_candidates, rng)
+    J = np.asarray(jacobian(candidates), float).reshape(n_candidates, 3, -1)
+    delta = None
+    sigma = np.full((n_candidates, 3), float(noise))
+    if inadequacy is not None:
+        say("model inadequacy at the candidates")
+        delta = np.asarray(inadequacy(candidates), float)
+        sigma = np.sqrt(sigma ** 2 + delta ** 2)
+    start = np.asarray(jacobian(np.zeros((1, 3))), float) / noise
+    say(f"greedy D-optimal selection of {n_points - 1} of {n_candidates} postures")
+    chosen, _ = greedy_d_optimal(J / sigma[:, :, None], prior_precision, n_points - 1, fixed=start, progress=say)
+    scale = np.abs(np.linalg.solve(angle_gain, workspace))
+    order = order_postures(candidates[chosen], scale)
+    chosen = chosen[order]
+    inputs = np.vstack([np.zeros((1, 3)), candidates[chosen]])
+    leg = np.concatenate([[0], 1 + np.arange(n_points - 1) // points_per_leg])
+    W = np.vstack([start, J[chosen].reshape(-1, J.shape[-1]) / noise])
+    W_reference = np.asarray(jacobian(np.asarray(reference_inputs, float)), float) / noise
+    return Design(inputs=inputs, leg=leg, candidates=candidates, chosen=chosen,
+                  quality=design_quality(W, prior_precision),
+                  reference_quality=design_quality(W_reference, prior_precision), noise=float(noise),
+                  prior_scale=float(prior_scale), inadequacy=delta)

@@ -110,7 +110,9 @@ def analyze_jacobian(J: np.ndarray, names: Sequence[str], *, noise: np.ndarray |
         J = J / sigma[:, None]
     from scipy.linalg import qr
 
-    U, s, Vt = np.linalg.svd(J, full_matrices=True)
+    # thin SVD: U is never used and a full one is (m, m) -- 26.8 GiB for a 20,000-posture file;
+    # V must be square, which the thin form gives when m >= d (else the full form is small)
+    _, s, Vt = np.linalg.svd(J, full_matrices=m < d)
     s_full = np.zeros(d)
     s_full[: s.size] = s
     scale = s[0] if s.size and s[0] > 0 else 1.0

@@ -35,6 +35,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "chain": ("cmd_chain", "FEM vs analytic 12x12 stiffness of one flexure chain"),
     "forward": ("cmd_forward", "analytic model: actuator inputs -> pose, chain states, point class"),
     "inverse": ("cmd_inverse", "analytic model: target angles -> actuator inputs"),
+    "design": ("cmd_design", "choose calibration postures (D-optimal) and write a trajectory file"),
     "truth": ("cmd_truth", "virtual prototype: synthetic misalignment curves with preset errors"),
     "sensitivity": ("cmd_sensitivity", "Sobol screening of the 45 error sources on a measurement or scenario"),
     "identify": ("cmd_identify", "identify error sources from a measurement (improved PSO + polish)"),

@@ -1,0 +1,142 @@
+"""MAP estimation, standard errors, base parameters, D-optimal design (calibration/)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from flexcal.calibration.base_parameters import base_parameters, pivoted_qr
+from flexcal.calibration.design import design_quality, greedy_d_optimal, order_postures
+from flexcal.calibration.estimation import covariance, estimate, held_out_folds, uniform_prior
+from flexcal.calibration.identifiability import analyze_jacobian
+from flexcal.calibration.pipeline import check_determined
+
+
+def _linear_problem(seed: int, m: int = 60, d: int = 4, sigma: float = 0.01):
+    rng = np.random.default_rng(seed)
+    A = rng.normal(size=(m, d))
+    truth = rng.uniform(0.2, 0.8, size=d)
+    y = A @ truth + rng.normal(size=m) * sigma
+    return A, truth, y, sigma, (lambda X: np.atleast_2d(X) @ A.T - y)
+
+
+def test_map_of_a_linear_model_is_the_closed_form_posterior_mean():
+    A, _, y, sigma, residuals = _linear_problem(0)
+    prior = uniform_prior(A.shape[1], 0.3)
+    fit = estimate(residuals, prior, noise=sigma)
+    information = A.T @ A / sigma**2 + np.diag(prior.precision)
+    expected = np.linalg.solve(information, A.T @ y / sigma**2 + prior.precision * prior.mean)
+    # trf converges to ftol/xtol 1e-10 on a quadratic: 1e-7 of the unit box is far above that
+    np.testing.assert_allclose(fit.x, expected, atol=1e-7)
+    # the covariance of a linear model is exact: (J^T J / sigma^2 + Lambda)^-1; the
+    # finite-difference Jacobian of a linear map is exact to round-off (1e-9 relative)
+    np.testing.assert_allclose(fit.covariance, np.linalg.inv(information), rtol=1e-6)
+
+
+def test_z_scores_of_a_linear_model_are_standard_normal():
+    """With the noise estimated from the residual, (estimate - truth) / std over many
+    independent problems has RMS 1: 400 z-values give an RMS within 1 +- 0.12 (its standard
+    deviation is ~ 1/sqrt(2 * 400) = 0.035; 0.12 is 3.4 of those)."""
+    z = []
+    for seed in range(100):
+        A, truth, _, sigma, residuals = _linear_problem(seed)
+        fit = estimate(residuals, uniform_prior(A.shape[1], np.inf))
+        z.extend((fit.x - truth) / fit.std)
+    rms = float(np.sqrt(np.mean(np.square(z))))
+    assert abs(rms - 1.0) < 0.12, rms
+
+
+def test_noise_estimate_recovers_the_noise():
+    """sigma^2 = RSS / (m - p_eff): on 2,000 residuals its relative standard deviation is
+    ~ 1/sqrt(2 * 2000) = 1.6 %; 5 % is 3 of those."""
+    A, _, _, sigma, residuals = _linear_problem(1, m=2000, sigma=0.02)
+    fit = estimate(residuals, uniform_prior(A.shape[1], 1.0))
+    assert fit.noise == pytest.approx(sigma, rel=0.05)
+    assert fit.p_eff == pytest.approx(A.shape[1], abs=0.05)  # data dominate a weak prior: p_eff -> d
+
+
+def test_a_source_the_data_cannot_see_stays_at_its_prior():
+    A, _, _, sigma, _ = _linear_problem(2)
+    A = np.hstack([A, np.zeros((A.shape[0], 1))])  # a fifth source with no effect at all
+    y = A @ np.array([0.3, 0.6, 0.4, 0.7, 0.9])
+    prior = uniform_prior(5, 1.0)
+    fit = estimate(lambda X: np.atleast_2d(X) @ A.T - y, prior, noise=sigma)
+    assert fit.x[4] == pytest.approx(0.5, abs=1e-9)  # the prior mean: no data pull
+    assert fit.std[4] == pytest.approx(prior.std[4], rel=1e-9)  # and the prior's std
+    free = covariance(A, sigma, uniform_prior(5, np.inf))[0]
+    assert np.isinf(free[4, 4])  # without a prior its variance is unbounded, and said so
+
+
+def test_duplicated_parameter_is_regrouped_into_the_base():
+    rng = np.random.default_rng(3)
+    u, v = rng.normal(size=(2, 50))
+    W = np.column_stack([u, v, 2.0 * u]) * 100.0  # column 2 is twice column 0
+    result = base_parameters(W, ("a", "b", "c"))
+    assert set(result.base) == {"c", "b"} and result.regrouped == ("a",)
+    k = result.base.index("c")
+    # beta_c = x_c + 0.5 x_a: W_a = W_c / 2 exactly; QR round-off is ~1e-15 relative
+    assert result.coefficients[k, 0] == pytest.approx(0.5, abs=1e-12)
+    assert result.labels[k] == "c + 0.5 a"
+    # the data only see the combination: two x with the same beta give the same W x
+    x1, x2 = np.array([0.2, 0.3, 0.4]), np.array([0.6, 0.3, 0.2])
+    np.testing.assert_allclose(result.values(x1, ("a", "b", "c")), result.values(x2, ("a", "b", "c")), atol=1e-12)
+    np.testing.assert_allclose(W @ x1, W @ x2, atol=1e-9)
+
+
+def test_pivot_ties_go_to_the_lower_index():
+    rng = np.random.default_rng(4)
+    u = rng.normal(size=30)
+    W = np.column_stack([rng.normal(size=30) * 0.1, u, u]) * 1e3  # columns 1 and 2 identical
+    result = base_parameters(W, ("p", "q", "r"))
+    assert "q" in result.base and "r" in result.regrouped
+    _, R, pivots = pivoted_qr(W)
+    assert list(pivots[:1]) == [1]
+    np.testing.assert_allclose(np.abs(R[0, 0]), np.linalg.norm(W[:, 1]), rtol=1e-12)
+
+
+def test_identifiability_takes_a_tall_jacobian_without_a_square_u():
+    """20,000 postures x 3 angles: a full SVD's U alone would be 28.8 GB; the thin one is
+    what the analysis needs."""
+    rng = np.random.default_rng(5)
+    J = rng.normal(size=(60_000, 45))
+    report = analyze_jacobian(J, [f"p{i}" for i in range(45)], noise=1.0)
+    assert report.rank == 45
+    s = np.linalg.svd(J, compute_uv=False)
+    np.testing.assert_allclose(report.singular_values, s, rtol=1e-10)
+
+
+def test_underdetermined_data_are_refused():
+    with pytest.raises(ValueError, match="fewer than the 45"):
+        check_determined(14, 45)  # 42 observations < 45 unknowns
+    check_determined(15, 45)  # 45 observations: determined
+
+
+def test_held_out_folds_are_whole_legs():
+    leg = np.array([0, 1, 1, 1, 2, 2, 3, 3, 3])
+    folds = held_out_folds(leg)
+    assert [f.tolist() for f in folds] == [[1, 2, 3], [4, 5], [6, 7, 8]]
+    blocks = held_out_folds(np.array([0] + [1] * 9), n_folds=5)
+    assert sum(len(b) for b in blocks) == 10 and all(np.all(np.diff(b) == 1) for b in blocks)
+
+
+def test_greedy_d_optimal_beats_random_and_exchange_is_a_local_optimum():
+    rng = np.random.default_rng(6)
+    candidates = rng.normal(size=(300, 3, 6))
+    precision = np.full(6, 1e-2)
+    chosen, value = greedy_d_optimal(candidates, precision, 12)
+    for seed in range(20):  # no random 12-subset may beat it
+        pick = np.random.default_rng(seed).choice(300, 12, replace=False)
+        random_value = design_quality(candidates[pick].reshape(-1, 6), precision).d_criterion
+        assert random_value < value
+    assert value == pytest.approx(design_quality(candidates[chosen].reshape(-1, 6), precision).d_criterion, rel=1e-10)
+    # no single swap improves it (what the exchange passes stop on), checked by brute force
+    for position in range(12):
+        for other in range(0, 300, 7):
+            trial = chosen.copy()
+            trial[position] = other
+            assert design_quality(candidates[trial].reshape(-1, 6), precision).d_criterion <= value + 1e-8
+
+
+def test_order_postures_visits_each_once_from_the_nearest():
+    points = np.array([[3.0, 0, 0], [1.0, 0, 0], [2.0, 0, 0]])
+    assert order_postures(points, np.ones(3)).tolist() == [1, 2, 0]
