@@ -2,15 +2,17 @@
 
 import json
 
+import numpy as np
 import pytest
 
 from flexcal.validation import cli
 
 
 def test_verify_writes_the_report_with_the_required_keys(tmp_path):
+    """The paper's method (Sobol screening + improved PSO), tiny settings."""
     out = tmp_path / "run"
     status = cli.main(["verify", "--scenario", "table1", "--provider", "analytic", "--model-stiffness", "closed-form",
-                       "--sobol-n", "16", "--particles", "48", "--iterations", "12", "--out", str(out), "-q"])
+                       "--method", "paper", "--sobol-n", "16", "--particles", "48", "--iterations", "12", "--out", str(out), "-q"])
     assert status == 0
     report = json.loads((out / "report.json").read_text())
     for key in ("parameters", "fit_rms_urad", "n_evaluations", "wall_s", "paper_comparison"):
@@ -25,9 +27,11 @@ def test_verify_writes_the_report_with_the_required_keys(tmp_path):
                        "hysteresis_max_rel_error_pct", "other_max_rel_error_pct", "orientation_fit_max_urad"}
     assert all({"paper", "ours", "beats_paper", "ours_identifiable", "not_identifiable"} <= set(r)
                for r in report["paper_comparison"])
-    # D1/D2 are compressed throughout the standard trajectory: their clearances are named
+    # D1/D2 are compressed throughout the standard trajectory: their clearances are named as
+    # not observable on this mount (not counted as identified or missed)
     clearance = {r["figure"]: r for r in report["paper_comparison"]}["clearance_max_abs_error_mm"]
-    assert {"D1.CL", "D2.CL"} <= set(clearance["not_identifiable"])
+    assert set(clearance["not_observable"]) == {"D1.CL", "D2.CL"}
+    assert not {"D1.CL", "D2.CL"} & set(clearance["not_identifiable"])
     assert report["n_evaluations"] > 16 * 47  # Sobol (N (d + 2)) + swarm, all counted
     for name in ("report.md", "fit.png", "convergence.png", "residuals.png"):
         assert (out / name).is_file(), name
@@ -35,16 +39,90 @@ def test_verify_writes_the_report_with_the_required_keys(tmp_path):
 
 @pytest.mark.slow
 def test_full_table1_run_on_the_fem_prototype(tmp_path):
-    # the README's main job with the paper's settings (Sobol N = 512, PSO 300 x 150, polish,
-    # FEM-informed second-order model). Measured 2026-11-22: initial positions 1.53 um (paper
-    # 2.7 um), D3 clearance 1.8 um, fit RMS 4.0 urad; the bounds leave ~2x headroom for
-    # fTetWild's run-to-run mesh differences (~0.05 % in the compliances) and the PSO seed
+    # the README's main job (MAP of all 45 sources with a cross-validated prior, FEM-informed
+    # second-order model) on the standard trajectory. Measured 2026-11-23: see
+    # docs/verification-table1.md; the bounds are the paper's figures where the mount can show
+    # them, and 2x headroom on the fit for fTetWild's run-to-run mesh differences
     out = tmp_path / "table1"
     assert cli.main(["verify", "--scenario", "table1", "--out", str(out), "-q"]) == 0
     report = json.loads((out / "report.json").read_text())
     figures = {r["figure"]: r for r in report["paper_comparison"]}
-    assert figures["initial_position_max_abs_error_um"]["ours"] < 2.7  # beats the paper's Table 1
+    assert figures["initial_position_max_abs_error_um"]["ours_identifiable"] < 2.7  # beats the paper's Table 1
     rows = {r["name"]: r for r in report["parameters"]}
     assert rows["D3.CL"]["abs_error"] < 0.004  # [mm]
     assert report["fit_rms_urad"] < 6.0  # the closed-form model left 5.1 urad (session 1)
-    assert report["timings_s"]["sobol"] < 60 and report["timings_s"]["pso"] < 60  # targets 30 s, loaded CI slack
+    assert report["wall_s"] < 120  # goal 60 s warm on an idle machine; 2x for a loaded CI runner
+
+
+def _analytic_verify(tmp_path, *extra):
+    out = tmp_path / "run"
+    status = cli.main(["verify", "--provider", "analytic", "--model-stiffness", "closed-form", "--noise-urad", "0.5",
+                       "--out", str(out), "-q", *extra])
+    assert status == 0
+    return json.loads((out / "report.json").read_text()), out
+
+
+def test_map_recovers_the_drive_sources_with_honest_error_bars(tmp_path):
+    """MAP of all 45 sources on the analytic prototype (0.5 urad noise, standard trajectory):
+    every value has an error bar; the initial positions beat the paper's 2.7 um; the z-scores
+    of the sources identified alone have an RMS inside the issue's honesty band [0.5, 2]
+    (measured 1.12 / 1.32 / 1.10 on seeds 1-3). The regrouped base combinations of chain
+    dimensions are not held to it: they absorb the model-form error of the analytic prototype
+    (exact kinematics, backlash operator) and miss by 4-24 standard errors (docs/calibration.md)."""
+    report, out = _analytic_verify(tmp_path, "--scenario", "table1")
+    assert report["method"] == "map"
+    rows = {r["name"]: r for r in report["parameters"]}
+    assert all(r["std_error"] is not None and r["std_error"] > 0 for r in rows.values())
+    assert all(r["z_score"] is not None for r in rows.values())
+    assert {"D1.x0", "D2.x0", "D3.x0"} <= set(report["identifiable"])
+    assert max(rows[f"D{i}.x0"]["abs_error"] for i in (1, 2, 3)) * 1e3 < 2.7  # [um], paper Table 1
+    assert report["n_z_scores"] >= 4 and 0.5 <= report["z_rms_identifiable"] <= 2.0
+    cv = report["estimation"]["cross_validation"]
+    assert cv["n_folds"] == 3 and report["estimation"]["prior_scale"] in cv["scales"]
+    # D1/D2 are compressed throughout: their clearance/hysteresis rows say why, not "miss"
+    assert set(report["not_observable"]) == {"D1.CL", "D1.mu", "D2.CL", "D2.mu"}
+    assert "not observable on this mount" in report["not_observable"]["D1.CL"]
+    for name in ("report.md", "fit.png", "residuals.png", "calibration.png"):
+        assert (out / name).is_file(), name
+
+
+def test_paper_mount_shows_every_drive_row(tmp_path):
+    """The built-in `paper` scenario (centre of gravity at O_C): all three drives pass through
+    their clearance on the standard trajectory, so no Table 1 row is hidden."""
+    report, _ = _analytic_verify(tmp_path, "--scenario", "paper", "--prior-scale", "1")
+    assert report["not_observable"] == {}
+    assert all(r["shown"] for r in report["paper_comparison"])
+    assert "S2" in report["point_class"]  # points with a drive in its clearance zone (Fig. 12)
+
+
+def test_verify_refuses_underdetermined_data(tmp_path, capsys):
+    from flexcal.validation.measurements import Measurement, write_measurement
+
+    n = 10  # 30 observations < 45 sources
+    measurement = Measurement(point=np.arange(1, n + 1), time=np.arange(n) * 2.0, leg=np.ones(n, int),
+                              inputs=np.zeros((n, 3)), angles=np.zeros((n, 3)), extras={}, metadata={})
+    write_measurement(tmp_path / "few.csv", measurement)
+    for command in (["verify"], ["identify", "--sources", "all"]):
+        status = cli.main([*command, "--data", str(tmp_path / "few.csv"), "--model-stiffness", "closed-form",
+                           "--out", str(tmp_path / "o"), "-q"])
+        assert status == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "fewer than the 45" in err[0], err
+        assert not (tmp_path / "o").exists()
+
+
+def test_design_beats_the_standard_trajectory_and_drives_truth(tmp_path):
+    out = tmp_path / "design"
+    assert cli.main(["design", "--points", "41", "--candidates", "300", "--model-stiffness", "closed-form",
+                     "--inadequacy", "none", "--out", str(out), "-q"]) == 0
+    report = json.loads((out / "report.json").read_text())
+    designed, standard = report["designed"], report["standard_trajectory"]
+    # 41 designed postures against the 77 of the standard trajectory: D-criterion and rank higher
+    assert designed["log_det_information"] > standard["log_det_information"]
+    assert designed["rank"] > standard["rank"]
+    lines = (out / "trajectory.csv").read_text().splitlines()
+    assert lines[0] == "point,leg,xa1_mm,xa2_mm,xa3_mm" and len(lines) == 42
+    assert cli.main(["truth", "--scenario", "table1", "--provider", "analytic", "--trajectory",
+                     str(out / "trajectory.csv"), "--out", str(tmp_path / "t"), "-q"]) == 0
+    truth = (tmp_path / "t" / "curves.csv").read_text().splitlines()
+    assert len(truth) == 42

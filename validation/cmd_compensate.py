@@ -35,7 +35,9 @@ EXAMPLES = (
 # validation postures, not name the true parameters: on the FEM table1 run (docs/compensation.md)
 # all 45 cut the first-round mean error by 92 / 92 / 81 % against 73 / 71 / 72 % with the
 # 9 Table 1 sources that the 0.01 screening keeps (verify's default), at ~10x the identification time.
-DEFAULT_CONFIG = {"sobol_n": 512, "sobol_threshold": 0.0, "particles": 300, "iterations": 150, "polish": True,
+# method "paper": the identification measured for docs/compensation.md; "map" (verify's default)
+# is available with --method map (its compensation figures are not yet measured on the FEM run).
+DEFAULT_CONFIG = {"method": "paper", "prior_scale": 0.0, "sobol_n": 512, "sobol_threshold": 0.0, "particles": 300, "iterations": 150, "polish": True,
                   "calibration_seed": 0, "readings": 10, "tolerance_urad": 1.0, "max_rounds": 8, "gain": 1.0,
                   "model_stiffness": "fem", "second_order": True}
 
@@ -55,8 +57,10 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--max-rounds", type=int, default=c["max_rounds"], metavar="N",
                         help="corrective rounds after the first (default %(default)s)")
     parser.add_argument("--gain", type=float, default=c["gain"], help="fraction of each correction applied (0, 1]")
-    from .cmd_verify import add_model_options
+    from .cmd_verify import add_method_options, add_model_options
 
+    add_method_options(parser)
+    parser.set_defaults(method=c["method"], prior_scale=c["prior_scale"])
     add_model_options(parser)
     parser.add_argument("--sobol-n", type=int, default=c["sobol_n"], metavar="N",
                         help="Sobol base sample N (power of two; default %(default)s)")
@@ -85,8 +89,11 @@ def _settings(args):
         raise ValueError(f"--sobol-n={args.sobol_n} must be a power of two (e.g. 512)")
     if args.readings < 1:
         raise ValueError(f"--readings={args.readings} must be >= 1")
+    from .cmd_verify import prior_scale_option
+
     verify = VerifySettings(sobol_n=args.sobol_n, sobol_threshold=args.sobol_threshold, seed=args.calibration_seed,
-                            polish=args.polish, remove_offset=True,
+                            polish=args.polish, remove_offset=True, method=args.method,
+                            prior_scale=prior_scale_option(args),
                             pso=dataclasses.replace(PSOSettings(), n_particles=args.particles,
                                                     max_iterations=args.iterations))
     loop = LoopSettings(tolerance=args.tolerance_urad * 1e-6, max_rounds=args.max_rounds, gain=args.gain)
@@ -117,7 +124,10 @@ def run(args: argparse.Namespace) -> int:
     settings = _settings(args)
     measurement = read_measurement(args.data)
     targets = read_targets(args.targets) if args.targets else default_targets()
-    space = model_space(args.model_stiffness, args.second_order, progress=not quiet)
+    from .scenario import mechanism_from_metadata
+
+    space = model_space(args.model_stiffness, args.second_order, progress=not quiet,
+                        mechanism=mechanism_from_metadata(measurement.metadata))
     dwell = float(np.median(np.diff(measurement.time))) if measurement.n_points > 1 else 2.0
     bench = bench_from_metadata(measurement.metadata, space, n_readings=args.readings, seed=args.seed,
                                 dwell=dwell if dwell > 0 else 2.0, end_time=float(measurement.time[-1]),

@@ -84,6 +84,9 @@ def run(args: argparse.Namespace) -> int:
 
     space = model_space(args.model_stiffness, args.second_order, progress=progress,
                         mechanism=mechanism_from_metadata(measurement.metadata))
+    from flexcal.calibration.pipeline import check_determined
+
+    check_determined(measurement.n_points, len(selected))
     angles = remove_return_offsets(measurement) if args.remove_offset else measurement.angles
     sub = space.subset(selected)
     problem = CalibrationProblem(space=sub, inputs=measurement.inputs, angles=angles)

@@ -174,8 +174,18 @@ def bench_from_metadata(metadata: dict, space: ParameterSpace, *, n_readings: in
 
 def identified_values(result: VerifyResult, space: ParameterSpace) -> np.ndarray:
     """(45,) [SI] every source at its identified value (nominal if screened out)."""
-    return space.build_values({r["name"]: r["identified"] for r in result.report["parameters"]}, display_units=True,
-                              check_bounds=False)
+    return np.asarray(result.values, float).copy()
+
+
+def unidentified_drive_sources(result: VerifyResult) -> list[str]:
+    """The Table 1 drive sources the compensation's inverse relies on (x0, CL, mu) that the
+    curve neither identifies nor shows to be irrelevant (a drive that never opens its gap
+    does not need its CL or mu): their values are the prior's or the screening's."""
+    from .verify import TABLE1_NAMES
+
+    identifiable = set(result.report.get("identifiable", []))
+    hidden = set(result.report.get("not_observable", {}))
+    return [n for n in TABLE1_NAMES if n not in identifiable and n not in hidden]
 
 
 def model_zero_angles(values: np.ndarray, space: ParameterSpace) -> np.ndarray:
@@ -297,6 +307,13 @@ def run_compensation(measurement: Measurement, targets: np.ndarray, space: Param
     verify_settings = dataclasses.replace(settings.verify, remove_offset=True)
     result = run_verify(measurement, space, verify_settings, progress=progress)
     values = identified_values(result, space)
+    weak = unidentified_drive_sources(result)
+    if weak:
+        import sys
+
+        print(f"compensate: warning: the curve does not identify {', '.join(weak)}, which the inverse relies on; "
+              f"their values are the prior's (--method map) or the screening's: measure a designed trajectory "
+              f"(flexcal design) to identify them", file=sys.stderr)
     curve_release = forward(values, measurement.inputs, space=space).release[0]
     offsets = return_offsets(measurement)
     first = calibrated_inputs(values, targets, space)

@@ -290,6 +290,7 @@ def _estimated_identification(measurement: Measurement, angles: np.ndarray, spac
                     "scales": list(cv.scales), "held_out_rms_urad": (cv.held_out_rms * 1e6).tolist(),
                     "n_folds": cv.n_folds, "folds": "whole legs held out"},
                 "noise_urad": fit.noise * 1e6, "noise_source": fit.noise_source,
+                "residual_autocorrelation": fit.autocorrelation, "noise_variance_inflation": fit.inflation,
                 "effective_parameters": fit.p_eff, "n_observations": fit.n_observations,
                 "base_parameters": result.base.as_dict()}}}
 
