@@ -70,7 +70,7 @@ def test_hinge_mesher_failure_exits_2_without_output(tmp_path, capsys, monkeypat
     monkeypatch.setenv("FLEXCAL_CACHE_DIR", str(tmp_path / "cache"))
     out = tmp_path / "nothing"
     args = ["hinge", "--type", "circular", "--radius-mm", "5", "--thickness-mm", "1", "--width-mm", "10",
-            "--out", str(out)]
+            "--mesher", "tetwild", "--out", str(out)]
     assert cli.main(args) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "no tets" in err and "Traceback" not in err
