@@ -146,9 +146,12 @@ def read_measurement(path: str | os.PathLike) -> Measurement:
         if len(raw) != len(header):
             raise ValueError(f"{path}: row {row_number} has {len(raw)} values, the header has {len(header)}")
         values = {}
-        for column, cell in zip(header, raw):
-            values[column] = _parse_number(cell.strip(), row_number, column,
-                                           integer=column in ("point", "leg"))
+        try:
+            for column, cell in zip(header, raw):
+                values[column] = _parse_number(cell.strip(), row_number, column,
+                                               integer=column in ("point", "leg"))
+        except ValueError as error:  # name the file: diagnose and compensate show it as is
+            raise ValueError(f"{path}: {error}") from None
         for column in INPUT_COLUMNS:
             if abs(values[column]) > MAX_ABS_INPUT_MM:
                 raise ValueError(f"{path}: row {row_number}, column {column!r}: {values[column]:g} mm exceeds "
