@@ -362,9 +362,11 @@ NOTCH_MAX_T_OVER_R = 1.0
 TORSION_MIN_LENGTH_OVER_WIDTH = 10.0
 
 
-def closed_form_range_warnings(hinge: LeafHinge | CircularNotchHinge) -> list[str]:
+def closed_form_range_warnings(hinge: LeafHinge | CircularNotchHinge, *, torsion: bool = True) -> list[str]:
     """Where the closed forms leave their range for this hinge: one sentence per
-    problem, naming the parameter, its value and the range (empty: within range)."""
+    problem, naming the parameter, its value and the range (empty: within range).
+    ``torsion=False`` leaves out the torsion note, which holds for most practical (short,
+    wide) hinges."""
     out = []
     if isinstance(hinge, CircularNotchHinge):
         ratio = hinge.thickness / hinge.radius
@@ -377,7 +379,7 @@ def closed_form_range_warnings(hinge: LeafHinge | CircularNotchHinge) -> list[st
     else:
         length = hinge.length
     slenderness = length / hinge.width
-    if slenderness < TORSION_MIN_LENGTH_OVER_WIDTH:
+    if torsion and slenderness < TORSION_MIN_LENGTH_OVER_WIDTH:
         out.append(f"hinge length {length * 1e3:.4g} mm over width {hinge.width * 1e3:.4g} mm is "
                    f"{slenderness:.3g}: the torsion closed form C_rx,Mx holds for length/width >= "
                    f"{TORSION_MIN_LENGTH_OVER_WIDTH:g}; below, the solid is stiffer in torsion (0.26x at 1)")

@@ -68,12 +68,13 @@ def build_hinge(args: argparse.Namespace):
 
 
 def warn_outside_closed_form_range(hinge) -> None:
-    """One warning line per closed-form validity range the hinge leaves (stderr, logging)."""
+    """One warning line per closed-form validity range of the working rotation the hinge
+    leaves (stderr, logging); report.json lists the torsion note as well."""
     import logging
 
     from flexcal.model.hinge import closed_form_range_warnings
 
-    for text in closed_form_range_warnings(hinge):
+    for text in closed_form_range_warnings(hinge, torsion=False):
         logging.getLogger("flexcal.hinge").warning(text)
 
 

@@ -232,6 +232,10 @@ def report_data(result: ComparisonResult, params_mm: dict[str, float]) -> dict[s
         "timings_s": {**result.timings, "mesh_stages": mesh_timings},
         "analytic_source": "flexcal.model (Euler-Bernoulli profile integrals, Timoshenko beams, Eq. 1); docs/model.md",
     }
+    if result.kind == "hinge":
+        from flexcal.model.hinge import closed_form_range_warnings
+
+        data["closed_form_range"] = closed_form_range_warnings(result.params)
     if result.stiffness_fem is not None:
         data["stiffness_fem"] = result.stiffness_fem
         data["stiffness_analytic"] = result.stiffness_analytic
@@ -261,6 +265,9 @@ def write_comparison(result: ComparisonResult, directory: Path, params_mm: dict[
              f"Deformed shape ({result.load_case}), coloured by von Mises stress:", "",
              f"![deformed shape]({result.kind}.png)", "", "Mesh:", "", f"![mesh]({result.kind}-mesh.png)", "",
              f"Fields (displacement, stress, von Mises) in {result.kind}.vtu for ParaView."]
+    if data.get("closed_form_range"):
+        lines += ["", "## Where the closed form leaves its range", "",
+                  *[f"- {text}" for text in data["closed_form_range"]]]
     (directory / "report.md").write_text("\n".join(lines) + "\n")
     write_vtu(result.mesh, directory / f"{result.kind}.vtu", result.displacement, result.material)
     render_deformed_png(result.mesh, result.displacement, directory / f"{result.kind}.png", material=result.material)
