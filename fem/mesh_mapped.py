@@ -33,9 +33,9 @@ if TYPE_CHECKING:
 
 __all__ = ["mapped_mesh_supported", "mapped_grid", "mapped_mesh_part", "MAX_MAPPED_DOF"]
 
-# Largest mesh built on request: a P2 hinge of 1.5 M DOF needs ~10 GB in the direct
-# solver (136k DOF took 6.5 GB with spsolve, docs/fem.md); beyond it the run would be
-# killed for memory long after it started instead of being refused up front.
+# Largest mesh built on request, an estimate (not measured): 136k DOF took 6.5 GB with
+# spsolve (docs/fem.md), so 11x that would not fit a workstation; beyond it the run would
+# be killed for memory long after it started instead of being refused up front.
 MAX_MAPPED_DOF = 1_500_000
 
 
