@@ -25,8 +25,8 @@ import numpy as np
 from flexcal.geometry.params import CircularNotchHinge, LeafHinge
 
 from .mesh import MeshReport, TetMesh
-from .mesh_snap import snap_to_part
-from .structured import grid_tet_mesh
+from .mesh_snap import _jacobian_ratios, snap_to_part
+from .structured import _EDGES, _folded_tets, _straighten, grid_tet_mesh
 
 if TYPE_CHECKING:
     from flexcal.geometry.solids import Part
@@ -94,6 +94,36 @@ def mapped_grid(hinge: CircularNotchHinge | LeafHinge, n_thickness: int, *, aspe
     return x, np.linspace(-0.5, 0.5, n + 1), np.linspace(-width / 2, width / 2, n_width + 1)
 
 
+def _isoparametric(mesh: TetMesh, c: float, rho: float, t: float) -> tuple[TetMesh, int]:
+    """The mesh with every mid-edge node at the image of its edge's midpoint in the
+    parent grid (x, eta = y / h(x), z): curved elements that follow the profile inside
+    the part too, not only on its surface (measured: C_rz,Mz -1.3 % of converged with
+    surface-projected mid-nodes only, -0.6 % with these, R 5, t 1, b 10 mm, 3 cells
+    across). Tets whose curved map would fold keep straight edges. Returns (mesh, number
+    of mid-nodes left straight)."""
+    nodes = mesh.nodes.copy()
+    tets = mesh.tets
+    corners = np.unique(tets[:, :4])
+    parent = np.zeros_like(nodes)
+    parent[corners] = nodes[corners]
+    parent[corners, 1] = nodes[corners, 1] / _height(nodes[corners, 0], c, rho, t)
+    for j, (a, b) in enumerate(_EDGES):
+        mid = tets[:, 4 + j]
+        point = 0.5 * (parent[tets[:, a]] + parent[tets[:, b]])
+        nodes[mid] = point
+        nodes[mid, 1] = point[:, 1] * _height(point[:, 0], c, rho, t)
+    straight: set[int] = set()
+    for _ in range(10):
+        folded = _folded_tets(nodes, tets)
+        if folded.size == 0:
+            break
+        straight.update(tets[folded, 4:].ravel().tolist())
+        _straighten(nodes, tets, folded)
+    else:  # pragma: no cover - the straight mesh is valid (snap_to_part checked it)
+        raise RuntimeError("could not unfold the mapped hinge mesh; use the tetwild mesher")
+    return TetMesh(nodes, tets), len(straight)
+
+
 def mapped_mesh_part(part: "Part", *, elements_through_thickness: float = 3, aspect: float = 2.0,
                      n_arc: int = 8) -> tuple[TetMesh, MeshReport]:
     """Mapped quadratic tet mesh of a hinge ``Part`` and its report (as ``mesh_part``).
@@ -130,10 +160,16 @@ def mapped_mesh_part(part: "Part", *, elements_through_thickness: float = 3, asp
     t0 = time.perf_counter()
     # every corner node lies on its surface already; the tolerance only has to catch the
     # mid-edge nodes on the chords of the arcs (sagitta <= rho (1 - cos(pi / (4 n_arc)))),
-    # kept well below a neck cell (t / n) so no node is put on a surface it is not on
+    # kept well below a neck cell (t / n) so no node is put on a surface it is not on.
+    # snap_to_part measures the mesh (the report); the mid-edge nodes are then put where
+    # the map sends them (isoparametric), as in structured.notch_hinge_tet_mesh
     h_min = t / n
     tolerance = 0.3 * h_min
-    mesh, measured = snap_to_part(params, nodes, tets4, tolerance=tolerance, project=True, morph=False)
+    snapped, measured = snap_to_part(params, nodes, tets4, tolerance=tolerance, project=True, morph=False)
+    mesh, n_straight = _isoparametric(snapped, c, rho, t)
+    jacobian = float(_jacobian_ratios(mesh.nodes, mesh.tets).min())
+    measured.update(min_jacobian_ratio=jacobian, volume=mesh.volume,
+                    volume_error=mesh.volume / measured["volume_exact"] - 1.0, n_straight_mid=n_straight)
     timings["snap_and_measure"] = time.perf_counter() - t0
     timings["cpu"] = time.process_time() - cpu0
     report = MeshReport(
