@@ -138,3 +138,16 @@ def test_hinge_outside_the_closed_form_range_warns_once(tmp_path, capsys, monkey
     assert len(err) == 1 and "WARNING" in err[0] and "t/R=2.5" in err[0], err
     notes = json.loads((out / "report.json").read_text())["closed_form_range"]
     assert len(notes) == 2 and "t/R=2.5" in notes[0] and "C_rx,Mx" in notes[1]
+
+
+@pytest.mark.slow
+def test_chain_uses_the_cache(tmp_path, monkeypatch):
+    """A chain is meshed by fTetWild (random); its second run with the same cache serves the
+    first run's mesh and stiffness, so the files repeat."""
+    monkeypatch.setenv("FLEXCAL_CACHE_DIR", str(tmp_path / "cache"))
+    args = ["chain", "--reference", "D1", "--elements-through", "1", "-q"]
+    assert cli.main([*args, "--out", str(tmp_path / "a")]) == 0
+    assert cli.main([*args, "--out", str(tmp_path / "b")]) == 0
+    assert set(json.loads((tmp_path / "b" / "report.json").read_text())["timings_s"]) == {"cache", "mesh_stages"}
+    assert _without_timings(tmp_path / "a") == _without_timings(tmp_path / "b")
+    assert (tmp_path / "a" / "chain.vtu").read_bytes() == (tmp_path / "b" / "chain.vtu").read_bytes()
