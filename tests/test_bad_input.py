@@ -235,3 +235,17 @@ def test_unreadable_csv_is_one_line(tmp_path, capsys, content, words):
     data.write_bytes(content)
     out = tmp_path / "out"
     assert_one_line_error(capsys, sensitivity(data, out), [str(data), *words], out)
+
+
+def test_diagnose_refuses_a_short_file_before_any_fem(tmp_path, capsys, monkeypatch):
+    # the 2-point file used to build the model's FEM correction (~30 s cold) first
+    import flexcal.validation.model_correction as correction
+
+    def no_fem(*args, **kwargs):
+        raise AssertionError("the FEM correction was built before the file was checked")
+
+    monkeypatch.setattr(correction, "model_space", no_fem)
+    data = write_csv(tmp_path / "curves.csv", GOOD_ROWS)
+    out = tmp_path / "out"
+    status = cli.main(["diagnose", str(data), "--out", str(out)])
+    assert_one_line_error(capsys, status, ["flexcal diagnose: error", "3 points", "at least 20"], out)
