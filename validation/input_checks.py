@@ -16,8 +16,10 @@ __all__ = ["MIN_LENGTH_MM", "MAX_LENGTH_MM", "MAX_ELEMENTS_THROUGH", "check_leng
 # machined or eroded flexure; 10 m: beyond the metre-scale mount this toolkit models.
 MIN_LENGTH_MM = 0.01
 MAX_LENGTH_MM = 10_000.0
-# Quadratic tets: 3 through a leaf are within 0.15 % of converged (REFERENCES.md), so 16
-# leaves room for convergence studies; a million (the bad case) would ask for ~1e18 DOF.
+# Quadratic tets: 3 through the neck are within 1 % of converged (0.15 % through a leaf,
+# REFERENCES.md; -0.27 % fTetWild / -0.64 % mapped for the reference notch,
+# docs/reliability.md), so 16 leaves room for convergence studies; a million (the bad
+# case) would ask for ~1e18 DOF.
 MAX_ELEMENTS_THROUGH = 16.0
 
 
@@ -42,4 +44,4 @@ def check_elements_through(value: float) -> None:
     """Raise ValueError unless 1 <= ``value`` <= MAX_ELEMENTS_THROUGH."""
     if not (math.isfinite(value) and 1.0 <= value <= MAX_ELEMENTS_THROUGH):
         raise ValueError(f"--elements-through={value:g} is out of range: give 1 to {MAX_ELEMENTS_THROUGH:g} "
-                         f"(3 is within 0.15 % of converged; more only multiplies time and memory)")
+                         f"(3 through the neck is within 1 % of converged; more only multiplies time and memory)")
