@@ -13,8 +13,9 @@ whole or not at all (temporary file in the same folder, then ``os.replace``). Ea
 also stores its own key and a SHA-256 of its arrays (entries ``__key__``, ``__digest__``);
 a file that cannot be read whole (truncated, garbage), holds a different key (copied or
 renamed by hand, written for other inputs) or whose bytes no longer match the digest
-(flipped bits) is a miss: it is recomputed and rewritten. Files written before keys were
-stored carry neither and are trusted when they read whole.
+(flipped bits) is a miss: it is recomputed and rewritten. Files in the older format
+(written before keys and digests were stored) carry neither and are a miss too: nothing
+shows that their numbers were not edited, so they are recomputed and replaced.
 
 Usage::
 
@@ -139,7 +140,8 @@ def _path(key: str, directory: Path) -> Path:
 
 def load_cached(key: str, directory: str | os.PathLike | None = None) -> dict[str, np.ndarray] | None:
     """The arrays stored under ``key``, or ``None``: missing file, unreadable or truncated
-    file, a file holding another key, or arrays whose digest does not match."""
+    file, a file without a stored key or digest (older format), a file holding another
+    key, or arrays whose digest does not match."""
     path = _path(key, cache_dir(directory))
     try:
         with np.load(path, allow_pickle=False) as data:
@@ -147,9 +149,9 @@ def load_cached(key: str, directory: str | os.PathLike | None = None) -> dict[st
     except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile, zlib.error, struct.error):
         return None
     stored_key, stored_digest = arrays.pop(_KEY_ENTRY, None), arrays.pop(_DIGEST_ENTRY, None)
-    if stored_key is not None and str(stored_key) != key:
+    if stored_key is None or stored_digest is None:  # older format: nothing vouches for the numbers
         return None
-    if stored_key is not None and (stored_digest is None or str(stored_digest) != arrays_digest(arrays)):
+    if str(stored_key) != key or str(stored_digest) != arrays_digest(arrays):
         return None
     return arrays
 

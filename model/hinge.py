@@ -73,6 +73,7 @@ __all__ = [
     "torsion_constant",
     "shear_coefficient",
     "circular_notch_rotation_compliance",
+    "closed_form_range_warnings",
 ]
 
 
@@ -346,3 +347,40 @@ def hinge_compliance_matrix(hinge: LeafHinge | CircularNotchHinge, material: Mat
         raise ValueError(f"hinge must be a LeafHinge or CircularNotchHinge, got {type(hinge).__name__}")
     transform = twist_transform(np.eye(3), np.array([notch_half - 0.5 * hinge.total_length, 0.0, 0.0]))
     return transform @ local @ transform.T
+
+
+# Where the Euler-Bernoulli/Saint-Venant closed forms stop describing the solid hinge,
+# from FEM runs with the deterministic mapped mesh (3 quadratic tets through the neck,
+# ``compare_hinge(..., mesher="mapped")``, docs/reliability.md):
+# - notch, working rotation rz/Mz: FEM / closed form 1.00 at t/R = 0.2, 1.07 at 0.5,
+#   1.12 at 1, 1.14 at 2 (R < t/2): past t/R = 1 the notch is a short thick block and the
+#   slender-beam integral is more than 10 % off;
+# - torsion rx/Mx assumes free warping, a hinge much longer than wide: FEM / closed form
+#   0.24 at length/width 0.5 (leaf l 20, w 40 mm), 0.26 at 1 (notch R 5, b 10 mm), 0.81 at
+#   2.5, 0.95 at 10 (leaf l 400, w 40 mm): the blocks restrain the warping.
+NOTCH_MAX_T_OVER_R = 1.0
+TORSION_MIN_LENGTH_OVER_WIDTH = 10.0
+
+
+def closed_form_range_warnings(hinge: LeafHinge | CircularNotchHinge, *, torsion: bool = True) -> list[str]:
+    """Where the closed forms leave their range for this hinge: one sentence per
+    problem, naming the parameter, its value and the range (empty: within range).
+    ``torsion=False`` leaves out the torsion note, which holds for most practical (short,
+    wide) hinges."""
+    out = []
+    if isinstance(hinge, CircularNotchHinge):
+        ratio = hinge.thickness / hinge.radius
+        if ratio > NOTCH_MAX_T_OVER_R:
+            shallow = " (R < t/2: shallower than half the neck)" if ratio > 2 else ""
+            out.append(f"notch radius R={hinge.radius * 1e3:.4g} mm with t={hinge.thickness * 1e3:.4g} mm gives "
+                       f"t/R={ratio:.3g}{shallow}: the closed-form notch compliances hold for t/R <= "
+                       f"{NOTCH_MAX_T_OVER_R:g} (R >= t); beyond, its C_rz,Mz is 10-15 % lower than the solid's (FEM)")
+        length = hinge.length
+    else:
+        length = hinge.length
+    slenderness = length / hinge.width
+    if torsion and slenderness < TORSION_MIN_LENGTH_OVER_WIDTH:
+        out.append(f"hinge length {length * 1e3:.4g} mm over width {hinge.width * 1e3:.4g} mm is "
+                   f"{slenderness:.3g}: the torsion closed form C_rx,Mx holds for length/width >= "
+                   f"{TORSION_MIN_LENGTH_OVER_WIDTH:g}; below, the solid is stiffer in torsion (0.26x at 1)")
+    return out

@@ -4,6 +4,7 @@ traceback, no output folder (issue #8). ``--debug`` shows the traceback."""
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
 from flexcal.validation import cli
@@ -161,3 +162,90 @@ def test_console_script_status_and_stderr(tmp_path):
     assert result.returncode == 2
     assert len(result.stderr.strip().splitlines()) == 1 and "fillet=12" in result.stderr
     assert not (tmp_path / "out").exists()
+
+
+# ----------------------------------------------------------------------------------------
+# issue 14: sizes no hinge has, negative comma lists, a byte-order mark
+
+HINGE = ["hinge", "--type", "circular", "--radius-mm", "5", "--thickness-mm", "1", "--width-mm", "10"]
+
+
+@pytest.mark.parametrize("change, words", [
+    (["--radius-mm", "1e300"], ["--radius-mm=1e+300 mm", "out of range", "10000 mm"]),
+    (["--radius-mm", "inf"], ["--radius-mm=inf", "finite"]),
+    (["--width-mm", "1e-6"], ["--width-mm=1e-06 mm", "0.01"]),
+    (["--elements-through", "1e6"], ["--elements-through=1e+06", "1 to 16"]),
+    (["--elements-through", "0.5"], ["--elements-through=0.5", "1 to 16"]),
+], ids=["radius-1e300", "radius-inf", "width-1nm", "elements-1e6", "elements-half"])
+def test_hinge_sizes_no_hinge_has(tmp_path, capsys, change, words):
+    # used to end in "internal error: Standard_DomainError" (exit 1) from inside OCCT
+    out = tmp_path / "out"
+    argv = HINGE + change + ["--out", str(out)]
+    assert_one_line_error(capsys, cli.main(argv), ["flexcal hinge: error", *words], out)
+
+
+def test_chain_sizes_no_chain_has(tmp_path, capsys):
+    out = tmp_path / "out"
+    status = cli.main(["chain", "--reference", "D1", "--section-mm", "1e300", "--out", str(out)])
+    assert_one_line_error(capsys, status, ["flexcal chain: error", "--section-mm=1e+300 mm"], out)
+
+
+@pytest.mark.parametrize("argv, expected", [
+    (["inverse", "--target-urad", "-100,200,50", "--json"], "theta_urad"),
+    (["forward", "--inputs-mm", "-0.5,0,0", "--json"], "theta_urad"),
+    (["forward", "--inputs-mm", "-5e-1, -0.1,0", "--json"], "theta_urad"),
+], ids=["inverse", "forward", "forward-exponent-spaces"])
+def test_comma_lists_may_start_with_a_minus(capsys, argv, expected):
+    # argparse took '-100,200,50' for an option ("expected one argument"); no '=' needed now
+    assert cli.main(argv) == 0, capsys.readouterr().err
+    assert expected in capsys.readouterr().out
+
+
+def test_comma_list_starting_with_minus_equals_the_form_with_equals(capsys):
+    assert cli.main(["inverse", "--target-urad", "-100,200,50", "--json"]) == 0
+    spaced = capsys.readouterr().out
+    assert cli.main(["inverse", "--target-urad=-100,200,50", "--json"]) == 0
+    assert capsys.readouterr().out == spaced
+
+
+def test_an_unknown_option_is_still_an_option(capsys):
+    # only numbers are taken as values: '-x' stays an (unknown) option
+    assert_one_line_error(capsys, cli.main(["forward", "--inputs-mm", "-x"]), ["--inputs-mm", "expected one argument"])
+
+
+def test_csv_with_a_byte_order_mark_reads(tmp_path):
+    from flexcal.validation.measurements import read_measurement
+
+    plain = write_csv(tmp_path / "plain.csv", GOOD_ROWS)
+    marked = tmp_path / "marked.csv"
+    marked.write_bytes(b"\xef\xbb\xbf" + plain.read_bytes())  # "CSV UTF-8" of spreadsheet programs
+    a, b = read_measurement(plain), read_measurement(marked)
+    np.testing.assert_array_equal(a.angles, b.angles)
+    np.testing.assert_array_equal(a.point, b.point)
+
+
+@pytest.mark.parametrize("content, words", [
+    (b"point,time_s\xff\xfe\n", ["not UTF-8", "byte 12"]),
+    (HEADER.encode() + b"\n1,0,0,0.1,0,0,1\x00,2,3\n", ["NUL bytes"]),
+    (HEADER.encode() + b'\n1,0,0,0.1,0,0,"1"x,2,3\n', ["row 2"]),
+    (HEADER.encode() + b"\n1e300,0,0,0.1,0,0,1,2,3\n", ["row 2", "'point'", "too large"]),
+], ids=["latin1-bytes", "nul", "quote", "huge-index"])
+def test_unreadable_csv_is_one_line(tmp_path, capsys, content, words):
+    data = tmp_path / "curves.csv"
+    data.write_bytes(content)
+    out = tmp_path / "out"
+    assert_one_line_error(capsys, sensitivity(data, out), [str(data), *words], out)
+
+
+def test_diagnose_refuses_a_short_file_before_any_fem(tmp_path, capsys, monkeypatch):
+    # the 2-point file used to build the model's FEM correction (~30 s cold) first
+    import flexcal.validation.model_correction as correction
+
+    def no_fem(*args, **kwargs):
+        raise AssertionError("the FEM correction was built before the file was checked")
+
+    monkeypatch.setattr(correction, "model_space", no_fem)
+    data = write_csv(tmp_path / "curves.csv", GOOD_ROWS)
+    out = tmp_path / "out"
+    status = cli.main(["diagnose", str(data), "--out", str(out)])
+    assert_one_line_error(capsys, status, ["flexcal diagnose: error", "3 points", "at least 20"], out)

@@ -70,8 +70,84 @@ def test_hinge_mesher_failure_exits_2_without_output(tmp_path, capsys, monkeypat
     monkeypatch.setenv("FLEXCAL_CACHE_DIR", str(tmp_path / "cache"))
     out = tmp_path / "nothing"
     args = ["hinge", "--type", "circular", "--radius-mm", "5", "--thickness-mm", "1", "--width-mm", "10",
-            "--out", str(out)]
+            "--mesher", "tetwild", "--out", str(out)]
     assert cli.main(args) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "no tets" in err and "Traceback" not in err
     assert not out.exists()
+
+
+def _without_timings(folder):
+    from flexcal.validation.cli_common import without_timings
+
+    return without_timings(json.loads((folder / "report.json").read_text()))
+
+
+HINGE_ARGS = ["hinge", "--type", "circular", "--radius-mm", "5", "--thickness-mm", "1", "--width-mm", "10",
+              "--elements-through", "2", "-q"]
+
+
+def test_hinge_is_deterministic_without_a_shared_cache(tmp_path, monkeypatch):
+    """Issue 14: the same hinge on two fresh caches gives the same mesh, numbers and files
+    (the mapped mesher; fTetWild seeds itself from std::random_device)."""
+    runs = []
+    for name in ("a", "b"):
+        monkeypatch.setenv("FLEXCAL_CACHE_DIR", str(tmp_path / f"cache-{name}"))
+        assert cli.main([*HINGE_ARGS, "--out", str(tmp_path / name)]) == 0
+        runs.append(tmp_path / name)
+    assert _without_timings(runs[0]) == _without_timings(runs[1])
+    for name in ("hinge.vtu", "report.md"):
+        assert (runs[0] / name).read_bytes() == (runs[1] / name).read_bytes(), name
+
+
+def test_hinge_uses_the_cache_and_recomputes_edited_entries(tmp_path, monkeypatch):
+    """The hinge result goes to the FEM cache and is served from it; an entry whose
+    numbers were edited, with a stale digest or without key and digest (older format),
+    is recomputed rather than served."""
+    monkeypatch.setenv("FLEXCAL_CACHE_DIR", str(tmp_path / "cache"))
+    assert cli.main([*HINGE_ARGS, "--out", str(tmp_path / "first")]) == 0
+    reference = _without_timings(tmp_path / "first")
+    entries = list((tmp_path / "cache").glob("*.npz"))
+    assert len(entries) == 1
+
+    out = tmp_path / "hit"
+    assert cli.main([*HINGE_ARGS, "--out", str(out)]) == 0
+    assert set(json.loads((out / "report.json").read_text())["timings_s"]) == {"cache", "mesh_stages"}
+    assert _without_timings(out) == reference
+
+    for legacy in (False, True):
+        with np.load(entries[0]) as stored:
+            arrays = {k: stored[k] for k in stored.files}
+        arrays["compliance"] = 2.0 * arrays["compliance"]  # numbers edited by hand
+        if legacy:
+            arrays = {k: v for k, v in arrays.items() if k not in ("__key__", "__digest__")}
+        np.savez(entries[0], **arrays)
+        out = tmp_path / f"edited-{legacy}"
+        assert cli.main([*HINGE_ARGS, "--out", str(out)]) == 0
+        assert "fem_solve" in json.loads((out / "report.json").read_text())["timings_s"]  # recomputed
+        assert _without_timings(out) == reference
+
+
+def test_hinge_outside_the_closed_form_range_warns_once(tmp_path, capsys, monkeypatch):
+    monkeypatch.setenv("FLEXCAL_CACHE_DIR", str(tmp_path / "cache"))
+    out = tmp_path / "shallow"
+    argv = ["hinge", "--type", "circular", "--radius-mm", "0.4", "--thickness-mm", "1", "--width-mm", "10",
+            "--elements-through", "1", "--out", str(out)]
+    assert cli.main(argv) == 0
+    err = [line for line in capsys.readouterr().err.splitlines() if "X server" not in line]
+    assert len(err) == 1 and "WARNING" in err[0] and "t/R=2.5" in err[0], err
+    notes = json.loads((out / "report.json").read_text())["closed_form_range"]
+    assert len(notes) == 2 and "t/R=2.5" in notes[0] and "C_rx,Mx" in notes[1]
+
+
+@pytest.mark.slow
+def test_chain_uses_the_cache(tmp_path, monkeypatch):
+    """A chain is meshed by fTetWild (random); its second run with the same cache serves the
+    first run's mesh and stiffness, so the files repeat."""
+    monkeypatch.setenv("FLEXCAL_CACHE_DIR", str(tmp_path / "cache"))
+    args = ["chain", "--reference", "D1", "--elements-through", "1", "-q"]
+    assert cli.main([*args, "--out", str(tmp_path / "a")]) == 0
+    assert cli.main([*args, "--out", str(tmp_path / "b")]) == 0
+    assert set(json.loads((tmp_path / "b" / "report.json").read_text())["timings_s"]) == {"cache", "mesh_stages"}
+    assert _without_timings(tmp_path / "a") == _without_timings(tmp_path / "b")
+    assert (tmp_path / "a" / "chain.vtu").read_bytes() == (tmp_path / "b" / "chain.vtu").read_bytes()

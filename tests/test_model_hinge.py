@@ -147,3 +147,23 @@ def test_leaf_compliance_is_spd_and_softens_when_thinner(l, a_frac, t, w):
     assert thinner[5, 5] > c[5, 5] and thinner[1, 1] > c[1, 1] and thinner[0, 0] > c[0, 0]
     # C_ry,My = (12 / w^2) C_ux,Fx holds for any profile (both are int dx/t)
     assert c[4, 4] == pytest.approx(12 / w**2 * c[0, 0], rel=1e-13)
+
+
+def test_closed_form_range_warnings_name_parameter_and_range():
+    from flexcal.geometry.params import CircularNotchHinge, LeafHinge
+    from flexcal.model.hinge import closed_form_range_warnings
+
+    mm = 1e-3
+    inside = CircularNotchHinge(radius=5 * mm, thickness=1 * mm, width=10 * mm, block_length=5 * mm)
+    assert closed_form_range_warnings(inside, torsion=False) == []
+    shallow = CircularNotchHinge(radius=0.4 * mm, thickness=1 * mm, width=10 * mm, block_length=1 * mm)
+    (text,) = closed_form_range_warnings(shallow, torsion=False)
+    assert "R=0.4 mm" in text and "t/R=2.5" in text and "R < t/2" in text and "t/R <= 1" in text
+    edge = CircularNotchHinge(radius=1 * mm, thickness=1 * mm, width=10 * mm, block_length=1 * mm)
+    assert closed_form_range_warnings(edge, torsion=False) == []  # t/R = 1 is the edge, still inside
+    # torsion: length/width 20/40 = 0.5 is short; 400/40 = 10 is long enough
+    short = LeafHinge(length=20 * mm, thickness=4 * mm, width=40 * mm, fillet=6 * mm, block_length=10 * mm)
+    (torsion,) = closed_form_range_warnings(short)
+    assert "C_rx,Mx" in torsion and "length/width >= 10" in torsion and "is 0.5" in torsion
+    long = LeafHinge(length=400 * mm, thickness=4 * mm, width=40 * mm, fillet=6 * mm, block_length=10 * mm)
+    assert closed_form_range_warnings(long) == []

@@ -24,6 +24,7 @@ import importlib
 import importlib.util
 import json
 import os
+import re
 import sys
 import traceback
 
@@ -48,8 +49,21 @@ COMMANDS: dict[str, tuple[str, str]] = {
 }
 
 
+# A number, and a comma list of numbers, starting with a minus sign: an option's value, not
+# an option ('--target-urad -100,200,50'). argparse knows only single numbers ('-5', '-.5').
+_NUMBER = r"(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?"
+_NEGATIVE_NUMBERS = re.compile(rf"^-{_NUMBER}(\s*,\s*[-+]?{_NUMBER})*$")
+
+
 class _Parser(argparse.ArgumentParser):
-    """argparse with one-line usage errors ('flexcal hinge: error: ...', exit 2)."""
+    """argparse with one-line usage errors ('flexcal hinge: error: ...', exit 2) and with
+    values such as '-100,200,50' taken as values (no '=' needed)."""
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        # argparse's own hook for "looks like a negative number" (used while no option
+        # of the parser itself looks like one); widened from single numbers to lists
+        self._negative_number_matcher = _NEGATIVE_NUMBERS
 
     def error(self, message: str):
         self.exit(2, f"{self.prog}: error: {message} (see '{self.prog} --help')\n")

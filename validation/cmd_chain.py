@@ -45,6 +45,10 @@ _FIELDS = {"length_mm": "length", "hinge_length_mm": "hinge_length", "width_mm":
 def build_chain(args: argparse.Namespace):
     from flexcal.geometry.params import FlexureChain, reference_mechanism
 
+    from .input_checks import check_length_mm
+
+    for option in _FIELDS:
+        check_length_mm("--" + option.replace("_", "-"), getattr(args, option), allow_zero=option == "fillet_mm")
     changes = {field: getattr(args, option) * 1e-3 for option, field in _FIELDS.items()
                if getattr(args, option) is not None}
     if args.reference is not None:
@@ -62,11 +66,13 @@ def run(args: argparse.Namespace) -> int:
     from .cli_common import show_progress
     from .fem_report import compare_chain, run_comparison
 
-    if not args.elements_through > 0:
-        raise ValueError(f"--elements-through={args.elements_through} must be > 0")
+    from .input_checks import check_elements_through
+
+    check_elements_through(args.elements_through)
     chain, params = build_chain(args)  # validates before any CAD or meshing
     result, data = run_comparison(compare_chain, chain, params, args.out,
-                                  elements_through_thickness=args.elements_through, progress=show_progress(args))
+                                  elements_through_thickness=args.elements_through, progress=show_progress(args),
+                                  cache=True)
     print(f"flexcal chain: largest diagonal compliance difference FEM vs Eq. 1 "
           f"{data['max_abs_percent_difference_diagonal']:.1f} %; {data['mesh']['n_dof']} DOF, "
           f"{sum(result.timings.values()):.1f} s; wrote {args.out}/report.json, report.md, chain.vtu, chain.png")

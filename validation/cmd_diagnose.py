@@ -89,7 +89,7 @@ def run(args: argparse.Namespace) -> int:
     from functools import partial
 
     from .cli_common import show_progress
-    from .diagnose import run_diagnosis
+    from .diagnose import check_measurement, run_diagnosis
     from .diagnose_baseline import BaselineSettings, calibrate_baseline
     from .diagnose_plots import plot_heldout, plot_residual, plot_strata
     from .measurements import read_measurement
@@ -99,6 +99,7 @@ def run(args: argparse.Namespace) -> int:
     if args.particles < 2 or args.iterations < 1:
         raise ValueError("--particles must be >= 2 and --iterations >= 1")
     measurement = read_measurement(args.data)
+    check_measurement(measurement)  # before the model's FEM correction (~30 s cold)
     from .scenario import mechanism_from_metadata
 
     space = model_space(args.model_stiffness, args.second_order, progress=show_progress(args),

@@ -20,7 +20,7 @@ from .diagnose_which import (CriterionSettings, Candidate, cross_validate, fit_t
                              principal_cosines, score_candidates)
 from .measurements import Measurement
 
-__all__ = ["Diagnosis", "run_diagnosis", "library_terms", "MIN_POINTS", "MAX_STAGES"]
+__all__ = ["Diagnosis", "run_diagnosis", "library_terms", "check_measurement", "MIN_POINTS", "MAX_STAGES"]
 
 MIN_POINTS = 20  # fewer points cannot support a 45-source baseline plus a held-out leg
 ABSORBED_LIMIT = 0.99  # a term whose signature the baseline mimics to this share is undetectable on the trajectory
@@ -57,7 +57,8 @@ def library_terms(extras: dict) -> tuple[list, list[str]]:
     return terms, skipped
 
 
-def _check(measurement: Measurement) -> None:
+def check_measurement(measurement: Measurement) -> None:
+    """Raise ValueError if the diagnosis cannot use ``measurement`` (too few points or legs)."""
     if measurement.n_points < MIN_POINTS:
         raise ValueError(f"the measurement has {measurement.n_points} points; the diagnosis needs at least "
                          f"{MIN_POINTS} (a calibration trajectory, e.g. the standard one of 77 points)")
@@ -122,7 +123,7 @@ def run_diagnosis(measurement: Measurement, *, baseline: Callable[..., BaselineF
     from .blas_threads import single_blas_thread
     from .effect_terms import TermData
 
-    _check(measurement)
+    check_measurement(measurement)
     fit = baseline(measurement, rng=rng, progress=progress)
     residual = measurement.angles - fit.model_angles
     direction = travel_directions(measurement.inputs)

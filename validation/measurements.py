@@ -37,6 +37,8 @@ _UNIT_SUFFIXES = ("_mm", "_urad", "_s", "_c", "_k", "_n", "_um", "_deg", "_pct",
 # flexure mount's misalignment curve but a unit mistake (m vs mm, rad vs urad).
 MAX_ABS_INPUT_MM = 100.0
 MAX_ABS_ANGLE_URAD = 1e5
+# point and leg are counters: beyond 2^53 a float no longer holds every integer exactly
+MAX_INDEX = 2.0**53
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -84,7 +86,23 @@ def _parse_number(text: str, row: int, column: str, integer: bool = False) -> fl
         raise ValueError(f"row {row}, column {column!r}: {text!r} is not finite")
     if integer and value != int(value):
         raise ValueError(f"row {row}, column {column!r}: {text!r} must be an integer")
+    if integer and abs(value) > MAX_INDEX:
+        raise ValueError(f"row {row}, column {column!r}: {text!r} is too large for an index (at most {MAX_INDEX:g})")
     return value
+
+
+def _csv_rows(reader, path: Path):
+    """(row number, cells) from row 2 on; a CSV syntax error is a ValueError naming the row."""
+    row_number = 1
+    while True:
+        row_number += 1
+        try:
+            raw = next(reader)
+        except StopIteration:
+            return
+        except csv.Error as error:
+            raise ValueError(f"{path}: row {row_number} is not valid CSV ({error})") from None
+        yield row_number, raw
 
 
 def read_measurement(path: str | os.PathLike) -> Measurement:
@@ -96,12 +114,20 @@ def read_measurement(path: str | os.PathLike) -> Measurement:
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"measurement file {path} does not exist")
-    text = path.read_text()
+    try:
+        # utf-8-sig: a byte-order mark (spreadsheet programs' "CSV UTF-8") is not part of 'point'
+        text = path.read_bytes().decode("utf-8-sig")
+    except UnicodeDecodeError as error:
+        raise ValueError(f"{path}: not UTF-8 text (byte {error.start}); save it as CSV in UTF-8 or ASCII") from None
+    if "\0" in text:
+        raise ValueError(f"{path}: holds NUL bytes, so it is not a CSV text file; export the measurement as CSV")
     reader = csv.reader(io.StringIO(text))
     try:
         header = [h.strip() for h in next(reader)]
     except StopIteration:
         raise ValueError(f"{path}: empty file (expected a header row {','.join(REQUIRED_COLUMNS)})") from None
+    except csv.Error as error:
+        raise ValueError(f"{path}: row 1 (header) is not valid CSV ({error})") from None
     missing = [c for c in REQUIRED_COLUMNS if c not in header]
     if missing:
         raise ValueError(f"{path}: row 1 (header) lacks required column(s) {', '.join(missing)}")
@@ -114,15 +140,18 @@ def read_measurement(path: str | os.PathLike) -> Measurement:
             raise ValueError(f"{path}: row 1 (header), column {name!r}: optional columns must name their "
                              f"unit with a suffix such as {', '.join(_UNIT_SUFFIXES)}")
     rows = []
-    for row_number, raw in enumerate(reader, start=2):
+    for row_number, raw in _csv_rows(reader, path):
         if not raw or all(not cell.strip() for cell in raw):
             continue
         if len(raw) != len(header):
             raise ValueError(f"{path}: row {row_number} has {len(raw)} values, the header has {len(header)}")
         values = {}
-        for column, cell in zip(header, raw):
-            values[column] = _parse_number(cell.strip(), row_number, column,
-                                           integer=column in ("point", "leg"))
+        try:
+            for column, cell in zip(header, raw):
+                values[column] = _parse_number(cell.strip(), row_number, column,
+                                               integer=column in ("point", "leg"))
+        except ValueError as error:  # name the file: diagnose and compensate show it as is
+            raise ValueError(f"{path}: {error}") from None
         for column in INPUT_COLUMNS:
             if abs(values[column]) > MAX_ABS_INPUT_MM:
                 raise ValueError(f"{path}: row {row_number}, column {column!r}: {values[column]:g} mm exceeds "
@@ -149,9 +178,11 @@ def read_measurement(path: str | os.PathLike) -> Measurement:
     side = sidecar_path(path)
     if side.is_file():
         try:
-            metadata = json.loads(side.read_text())
-        except json.JSONDecodeError as error:
+            metadata = json.loads(side.read_bytes().decode("utf-8-sig"))
+        except (json.JSONDecodeError, UnicodeDecodeError, RecursionError) as error:
             raise ValueError(f"{side}: not valid JSON ({error})") from None
+        if not isinstance(metadata, dict):
+            raise ValueError(f"{side}: the sidecar must hold a JSON object ({{...}}), not a {type(metadata).__name__}")
     return Measurement(
         point=column("point").astype(int),
         time=column("time_s"),

@@ -37,6 +37,7 @@ import scipy.linalg
 from flexcal.geometry.params import MechanismParams
 
 from .blas_threads import single_blas_thread
+from .fixed_point import anderson_step
 from .kinematics import pose, so3_log, translation_pose
 from .prototype_effects import EffectContext, PointConditions, PointResult, effect_record, room_temperature
 from .prototype_equilibrium import (Assembly, Loads, NonConvergenceError, SolverSettings, build_assembly,
@@ -308,6 +309,20 @@ def _time_and_temperature(n: int, time, temperature) -> tuple[np.ndarray, np.nda
     return times, temps
 
 
+def _offsets_not_converged(k: int, settings: SolverSettings, change: np.ndarray, load_change: float,
+                           offsets: np.ndarray, load_dependent: bool) -> str:
+    """The message of a nut-offset fixed point that did not settle, naming the knob."""
+    text = (f"nut offsets (and load-dependent effects' loads) did not converge at point {k} within "
+            f"{settings.max_offset_iterations} iterations (last change {np.max(np.abs(change)):.3g} m, "
+            f"{load_change:.3g} N)")
+    if load_dependent and load_change > settings.load_tolerance:
+        return text + "; a load-dependent effect keeps changing the loads: reduce its magnitude in [[effects]]"
+    drives = [f"D{i + 1}" for i in range(3) if offsets[i] > 0] or ["D1", "D2", "D3"]
+    knobs = ", ".join(f"'{d}.mu', '{d}.CL'" for d in drives)
+    return (text + f"; {'/'.join(drives)} sit in their clearance there: set {knobs} under [errors] of the scenario "
+            f"(Table 1: mu 0.83-0.93, CL 0.10-0.42 mm) or try another --seed")
+
+
 def _simulate(prototype: Prototype, inputs: np.ndarray, effects: tuple, progress: bool, time_s, temperature
               ) -> PrototypeRun:
     inputs = np.asarray(inputs, dtype=float)
@@ -368,6 +383,7 @@ def _simulate(prototype: Prototype, inputs: np.ndarray, effects: tuple, progress
         base, guess = conditions, None if previous_result is None else previous_result.axial_loads
         conditions = _with_loads(base, guess, loaded_hooks, context)
         offsets = np.zeros(3) if previous_offsets is None else previous_offsets.copy()
+        iterates, images = [], []
         for outer in range(1, settings.max_offset_iterations + 1):
             loads = _loads(prototype, conditions, screw + offsets)
             poses, info = solve_equilibrium(prototype.assembly, poses, conditions.segment_stiffness.reshape(-1, 6, 6),
@@ -379,15 +395,22 @@ def _simulate(prototype: Prototype, inputs: np.ndarray, effects: tuple, progress
             load_change = 0.0 if not loaded_hooks else np.inf if guess is None else np.max(np.abs(tension - guess))
             if np.max(np.abs(new - offsets)) <= settings.offset_tolerance and load_change <= settings.load_tolerance:
                 break
-            # plain fixed point; damped once it has not settled (guards a 2-cycle at a wall)
-            offsets = new if outer < 10 else 0.5 * (offsets + new)
+            # plain fixed point; once it has not settled, accelerated (slow contraction with
+            # two chains off their flanks) or damped (a 2-cycle at a wall): fixed_point.py
+            if outer < 10:
+                offsets = new
+            else:
+                iterates.append(offsets)
+                images.append(new)
+                offsets, restart = anderson_step(iterates, images, clearance)
+                if restart:
+                    iterates, images = [], []
             if loaded_hooks:
                 guess = tension
                 conditions = _with_loads(base, guess, loaded_hooks, context)
         else:
-            raise NonConvergenceError(f"nut offsets (and load-dependent effects' loads) did not converge at point {k} "
-                                      f"within {settings.max_offset_iterations} iterations (last change "
-                                      f"{np.max(np.abs(new - offsets)):.3g} m, {load_change:.3g} N)")
+            raise NonConvergenceError(_offsets_not_converged(k, settings, new - offsets, load_change, offsets,
+                                                             bool(loaded_hooks)))
         outer_iters[k] = outer
         rotation_vector = so3_log(poses[FRAME_BODY, :3, :3])
         measured = rotation_vector.copy()
