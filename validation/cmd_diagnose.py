@@ -99,7 +99,10 @@ def run(args: argparse.Namespace) -> int:
     if args.particles < 2 or args.iterations < 1:
         raise ValueError("--particles must be >= 2 and --iterations >= 1")
     measurement = read_measurement(args.data)
-    space = model_space(args.model_stiffness, args.second_order, progress=show_progress(args))
+    from .executor import executor_options
+
+    space = model_space(args.model_stiffness, args.second_order, progress=show_progress(args),
+                        **executor_options(args))
     baseline = partial(calibrate_baseline, space=space,
                        settings=BaselineSettings(particles=args.particles, iterations=args.iterations))
     diagnosis = run_diagnosis(measurement, baseline=baseline, rng=args.seed, progress=show_progress(args))

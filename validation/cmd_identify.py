@@ -80,7 +80,9 @@ def run(args: argparse.Namespace) -> int:
     settings = dataclasses.replace(PSOSettings(), n_particles=args.particles, max_iterations=args.iterations)
     progress = show_progress(args)
     measurement, presets = load_source(args, parameter_space(), progress=progress)
-    space = model_space(args.model_stiffness, args.second_order, progress=progress)
+    from .executor import executor_options
+
+    space = model_space(args.model_stiffness, args.second_order, progress=progress, **executor_options(args))
     angles = remove_return_offsets(measurement) if args.remove_offset else measurement.angles
     sub = space.subset(selected)
     problem = CalibrationProblem(space=sub, inputs=measurement.inputs, angles=angles)

@@ -59,7 +59,10 @@ def load_source(args: argparse.Namespace, space, *, progress: bool):
         from .truth import make_truth
 
         scenario = load_scenario(args.scenario, seed=args.seed, noise_urad=args.noise_urad)
-        truth = make_truth(scenario, stiffness_provider(args.provider, progress=progress), progress=progress)
+        from .executor import executor_options
+
+        provider = stiffness_provider(args.provider, progress=progress, **executor_options(args))
+        truth = make_truth(scenario, provider, progress=progress)
         return truth.measurement, scenario.values
     try:
         measurement = read_measurement(args.data)
