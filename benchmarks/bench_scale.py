@@ -5,7 +5,8 @@ Each run is the command line as a user types it, in a subprocess with its own em
 ``FLEXCAL_CACHE_DIR`` (so every FEM segment is built) and its own ``--out``; the modes
 alternate (sequential, parallel, sequential, ...) so a change of the machine's load
 hits both alike. Prints each wall time, the medians and the ratio parallel / sequential
-(goal <= 0.6 with 2 workers), plus the load average before and after. Not a test.
+(goal <= 0.6 with 2 workers), the CPU seconds of each run (command + its worker
+processes: how many cores it kept busy) and the load average. Not a test.
 
     .venv/bin/python benchmarks/bench_scale.py                  # 1 repeat, 2 workers
     .venv/bin/python benchmarks/bench_scale.py --repeats 3 --workers 2
@@ -15,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import resource
 import shutil
 import statistics
 import subprocess
@@ -32,11 +34,16 @@ def timed_truth(workers: int, root: Path, label: str) -> float:
     cache.mkdir()
     env = {**os.environ, "FLEXCAL_CACHE_DIR": str(cache)}
     command = [FLEXCAL, "truth", "--scenario", "table1", "--out", str(out), "--workers", str(workers), "-q"]
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
     start = time.perf_counter()
     subprocess.run(command, env=env, cwd=root, check=True)
     wall = time.perf_counter() - start
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    # CPU of the command and its reaped children (the LocalCluster's worker processes)
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
     n_entries = len(list(cache.glob("*.npz")))
-    print(f"{label:>14}: {wall:7.1f} s  ({n_entries} FEM cache entries built)", flush=True)
+    print(f"{label:>14}: {wall:7.1f} s wall, {cpu:7.1f} s CPU (cores busy on average {cpu / wall:.2f}); "
+          f"{n_entries} FEM cache entries built; load average now {os.getloadavg()[0]:.2f}", flush=True)
     shutil.rmtree(cache)
     shutil.rmtree(out)
     return wall
