@@ -22,7 +22,10 @@ from flexcal.validation.fem_provider import (DEFAULT_ELEMENTS_THROUGH, build_seg
 from flexcal.validation.prototype import build_prototype
 from flexcal.validation.segments import analytic_provider, chain_slices, section_nodes
 
-DASK = str(Path(sys.executable).with_name("dask"))
+# `dask scheduler` / `dask worker` through this interpreter: the `dask` script's shebang may
+# name another environment's Python (a copied virtualenv), which imports another flexcal
+SCHEDULER = [sys.executable, "-m", "distributed.cli.dask_scheduler"]
+WORKER = [sys.executable, "-m", "distributed.cli.dask_worker"]
 
 
 def _fail_on_three(item):
@@ -111,7 +114,7 @@ def dask_cluster(tmp_path_factory):
     folder = tmp_path_factory.mktemp("dask")
     scheduler_file = folder / "scheduler.json"
     env = {**os.environ, "FLEXCAL_CACHE_DIR": str(folder / "worker-cache")}
-    processes = [subprocess.Popen([DASK, "scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard",
+    processes = [subprocess.Popen([*SCHEDULER, "--host", "127.0.0.1", "--port", "0", "--no-dashboard",
                                    "--scheduler-file", str(scheduler_file)], cwd=folder, env=env,
                                   stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)]
     try:
@@ -121,7 +124,7 @@ def dask_cluster(tmp_path_factory):
         assert scheduler_file.exists(), "dask scheduler did not start within 60 s"
         address = json.loads(scheduler_file.read_text())["address"]
         for name in ("w1", "w2"):
-            processes.append(subprocess.Popen([DASK, "worker", address, "--nthreads", "1", "--nworkers", "1",
+            processes.append(subprocess.Popen([*WORKER, address, "--nthreads", "1", "--nworkers", "1",
                                                "--no-dashboard", "--name", name, "--local-directory",
                                                str(folder / name)], cwd=folder, env=env,
                                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
