@@ -114,8 +114,10 @@ def test_benchmark_command_tiny_grid_survives_a_failed_case_and_resumes(tmp_path
     import flexcal.validation.diagnose_benchmark as bench
 
     out = tmp_path / "bench"
+    # --workers 0: the cases run in this process, where the monkeypatched failure applies
+    # (the executor's worker processes are tested in tests/test_scale.py)
     command = ["diagnose-benchmark", "--grid", "tiny", "--effects", "drift,none,sensor_interpolation", "--out",
-               str(out), "--quiet"]
+               str(out), "--quiet", "--workers", "0"]
     measure = bench.benchmark_measurement
 
     def none_runs_out_of_memory(effect_id, *args, **kwargs):

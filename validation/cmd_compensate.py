@@ -124,14 +124,15 @@ def run(args: argparse.Namespace) -> int:
     settings = _settings(args)
     measurement = read_measurement(args.data)
     targets = read_targets(args.targets) if args.targets else default_targets()
+    from .executor import executor_options
     from .scenario import mechanism_from_metadata
 
     space = model_space(args.model_stiffness, args.second_order, progress=not quiet,
-                        mechanism=mechanism_from_metadata(measurement.metadata))
+                        mechanism=mechanism_from_metadata(measurement.metadata), **executor_options(args))
     dwell = float(np.median(np.diff(measurement.time))) if measurement.n_points > 1 else 2.0
     bench = bench_from_metadata(measurement.metadata, space, n_readings=args.readings, seed=args.seed,
                                 dwell=dwell if dwell > 0 else 2.0, end_time=float(measurement.time[-1]),
-                                progress=not quiet)
+                                progress=not quiet, **executor_options(args))
     result = run_compensation(measurement, targets, space, settings, bench=bench, progress=not quiet)
     report = build_report(result)
     report["settings"] = {"data": str(args.data), "targets": args.targets or "default (flexcal.validation.targets)",

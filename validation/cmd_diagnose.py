@@ -100,10 +100,11 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError("--particles must be >= 2 and --iterations >= 1")
     measurement = read_measurement(args.data)
     check_measurement(measurement)  # before the model's FEM correction (~30 s cold)
+    from .executor import executor_options
     from .scenario import mechanism_from_metadata
 
     space = model_space(args.model_stiffness, args.second_order, progress=show_progress(args),
-                        mechanism=mechanism_from_metadata(measurement.metadata))
+                        mechanism=mechanism_from_metadata(measurement.metadata), **executor_options(args))
     baseline = partial(calibrate_baseline, space=space,
                        settings=BaselineSettings(particles=args.particles, iterations=args.iterations))
     diagnosis = run_diagnosis(measurement, baseline=baseline, rng=args.seed, progress=show_progress(args))

@@ -10,7 +10,10 @@ Each finished case is written at once to DIR/cases/<id>.json (row and answer; th
 hashes the case and the settings, not the code version: use a new DIR after a code
 change). A case already there is not run again, so an interrupted or partly failed grid
 resumes where it stopped; a case that raises is listed in the report and the command
-exits 1 after writing the figures of the others.
+exits 1 after writing the figures of the others. The cases run in parallel on the shared
+executor (local worker processes by default, ``--workers N``, ``--scheduler ADDRESS``;
+docs/scale.md); with ``--provider fem`` the as-built mounts' segments are built first, on
+the same executor.
 
     flexcal diagnose-benchmark --out runs/bench                 # small grid, analytic prototype
     flexcal diagnose-benchmark --grid full --provider fem --out runs/bench-full
@@ -45,6 +48,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="one as-built mount (table1 draws and noise) for every case (default: 1000 + the case "
                              "seed; a fixed one keeps the FEM cache warm)")
     add_seed(parser, what="the baseline optimizer of every diagnosis", default=0)
+    from .executor import add_executor_options
+
+    add_executor_options(parser, what="the cases (and, with --provider fem, the FEM segment builds)")
     add_out(parser, what="report.json, report.md, answers.json, diagnosis_*.png, cases/",
             when="each finished case is kept at once in DIR/cases/ and running the same command again resumes; the "
                  "report is written at the end, also when some cases failed (they are listed, exit status 1)")
@@ -83,48 +89,91 @@ def grid_cases(ids, grid) -> list[tuple[str, float, int]]:
     return cases
 
 
-def run_benchmark(ids, grid, provider, *, noise_urad, cycles, seed, progress, scenario_seed=None, space=None,
-                  provider_name="analytic", store=None, log=None):
-    """(rows, answers, failures) of every case of the grid; space: the baseline's model
-    (default: the baseline's own default); store: a ``DesignStore`` of finished cases (each
-    saved as it finishes; a case already in it is not run again); failures: {case label:
-    error text} of the cases that raised (one bad case must not sink a two-hour grid)."""
+def case_record(spec: dict, *, space=None) -> dict:
+    """One case of ``case_spec`` run and scored (a pure function, run on a worker): the
+    record {"id", "spec", "row", "answer"} the case store keeps; space: the baseline's model."""
     from functools import partial
 
-    from tqdm import tqdm
-
+    from .cmd_truth import stiffness_provider
     from .diagnose import run_diagnosis
     from .diagnose_baseline import calibrate_baseline
     from .diagnose_benchmark import benchmark_measurement, run_case
     from .sweep_space import design_id
 
+    start = time.perf_counter()
+    provider = stiffness_provider(spec["provider"], progress=False)  # FEM: the segments are cached by then
+    case = benchmark_measurement(spec["effect"], spec["magnitude_noise"], spec["seed"], provider,
+                                 cycles=spec["cycles"], noise_urad=spec["noise_urad"],
+                                 scenario_seed=spec["scenario_seed"])
+    row = run_case(case, lambda m: run_diagnosis(m, rng=spec["baseline_seed"],
+                                                 baseline=partial(calibrate_baseline, space=space)))
+    row["wall_s"] = time.perf_counter() - start
+    return {"id": design_id(spec), "spec": spec, "row": row, "answer": case.answer}
+
+
+def case_slices(specs) -> list:
+    """Every FEM segment slice the as-built mounts of ``specs`` ask for (``chain_slices``)."""
+    from .scenario import load_scenario
+    from .segments import chain_slices
+    from .truth import as_built
+
+    chains = []
+    for spec in specs:
+        scenario_seed = 1000 + spec["seed"] if spec["scenario_seed"] is None else spec["scenario_seed"]
+        scenario = load_scenario("table1", seed=scenario_seed)
+        mechanism, _, _ = as_built(scenario.space, scenario.values)
+        chains += [p.chain for p in mechanism.chains]
+    return chain_slices(chains)
+
+
+def run_benchmark(ids, grid, *, noise_urad, cycles, seed, progress, scenario_seed=None, space=None,
+                  provider_name="analytic", store=None, log=None, workers: int | None = 0, scheduler=None):
+    """(rows, answers, failures) of every case of the grid, rows in grid order; space: the
+    baseline's model (default: the baseline's own default); store: a ``DesignStore`` of
+    finished cases (each saved as it finishes; a case already in it is not run again);
+    failures: {case label: error text} of the cases that raised (one bad case must not
+    sink a two-hour grid). workers / scheduler: the shared executor
+    (``flexcal.validation.executor``; 0 without a scheduler: one case after the other
+    here). With the FEM provider the as-built mounts' missing segments are built first,
+    all at once on the same executor, then the cases run on cached segments."""
+    from tqdm import tqdm
+
+    from .executor import resolve_workers, run_jobs, where
+    from .sweep_space import design_id
+
     log = log or (lambda text: None)
-    rows, answers, failures = [], [], {}
-    for effect_id, magnitude, case_seed in tqdm(grid_cases(ids, grid), desc="diagnose-benchmark", unit="case",
-                                                disable=None if progress else True):
+    specs, labels = [], {}
+    for effect_id, magnitude, case_seed in grid_cases(ids, grid):
         spec = case_spec(effect_id, magnitude, case_seed, provider_name=provider_name, noise_urad=noise_urad,
                          cycles=cycles, seed=seed, scenario_seed=scenario_seed)
-        identifier = design_id(spec)
-        record = None if store is None else store.load(identifier)
-        if record is None:
-            start = time.perf_counter()
-            try:
-                case = benchmark_measurement(effect_id, magnitude, case_seed, provider, cycles=cycles,
-                                             noise_urad=noise_urad, scenario_seed=scenario_seed)
-                row = run_case(case, lambda m: run_diagnosis(m, rng=seed,
-                                                             baseline=partial(calibrate_baseline, space=space)))
-            except Exception as error:
-                label = f"{effect_id} {magnitude:g}x seed {case_seed}"
-                failures[label] = f"{type(error).__name__}: {error}"
-                log(f"diagnose-benchmark: case {label} failed: {failures[label]}")
-                continue
-            row["wall_s"] = time.perf_counter() - start
-            record = {"id": identifier, "spec": spec, "row": row, "answer": case.answer}
+        specs.append(spec)
+        labels[design_id(spec)] = f"{effect_id} {magnitude:g}x seed {case_seed}"
+    records = {} if store is None else {i: r for i in labels if (r := store.load(i)) is not None}
+    pending = list({design_id(s): s for s in specs if design_id(s) not in records}.values())
+    n_workers = resolve_workers(workers, len(pending))
+    if pending:
+        log(f"diagnose-benchmark: {len(labels)} cases, {len(labels) - len(pending)} already done, {len(pending)} to "
+            f"run on {where(n_workers, scheduler)}")
+    if pending and provider_name == "fem":
+        from .fem_provider import build_segments
+
+        build_segments(case_slices(pending), workers=workers, scheduler=scheduler, progress=progress)
+    failures = {}
+    with tqdm(total=len(specs), initial=len(specs) - len(pending), desc="diagnose-benchmark", unit="case",
+              disable=None if progress else True) as bar:
+        def on_done(_spec, record):
             if store is not None:
                 store.save(record)
-        rows.append(record["row"])
-        answers.append(record["answer"])
-    return rows, answers, failures
+            records[record["id"]] = record
+            bar.update(1)
+
+        for identifier, text in run_jobs(pending, case_record, on_done, key=design_id, workers=n_workers,
+                                         scheduler=scheduler, job_options={"space": space},
+                                         task_prefix="case").items():
+            failures[labels[identifier]] = text
+            log(f"diagnose-benchmark: case {labels[identifier]} failed: {text}")
+    done = [records[design_id(s)] for s in specs if design_id(s) in records]
+    return [r["row"] for r in done], [r["answer"] for r in done], failures
 
 
 def _number(value, digits: int = 1) -> str:
@@ -168,8 +217,8 @@ def _markdown(report) -> str:
 
 def run(args: argparse.Namespace) -> int:
     from .cli_common import show_progress
-    from .cmd_truth import stiffness_provider
     from .diagnose_benchmark import summarize
+    from .executor import executor_options
     from .diagnose_plots import plot_benchmark
     from .effect_library import EFFECT_IDS, LIBRARY, NONE, OUT_OF_LIBRARY_IDS
     from .model_correction import model_space
@@ -189,12 +238,13 @@ def run(args: argparse.Namespace) -> int:
     progress = show_progress(args)
     log = (lambda text: print(text, file=sys.stderr)) if progress else (lambda text: None)
     store = DesignStore(out_folder(args.out) / "cases")
-    provider = stiffness_provider(args.provider, progress=progress)
+    executor = executor_options(args)
     try:
         rows, answers, failures = run_benchmark(
-            ids, args.grid, provider, noise_urad=args.noise_urad, cycles=args.cycles, seed=args.seed,
+            ids, args.grid, noise_urad=args.noise_urad, cycles=args.cycles, seed=args.seed,
             progress=progress, scenario_seed=args.scenario_seed, provider_name=args.provider, store=store, log=log,
-            space=model_space(baseline_stiffness(args.provider), second_order=True))
+            space=model_space(baseline_stiffness(args.provider), second_order=True, progress=progress, **executor),
+            **executor)
     except KeyboardInterrupt:
         log(f"diagnose-benchmark: interrupted; finished cases are kept in {store.folder}, run the same command "
             f"again to resume")

@@ -80,13 +80,14 @@ def run(args: argparse.Namespace) -> int:
     settings = dataclasses.replace(PSOSettings(), n_particles=args.particles, max_iterations=args.iterations)
     progress = show_progress(args)
     measurement, presets = load_source(args, parameter_space(), progress=progress)
-    from .scenario import mechanism_from_metadata
-
-    space = model_space(args.model_stiffness, args.second_order, progress=progress,
-                        mechanism=mechanism_from_metadata(measurement.metadata))
     from flexcal.calibration.pipeline import check_determined
 
+    from .executor import executor_options
+    from .scenario import mechanism_from_metadata
+
     check_determined(measurement.n_points, len(selected))
+    space = model_space(args.model_stiffness, args.second_order, progress=progress,
+                        mechanism=mechanism_from_metadata(measurement.metadata), **executor_options(args))
     angles = remove_return_offsets(measurement) if args.remove_offset else measurement.angles
     sub = space.subset(selected)
     problem = CalibrationProblem(space=sub, inputs=measurement.inputs, angles=angles)

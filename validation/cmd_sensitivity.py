@@ -60,7 +60,10 @@ def load_source(args: argparse.Namespace, space, *, progress: bool):
         from .truth import make_truth
 
         scenario = load_scenario_with_trajectory(args)
-        truth = make_truth(scenario, stiffness_provider(args.provider, progress=progress), progress=progress)
+        from .executor import executor_options
+
+        provider = stiffness_provider(args.provider, progress=progress, **executor_options(args))
+        truth = make_truth(scenario, provider, progress=progress)
         return truth.measurement, scenario.values
     if getattr(args, "trajectory", None):
         raise ValueError("--trajectory drives a --scenario; a --data file already holds its own trajectory")

@@ -35,18 +35,22 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="segment stiffness: FEM condensation of the as-built solids (default) or the "
                              "closed-form compliance (fast, for checks only: then truth shares the model's hinge formulas)")
     add_trajectory(parser)
+    from .executor import add_executor_options
+
+    add_executor_options(parser, what="the FEM segment builds (cold cache only)")
     add_out(parser, what="curves.csv, curves.json, curves.png")
 
 
-def stiffness_provider(kind: str, *, progress: bool = True):
-    """The segment stiffness provider by name."""
+def stiffness_provider(kind: str, *, progress: bool = True, workers: int | None = 0, scheduler: str | None = None):
+    """The segment stiffness provider by name; workers / scheduler: where the FEM
+    provider builds missing segments (``fem_provider``; 0 without a scheduler: here, in order)."""
     if kind == "analytic":
         from .segments import analytic_provider
 
         return analytic_provider()
     from .fem_provider import fem_provider
 
-    return fem_provider(progress=progress)
+    return fem_provider(progress=progress, workers=workers, scheduler=scheduler)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -61,7 +65,9 @@ def run(args: argparse.Namespace) -> int:
     if args.noise_urad is not None and args.noise_urad < 0:
         raise ValueError(f"--noise-urad={args.noise_urad} must be >= 0")
     scenario = load_scenario_with_trajectory(args)
-    provider = stiffness_provider(args.provider, progress=not args.quiet)
+    from .executor import executor_options
+
+    provider = stiffness_provider(args.provider, progress=not args.quiet, **executor_options(args))
     result = make_truth(scenario, provider, progress=not args.quiet)
     measurement = result.measurement
     misalignment = measurement.angles - ideal_angles(measurement.inputs, scenario.space)

@@ -54,6 +54,9 @@ def add_model_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--model-stiffness", choices=("fem", "closed-form"),
                         help="the model's chain compliance: closed-form (the paper's Eq. 1) or corrected by the FEM "
                              "at the nominal design (docs/model.md 7; default %(default)s)")
+    from .executor import add_executor_options
+
+    add_executor_options(parser, what="the FEM segment builds (cold cache only)")
 
 
 def add_identification_options(parser: argparse.ArgumentParser) -> None:
@@ -259,6 +262,7 @@ def run(args: argparse.Namespace) -> int:
     from .output import staged_output, write_json
     from .model_correction import model_space
     from .verify import VerifySettings, run_verify
+    from .executor import executor_options
 
     if args.particles < 2 or args.iterations < 1:
         raise ValueError(f"--particles={args.particles} must be >= 2 and --iterations={args.iterations} >= 1")
@@ -274,7 +278,7 @@ def run(args: argparse.Namespace) -> int:
     space = parameter_space()
     measurement, presets = load_source(args, space, progress=not args.quiet)
     space = model_space(args.model_stiffness, args.second_order, progress=not args.quiet,
-                        mechanism=mechanism_from_metadata(measurement.metadata))
+                        mechanism=mechanism_from_metadata(measurement.metadata), **executor_options(args))
     result = run_verify(measurement, space, settings, presets=presets, progress=not args.quiet)
     result.report["model_stiffness"] = ("closed-form chains scaled by FEM factors at the nominal design "
                                         "(docs/model.md 7)" if space.compliance_factors else "closed-form (paper Eq. 1)")

@@ -118,11 +118,12 @@ def bench_driver(bench: Bench, log: list) -> Callable[[np.ndarray], np.ndarray]:
     return drive
 
 
-def _provider_from_description(description: str, progress: bool):
+def _provider_from_description(description: str, progress: bool, workers: int | None = 0,
+                               scheduler: str | None = None):
     from .cmd_truth import stiffness_provider
 
     if description.startswith("FEM"):
-        return stiffness_provider("fem", progress=progress)
+        return stiffness_provider("fem", progress=progress, workers=workers, scheduler=scheduler)
     if description.startswith("analytic"):
         return stiffness_provider("analytic")
     raise ValueError(f"the sidecar's provider {description!r} is neither FEM nor analytic; cannot rebuild the prototype")
@@ -139,12 +140,15 @@ def bench_effects(entries: list) -> tuple:
 
 def bench_from_metadata(metadata: dict, space: ParameterSpace, *, n_readings: int = DEFAULT_READINGS,
                         seed: int | None = None, dwell: float = DEFAULT_DWELL, end_time: float = 0.0,
-                        progress: bool = False) -> Bench | None:
+                        progress: bool = False, workers: int | None = 0, scheduler: str | None = None) -> Bench | None:
     """The prototype a virtual-prototype measurement came from, or None for a real one.
 
     metadata: the measurement's JSON sidecar (``flexcal truth``: preset errors, provider,
     transmission, sensors, effects, seed); dwell [s] per posture (the curve's time step);
-    end_time [s]: the curve's last time stamp (the session clock continues one dwell later)."""
+    end_time [s]: the curve's last time stamp (the session clock continues one dwell later);
+    workers / scheduler: where the FEM segments missing from the cache are built in
+    parallel (``fem_provider``; the bench's drives themselves are sequential: each round
+    depends on the last, and the prototype's friction and clock carry over)."""
     from .prototype import build_prototype
     from .truth import as_built
 
@@ -155,7 +159,7 @@ def bench_from_metadata(metadata: dict, space: ParameterSpace, *, n_readings: in
     mechanism, offsets, drives = as_built(space, values)
     breakaway = float(metadata.get("transmission", {}).get("breakaway_force_n", 2.0))
     prototype = build_prototype(mechanism, [(x0, cl, mu, breakaway) for x0, cl, mu in drives],
-                                _provider_from_description(str(metadata["provider"]), progress),
+                                _provider_from_description(str(metadata["provider"]), progress, workers, scheduler),
                                 mount_offsets=offsets)
     sensors = metadata.get("sensors", {})
     entries = list(metadata.get("effects", []))

@@ -27,7 +27,7 @@ from flexcal.model.frames import twist_transform
 from flexcal.model.hinge import ENTRY_INDEX
 from flexcal.model.parameters import ParameterSpace
 
-from .segments import StiffnessProvider, end_stiffness, section_nodes
+from .segments import StiffnessProvider, chain_slices, end_stiffness, prepare_provider, section_nodes
 
 __all__ = ["provider_chain_compliance", "compliance_factors", "corrected_space", "model_space"]
 
@@ -50,6 +50,7 @@ def compliance_factors(space: ParameterSpace, provider: StiffnessProvider) -> np
     order) at the nominal chains of ``space.mechanism`` (no actuator spring) [-]."""
     mech = space.mechanism
     rows, done = [], {}
+    prepare_provider(provider, chain_slices(p.chain for p in mech.chains))  # parallel FEM builds
     for placement in mech.chains:
         key = placement.chain
         if key not in done:  # identical chains (L1-L3, D1-D3) share their FEM solve
@@ -70,12 +71,13 @@ def corrected_space(space: ParameterSpace, provider: StiffnessProvider) -> Param
     return dataclasses.replace(space, compliance_factors=tuple(tuple(float(v) for v in row) for row in factors))
 
 
-def model_space(stiffness: str = "fem", second_order: bool = True, *, progress: bool = False,
-                mechanism=None) -> ParameterSpace:
+def model_space(stiffness: str = "fem", second_order: bool = True, *, progress: bool = False, workers: int | None = 0,
+                scheduler: str | None = None, mechanism=None) -> ParameterSpace:
     """The parameter space of ``mechanism`` (the reference one by default) with the model
     options the calibration commands share: stiffness "fem" (FEM-informed chain compliance,
     FEM solves cached) or "closed-form" (the paper's Eq. 1); second_order: the geometric
-    second-order terms (``flexcal.model.second_order``)."""
+    second-order terms (``flexcal.model.second_order``); workers / scheduler: where missing
+    FEM segments are built (``fem_provider``)."""
     from flexcal.model.parameters import parameter_space
 
     if stiffness not in ("fem", "closed-form"):
@@ -84,6 +86,6 @@ def model_space(stiffness: str = "fem", second_order: bool = True, *, progress: 
     if stiffness == "fem":
         from .fem_provider import fem_provider
 
-        space = corrected_space(space, fem_provider(progress=progress))
+        space = corrected_space(space, fem_provider(progress=progress, workers=workers, scheduler=scheduler))
     return dataclasses.replace(space, second_order=bool(second_order))
 

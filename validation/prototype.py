@@ -42,7 +42,8 @@ from .kinematics import pose, so3_log, translation_pose
 from .prototype_effects import EffectContext, PointConditions, PointResult, effect_record, room_temperature
 from .prototype_equilibrium import (Assembly, Loads, NonConvergenceError, SolverSettings, build_assembly,
                                     solve_equilibrium)
-from .segments import StiffnessProvider, end_stiffness, rigid_mode_defect, section_nodes
+from .segments import (StiffnessProvider, chain_slices, end_stiffness, prepare_provider, rigid_mode_defect,
+                       section_nodes)
 from .transmission import ActuatorTransmission, nut_offset, point_class
 
 __all__ = [
@@ -161,6 +162,7 @@ def _segment_stiffness(mechanism: MechanismParams, provider: StiffnessProvider):
     k12 = np.zeros((N_CHAINS, N_SEGMENTS, 12, 12))
     xs = np.zeros((N_CHAINS, 6))
     asked: dict = {}  # equal chains (L1-L3, D1-D3 by default) ask the provider once
+    prepare_provider(provider, chain_slices(p.chain for p in mechanism.chains))  # parallel FEM builds
     for c, placement in enumerate(mechanism.chains):
         xs[c] = section_nodes(placement.chain)
         for s in range(N_SEGMENTS):

@@ -44,6 +44,8 @@ __all__ = [
     "rigid_mode_defect",
     "end_compliance",
     "analytic_provider",
+    "chain_slices",
+    "prepare_provider",
 ]
 
 StiffnessProvider = Callable[[FlexureChain, float, float], np.ndarray]
@@ -56,6 +58,26 @@ def section_nodes(chain: FlexureChain) -> np.ndarray:
     m1 = e + l + 0.5 * c
     s0 = e + 2.0 * l + c + min(0.5 * h, 0.25 * chain.strut_length)
     return np.array([0.0, m1, s0, length - s0, length - m1, length])
+
+
+def chain_slices(chains) -> list[tuple[FlexureChain, float, float]]:
+    """The distinct slices ``(chain, x_start, x_end)`` [m] between consecutive section
+    nodes of ``chains`` (an iterable of ``FlexureChain``), in order: what a prototype or
+    a chain compliance asks its provider for (equal chains are asked once)."""
+    out: dict = {}
+    for chain in chains:
+        nodes = section_nodes(chain)
+        for x0, x1 in zip(nodes[:-1], nodes[1:]):
+            out.setdefault((chain, float(x0), float(x1)), None)
+    return list(out)
+
+
+def prepare_provider(provider: StiffnessProvider, slices: list[tuple[FlexureChain, float, float]]) -> None:
+    """Let a provider with a ``prepare(slices)`` hook (the FEM provider's parallel build)
+    compute what it will be asked for at once; a plain callable is left alone."""
+    prepare = getattr(provider, "prepare", None)
+    if callable(prepare):
+        prepare(slices)
 
 
 def rigid_transfer(length: float | np.ndarray) -> np.ndarray:

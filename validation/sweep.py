@@ -17,7 +17,6 @@ config), OUT/report.json and the plots are (re)written from the store.
 from __future__ import annotations
 
 import json
-import logging
 import os
 import sys
 import time
@@ -25,6 +24,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
 
+from .executor import resolve_workers, run_jobs, where as executor_where
 from .output import out_folder, write_json
 from .sweep_space import design_id, designs_from_config
 
@@ -68,46 +68,10 @@ class SweepResult:
 def execute(designs: list[dict[str, Any]], job: Callable[..., dict[str, Any]], on_done: Callable, *,
             workers: int, scheduler: str | None, job_options: dict[str, Any]) -> dict[str, str]:
     """Run ``job(design, **job_options)`` for every design, calling ``on_done(record)``
-    as each finishes; returns {design id: error text} of the designs that raised."""
-    failures: dict[str, str] = {}
-    if not designs:
-        return failures
-    if scheduler is None and workers == 0:
-        for design in designs:
-            try:
-                on_done(job(design, **job_options))
-            except Exception as error:  # one bad design must not sink the sweep
-                failures[design_id(design)] = f"{type(error).__name__}: {error}"
-        return failures
-    from dask.distributed import Client, LocalCluster, as_completed
-
-    quiet = logging.getLogger().getEffectiveLevel() > logging.INFO  # Dask's INFO lines only with -v
-    previous_level = logging.getLogger("distributed").level
-    if quiet:
-        logging.getLogger("distributed").setLevel(logging.WARNING)
-    if scheduler is not None:
-        client, cluster = Client(scheduler), None
-    else:
-        # no fixed dashboard port: other sweeps may run on the same machine
-        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=":0",
-                               silence_logs=logging.WARNING if quiet else logging.INFO)
-        client = Client(cluster)
-    try:
-        futures = {client.submit(job, design, **job_options, key=f"design-{design_id(design)}", pure=False):
-                   design_id(design) for design in designs}
-        for future in as_completed(futures):
-            try:
-                record = future.result()
-            except Exception as error:
-                failures[futures[future]] = f"{type(error).__name__}: {error}"
-                continue
-            on_done(record)
-    finally:
-        client.close()
-        if cluster is not None:
-            cluster.close()
-        logging.getLogger("distributed").setLevel(previous_level)
-    return failures
+    as each finishes; returns {design id: error text} of the designs that raised
+    (``executor.run_jobs``, the executor every heavy job shares)."""
+    return run_jobs(designs, job, lambda _design, record: on_done(record), key=design_id, workers=workers,
+                    scheduler=scheduler, job_options=job_options, task_prefix="design")
 
 
 def run_sweep(config: dict[str, Any], out: str | os.PathLike, *, workers: int | None = None,
@@ -130,11 +94,8 @@ def run_sweep(config: dict[str, Any], out: str | os.PathLike, *, workers: int | 
     ids = [design_id(d) for d in designs]
     unique = dict(zip(ids, designs))  # a value listed twice is one design
     pending = [d for i, d in unique.items() if store.load(i) is None]
-    if workers is None:
-        workers = max(1, min(os.cpu_count() or 1, len(pending)))
-    if workers < 0:
-        raise ValueError(f"--workers={workers} must be >= 0 (0: run in this process)")
-    where = scheduler or (f"{workers} local worker process(es)" if workers else "this process")
+    workers = resolve_workers(workers, len(pending))
+    where = executor_where(workers, scheduler)
     log(f"sweep: {len(unique)} designs, {len(unique) - len(pending)} already done, {len(pending)} to compute "
         f"on {where}")
     computed: list[str] = []

@@ -1,0 +1,236 @@
+"""The shared executor (``flexcal.validation.executor``) under the heavy jobs: FEM segment
+builds of the virtual prototype, ``diagnose-benchmark`` cases, ``compensate``'s bench
+(issue #14, docs/scale.md). The cluster tests start a real ``dask scheduler`` and two
+``dask worker`` processes on localhost."""
+
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from flexcal.fem.cache import load_cached, store_cached
+from flexcal.geometry.params import reference_mechanism
+from flexcal.validation import cli
+from flexcal.validation.executor import resolve_workers, run_jobs
+from flexcal.validation.fem_provider import (DEFAULT_ELEMENTS_THROUGH, build_segments, canonical_segment,
+                                             fem_provider, segment_cache_key)
+from flexcal.validation.prototype import build_prototype
+from flexcal.validation.segments import analytic_provider, chain_slices, section_nodes
+
+# `dask scheduler` / `dask worker` through this interpreter: the `dask` script's shebang may
+# name another environment's Python (a copied virtualenv), which imports another flexcal
+SCHEDULER = [sys.executable, "-m", "distributed.cli.dask_scheduler"]
+WORKER = [sys.executable, "-m", "distributed.cli.dask_worker"]
+
+
+def _fail_on_three(item):
+    if item == 3:
+        raise ValueError("three is bad")
+    return item * item
+
+
+def test_run_jobs_in_process_hands_each_result_over_and_lists_failures():
+    done = {}
+    failures = run_jobs([1, 2, 3, 4], _fail_on_three, lambda item, result: done.update({item: result}), key=str,
+                        workers=0)
+    assert done == {1: 1, 2: 4, 4: 16}
+    assert failures == {"3": "ValueError: three is bad"}
+    assert resolve_workers(None, 0) == 0 and resolve_workers(None, 1) == 1 and resolve_workers(0, 9) == 0
+    assert resolve_workers(None, 100) == (os.cpu_count() or 1)
+    with pytest.raises(ValueError, match="--workers=-1 must be >= 0"):
+        resolve_workers(-1, 3)
+
+
+def test_prepare_gets_exactly_the_slices_the_prototype_asks_for():
+    """``build_prototype`` announces its slices before asking: the parallel build then
+    covers every call (none left for the sequential path) and builds nothing unused."""
+    base = analytic_provider()
+    asked, announced = [], []
+
+    def provider(chain, x_start, x_end):
+        asked.append((chain, x_start, x_end))
+        return base(chain, x_start, x_end)
+
+    provider.prepare = lambda slices: announced.append(list(slices))
+    mechanism = reference_mechanism()
+    build_prototype(mechanism, [(0.0, 0.0, 1.0, 2.0)] * 3, provider)
+    assert len(announced) == 1
+    assert set(announced[0]) == set(asked) and len(announced[0]) == len(set(asked))
+    assert announced[0] == chain_slices(p.chain for p in mechanism.chains)
+
+
+def _small_slices():
+    """The first two slices of the 150 mm driving chain (leaf 1, leaf 2): cheap at 1 element through."""
+    chain = reference_mechanism().chains[3].chain
+    xs = section_nodes(chain)
+    return [(chain, float(xs[0]), float(xs[1])), (chain, float(xs[1]), float(xs[2]))]
+
+
+@pytest.mark.slow
+def test_parallel_segment_build_equals_sequential(tmp_path, monkeypatch):
+    """Two segments built on a LocalCluster of 2 worker processes and one after the other
+    in this process: the same cache keys, and the same matrices up to the mesher's
+    run-to-run scatter. The provider then serves every slice from the cache (no new
+    file) and returns the stored matrix bit for bit."""
+    monkeypatch.chdir(tmp_path)  # pytetwild's __tracked_surface.stl (the mesher also moves into a temp folder)
+    slices = _small_slices()
+    sequential, parallel = tmp_path / "sequential", tmp_path / "parallel"
+    assert build_segments(slices, elements_through_thickness=1, cache_directory=sequential, workers=0,
+                          progress=False) == 2
+    assert build_segments(slices, elements_through_thickness=1, cache_directory=parallel, workers=2,
+                          progress=False) == 2
+    names = sorted(p.name for p in sequential.glob("*.npz"))
+    assert names == sorted(p.name for p in parallel.glob("*.npz")) and len(names) == 2
+    provider = fem_provider(elements_through_thickness=1, cache_directory=parallel, progress=False, workers=2)
+    assert build_segments(slices, elements_through_thickness=1, cache_directory=parallel, workers=2) == 0
+    for chain, x0, x1 in slices:
+        segment, mirrored = canonical_segment(chain, x0, x1)
+        assert not mirrored
+        key = segment_cache_key(segment, elements_through_thickness=1)
+        stored_parallel = load_cached(key, parallel)["stiffness"]
+        stored_sequential = load_cached(key, sequential)["stiffness"]
+        assert np.array_equal(provider(chain, x0, x1), stored_parallel)
+        c_parallel = np.diag(np.linalg.inv(stored_parallel[6:, 6:]))
+        c_sequential = np.diag(np.linalg.inv(stored_sequential[6:, 6:]))
+        # fTetWild is not deterministic (issue #14; two runs of the first segment here gave
+        # C_rz,Mz 0.10 % apart, single-threaded 0.035 %): 1 % is 10x that scatter, while a
+        # wrong segment (other cut, other chain, mirrored) differs by tens of percent
+        np.testing.assert_allclose(c_parallel, c_sequential, rtol=0.01)
+    assert len(list(parallel.glob("*.npz"))) == 2  # the provider's calls built nothing more
+
+
+# --- a real Dask cluster on localhost ------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def dask_cluster(tmp_path_factory):
+    """A ``dask scheduler`` (free port: --port 0, address from its scheduler file) and two
+    single-threaded ``dask worker`` processes, whose FEM cache is their own folder (not the
+    test's: results must come back through the executor). Torn down at the end."""
+    folder = tmp_path_factory.mktemp("dask")
+    scheduler_file = folder / "scheduler.json"
+    env = {**os.environ, "FLEXCAL_CACHE_DIR": str(folder / "worker-cache")}
+    processes = [subprocess.Popen([*SCHEDULER, "--host", "127.0.0.1", "--port", "0", "--no-dashboard",
+                                   "--scheduler-file", str(scheduler_file)], cwd=folder, env=env,
+                                  stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)]
+    try:
+        deadline = time.monotonic() + 60  # scheduler start-up: a few seconds, slower under load
+        while not scheduler_file.exists() and time.monotonic() < deadline:
+            time.sleep(0.2)
+        assert scheduler_file.exists(), "dask scheduler did not start within 60 s"
+        address = json.loads(scheduler_file.read_text())["address"]
+        for name in ("w1", "w2"):
+            processes.append(subprocess.Popen([*WORKER, address, "--nthreads", "1", "--nworkers", "1",
+                                               "--no-dashboard", "--name", name, "--local-directory",
+                                               str(folder / name)], cwd=folder, env=env,
+                                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
+        from dask.distributed import Client
+
+        with Client(address, timeout=60) as client:
+            client.wait_for_workers(2, timeout=120)
+        yield {"address": address, "worker_cache": folder / "worker-cache"}
+    finally:
+        for process in reversed(processes):
+            process.terminate()
+        for process in processes:
+            try:
+                process.wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                process.kill()
+                process.wait()
+
+
+def _task_prefixes(address: str) -> set[str]:
+    from dask.distributed import Client
+
+    with Client(address, timeout=30) as client:
+        return set(client.run_on_scheduler(lambda dask_scheduler: list(dask_scheduler.task_prefixes)))
+
+
+def _seed_cache_except(mechanism, cache: Path, keep) -> tuple:
+    """Store the closed-form stiffness under the FEM key of every slice of ``mechanism``
+    except the one ``keep`` picks, so that a job on it has exactly one real FEM segment to
+    build (the closed form stands in for segments that are not under test here). Returns
+    the kept (segment, key)."""
+    analytic = analytic_provider()
+    kept = None
+    for chain, x0, x1 in chain_slices(p.chain for p in mechanism.chains):
+        segment, _ = canonical_segment(chain, x0, x1)
+        key = segment_cache_key(segment, elements_through_thickness=DEFAULT_ELEMENTS_THROUGH)
+        if keep(segment) and kept is None:
+            kept = (segment, key)
+        elif kept is None or key != kept[1]:
+            store_cached(key, {"stiffness": analytic(chain, segment.x_start, segment.x_end)}, cache)
+    assert kept is not None
+    return kept
+
+
+def _is_strut(segment) -> bool:
+    """The strut piece of a driving chain: no leaf, the cheapest segment to mesh."""
+    return segment.chain.length < 0.2 and all(k in ("strut",) for k, _, _ in segment.segments())
+
+
+@pytest.mark.slow
+def test_truth_builds_its_missing_segment_on_the_cluster(dask_cluster, tmp_path, monkeypatch):
+    """``flexcal truth --scheduler ADDRESS``: the one missing FEM segment is built on the
+    cluster and handed back into this machine's cache (the workers have their own)."""
+    from flexcal.validation.scenario import load_scenario
+    from flexcal.validation.truth import as_built
+
+    cache = tmp_path / "cache"
+    monkeypatch.setenv("FLEXCAL_CACHE_DIR", str(cache))
+    monkeypatch.chdir(tmp_path)
+    scenario = load_scenario("table1")
+    mechanism, _, _ = as_built(scenario.space, scenario.values)
+    segment, key = _seed_cache_except(mechanism, cache, _is_strut)
+    assert load_cached(key, cache) is None
+    out = tmp_path / "truth"
+    assert cli.main(["truth", "--scenario", "table1", "--scheduler", dask_cluster["address"], "--out", str(out),
+                     "-q"]) == 0
+    assert load_cached(key, cache) is not None  # handed back by the executor
+    assert load_cached(key, dask_cluster["worker_cache"]) is not None  # built there
+    assert "fem-segment" in _task_prefixes(dask_cluster["address"])
+    assert (out / "curves.csv").exists()
+
+
+@pytest.mark.slow
+def test_compensate_bench_builds_on_the_cluster(dask_cluster, tmp_path, monkeypatch):
+    """``compensate``'s bench (the prototype rebuilt from a FEM sidecar) builds its missing
+    segment through ``--scheduler``; the bench drives themselves stay sequential."""
+    from flexcal.validation.compensate import bench_from_metadata
+    from flexcal.validation.scenario import load_scenario
+    from flexcal.validation.truth import as_built, make_truth
+
+    cache = tmp_path / "cache"
+    monkeypatch.setenv("FLEXCAL_CACHE_DIR", str(cache))
+    monkeypatch.chdir(tmp_path)
+    scenario = load_scenario("table1", seed=3)
+    metadata = dict(make_truth(scenario, analytic_provider()).measurement.metadata)
+    metadata["provider"] = fem_provider().description  # a FEM prototype's sidecar
+    mechanism, _, _ = as_built(scenario.space, scenario.values)
+    segment, key = _seed_cache_except(mechanism, cache, _is_strut)
+    bench = bench_from_metadata(metadata, scenario.space, scheduler=dask_cluster["address"])
+    assert bench is not None and bench.prototype.provider_description.startswith("FEM")
+    assert load_cached(key, cache) is not None
+    assert load_cached(key, dask_cluster["worker_cache"]) is not None
+
+
+@pytest.mark.slow
+def test_diagnose_benchmark_cases_on_the_cluster_equal_in_process(dask_cluster, tmp_path):
+    """One tiny-grid case (analytic prototype) through ``--scheduler`` and in this process
+    (``--workers 0``): the same row, bit for bit apart from its wall time."""
+    rows = {}
+    for name, options in (("cluster", ["--scheduler", dask_cluster["address"]]), ("here", ["--workers", "0"])):
+        out = tmp_path / name
+        assert cli.main(["diagnose-benchmark", "--grid", "tiny", "--effects", "drift", "--out", str(out), "-q",
+                         *options]) == 0
+        report = json.loads((out / "report.json").read_text())
+        assert report["failures"] == {} and len(report["rows"]) == 1
+        rows[name] = {k: v for k, v in report["rows"][0].items() if k != "wall_s"}
+        assert len(list((out / "cases").glob("*.json"))) == 1  # the resumable store
+    assert rows["cluster"] == rows["here"]
+    assert "case" in _task_prefixes(dask_cluster["address"])

@@ -1,0 +1,124 @@
+"""One executor for the heavy jobs: independent items run in this process, on a Dask
+``LocalCluster`` of worker processes, or on an existing Dask distributed cluster.
+
+``run_jobs(items, job, on_done, key=...)`` runs ``job(item, **job_options)`` for every
+item and calls ``on_done(item, result)`` in the calling process as each one finishes
+(``as_completed``), so the caller can store it at once (sweep designs, benchmark cases,
+FEM cache entries); an item that raises is returned in the failures, never sinks the
+others.
+
+- ``workers=0``: one after the other in this process (debugging, tiny jobs);
+- ``workers=N``: a ``LocalCluster`` of N single-threaded worker processes;
+- ``scheduler="tcp://host:8786"``: an existing cluster (``workers`` is then ignored).
+  Workers need flexcal installed; for a shared FEM cache, the same cache folder
+  (``$FLEXCAL_CACHE_DIR`` on shared storage).
+
+Used by ``flexcal sweep`` (designs), the virtual prototype's FEM segment builds
+(``truth``, ``verify``, ``compensate``, ``diagnose-benchmark --provider fem``) and
+``diagnose-benchmark`` (cases); docs/scale.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import os
+from typing import Any, Callable, Hashable, Sequence
+
+__all__ = ["run_jobs", "resolve_workers", "where", "add_executor_options", "executor_options", "JobFailures"]
+
+JobFailures = dict  # {item key: "ErrorType: message"}
+
+
+def resolve_workers(workers: int | None, n_items: int) -> int:
+    """Local worker processes to start: ``workers`` as given (0: this process), or by
+    default min(cores, items to compute) (at least 1 when there is an item)."""
+    if workers is None:
+        return max(1, min(os.cpu_count() or 1, n_items)) if n_items else 0
+    if workers < 0:
+        raise ValueError(f"--workers={workers} must be >= 0 (0: run in this process)")
+    return int(workers)
+
+
+def where(workers: int, scheduler: str | None) -> str:
+    """Where the items run, in words (for progress lines)."""
+    if scheduler is not None:
+        return f"the Dask cluster at {scheduler}"
+    return f"{workers} local worker process(es)" if workers else "this process"
+
+
+def add_executor_options(parser: argparse.ArgumentParser, *, what: str) -> None:
+    """``--workers N`` and ``--scheduler ADDRESS`` with the same meaning on every command."""
+    # default 0 (this process): on the 2-core reference machine two local workers were not
+    # faster under load (docs/scale.md); a user opts in with --workers N or --scheduler
+    parser.add_argument("--workers", type=int, metavar="N", default=0,
+                        help=f"local worker processes for {what} (default 0: run in this process; "
+                             "N > 0: N local worker processes)")
+    parser.add_argument("--scheduler", metavar="ADDRESS", default=None,
+                        help=f"address of a Dask scheduler (tcp://host:8786) to run {what} on; "
+                             "default: see --workers)")
+
+
+def executor_options(args: argparse.Namespace) -> dict[str, Any]:
+    """{"workers": ..., "scheduler": ...} of a parsed command line; a command without
+    ``add_executor_options`` runs in its own process (workers 0)."""
+    return {"workers": getattr(args, "workers", 0), "scheduler": getattr(args, "scheduler", None)}
+
+
+def run_jobs(items: Sequence[Any], job: Callable[..., Any], on_done: Callable[[Any, Any], None], *,
+             key: Callable[[Any], Hashable], workers: int, scheduler: str | None = None,
+             job_options: dict[str, Any] | None = None, task_prefix: str = "item") -> JobFailures:
+    """Run ``job(item, **job_options)`` for every item; ``on_done(item, result)`` as each
+    finishes (in this process); returns {key(item): error text} of the items that raised.
+
+    key: a unique, stable name of an item (also the Dask task key); workers: 0 runs in
+    this process, N > 0 on a LocalCluster of N processes (ignored with ``scheduler``).
+    KeyboardInterrupt propagates after the cluster is shut down; finished items have
+    already been handed to ``on_done``.
+    """
+    job_options = dict(job_options or {})
+    failures: JobFailures = {}
+    if not items:
+        return failures
+    if scheduler is None and workers == 0:
+        for item in items:
+            try:
+                result = job(item, **job_options)
+            except Exception as error:  # one bad item must not sink the others
+                failures[key(item)] = f"{type(error).__name__}: {error}"
+                continue
+            on_done(item, result)
+        return failures
+    from dask.distributed import Client, LocalCluster, as_completed
+
+    quiet = logging.getLogger().getEffectiveLevel() > logging.INFO  # Dask's INFO lines only with -v
+    previous_level = logging.getLogger("distributed").level
+    if quiet:
+        logging.getLogger("distributed").setLevel(logging.WARNING)
+    cluster = None
+    try:
+        if scheduler is not None:
+            client = Client(scheduler)
+        else:
+            # no fixed dashboard port: other jobs may run on the same machine
+            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=":0",
+                                   silence_logs=logging.WARNING if quiet else logging.INFO)
+            client = Client(cluster)
+        try:
+            futures = {client.submit(job, item, **job_options, key=f"{task_prefix}-{key(item)}", pure=False): item
+                       for item in items}
+            for future in as_completed(futures):
+                item = futures[future]
+                try:
+                    result = future.result()
+                except Exception as error:
+                    failures[key(item)] = f"{type(error).__name__}: {error}"
+                    continue
+                on_done(item, result)
+        finally:
+            client.close()
+    finally:
+        if cluster is not None:
+            cluster.close()
+        logging.getLogger("distributed").setLevel(previous_level)
+    return failures
