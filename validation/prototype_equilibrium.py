@@ -62,9 +62,7 @@ class SolverSettings:
     offsets' fixed point stops when no offset moves more than this; load_tolerance [N]: and,
     with load-dependent effects, when no chain's axial load moves more than this (10x the
     force tolerance: the Newton solution's own load noise; 1e-4 N of 3 kN changes a
-    load-dependent stiffness by ~3e-8 of itself); max_offset_iterations: 200, since a point at a
-    clearance wall contracts slowly once damped (74 iterations on a designed trajectory of table1
-    seed 1; most points take 3-5, so the cap costs nothing elsewhere);
+    load-dependent stiffness by ~3e-8 of itself); max_offset_iterations;
     step [m or rad]: central-difference step of the tangent.
     """
 
@@ -73,7 +71,7 @@ class SolverSettings:
     max_iterations: int = 40
     offset_tolerance: float = 1e-12
     load_tolerance: float = 1e-4
-    max_offset_iterations: int = 200
+    max_offset_iterations: int = 30
     step: float = DEFAULT_STEP
 
     def __post_init__(self) -> None:
