@@ -34,7 +34,7 @@ def test_error_keeps_previous_results_whole(tmp_path, error):
     with staged_output(out) as staging:
         write_json(staging / "report.json", {"run": 1})
     with pytest.raises(type(error)):
-        with staged_output(out) as staging:
+        with staged_output(out, replace=True) as staging:
             write_json(staging / "report.json", {"run": 2})
             raise error
     assert json.loads((out / "report.json").read_text()) == {"run": 1}
@@ -46,7 +46,7 @@ def test_success_moves_files_and_replaces_old_ones(tmp_path):
     out.mkdir()
     (out / "keep.txt").write_text("old run, other file")
     (out / "report.json").write_text("old")
-    with staged_output(out) as staging:
+    with staged_output(out, resume=True) as staging:
         write_json(staging / "report.json", {"v": np.float64(2.5), "m": np.eye(2)})
         (staging / "sub").mkdir()
         write_text(staging / "sub" / "t.md", "# hi\n")
@@ -99,7 +99,7 @@ def test_ctrl_c_during_the_moves_is_raised_after_them(tmp_path, monkeypatch):
         os.kill(os.getpid(), signal.SIGINT)
 
     with pytest.raises(KeyboardInterrupt):
-        with staged_output(out) as staging:
+        with staged_output(out, replace=True) as staging:
             for name in ("a.txt", "b.txt"):
                 (staging / name).write_text("new")
             monkeypatch.setattr(os, "replace", replace_then_interrupt)

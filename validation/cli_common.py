@@ -97,6 +97,10 @@ def install_common_options(parser: argparse.ArgumentParser, module) -> None:
         group.add_argument("--json", action="store_true",
                            help="print only a JSON summary of DIR/report.json on stdout")
         central.add("json")
+    if "--out" in parser._option_string_actions and not getattr(module, "RESUMES_OUT", False):
+        _add_if_free(group, ["--force"], dest="force", action="store_true",
+                     help="--out may hold an earlier run: its files are replaced (removed when the new "
+                          "results move in); without it such a folder is refused")
     defaults = getattr(module, "DEFAULT_CONFIG", None)
     if defaults is not None:
         from .config import check_default_config
@@ -109,7 +113,7 @@ def install_common_options(parser: argparse.ArgumentParser, module) -> None:
                            help="print the effective configuration as TOML and exit")
         _set_option_defaults(parser, defaults)
     parser.set_defaults(_central=frozenset(central), config=dict(defaults or {}))
-    for attr, value in (("verbose", 0), ("quiet", False), ("debug", False)):
+    for attr, value in (("verbose", 0), ("quiet", False), ("debug", False), ("force", False)):
         if attr not in {a.dest for a in parser._actions}:
             parser.set_defaults(**{attr: value})
 

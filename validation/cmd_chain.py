@@ -66,7 +66,8 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError(f"--elements-through={args.elements_through} must be > 0")
     chain, params = build_chain(args)  # validates before any CAD or meshing
     result, data = run_comparison(compare_chain, chain, params, args.out,
-                                  elements_through_thickness=args.elements_through, progress=show_progress(args))
+                                  elements_through_thickness=args.elements_through, progress=show_progress(args),
+                                  replace=args.force)
     print(f"flexcal chain: largest diagonal compliance difference FEM vs Eq. 1 "
           f"{data['max_abs_percent_difference_diagonal']:.1f} %; {data['mesh']['n_dof']} DOF, "
           f"{sum(result.timings.values()):.1f} s; wrote {args.out}/report.json, report.md, chain.vtu, chain.png")

@@ -24,6 +24,9 @@ import time
 
 __all__ = ["configure", "run", "EXAMPLES"]
 
+# --out holds the finished designs of an earlier run, which a rerun resumes (no --force)
+RESUMES_OUT = True
+
 EXAMPLES = ("flexcal diagnose-benchmark --out runs/bench",
             "flexcal diagnose-benchmark --grid full --provider fem --out runs/bench-full")
 
@@ -207,7 +210,7 @@ def run(args: argparse.Namespace) -> int:
               "noise_urad": args.noise_urad, "cycles": args.cycles,
               "out_of_library": list(OUT_OF_LIBRARY_IDS), "rows": rows, "failures": failures, "summary": summary,
               "note": "answers.json holds what was injected; the diagnosis only received the measurement"}
-    with staged_output(args.out) as staging:
+    with staged_output(args.out, resume=True) as staging:
         write_json(staging / "answers.json", answers)
         write_json(staging / "report.json", report)
         (staging / "report.md").write_text(_markdown(report))

@@ -65,7 +65,8 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError(f"--elements-through={args.elements_through} must be > 0")
     hinge, params = build_hinge(args)  # validates before any CAD or meshing
     result, data = run_comparison(compare_hinge, hinge, params, args.out,
-                                  elements_through_thickness=args.elements_through, progress=show_progress(args))
+                                  elements_through_thickness=args.elements_through, progress=show_progress(args),
+                                  replace=args.force)
     c_fem, c_ana = result.compliance_fem[5, 5], result.compliance_analytic[5, 5]
     print(f"flexcal hinge: C_rz,Mz FEM {c_fem:.6g} rad/(N m), closed form {c_ana:.6g} "
           f"({100 * (c_fem - c_ana) / c_ana:+.2f} %); largest diagonal difference "
