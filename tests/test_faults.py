@@ -351,3 +351,19 @@ def _no_litter():
     before = set(os.listdir("."))
     yield
     assert "__tracked_surface.stl" not in set(os.listdir(".")) - before
+
+
+@pytest.mark.slow
+def test_finished_fem_segments_stay_cached_after_an_interrupt(tmp_path):
+    # cold cache: the FEM truth builds its chain segments one by one; stop it after the
+    # first one is reported, then every cache file must be whole and readable
+    from flexcal.fem.cache import load_cached
+
+    cache = tmp_path / "cache"
+    status, lines, work = _interrupt_at(["truth", "--scenario", "table1", "--seed", "3"], tmp_path, "FEM segment",
+                                        signal.SIGINT, env={"FLEXCAL_CACHE_DIR": str(cache)})
+    assert status == 130 and "interrupted" in lines[-1], lines
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cache", "work"]  # no out, no staging folder
+    files = sorted(cache.iterdir())
+    assert files and all(p.suffix == ".npz" for p in files), files  # no temporaries left
+    assert all(load_cached(p.stem, cache) is not None for p in files)

@@ -191,7 +191,7 @@ def run(args: argparse.Namespace) -> int:
             raise ValueError(f"--effects: unknown id(s) {unknown}; known: {', '.join(LIBRARY)}, none")
     progress = show_progress(args)
     log = (lambda text: print(text, file=sys.stderr)) if progress else (lambda text: None)
-    store = DesignStore(out_folder(args.out) / "cases")
+    store = DesignStore(out_folder(args.out, resume=True) / "cases")
     provider = stiffness_provider(args.provider, progress=progress)
     try:
         rows, answers, failures = run_benchmark(
