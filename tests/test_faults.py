@@ -367,3 +367,11 @@ def test_finished_fem_segments_stay_cached_after_an_interrupt(tmp_path):
     files = sorted(cache.iterdir())
     assert files and all(p.suffix == ".npz" for p in files), files  # no temporaries left
     assert all(load_cached(p.stem, cache) is not None for p in files)
+
+
+def test_force_never_empties_the_working_directory(tmp_path, monkeypatch, capsys):
+    (tmp_path / "my-notes.txt").write_text("keep")
+    monkeypatch.chdir(tmp_path)
+    status = cli.main([*TRUTH, "--out", ".", "-q", "--force"])
+    _one_line(capsys, status, 2, "--force would empty", "folder of its own")
+    assert [p.name for p in tmp_path.iterdir()] == ["my-notes.txt"]

@@ -115,6 +115,11 @@ def out_folder(out_dir: str | os.PathLike, *, replace: bool = False, resume: boo
         raise ValueError(f"--out {out} exists and is not a folder; give a folder name")
     if out.is_dir():
         _probe_writable(out, str(out))
+        resolved = out.resolve()
+        if replace and (resolved == Path.home().resolve() or resolved == Path(resolved.anchor)
+                        or Path.cwd().resolve().is_relative_to(resolved)):
+            raise ValueError(f"--out {out} with --force would empty {resolved} (the home folder, the file-system root "
+                             f"or a folder holding the working directory); give a folder of its own")
         held = _visible_entries(out)
         if held and not (replace or resume):
             shown = ", ".join(held[:4]) + (f" and {len(held) - 4} more" if len(held) > 4 else "")
