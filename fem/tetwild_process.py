@@ -9,8 +9,9 @@ handlers untouched and lets the parent stop at once: on ``KeyboardInterrupt`` (o
 other exception) while it waits, it kills the child and re-raises. The child also runs in
 a fresh temporary folder, where fTetWild writes its ``__tracked_surface.stl``.
 
-The price is one interpreter start and the pytetwild import per mesh (~0.5 s on the
-development machine), small against the seconds to minutes a mesh takes.
+The price is one interpreter start and the pytetwild import per mesh (0.5-0.6 s on the
+idle development machine, a few seconds when it is heavily loaded), small against the
+seconds to minutes a mesh and its solve take.
 
 ``python -m flexcal.fem.tetwild_process IN.npz OUT.npz`` is the child's side: it reads
 the arrays and keyword arguments of ``pytetwild.tetrahedralize`` from IN.npz and writes
