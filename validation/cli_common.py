@@ -31,8 +31,8 @@ from typing import Any, Callable, Iterable
 import numpy as np
 
 __all__ = ["add_out", "add_seed", "add_scenario", "install_common_options", "apply_config", "print_config",
-           "summary_of", "show_progress", "progress_bar", "progress_iter", "LineProgress", "with_progress", "error_line", "is_user_error",
-           "configure_logging", "TIMING_KEYS", "without_timings", "examples_epilog"]
+           "summary_of", "show_progress", "progress_bar", "progress_iter", "LineProgress", "with_progress",
+           "error_line", "is_user_error", "configure_logging", "TIMING_KEYS", "without_timings", "examples_epilog"]
 
 # report.json keys that hold wall-clock times: they differ between two runs with the same
 # seed, everything else must be byte-identical (tests/test_cli_common.py)

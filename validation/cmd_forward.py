@@ -114,7 +114,8 @@ def print_point(report: dict, title: str) -> None:
           f"S3 mixed, no clearance)")
 
 
-def write_point(out: str, report: dict, title: str, extra_lines: tuple[str, ...] = (), *, replace: bool = False) -> None:
+def write_point(out: str, report: dict, title: str, extra_lines: tuple[str, ...] = (), *,
+                replace: bool = False) -> None:
     """DIR/report.json (``report``) and DIR/report.md (the text output), whole or not at all
     (``replace``: --force, see ``output.staged_output``)."""
     import contextlib
