@@ -129,6 +129,12 @@ def test_hinge_interrupted_while_meshing(tmp_path, signum):
     _assert_stopped_cleanly(status, lines, tmp_path, work, signum)
 
 
+def test_hinge_terminated_while_rendering(tmp_path):
+    # VTK renders the pictures off-screen inside the staging step; SIGTERM there removes the staging folder
+    status, lines, work = _interrupt_at(HINGE, tmp_path, "VTU, pictures", signal.SIGTERM, delay_s=0.2)
+    _assert_stopped_cleanly(status, lines, tmp_path, work, signal.SIGTERM)
+
+
 @pytest.mark.slow
 def test_hinge_interrupted_while_solving_then_rerun(tmp_path):
     status, lines, work = _interrupt_at(HINGE, tmp_path, "FEM solve", signal.SIGINT, delay_s=0.5)
