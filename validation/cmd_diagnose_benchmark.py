@@ -94,8 +94,7 @@ def run_benchmark(ids, grid, provider, *, noise_urad, cycles, seed, progress, sc
     error text} of the cases that raised (one bad case must not sink a two-hour grid)."""
     from functools import partial
 
-    from tqdm import tqdm
-
+    from .cli_common import progress_iter
     from .diagnose import run_diagnosis
     from .diagnose_baseline import calibrate_baseline
     from .diagnose_benchmark import benchmark_measurement, run_case
@@ -103,8 +102,8 @@ def run_benchmark(ids, grid, provider, *, noise_urad, cycles, seed, progress, sc
 
     log = log or (lambda text: None)
     rows, answers, failures = [], [], {}
-    for effect_id, magnitude, case_seed in tqdm(grid_cases(ids, grid), desc="diagnose-benchmark", unit="case",
-                                                disable=None if progress else True):
+    for effect_id, magnitude, case_seed in progress_iter(grid_cases(ids, grid), "diagnose-benchmark", unit="case",
+                                                         enabled=progress):
         spec = case_spec(effect_id, magnitude, case_seed, provider_name=provider_name, noise_urad=noise_urad,
                          cycles=cycles, seed=seed, scenario_seed=scenario_seed)
         identifier = design_id(spec)
