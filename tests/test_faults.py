@@ -381,3 +381,21 @@ def test_force_never_empties_the_working_directory(tmp_path, monkeypatch, capsys
     status = cli.main([*TRUTH, "--out", ".", "-q", "--force"])
     _one_line(capsys, status, 2, "--force would empty", "folder of its own")
     assert [p.name for p in tmp_path.iterdir()] == ["my-notes.txt"]
+
+
+def test_an_error_caused_by_ctrl_c_counts_as_the_interrupt(tmp_path, capsys, monkeypatch):
+    # Ctrl-C while an extension module initialises surfaces as ImportError('initialization
+    # failed') raised from the KeyboardInterrupt (seen when truth was stopped while importing
+    # its plotting modules): still exit 130 and the interrupt line, not 'internal error'
+    from flexcal.validation import cmd_truth
+
+    def interrupted_import(*args, **kwargs):
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt as interrupt:
+            raise ImportError("initialization failed") from interrupt
+
+    monkeypatch.setattr(cmd_truth, "stiffness_provider", interrupted_import)
+    status = cli.main([*TRUTH, "--out", str(tmp_path / "out")])
+    _one_line(capsys, status, 130, "interrupted")
+    assert list(tmp_path.iterdir()) == []

@@ -117,21 +117,30 @@ def main(argv: list[str] | None = None) -> int:
             os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error at exit
         return 0
     except KeyboardInterrupt as interrupt:  # Ctrl-C, or SIGTERM (signals.Terminated)
-        from .signals import Terminated, exit_status
-
-        if debug:
-            traceback.print_exc()
-        kept = "; finished designs are kept in --out and a rerun resumes" if command == "sweep" else "; nothing was written to --out"
-        what = "terminated (SIGTERM)" if isinstance(interrupt, Terminated) else "interrupted"
-        print(f"flexcal {command}: {what}{kept}", file=sys.stderr)
-        return exit_status(interrupt)
+        return _interrupted(command, interrupt, debug)
     except Exception as error:  # noqa: BLE001 - the one place that turns errors into exit codes
         from .cli_common import error_line, is_user_error
+        from .signals import interrupt_behind
 
+        interrupt = interrupt_behind(error)  # e.g. ImportError('initialization failed') from Ctrl-C
+        if interrupt is not None:
+            return _interrupted(command, interrupt, debug)
         if debug:
             traceback.print_exc()
         print(error_line(command or "", error), file=sys.stderr)
         return 2 if is_user_error(error) else 1
+
+
+def _interrupted(command: str | None, interrupt: KeyboardInterrupt, debug: bool) -> int:
+    """One line for Ctrl-C / SIGTERM; the exit status 130 / 143."""
+    from .signals import Terminated, exit_status
+
+    if debug:
+        traceback.print_exc()
+    kept = "; finished designs are kept in --out and a rerun resumes" if command == "sweep" else "; nothing was written to --out"
+    what = "terminated (SIGTERM)" if isinstance(interrupt, Terminated) else "interrupted"
+    print(f"flexcal {command}: {what}{kept}", file=sys.stderr)
+    return exit_status(interrupt)
 
 
 def _main(argv: list[str], command: str | None) -> int:
