@@ -104,7 +104,7 @@ def _assert_stopped_cleanly(status, lines, tmp_path, work, signum):
 
 
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
-@pytest.mark.parametrize("stage, delay_s", [("prototype: started", 0.0), ("prototype: started", 0.7)],
+@pytest.mark.parametrize("stage, delay_s", [("prototype: started", 0.0), ("prototype: started", 0.3)],
                          ids=["first-point", "mid-points"])
 def test_truth_interrupted_leaves_nothing_and_reruns(tmp_path, signum, stage, delay_s):
     status, lines, work = _interrupt_at(TRUTH, tmp_path, stage, signum, delay_s=delay_s)
