@@ -14,13 +14,9 @@ every corner tet with positive volume. See docs/meshing.md for the measured accu
 
 from __future__ import annotations
 
-import contextlib
-import os
-import tempfile
-import threading
 import time
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Iterator
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -100,24 +96,6 @@ class MeshReport:
 # pytetwild
 
 
-_TETWILD_LOCK = threading.Lock()
-
-
-@contextlib.contextmanager
-def _inside_temporary_directory() -> Iterator[str]:
-    """chdir into a fresh temporary folder (fTetWild writes __tracked_surface.stl and
-    friends into the working directory), restore the old cwd and delete the folder after.
-    Serialised by a lock: the working directory is process-wide."""
-    with _TETWILD_LOCK:
-        previous = os.getcwd()
-        with tempfile.TemporaryDirectory(prefix="flexcal-tetwild-") as folder:
-            os.chdir(folder)
-            try:
-                yield folder
-            finally:
-                os.chdir(previous)
-
-
 def _surface_triangles(part: "Part", tolerance: float, angular_tolerance: float) -> tuple[np.ndarray, np.ndarray]:
     """Triangulation of the CAD solid (absolute chord tolerance [m], angular tolerance
     [rad]) with the vertices that faces share merged: vertices (n, 3) [m], triangles
@@ -161,14 +139,14 @@ def _surface_triangles(part: "Part", tolerance: float, angular_tolerance: float)
 def _tetrahedralize(vertices: np.ndarray, faces: np.ndarray, *, edge_length: float, epsilon: float,
                     background: tuple[np.ndarray, np.ndarray, np.ndarray], num_threads: int,
                     options: dict[str, Any]) -> tuple[np.ndarray, np.ndarray]:
-    import pytetwild
+    from .tetwild_process import tetrahedralize_in_child
 
     bg_points, bg_tets, bg_values = background
-    with _inside_temporary_directory():
-        nodes, tets = pytetwild.tetrahedralize(
-            vertices, faces, edge_length_abs=edge_length, epsilon=epsilon, vtk_ordering=True,
-            optimize=True, num_threads=num_threads, quiet=True,
-            bg_vertices=bg_points, bg_tets=bg_tets, bg_values=bg_values, **options)
+    # in a child process: pytetwild resets the SIGINT handler (Ctrl-C would kill us silently)
+    nodes, tets = tetrahedralize_in_child(
+        vertices, faces, edge_length_abs=edge_length, epsilon=epsilon, vtk_ordering=True,
+        optimize=True, num_threads=num_threads, quiet=True,
+        bg_vertices=bg_points, bg_tets=bg_tets, bg_values=bg_values, **options)
     nodes = np.asarray(nodes, dtype=float)
     tets = np.asarray(tets, dtype=np.int64)
     if len(tets) == 0:

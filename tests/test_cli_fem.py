@@ -73,6 +73,12 @@ def test_hinge_mesher_failure_exits_2_without_output(tmp_path, capsys, monkeypat
             "--mesher", "tetwild", "--out", str(out)]
     assert cli.main(args) == 2
     err = capsys.readouterr().err
+    # off a terminal the stages before the failure are logged (docs/cli.md); the error is the last line
+    assert err.strip().splitlines()[-1].startswith("flexcal hinge: error:") and "Traceback" not in err
+    assert "no tets" in err.strip().splitlines()[-1]
+    assert not out.exists()
+    assert cli.main([*args, "-q"]) == 2
+    err = capsys.readouterr().err
     assert err.count("\n") == 1 and "no tets" in err and "Traceback" not in err
     assert not out.exists()
 

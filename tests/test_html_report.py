@@ -38,14 +38,15 @@ def test_page_is_self_contained_and_complete(run_folder):
     assert "<title>Hinge check</title>" in page
     assert "<table>" in page and "<td>1</td>" in page               # the markdown table
     assert 'src="fit.png"' not in page                              # markdown image embedded ...
-    assert page.count("data:image/png;base64,") == 3                # ... plus both PNGs in the gallery
+    assert page.count("data:image/png;base64,") == 2                # ... and only the other PNG in the gallery
+    assert page.count('alt="fit.png"') == 0 and page.count('alt="extra.png"') == 1  # each picture once
     assert base64.b64encode(PNG).decode() in page
     assert not re.search(r"<script|<link|src=\"https?:|url\(", page)  # nothing fetched from elsewhere
     assert "0.0123457" in page                                      # scalars at 6 significant digits
     assert "D1.CL" in page and "0.83" in page                       # records as a table
     assert "mesh.quality" in page or "quality" in page              # nested tables
     assert "100 values" in page                                     # long vectors folded
-    assert '<a href="hinge.vtu">hinge.vtu</a>' in page              # other files listed
+    assert '<a href="./hinge.vtu">hinge.vtu</a>' in page            # other files listed
 
 
 def test_same_folder_same_bytes(run_folder):

@@ -244,20 +244,6 @@ def test_snap_without_projection_keeps_the_nodes():
 # pytetwild
 
 
-def test_temporary_directory_is_restored_and_removed(tmp_path, monkeypatch):
-    from flexcal.fem.mesh import _inside_temporary_directory
-
-    monkeypatch.chdir(tmp_path)
-    with pytest.raises(RuntimeError):
-        with _inside_temporary_directory() as folder:
-            assert Path(os.getcwd()).resolve() == Path(folder).resolve()
-            Path("__tracked_surface.stl").write_text("x")
-            raise RuntimeError("boom")
-    assert Path(os.getcwd()).resolve() == tmp_path.resolve()
-    assert not Path(folder).exists()
-    assert list(tmp_path.iterdir()) == []
-
-
 @pytest.fixture(scope="module")
 def coarse_notch(tmp_path_factory):
     pytest.importorskip("pytetwild")

@@ -34,7 +34,7 @@ def test_error_keeps_previous_results_whole(tmp_path, error):
     with staged_output(out) as staging:
         write_json(staging / "report.json", {"run": 1})
     with pytest.raises(type(error)):
-        with staged_output(out) as staging:
+        with staged_output(out, replace=True) as staging:
             write_json(staging / "report.json", {"run": 2})
             raise error
     assert json.loads((out / "report.json").read_text()) == {"run": 1}
@@ -46,7 +46,7 @@ def test_success_moves_files_and_replaces_old_ones(tmp_path):
     out.mkdir()
     (out / "keep.txt").write_text("old run, other file")
     (out / "report.json").write_text("old")
-    with staged_output(out) as staging:
+    with staged_output(out, resume=True) as staging:
         write_json(staging / "report.json", {"v": np.float64(2.5), "m": np.eye(2)})
         (staging / "sub").mkdir()
         write_text(staging / "sub" / "t.md", "# hi\n")
@@ -88,7 +88,16 @@ def test_write_text_fsync_round_trips(tmp_path):
     assert _everything(tmp_path) == ["a.txt"]
 
 
-def test_ctrl_c_during_the_moves_is_raised_after_them(tmp_path, monkeypatch):
+@pytest.fixture
+def ctrl_c_raises():
+    """SIGINT as KeyboardInterrupt for the test (pytest started in the background by a
+    non-interactive shell inherits SIGINT ignored, and an ignored signal stays ignored)."""
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, previous)
+
+
+def test_ctrl_c_during_the_moves_is_raised_after_them(tmp_path, monkeypatch, ctrl_c_raises):
     out = tmp_path / "out"
     out.mkdir()
     (out / "a.txt").write_text("old")
@@ -99,7 +108,7 @@ def test_ctrl_c_during_the_moves_is_raised_after_them(tmp_path, monkeypatch):
         os.kill(os.getpid(), signal.SIGINT)
 
     with pytest.raises(KeyboardInterrupt):
-        with staged_output(out) as staging:
+        with staged_output(out, replace=True) as staging:
             for name in ("a.txt", "b.txt"):
                 (staging / name).write_text("new")
             monkeypatch.setattr(os, "replace", replace_then_interrupt)
@@ -108,12 +117,24 @@ def test_ctrl_c_during_the_moves_is_raised_after_them(tmp_path, monkeypatch):
     assert _everything(tmp_path) == ["out", "out/a.txt", "out/b.txt"]
 
 
-def test_interrupts_deferred_without_signal_is_transparent():
-    # the handler before the block is restored (Python's default in a terminal, SIG_IGN when
-    # the run was started in the background by a non-interactive shell)
+def test_interrupts_deferred_without_signal_is_transparent(ctrl_c_raises):
+    # the handler before the block is restored
     before = signal.getsignal(signal.SIGINT)
     with interrupts_deferred():
         value = 1
         assert signal.getsignal(signal.SIGINT) is not before  # held back inside the block
     assert value == 1
     assert signal.getsignal(signal.SIGINT) is before
+
+
+def test_an_ignored_ctrl_c_stays_ignored():
+    # a run started in the background by a non-interactive shell has SIGINT ignored: the
+    # deferral must neither install a handler nor turn that signal into KeyboardInterrupt
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        with interrupts_deferred():
+            assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+            os.kill(os.getpid(), signal.SIGINT)
+        assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+    finally:
+        signal.signal(signal.SIGINT, previous)

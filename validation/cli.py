@@ -10,7 +10,8 @@ for another's heavy imports (CadQuery, pyvista). The options every command share
 (``flexcal.validation.cli_common``; the convention: docs/cli.md).
 
 Errors about the input (``ValueError``, ``OSError``, a solver or mesher that fails,
-a bad option) print one line on stderr and exit with status 2; Ctrl-C exits 130; a bug
+a bad option) print one line on stderr and exit with status 2; Ctrl-C exits 130, SIGTERM
+143 (one line; staging folders removed: ``flexcal.validation.signals``); a bug
 prints one line and exits 1; ``--debug`` adds the traceback. Commands write their outputs
 only after the work succeeded (``flexcal.validation.output``), so a failed or
 interrupted run leaves nothing partial.
@@ -22,7 +23,6 @@ import argparse
 import contextlib
 import importlib
 import importlib.util
-import json
 import os
 import re
 import sys
@@ -120,31 +120,47 @@ def main(argv: list[str] | None = None) -> int:
         print(f"flexcal: error: unknown command {command!r}; 'flexcal --help' lists them", file=sys.stderr)
         return 2
     debug = "--debug" in argv
+    from .signals import termination_raises
+
     try:
-        return _main(argv, command)
+        with termination_raises():
+            return _main(argv, command)
     except SystemExit as stop:  # argparse: --help (0) or a usage error (2)
         return stop.code if isinstance(stop.code, int) else 2
     except BrokenPipeError:  # stdout closed early ('flexcal ... | head'): the reader wanted no more
         with contextlib.suppress(OSError, ValueError, AttributeError):
             os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error at exit
         return 0
-    except KeyboardInterrupt:
-        if debug:
-            traceback.print_exc()
-        kept = "; finished designs are kept in --out and a rerun resumes" if command == "sweep" else "; nothing was written to --out"
-        print(f"flexcal {command}: interrupted{kept}", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as interrupt:  # Ctrl-C, or SIGTERM (signals.Terminated)
+        return _interrupted(command, interrupt, debug)
     except Exception as error:  # noqa: BLE001 - the one place that turns errors into exit codes
         from .cli_common import error_line, is_user_error
+        from .signals import interrupt_behind
 
+        interrupt = interrupt_behind(error)  # e.g. ImportError('initialization failed') from Ctrl-C
+        if interrupt is not None:
+            return _interrupted(command, interrupt, debug)
         if debug:
             traceback.print_exc()
         print(error_line(command or "", error), file=sys.stderr)
         return 2 if is_user_error(error) else 1
 
 
+def _interrupted(command: str | None, interrupt: KeyboardInterrupt, debug: bool) -> int:
+    """One line for Ctrl-C / SIGTERM; the exit status 130 / 143."""
+    from .signals import Terminated, exit_status
+
+    if debug:
+        traceback.print_exc()
+    kept = "; finished designs are kept in --out and a rerun resumes" if command == "sweep" else "; nothing was written to --out"
+    what = "terminated (SIGTERM)" if isinstance(interrupt, Terminated) else "interrupted"
+    print(f"flexcal {command}: {what}{kept}", file=sys.stderr)
+    return exit_status(interrupt)
+
+
 def _main(argv: list[str], command: str | None) -> int:
     from .cli_common import apply_config, configure_logging, effective_config, print_config, summary_of
+    from .output import dumps_strict
 
     parser = build_parser(only=command)
     if command is None:
@@ -161,6 +177,11 @@ def _main(argv: list[str], command: str | None) -> int:
     if merged is not None:
         args.config = effective_config(command_parser, args, merged)
     configure_logging(args.verbose, args.quiet)
+    if getattr(args, "out", None):
+        from .output import out_folder
+
+        # one check of --out before any computation (writable; not another run's folder without --force)
+        out_folder(args.out, replace=getattr(args, "force", False), resume=getattr(module, "RESUMES_OUT", False))
     central_json = "json" in args._central and args.json
     with contextlib.ExitStack() as stack:
         if central_json or args.quiet:
@@ -168,7 +189,7 @@ def _main(argv: list[str], command: str | None) -> int:
             stack.enter_context(contextlib.redirect_stdout(devnull))
         status = int(module.run(args) or 0)
     if central_json and status == 0 and args.out:
-        print(json.dumps(summary_of(args.out), sort_keys=True))
+        print(dumps_strict(summary_of(args.out), sort_keys=True))
     return status
 
 

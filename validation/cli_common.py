@@ -24,14 +24,15 @@ import argparse
 import json
 import logging
 import sys
+import time
 from pathlib import Path
 from typing import Any, Callable, Iterable
 
 import numpy as np
 
 __all__ = ["add_out", "add_seed", "add_scenario", "install_common_options", "apply_config", "print_config",
-           "summary_of", "show_progress", "progress_bar", "with_progress", "error_line", "is_user_error",
-           "configure_logging", "TIMING_KEYS", "without_timings", "examples_epilog"]
+           "summary_of", "show_progress", "progress_bar", "progress_iter", "LineProgress", "with_progress",
+           "error_line", "is_user_error", "configure_logging", "TIMING_KEYS", "without_timings", "examples_epilog"]
 
 # report.json keys that hold wall-clock times: they differ between two runs with the same
 # seed, everything else must be byte-identical (tests/test_cli_common.py)
@@ -114,6 +115,10 @@ def install_common_options(parser: argparse.ArgumentParser, module) -> None:
         group.add_argument("--json", action="store_true",
                            help="print only a JSON summary of DIR/report.json on stdout")
         central.add("json")
+    if "--out" in parser._option_string_actions and not getattr(module, "RESUMES_OUT", False):
+        _add_if_free(group, ["--force"], dest="force", action="store_true",
+                     help="--out may hold an earlier run: its files are replaced (removed when the new "
+                          "results move in); without it such a folder is refused")
     defaults = getattr(module, "DEFAULT_CONFIG", None)
     if defaults is not None:
         from .config import check_default_config
@@ -126,7 +131,7 @@ def install_common_options(parser: argparse.ArgumentParser, module) -> None:
                            help="print the effective configuration as TOML and exit")
         _set_option_defaults(parser, defaults)
     parser.set_defaults(_central=frozenset(central), config=dict(defaults or {}))
-    for attr, value in (("verbose", 0), ("quiet", False), ("debug", False)):
+    for attr, value in (("verbose", 0), ("quiet", False), ("debug", False), ("force", False)):
         if attr not in {a.dest for a in parser._actions}:
             parser.set_defaults(**{attr: value})
 
@@ -230,13 +235,87 @@ def show_progress(args: argparse.Namespace) -> bool:
     return not getattr(args, "quiet", False)
 
 
+_STARTED = time.monotonic()  # the command's start (this module loads first): elapsed times in log lines
+LINE_INTERVAL_S = 30.0  # off a terminal, a running count is logged at most this often
+
+
+class LineProgress:
+    """Progress for logs (stderr not a terminal: CI, nohup, a pipe): one line when a bar
+    starts, when its stage changes (``set_description``), at most every
+    ``LINE_INTERVAL_S`` while it counts, and when it ends, each with the time since the
+    command started. The part of tqdm's interface flexcal uses (``update``,
+    ``set_description``, ``close``, iteration, ``with``)."""
+
+    def __init__(self, iterable=None, *, total: int | None = None, desc: str = "", unit: str = "it", stream=None):
+        self.iterable, self.total, self.desc, self.unit = iterable, total, desc, unit
+        if total is None and iterable is not None and hasattr(iterable, "__len__"):
+            self.total = len(iterable)
+        self.n, self._stream = 0, stream
+        self._started = self._last_line = self._stage_started = time.monotonic()
+        self._closed = False
+        self._line(f"{desc}: started" + (f", {self.total} {unit}" if self.total else ""))
+
+    def _line(self, text: str) -> None:
+        stream = self._stream or sys.stderr
+        print(f"[{time.monotonic() - _STARTED:8.1f} s] {text}", file=stream, flush=True)
+        self._last_line = time.monotonic()
+
+    def _count(self) -> str:
+        return f"{self.n}/{self.total} {self.unit}" if self.total else f"{self.n} {self.unit}"
+
+    def update(self, n: int = 1) -> None:
+        self.n += n
+        if time.monotonic() - self._last_line >= LINE_INTERVAL_S:
+            self._line(f"{self.desc}: {self._count()}")
+
+    def set_description(self, desc: str, refresh: bool = True) -> None:
+        now = time.monotonic()
+        self._line(f"{desc} (previous stage {self.desc}: {now - self._stage_started:.1f} s)")
+        self.desc, self._stage_started = desc, now
+
+    def close(self) -> None:
+        if not self._closed:
+            self._closed = True
+            self._line(f"{self.desc}: done, {self._count()} in {time.monotonic() - self._started:.1f} s")
+
+    def __iter__(self):
+        for item in self.iterable:
+            yield item
+            self.update(1)
+        self.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc) -> None:
+        if exc[0] is None:
+            self.close()
+
+
+def _stderr_is_terminal() -> bool:
+    try:
+        return sys.stderr.isatty()
+    except (AttributeError, ValueError):
+        return False
+
+
 def progress_bar(total: int | None, desc: str, *, enabled: bool = True, unit: str = "it"):
-    """A tqdm bar on stderr; hidden with ``enabled=False`` and whenever stderr is not a
-    terminal (``disable=None``)."""
+    """A tqdm bar on stderr when stderr is a terminal; off a terminal one log line per
+    stage with the elapsed time (``LineProgress``); nothing with ``enabled=False``."""
     from tqdm import tqdm
 
-    return tqdm(total=total, desc=desc, unit=unit, disable=None if enabled else True, leave=False,
-                dynamic_ncols=True)
+    if enabled and not _stderr_is_terminal():
+        return LineProgress(total=total, desc=desc, unit=unit)
+    return tqdm(total=total, desc=desc, unit=unit, disable=not enabled, leave=False, dynamic_ncols=True)
+
+
+def progress_iter(iterable, desc: str, *, enabled: bool = True, unit: str = "it", total: int | None = None):
+    """``iterable`` with progress shown as ``progress_bar`` shows it."""
+    from tqdm import tqdm
+
+    if enabled and not _stderr_is_terminal():
+        return LineProgress(iterable, total=total, desc=desc, unit=unit)
+    return tqdm(iterable, total=total, desc=desc, unit=unit, disable=not enabled, leave=False, dynamic_ncols=True)
 
 
 def stage_advancer(bar) -> Callable[[str], None]:

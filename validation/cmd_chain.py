@@ -72,7 +72,7 @@ def run(args: argparse.Namespace) -> int:
     chain, params = build_chain(args)  # validates before any CAD or meshing
     result, data = run_comparison(compare_chain, chain, params, args.out,
                                   elements_through_thickness=args.elements_through, progress=show_progress(args),
-                                  cache=True)
+                                  cache=True, replace=args.force)
     print(f"flexcal chain: largest diagonal compliance difference FEM vs Eq. 1 "
           f"{data['max_abs_percent_difference_diagonal']:.1f} %; {data['mesh']['n_dof']} DOF, "
           f"{sum(result.timings.values()):.1f} s; wrote {args.out}/report.json, report.md, chain.vtu, chain.png")

@@ -142,7 +142,7 @@ def run(args: argparse.Namespace) -> int:
                           "calibration_seed": args.calibration_seed, "model_stiffness": args.model_stiffness,
                           "second_order": args.second_order}
     ideal = ideal_angles(measurement.inputs, space)
-    with staged_output(args.out) as staging:
+    with staged_output(args.out, replace=args.force) as staging:
         write_json(staging / "report.json", report)
         (staging / "report.md").write_text(report_markdown(report))
         write_targets(staging / "targets.csv", targets)

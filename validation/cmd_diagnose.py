@@ -111,7 +111,7 @@ def run(args: argparse.Namespace) -> int:
     report = diagnosis.report
     report["baseline"]["model_stiffness"] = args.model_stiffness
     report["baseline"]["second_order"] = bool(args.second_order)
-    with staged_output(args.out) as staging:
+    with staged_output(args.out, replace=args.force) as staging:
         write_json(staging / "report.json", report)
         (staging / "report.md").write_text(markdown(report))
         plot_residual(staging / "residual.png", diagnosis, measurement.leg)

@@ -27,6 +27,9 @@ import time
 
 __all__ = ["configure", "run", "EXAMPLES"]
 
+# --out holds the finished designs of an earlier run, which a rerun resumes (no --force)
+RESUMES_OUT = True
+
 EXAMPLES = ("flexcal diagnose-benchmark --out runs/bench",
             "flexcal diagnose-benchmark --grid full --provider fem --out runs/bench-full")
 
@@ -136,8 +139,7 @@ def run_benchmark(ids, grid, *, noise_urad, cycles, seed, progress, scenario_see
     (``flexcal.validation.executor``; 0 without a scheduler: one case after the other
     here). With the FEM provider the as-built mounts' missing segments are built first,
     all at once on the same executor, then the cases run on cached segments."""
-    from tqdm import tqdm
-
+    from .cli_common import progress_bar
     from .executor import resolve_workers, run_jobs, where
     from .sweep_space import design_id
 
@@ -159,8 +161,8 @@ def run_benchmark(ids, grid, *, noise_urad, cycles, seed, progress, scenario_see
 
         build_segments(case_slices(pending), workers=workers, scheduler=scheduler, progress=progress)
     failures = {}
-    with tqdm(total=len(specs), initial=len(specs) - len(pending), desc="diagnose-benchmark", unit="case",
-              disable=None if progress else True) as bar:
+    with progress_bar(len(specs), "diagnose-benchmark", enabled=progress, unit="case") as bar:
+        bar.update(len(specs) - len(pending))
         def on_done(_spec, record):
             if store is not None:
                 store.save(record)
@@ -237,7 +239,7 @@ def run(args: argparse.Namespace) -> int:
             raise ValueError(f"--effects: unknown id(s) {unknown}; known: {', '.join(LIBRARY)}, none")
     progress = show_progress(args)
     log = (lambda text: print(text, file=sys.stderr)) if progress else (lambda text: None)
-    store = DesignStore(out_folder(args.out) / "cases")
+    store = DesignStore(out_folder(args.out, resume=True) / "cases")
     executor = executor_options(args)
     try:
         rows, answers, failures = run_benchmark(
@@ -257,7 +259,7 @@ def run(args: argparse.Namespace) -> int:
               "noise_urad": args.noise_urad, "cycles": args.cycles,
               "out_of_library": list(OUT_OF_LIBRARY_IDS), "rows": rows, "failures": failures, "summary": summary,
               "note": "answers.json holds what was injected; the diagnosis only received the measurement"}
-    with staged_output(args.out) as staging:
+    with staged_output(args.out, resume=True) as staging:
         write_json(staging / "answers.json", answers)
         write_json(staging / "report.json", report)
         (staging / "report.md").write_text(_markdown(report))

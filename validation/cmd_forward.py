@@ -11,9 +11,10 @@ With ``--out DIR`` the point is also written as DIR/report.json and DIR/report.m
 from __future__ import annotations
 
 import argparse
-import json
 
 import numpy as np
+
+from .output import dumps_strict
 
 __all__ = ["configure", "run", "parse_triple", "parse_directions", "load_values", "add_model_options",
            "point_report", "print_point", "write_point", "EXAMPLES"]
@@ -113,8 +114,10 @@ def print_point(report: dict, title: str) -> None:
           f"S3 mixed, no clearance)")
 
 
-def write_point(out: str, report: dict, title: str, extra_lines: tuple[str, ...] = ()) -> None:
-    """DIR/report.json (``report``) and DIR/report.md (the text output), whole or not at all."""
+def write_point(out: str, report: dict, title: str, extra_lines: tuple[str, ...] = (), *,
+                replace: bool = False) -> None:
+    """DIR/report.json (``report``) and DIR/report.md (the text output), whole or not at all
+    (``replace``: --force, see ``output.staged_output``)."""
     import contextlib
     import io
 
@@ -125,7 +128,7 @@ def write_point(out: str, report: dict, title: str, extra_lines: tuple[str, ...]
         print_point(report, title)
         for line in extra_lines:
             print(line)
-    with staged_output(out) as staging:
+    with staged_output(out, replace=replace) as staging:
         write_json(staging / "report.json", report)
         plot_point(report, staging / "point.png", title)
         (staging / "report.md").write_text(f"# {title}\n\n```\n{text.getvalue()}```\n\n![the point](point.png)\n")
@@ -173,9 +176,9 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError(f"the model did not converge: {error}") from None
     report = point_report(result, 0, overrides)
     if args.out:
-        write_point(args.out, report, "flexcal forward (analytic model, paper Eq. 1-8)")
+        write_point(args.out, report, "flexcal forward (analytic model, paper Eq. 1-8)", replace=args.force)
     if args.json:
-        print(json.dumps(report))
+        print(dumps_strict(report))
     else:
         print_point(report, "flexcal forward (analytic model, paper Eq. 1-8)")
     return 0

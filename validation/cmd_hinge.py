@@ -90,7 +90,7 @@ def run(args: argparse.Namespace) -> int:
     warn_outside_closed_form_range(hinge)
     result, data = run_comparison(compare_hinge, hinge, params, args.out,
                                   elements_through_thickness=args.elements_through, progress=show_progress(args),
-                                  mesher=args.mesher, cache=True)
+                                  mesher=args.mesher, cache=True, replace=args.force)
     c_fem, c_ana = result.compliance_fem[5, 5], result.compliance_analytic[5, 5]
     print(f"flexcal hinge: C_rz,Mz FEM {c_fem:.6g} rad/(N m), closed form {c_ana:.6g} "
           f"({100 * (c_fem - c_ana) / c_ana:+.2f} %); largest diagonal difference "

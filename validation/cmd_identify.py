@@ -137,7 +137,7 @@ def run(args: argparse.Namespace) -> int:
             cells += [f"{r['preset']:.5g}", f"{r['abs_error']:.3g}"]
         lines.append("| " + " | ".join(cells + ["yes" if r["identifiable"] else "no"]) + " |")
     ideal = ideal_angles(measurement.inputs, space)
-    with staged_output(args.out) as staging:
+    with staged_output(args.out, replace=args.force) as staging:
         write_json(staging / "report.json", report)
         (staging / "report.md").write_text("\n".join(lines) + "\n")
         classes = measurement.metadata.get("prototype", {}).get("point_class") or ["S3"] * measurement.n_points

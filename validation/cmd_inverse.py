@@ -10,10 +10,10 @@ needs the ``=`` form: ``--target-urad=-100,0,0``.
 from __future__ import annotations
 
 import argparse
-import json
 
 from .cmd_forward import (add_model_options, load_values, parse_directions, parse_triple, point_report, print_point,
                           write_point)
+from .output import dumps_strict
 
 __all__ = ["configure", "run", "EXAMPLES"]
 
@@ -49,9 +49,9 @@ def run(args: argparse.Namespace) -> int:
     report["residual_urad"] = (result.residual[0] * 1e6).tolist()
     residual_line = "  angle residual [urad]: " + ", ".join(f"{v:.2e}" for v in report["residual_urad"])
     if args.out:
-        write_point(args.out, report, "flexcal inverse (analytic model, paper Eq. 1-8)", (residual_line,))
+        write_point(args.out, report, "flexcal inverse (analytic model, paper Eq. 1-8)", (residual_line,), replace=args.force)
     if args.json:
-        print(json.dumps(report))
+        print(dumps_strict(report))
     else:
         print_point(report, "flexcal inverse (analytic model, paper Eq. 1-8)")
         print(residual_line)

@@ -137,7 +137,7 @@ def run(args: argparse.Namespace) -> int:
                 f"drive sources ({len(selected)}): " + ", ".join(f"`{n}`" for n in selected), "",
                 "![Normalized total Sobol indices (Fig. 5)](sensitivity.png)", "",
                 "## Ranked by the overall total index", "", format_ranked_table(sobol, 0)]
-    with staged_output(args.out) as staging:
+    with staged_output(args.out, replace=args.force) as staging:
         write_json(staging / "report.json", report)
         (staging / "report.md").write_text("\n".join(markdown))
         plot_sensitivity(sobol, staging / "sensitivity.png")

@@ -17,6 +17,9 @@ from .sweep_space import DEFAULT_CONFIG
 
 __all__ = ["configure", "run", "EXAMPLES", "DEFAULT_CONFIG"]
 
+# --out holds the finished designs of an earlier run, which a rerun resumes (no --force)
+RESUMES_OUT = True
+
 EXAMPLES = (
     "flexcal sweep --config examples/sweep_notch.toml --out runs/sweep",
     "flexcal sweep --config examples/sweep_notch.toml --out runs/sweep --workers 0     # in this process",

@@ -83,7 +83,7 @@ def run(args: argparse.Namespace) -> int:
         "metadata": measurement.metadata,
         "wall_s": float(result.run.wall_time),
     }
-    with staged_output(args.out) as staging:
+    with staged_output(args.out, replace=args.force) as staging:
         write_measurement(staging / "curves.csv", measurement)
         write_json(staging / "report.json", report)
         (staging / "report.md").write_text(

@@ -283,7 +283,7 @@ def run(args: argparse.Namespace) -> int:
     result.report["model_stiffness"] = ("closed-form chains scaled by FEM factors at the nominal design "
                                         "(docs/model.md 7)" if space.compliance_factors else "closed-form (paper Eq. 1)")
     result.report["model_second_order"] = bool(space.second_order)
-    with staged_output(args.out) as staging:
+    with staged_output(args.out, replace=args.force) as staging:
         write_json(staging / "report.json", result.report)
         (staging / "report.md").write_text(_markdown(result.report))
         write_measurement(staging / "curves.csv", measurement)

@@ -277,10 +277,11 @@ def write_comparison(result: ComparisonResult, directory: Path, params_mm: dict[
 
 def run_comparison(compare: Callable[..., ComparisonResult], part, params_mm: dict[str, float], out: str, *,
                    elements_through_thickness: float, progress: bool,
-                   **options: Any) -> tuple[ComparisonResult, dict[str, Any]]:
+                   replace: bool = False, **options: Any) -> tuple[ComparisonResult, dict[str, Any]]:
     """``compare(part, ...)`` with a stage progress bar, then every output into ``out``
-    (whole or not at all). Returns (result, report data); ``options`` go to ``compare``
-    (``mesher``, ``cache``). Shared by ``flexcal hinge`` and ``flexcal chain``."""
+    (whole or not at all; ``replace``: --force, see ``output.staged_output``). Returns
+    (result, report data); ``options`` go to ``compare`` (``mesher``, ``cache``). Shared by
+    ``flexcal hinge`` and ``flexcal chain``."""
     from .cli_common import progress_bar, stage_advancer
     from .output import staged_output
 
@@ -288,7 +289,7 @@ def run_comparison(compare: Callable[..., ComparisonResult], part, params_mm: di
         stage = stage_advancer(bar)
         result = compare(part, elements_through_thickness=elements_through_thickness, stage=stage, **options)
         stage("VTU, pictures, report")
-        with staged_output(out) as staging:
+        with staged_output(out, replace=replace) as staging:
             data = write_comparison(result, staging, params_mm)
         bar.update(1)
     return result, data

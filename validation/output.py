@@ -1,11 +1,20 @@
 """Writing results whole or not at all.
 
-``staged_output(out_dir)`` yields a temporary folder beside ``out_dir``; when the
-``with`` block finishes without error its files are moved into ``out_dir`` (created if
-needed, existing files of the same name replaced); on any error, ``KeyboardInterrupt``
-(Ctrl-C) included, the temporary folder is removed and ``out_dir`` is untouched. A
-fresh ``out_dir`` appears in one rename; into an existing one each file moves by its own
-rename (each file is whole, old or new), with Ctrl-C held back until the moves are done.
+``out_folder(out_dir)`` checks ``--out`` before any computation (the command line calls
+it once, before the command runs): not a file, writable, and not holding the files of
+another run unless ``--force`` (``replace=True``) or the command resumes its own earlier
+run (``resume=True``: ``sweep``, ``diagnose-benchmark``).
+
+``staged_output(out_dir)`` yields a temporary staging folder (hidden, ``.NAME.*``)
+beside a new ``out_dir``, or inside an existing one, so it is always on the target's own
+file system (a mount point as ``--out`` works; a move that still crosses file systems is
+copied to a temporary name and renamed). When the ``with`` block finishes without error
+its files are moved into ``out_dir``; with ``replace`` whatever ``out_dir`` held before is
+removed at that moment (a failed run keeps the old results). On any error,
+``KeyboardInterrupt`` (Ctrl-C) and ``signals.Terminated`` (SIGTERM) included, the staging
+folder is removed and ``out_dir`` is untouched. A fresh ``out_dir`` appears in one
+rename; into an existing one each file moves by its own rename (each file is whole, old
+or new), with Ctrl-C and SIGTERM held back until the moves are done.
 
 ``atomic_path(path)`` yields a temporary name beside ``path`` for any writer (matplotlib,
 numpy, csv); on success it is renamed onto ``path``, on error deleted. ``write_json`` and
@@ -15,7 +24,9 @@ numpy, csv); on success it is renamed onto ``path``, on error deleted. ``write_j
 from __future__ import annotations
 
 import contextlib
+import errno
 import json
+import math
 import os
 import shutil
 import signal
@@ -27,7 +38,8 @@ from typing import Any, Iterator
 
 import numpy as np
 
-__all__ = ["out_folder", "staged_output", "atomic_path", "write_json", "write_text", "to_jsonable", "interrupts_deferred"]
+__all__ = ["out_folder", "staged_output", "atomic_path", "write_json", "write_text", "to_jsonable", "dumps_strict",
+           "interrupts_deferred"]
 
 _UMASK = os.umask(0o022)  # read the process umask (only settable, not readable) ...
 os.umask(_UMASK)  # ... and put it back: folders made by mkdtemp get the usual permissions
@@ -35,22 +47,32 @@ os.umask(_UMASK)  # ... and put it back: folders made by mkdtemp get the usual p
 
 @contextlib.contextmanager
 def interrupts_deferred() -> Iterator[None]:
-    """Hold back Ctrl-C (SIGINT) inside the block and raise it right after; a no-op off
-    the main thread (where Python never delivers signals anyway)."""
+    """Hold back Ctrl-C (SIGINT) and SIGTERM inside the block and deliver the first one
+    right after (to the handler that was there before); a no-op off the main thread
+    (where Python never delivers signals anyway). A signal that was ignored stays ignored."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
     received: list[tuple[int, Any]] = []
-    previous = signal.signal(signal.SIGINT, lambda signum, frame: received.append((signum, frame)))
+    previous = {}
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        handler = signal.getsignal(signum)
+        if handler is not None and handler is not signal.SIG_IGN:  # None: set outside Python, leave it
+            previous[signum] = signal.signal(signum, lambda number, frame: received.append((number, frame)))
     try:
         yield
     finally:
-        signal.signal(signal.SIGINT, previous)
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
     if received:
-        if callable(previous):
-            previous(*received[0])
-        else:
+        signum, frame = received[0]
+        handler = previous[signum]
+        if callable(handler):
+            handler(signum, frame)
+        elif signum == signal.SIGINT:
             raise KeyboardInterrupt
+        else:  # SIG_DFL (or a handler not set from Python): let the system act on it
+            os.kill(os.getpid(), signum)
 
 
 @contextlib.contextmanager
@@ -68,48 +90,178 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
         raise
 
 
-def out_folder(out_dir: str | os.PathLike) -> Path:
-    """``--out`` as a path; ValueError if it exists and is not a folder."""
+def _probe_writable(folder: Path, what: str) -> None:
+    """ValueError (one line) unless a file can be made in ``folder`` (tried, not guessed
+    from mode bits: root ignores those, read-only mounts do not show in them)."""
+    try:
+        os.rmdir(tempfile.mkdtemp(prefix=".flexcal-probe.", dir=folder))
+    except OSError as error:
+        raise ValueError(f"--out {what}: cannot write in {folder} ({error.strerror or error}); "
+                         f"choose a folder you can write to") from None
+
+
+def _visible_entries(folder: Path) -> list[str]:
+    return sorted(p.name for p in folder.iterdir() if not p.name.startswith("."))
+
+
+def out_folder(out_dir: str | os.PathLike, *, replace: bool = False, resume: bool = False) -> Path:
+    """``--out`` as a path, checked before any computation: not a file, writable (the
+    folder itself if it exists, else its nearest existing parent), and, unless
+    ``replace`` (``--force``) or ``resume`` (commands that continue an earlier run in
+    the same folder), not already holding files (another run's report, stale PNGs).
+    ValueError with one line saying what to do."""
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise ValueError(f"--out {out} exists and is not a folder; give a folder name")
+    if out.is_dir():
+        _probe_writable(out, str(out))
+        resolved = out.resolve()
+        if replace and (resolved == Path.home().resolve() or resolved == Path(resolved.anchor)
+                        or Path.cwd().resolve().is_relative_to(resolved)):
+            raise ValueError(f"--out {out} with --force would empty {resolved} (the home folder, the file-system root "
+                             f"or a folder holding the working directory); give a folder of its own")
+        held = _visible_entries(out)
+        if held and not (replace or resume):
+            shown = ", ".join(held[:4]) + (f" and {len(held) - 4} more" if len(held) > 4 else "")
+            raise ValueError(f"--out {out} already holds files ({shown}); pass --force to replace them "
+                             f"or choose another folder")
+        return out
+    ancestor = out.absolute().parent
+    while not ancestor.exists():
+        ancestor = ancestor.parent
+    if not ancestor.is_dir():
+        raise ValueError(f"--out {out}: {ancestor} is a file, not a folder; choose another --out")
+    _probe_writable(ancestor, str(out))
     return out
 
 
+def _move(source: Path, target: Path) -> None:
+    """``os.replace(source, target)``; across file systems (EXDEV) a copy to a temporary
+    name beside ``target``, renamed onto it, then the source removed."""
+    try:
+        os.replace(source, target)
+        return
+    except OSError as error:
+        if error.errno != errno.EXDEV:
+            raise
+    partial = target.with_name(f".{target.name}.{uuid.uuid4().hex[:12]}.partial")
+    try:
+        if source.is_dir() and not source.is_symlink():
+            shutil.copytree(source, partial, symlinks=True)
+        else:
+            shutil.copy2(source, partial, follow_symlinks=False)
+        os.replace(partial, target)
+    except BaseException:
+        if partial.is_dir() and not partial.is_symlink():
+            shutil.rmtree(partial, ignore_errors=True)
+        else:
+            partial.unlink(missing_ok=True)
+        raise
+    if source.is_dir() and not source.is_symlink():
+        shutil.rmtree(source)
+    else:
+        source.unlink()
+
+
+def _remove(path: Path) -> None:
+    if path.is_dir() and not path.is_symlink():
+        shutil.rmtree(path)
+    else:
+        path.unlink()
+
+
 @contextlib.contextmanager
-def staged_output(out_dir: str | os.PathLike) -> Iterator[Path]:
-    out = out_folder(out_dir)
-    parent = out.resolve().parent
-    parent.mkdir(parents=True, exist_ok=True)
-    staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=parent))
+def staged_output(out_dir: str | os.PathLike, *, replace: bool = False, resume: bool = False) -> Iterator[Path]:
+    """A staging folder for the outputs of a run, moved into ``out_dir`` when the block
+    succeeds, removed otherwise (see the module doc). ``replace`` (``--force``): what
+    ``out_dir`` held before is removed when the new files move in (not before: a failed
+    run keeps the old results); ``resume``: files of the folder not written now stay.
+    Checks ``out_dir`` first (``out_folder``)."""
+    out = out_folder(out_dir, replace=replace, resume=resume)
+    if out.is_dir():  # stage inside it: same file system (a mount point as --out), no EXDEV
+        where = out
+    else:
+        where = out.absolute().parent
+        where.mkdir(parents=True, exist_ok=True)
+    staging = Path(tempfile.mkdtemp(prefix=f".{out.name or 'out'}.", dir=where))
     os.chmod(staging, 0o777 & ~_UMASK)
     try:
         yield staging
         with interrupts_deferred():
-            try:
-                os.rename(staging, out)  # a new (or empty) folder: one atomic step
-            except OSError:
-                out.mkdir(parents=True, exist_ok=True)
-                for item in staging.iterdir():
-                    target = out / item.name
-                    if target.is_dir() and not target.is_symlink():
-                        shutil.rmtree(target)
-                    os.replace(item, target)
+            if not out.is_dir():
+                try:
+                    os.rename(staging, out)  # a new folder: one atomic step
+                    return
+                except OSError:
+                    out.mkdir(parents=True, exist_ok=True)
+            if replace:
+                for name in _visible_entries(out):
+                    _remove(out / name)
+            for item in staging.iterdir():
+                target = out / item.name
+                if target.is_dir() and not target.is_symlink():
+                    shutil.rmtree(target)
+                _move(item, target)
     finally:
         shutil.rmtree(staging, ignore_errors=True)
 
 
+# Strict JSON (RFC 8259 has no NaN or Infinity): a non-finite number is written as null,
+# and the object holding it gets "<key>_note" saying what it was (docs/cli.md).
+_NONFINITE_REASONS = {"condition_number": "infinite: rank deficient (the data cannot separate some parameters)",
+                      "condition_number_subset": "infinite: rank deficient (the data cannot separate some parameters)"}
+
+
+def _nonfinite_name(value: float) -> str:
+    return "NaN (not a number)" if math.isnan(value) else ("+infinity" if value > 0 else "-infinity")
+
+
+def _count_nonfinite(value: Any) -> int:
+    if isinstance(value, float):
+        return 0 if math.isfinite(value) else 1
+    if isinstance(value, list):
+        return sum(_count_nonfinite(v) for v in value)
+    return 0
+
+
 def to_jsonable(value: Any) -> Any:
-    """numpy arrays and scalars -> lists and floats, recursively."""
+    """numpy arrays and scalars -> lists and floats, recursively; non-finite floats ->
+    None, with a ``<key>_note`` beside them in the enclosing object (strict JSON)."""
     if isinstance(value, dict):
-        return {str(k): to_jsonable(v) for k, v in value.items()}
+        out: dict[str, Any] = {}
+        notes: dict[str, str] = {}
+        for key, item in value.items():
+            key, item = str(key), to_jsonable(item)
+            if isinstance(item, float) and not math.isfinite(item):
+                notes[f"{key}_note"] = _NONFINITE_REASONS.get(key, _nonfinite_name(item)) + "; written as null"
+                item = None
+            elif isinstance(item, list) and (n_bad := _count_nonfinite(item)):
+                notes[f"{key}_note"] = f"{n_bad} non-finite entries (NaN or infinity) written as null"
+                item = _nulled(item)
+            out[key] = item
+        for key, note in notes.items():
+            out.setdefault(key, note)
+        return out
     if isinstance(value, (list, tuple)):
         return [to_jsonable(v) for v in value]
     if isinstance(value, np.ndarray):
         return to_jsonable(value.tolist())
     if isinstance(value, np.generic):
-        return value.item()
+        return to_jsonable(value.item())
     return value
+
+
+def _nulled(value: Any) -> Any:
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, list):
+        return [_nulled(v) for v in value]
+    return value
+
+
+def dumps_strict(data: Any, **kwargs: Any) -> str:
+    """``json.dumps`` of ``to_jsonable(data)`` that never writes NaN or Infinity."""
+    return json.dumps(_nulled(to_jsonable(data)), allow_nan=False, **kwargs)
 
 
 def write_text(path: str | os.PathLike, text: str, *, fsync: bool = False) -> None:
@@ -124,5 +276,6 @@ def write_text(path: str | os.PathLike, text: str, *, fsync: bool = False) -> No
 
 
 def write_json(path: str | os.PathLike, data: Any, *, fsync: bool = False) -> None:
-    """Write ``data`` as indented JSON (atomically: temporary file, then rename)."""
-    write_text(path, json.dumps(to_jsonable(data), indent=2) + "\n", fsync=fsync)
+    """Write ``data`` as indented strict JSON (non-finite numbers as null with a note;
+    atomically: temporary file, then rename)."""
+    write_text(path, dumps_strict(data, indent=2) + "\n", fsync=fsync)

@@ -353,8 +353,9 @@ def _simulate(prototype: Prototype, inputs: np.ndarray, effects: tuple, progress
     direction, last_command = np.ones(3), inputs[0].copy()
     points = range(n)
     if progress:
-        from tqdm import tqdm
-        points = tqdm(points, desc="prototype", unit="point", disable=None, leave=False)
+        from .cli_common import progress_iter
+
+        points = progress_iter(points, "prototype", unit="point")
     start = time.perf_counter()
     for k in points:
         command = inputs[k]

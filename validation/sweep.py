@@ -89,7 +89,7 @@ def run_sweep(config: dict[str, Any], out: str | os.PathLike, *, workers: int | 
     start = time.perf_counter()
     log = (lambda text: print(text, file=sys.stderr)) if progress else (lambda text: None)
     designs = designs_from_config(config, seed=seed)
-    out = out_folder(out)
+    out = out_folder(out, resume=True)  # finished designs of an earlier run are kept and reused
     store = DesignStore(out / "designs")
     ids = [design_id(d) for d in designs]
     unique = dict(zip(ids, designs))  # a value listed twice is one design
