@@ -5,8 +5,10 @@ Writes DIR/trajectory.csv (columns point, leg, xa1_mm, xa2_mm, xa3_mm: the file 
 order in which to measure a real mount), DIR/report.json, DIR/report.md and design.png (the
 expected standard error of each source with the designed and the standard trajectory).
 
-The design point is the prior mean (every source mid-range: Eq. 9), the prior the paper's
-ranges scaled by ``--prior-scale``, the noise ``--noise-urad``; with ``--inadequacy analytic``
+The design point is the prior mean (every source mid-range: Eq. 9), or with ``--at
+REPORT`` the values a previous ``flexcal verify``/``identify`` identified (sequential design:
+the information of a clearance or hysteresis source depends on the drive loads, which
+depend on the sources themselves); the prior is the paper's ranges scaled by ``--prior-scale``, the noise ``--noise-urad``; with ``--inadequacy analytic``
 (default) the model's own error at each candidate posture, measured once against the
 analytic virtual prototype at the nominal design, is added to the noise, so that postures
 where the model is known to be off (large combined rotations) weigh less
@@ -28,9 +30,10 @@ EXAMPLES = (
     "flexcal design --out runs/design                                  # 77 postures from 2000 candidates",
     "flexcal design --scenario paper --points 61 --out runs/design-paper",
     "flexcal truth --scenario table1 --trajectory runs/design/trajectory.csv --noise-urad 0.5 --out runs/t1",
+    "flexcal design --at runs/first-verify/report.json --out runs/design-2   # design at the identified values",
 )
 DEFAULT_CONFIG = {"points": 77, "candidates": 2000, "noise_urad": 0.5, "prior_scale": 1.0, "points_per_leg": 11,
-                  "design_seed": 0, "inadequacy": "analytic", "scenario": "table1", "model_stiffness": "fem",
+                  "design_seed": 0, "inadequacy": "analytic", "at": "", "scenario": "table1", "model_stiffness": "fem",
                   "second_order": True}
 
 
@@ -49,6 +52,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--points-per-leg", type=int, metavar="N",
                         help="postures per leg; legs are the held-out folds of the identification (default "
                              "%(default)s)")
+    parser.add_argument("--at", metavar="REPORT",
+                        help="design at the values identified in this report.json (flexcal verify / identify) "
+                             "instead of the prior mean")
     parser.add_argument("--design-seed", type=int, metavar="N", help="seed of the candidate draw (default %(default)s)")
     parser.add_argument("--inadequacy", choices=("analytic", "none"),
                         help="add the model's error at each candidate (against the analytic prototype at the nominal "
@@ -90,6 +96,22 @@ def _inadequacy(space, scenario_space, progress: bool):
     return delta
 
 
+def design_point(path: str, space) -> np.ndarray:
+    """Unit-box values (n_active,) of the sources identified in a report.json."""
+    import json
+    from pathlib import Path
+
+    try:
+        rows = json.loads(Path(path).read_text())["parameters"]
+        values = space.build_values({r["name"]: r["identified"] for r in rows}, display_units=True)
+    except FileNotFoundError:
+        raise ValueError(f"--at {path}: no such file") from None
+    except (KeyError, TypeError, json.JSONDecodeError):
+        raise ValueError(f"--at {path}: not a flexcal verify/identify report.json (needs 'parameters' rows with "
+                         f"'name' and 'identified')") from None
+    return space.to_unit(values[space.active_indices])
+
+
 def run(args: argparse.Namespace) -> int:
     from flexcal.calibration.design import design_trajectory
     from flexcal.calibration.estimation import uniform_prior
@@ -110,7 +132,7 @@ def run(args: argparse.Namespace) -> int:
     space = model_space(args.model_stiffness, args.second_order, progress=progress,
                         mechanism=scenario.space.mechanism)
     prior = uniform_prior(space.n_params, args.prior_scale)
-    x_design = prior.mean
+    x_design = design_point(args.at, space) if args.at else prior.mean
 
     def jacobian(inputs: np.ndarray) -> np.ndarray:
         problem = CalibrationProblem(space=space, inputs=inputs, angles=np.zeros_like(inputs))
@@ -151,6 +173,7 @@ def _report(design, space, args, wall: float) -> dict:
         "n_points": int(design.inputs.shape[0]), "n_candidates": int(design.candidates.shape[0]),
         "noise_urad": design.noise * 1e6, "prior_scale": design.prior_scale, "scenario": args.scenario,
         "design_seed": args.design_seed, "inadequacy": args.inadequacy,
+        "design_point": args.at or "prior mean (every source mid-range)",
         "inadequacy_rms_urad": None if design.inadequacy is None else float(np.sqrt(np.mean(design.inadequacy ** 2))
                                                                             * 1e6),
         "criterion": "D-optimal: log det(W^T W + prior precision), W = model Jacobian / noise on the unit box, at "
