@@ -42,7 +42,7 @@ import numpy as np
 
 from flexcal.calibration.polish import batched_jacobian_fd, least_squares_polish
 
-__all__ = ["Prior", "uniform_prior", "Estimate", "estimate", "covariance", "residual_autocorrelation", "choose_prior_scale", "CrossValidation",
+__all__ = ["Prior", "uniform_prior", "Estimate", "estimate", "covariance", "standard_errors", "residual_autocorrelation", "choose_prior_scale", "CrossValidation",
            "held_out_folds", "PRIOR_SCALES"]
 
 Residuals = Callable[[np.ndarray], np.ndarray]
@@ -121,26 +121,40 @@ class Estimate:
 def covariance(J: np.ndarray, noise: float, prior: Prior) -> tuple[np.ndarray, float]:
     """(Sigma (d, d) [unit box^2], p_eff) of the linearized MAP: J (m, d) the data Jacobian
     [residual units per unit box], noise sigma [residual units]. Sigma = (J^T J/sigma^2 +
-    diag(prior precision))^+ (a pseudo-inverse: a free direction the data do not see has
-    infinite variance, reported as inf); p_eff = trace(J Sigma J^T)/sigma^2."""
+    diag(prior precision))^+, a pseudo-inverse: finite, and right for every combination the
+    data or the prior see (a base parameter's variance is c^T Sigma c); a single source in an
+    unseen direction has an unbounded variance (``standard_errors``); p_eff =
+    trace(J Sigma J^T)/sigma^2."""
     W = J / noise
     information = W.T @ W + np.diag(prior.precision)
     eigenvalues, vectors = np.linalg.eigh(information)
     floor = max(eigenvalues.max(initial=0.0), 1e-300) * 1e-12  # below this a direction is numerically unseen
     seen = eigenvalues > floor
     sigma = (vectors[:, seen] / eigenvalues[seen]) @ vectors[:, seen].T
-    # a source taking part in an unseen direction (free prior, no data) has an unbounded variance
-    unbounded = np.any(vectors[:, ~seen] ** 2 > 1e-12, axis=1)
-    sigma[np.diag_indices_from(sigma)] = np.where(unbounded, np.inf, np.diag(sigma))
     p_eff = float(np.sum(np.sum((W @ vectors[:, seen]) ** 2, axis=0) / eigenvalues[seen]))
     return sigma, p_eff
+
+
+def standard_errors(J: np.ndarray, noise: float, prior: Prior) -> np.ndarray:
+    """(d,) [unit box] sqrt(diag Sigma), inf for a source that takes part in a direction
+    neither the data nor a prior sees (free least squares on a rank-deficient problem)."""
+    W = J / noise
+    eigenvalues, vectors = np.linalg.eigh(W.T @ W + np.diag(prior.precision))
+    floor = max(eigenvalues.max(initial=0.0), 1e-300) * 1e-12
+    seen = eigenvalues > floor
+    unbounded = np.any(vectors[:, ~seen] ** 2 > 1e-12, axis=1)
+    variance = np.sum(vectors[:, seen] ** 2 / eigenvalues[seen], axis=1)
+    return np.where(unbounded, np.inf, np.sqrt(variance))
 
 
 def residual_autocorrelation(r: np.ndarray, point_size: int = 3) -> float:
     """Lag-1 autocorrelation of a residual (m,) laid out points major (``point_size`` angles a
     point), pooled over the angles and clipped to [0, 0.95] (a negative one would shrink the
     error bars; 0.95 caps the inflation at 39x)."""
-    R = np.asarray(r, float).reshape(-1, point_size)
+    r = np.asarray(r, float)
+    if r.size % point_size:
+        raise ValueError(f"residual length {r.size} is not a multiple of point_size={point_size}")
+    R = r.reshape(-1, point_size)
     if R.shape[0] < 3:
         return 0.0
     R = R - R.mean(axis=0)
@@ -205,7 +219,7 @@ def estimate(residuals: Residuals, prior: Prior, *, noise: float | None = None, 
         if converged:
             break
     sigma_matrix, p_eff = covariance(J, sigma, prior)
-    std = np.sqrt(np.diag(sigma_matrix))
+    std = standard_errors(J, sigma, prior)
     rho = 0.0 if given or not correlated else residual_autocorrelation(r, point_size)
     at_bound = (x <= 1e-9) | (x >= 1.0 - 1e-9)
     return Estimate(x=x, std=std, covariance=sigma_matrix, noise=sigma,

@@ -7,7 +7,7 @@ import pytest
 
 from flexcal.calibration.base_parameters import base_parameters, pivoted_qr
 from flexcal.calibration.design import design_quality, greedy_d_optimal, order_postures
-from flexcal.calibration.estimation import covariance, estimate, held_out_folds, uniform_prior
+from flexcal.calibration.estimation import covariance, estimate, held_out_folds, standard_errors, uniform_prior
 from flexcal.calibration.identifiability import analyze_jacobian
 from flexcal.calibration.pipeline import check_determined
 
@@ -40,7 +40,7 @@ def test_z_scores_of_a_linear_model_are_standard_normal():
     z = []
     for seed in range(100):
         A, truth, _, sigma, residuals = _linear_problem(seed)
-        fit = estimate(residuals, uniform_prior(A.shape[1], np.inf))
+        fit = estimate(residuals, uniform_prior(A.shape[1], np.inf), point_size=1)
         z.extend((fit.x - truth) / fit.std)
     rms = float(np.sqrt(np.mean(np.square(z))))
     assert abs(rms - 1.0) < 0.12, rms
@@ -50,7 +50,7 @@ def test_noise_estimate_recovers_the_noise():
     """sigma^2 = RSS / (m - p_eff): on 2,000 residuals its relative standard deviation is
     ~ 1/sqrt(2 * 2000) = 1.6 %; 5 % is 3 of those."""
     A, _, _, sigma, residuals = _linear_problem(1, m=2000, sigma=0.02)
-    fit = estimate(residuals, uniform_prior(A.shape[1], 1.0))
+    fit = estimate(residuals, uniform_prior(A.shape[1], 1.0), point_size=1)
     assert fit.noise == pytest.approx(sigma, rel=0.05)
     assert fit.p_eff == pytest.approx(A.shape[1], abs=0.05)  # data dominate a weak prior: p_eff -> d
 
@@ -63,8 +63,8 @@ def test_a_source_the_data_cannot_see_stays_at_its_prior():
     fit = estimate(lambda X: np.atleast_2d(X) @ A.T - y, prior, noise=sigma)
     assert fit.x[4] == pytest.approx(0.5, abs=1e-9)  # the prior mean: no data pull
     assert fit.std[4] == pytest.approx(prior.std[4], rel=1e-9)  # and the prior's std
-    free = covariance(A, sigma, uniform_prior(5, np.inf))[0]
-    assert np.isinf(free[4, 4])  # without a prior its variance is unbounded, and said so
+    free = standard_errors(A, sigma, uniform_prior(5, np.inf))
+    assert np.isinf(free[4]) and np.all(np.isfinite(free[:4]))  # without a prior: unbounded, and said so
 
 
 def test_duplicated_parameter_is_regrouped_into_the_base():
@@ -140,3 +140,22 @@ def test_greedy_d_optimal_beats_random_and_exchange_is_a_local_optimum():
 def test_order_postures_visits_each_once_from_the_nearest():
     points = np.array([[3.0, 0, 0], [1.0, 0, 0], [2.0, 0, 0]])
     assert order_postures(points, np.ones(3)).tolist() == [1, 2, 0]
+
+
+def test_correlated_misfit_inflates_the_error_bars():
+    """A smooth misfit (a model-form error) has a lag-1 autocorrelation near 1; white noise
+    near 0. The AR(1) factor (1 + rho)/(1 - rho) follows."""
+    from flexcal.calibration.estimation import residual_autocorrelation
+
+    t = np.linspace(0.0, 1.0, 300)
+    smooth = np.sin(2 * np.pi * t)
+    assert residual_autocorrelation(smooth, point_size=1) > 0.99 * 0.95  # clipped at 0.95
+    white = np.random.default_rng(7).normal(size=3000)
+    # white noise: |rho| ~ 1/sqrt(3000) = 0.018; 0.06 is 3.3 of those
+    assert residual_autocorrelation(white, point_size=1) < 0.06
+    A, truth, y, sigma, _ = _linear_problem(8, m=300)
+    drift = 0.05 * smooth  # a smooth error 5x the noise on top of the data
+    plain = estimate(lambda X: np.atleast_2d(X) @ A.T - y - drift, uniform_prior(4, np.inf), point_size=1,
+                     correlated=False)
+    inflated = estimate(lambda X: np.atleast_2d(X) @ A.T - y - drift, uniform_prior(4, np.inf), point_size=1)
+    assert inflated.inflation > 5.0 and np.all(inflated.std > 2.0 * plain.std)

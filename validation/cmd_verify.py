@@ -160,7 +160,8 @@ def plot_calibration(path, rows) -> None:
     axes[1].axhspan(-2, 2, color="0.9")
     axes[1].set_xlabel("source (space order within each class)")
     axes[1].set_ylabel("z = error / standard error")
-    axes[1].legend(fontsize=7)
+    if shown:
+        axes[1].legend(fontsize=7)
     fig.suptitle("calibration of the error bars: predicted vs actual error")
     fig.tight_layout()
     fig.savefig(path, dpi=120)
@@ -293,7 +294,8 @@ def run(args: argparse.Namespace) -> int:
           f"{report['n_evaluations']} evaluations, {report['wall_s']:.1f} s; wrote {args.out}/report.json, report.md")
     if report.get("z_rms_identifiable") is not None:
         print(f"  z-scores of the {report['n_z_scores']} identifiable sources: RMS {report['z_rms_identifiable']:.3g}")
-    if report.get("base_parameters", {}).get("z_rms") is not None:
+    z_base = report.get("base_parameters", {}).get("z_rms")
+    if z_base is not None and np.isfinite(z_base):
         print(f"  z-scores of the {len(report['base_parameters']['rows'])} base parameters: RMS "
               f"{report['base_parameters']['z_rms']:.3g}")
     for row in report.get("paper_comparison", []):
