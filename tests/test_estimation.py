@@ -159,3 +159,11 @@ def test_correlated_misfit_inflates_the_error_bars():
                      correlated=False)
     inflated = estimate(lambda X: np.atleast_2d(X) @ A.T - y - drift, uniform_prior(4, np.inf), point_size=1)
     assert inflated.inflation > 5.0 and np.all(inflated.std > 2.0 * plain.std)
+
+
+def test_many_legs_are_merged_into_five_folds():
+    leg = np.concatenate([[0], np.repeat(np.arange(1, 8), 11)])  # a designed trajectory: 7 legs of 11
+    folds = held_out_folds(leg)
+    assert len(folds) == 5
+    assert sorted(np.concatenate(folds).tolist()) == list(range(1, 78))  # every point but the start, once
+    assert all(len(set(leg[f])) in (1, 2) for f in folds)  # whole legs only
