@@ -74,6 +74,11 @@ def _check(args: argparse.Namespace) -> None:
         raise ValueError(f"--prior-scale={args.prior_scale} must be > 0")
     if args.points_per_leg < 1:
         raise ValueError(f"--points-per-leg={args.points_per_leg} must be >= 1")
+    if args.at:
+        from pathlib import Path
+
+        if not Path(args.at).is_file():
+            raise ValueError(f"--at {args.at}: no such file (a flexcal verify/identify report.json)")
 
 
 def _inadequacy(space, scenario_space, progress: bool):
