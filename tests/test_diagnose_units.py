@@ -159,7 +159,7 @@ def test_strata_cover_the_requested_groupings():
 
 
 def test_baseline_escapes_the_false_clearance_mode():
-    """One 80 x 60 swarm on this `none` file (table1 draw 1000, baseline seed 0) ends in a
+    """A single 80 x 60 swarm on this `none` file (table1 draw 1000) can end in a
     false clearance mode: a ~100 urad spike at a stroke end (measured 2026-11-22). The
     default baseline (best of several starts after the 45-source polish) must not; its good
     mode leaves ~2.4 urad at most (noise 0.5 urad plus the model gap)."""
@@ -169,9 +169,13 @@ def test_baseline_escapes_the_false_clearance_mode():
 
     measurement = benchmark_measurement("none", 0.0, 0, stiffness_provider("analytic", progress=False)).measurement
 
-    def worst(settings):
-        fit = calibrate_baseline(measurement, rng=0, settings=settings)
+    def worst(settings, rng):
+        fit = calibrate_baseline(measurement, rng=rng, settings=settings)
         return np.abs(measurement.angles - fit.model_angles).max()
 
-    assert worst(BaselineSettings(starts=1)) > 30e-6  # the file exercises the false mode at all
-    assert worst(BaselineSettings()) < 5e-6  # 2x the good mode's 2.4 urad, 1/10 of the false one
+    # which swarm seed lands in the false mode depends on the numerical libraries' build
+    # (2026-11-22: seed 0; 2026-11-23, fresh install: seeds 0-4 find the good mode at 2.2-2.3
+    # urad, seed 5 the false one at 51 urad): take the first of seeds 0-7 that does
+    false = next((rng for rng in range(8) if worst(BaselineSettings(starts=1), rng) > 30e-6), None)
+    assert false is not None, "no single start of seeds 0-7 exercises the false mode on this file any more"
+    assert worst(BaselineSettings(), false) < 5e-6  # 2x the good mode's 2.4 urad, 1/10 of the false one
