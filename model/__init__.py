@@ -35,6 +35,8 @@ _EXPORTS = {
     "Trajectory": "trajectory",
     "standard_trajectory": "trajectory",
     "travel_directions": "trajectory",
+    "next_direction": "trajectory",
+    "approach_directions": "trajectory",
     "WORKSPACE": "trajectory",
     "MIN_MOVE": "trajectory",
     "segment_compliance": "hinge",

@@ -17,7 +17,8 @@ import numpy as np
 
 from flexcal.geometry.params import MechanismParams
 
-__all__ = ["Trajectory", "standard_trajectory", "travel_directions", "WORKSPACE", "MIN_MOVE"]
+__all__ = ["Trajectory", "standard_trajectory", "travel_directions", "next_direction", "approach_directions",
+           "WORKSPACE", "MIN_MOVE"]
 
 WORKSPACE = np.array([1e-3, 5e-3, 3e-3])  # [rad] half-ranges of theta_x, theta_y, theta_z (paper Sec. 4.2)
 MIN_MOVE = 1e-9  # [m] steps smaller than this are not moves (numerical jitter of computed inputs)
@@ -100,3 +101,20 @@ def travel_directions(inputs, min_move: float = MIN_MOVE) -> np.ndarray:
     last = np.maximum.accumulate(index, axis=0)
     sign = np.sign(step[np.maximum(last, 0), np.arange(3)])
     return np.where(last >= 0, sign, 1.0)
+
+
+def next_direction(direction, move, min_move: float = MIN_MOVE) -> np.ndarray:
+    """The rule of ``travel_directions`` for one step: the travel direction (..., 3) after
+    the command changes by ``move`` (..., 3) [m] from a state with travel direction
+    ``direction`` (..., 3) in {+1, -1}: the sign of the move where it is larger than
+    ``min_move`` [m], else unchanged. For code that walks a trajectory point by point."""
+    move = np.asarray(move, dtype=float)
+    return np.where(np.abs(move) > min_move, np.sign(move), np.asarray(direction, dtype=float))
+
+
+def approach_directions(inputs, min_move: float = MIN_MOVE) -> np.ndarray:
+    """Travel direction (n, 3) in {+1, -1} at each of the inputs (n, 3) [m] when each is
+    reached by one straight move from the zero inputs (+1 before any move): the last
+    point of ``travel_directions([0, x])`` for every row x, each row on its own."""
+    x = np.asarray(inputs, dtype=float)
+    return next_direction(np.ones_like(x), x, min_move)

@@ -20,6 +20,7 @@ from flexcal.validation.segments import analytic_provider
 from flexcal.validation.truth import as_built, make_truth
 
 SHORT = standard_trajectory(n_points=17)  # both turning points of every leg, ~0.6 s per run
+GROWING_WITH_TIME = {"drift", "creep"}  # effects whose size grows with elapsed time
 
 
 @pytest.fixture(scope="module")
@@ -57,9 +58,14 @@ def test_every_injector_changes_the_prototype_finitely(prototype, baseline, effe
     run = _run(prototype, effect)
     change = np.abs(run.angles - baseline.angles)
     assert np.all(np.isfinite(run.angles))
-    # 10 urad RMS asked on the standard trajectory: on this 17-point version any real effect
-    # moves some angle by > 0.1 urad, and none by more than 1 mrad (a blown-up physics)
-    assert 1e-7 < change.max() < 1e-3, change.max()
+    # 10 urad RMS asked: make_injector's linear estimate on the standard 77-point trajectory.
+    # Measured here (17 points, table1, seeds 0-5): drift and creep 1.4-3.6 urad RMS (they
+    # grow with time and these points last 32 s of the standard 152 s: 10 x 32/152 = 2.1),
+    # every other effect 8.6-31 urad (the estimate is linear at the nominal model and misses
+    # table1's clearances: up to 3x, lead_error). Windows: those ranges widened by 1.3-1.7x.
+    rms = np.sqrt(np.mean(change ** 2))
+    low, high = (1e-6, 5e-6) if effect_id in GROWING_WITH_TIME else (5e-6, 40e-6)
+    assert low < rms < high, rms
     assert run.provenance["effects"][0]["name"] == effect_id
 
 

@@ -27,7 +27,12 @@ def test_plane_selection_finds_the_face():
     # a tilted normal of the same plane finds the same face (normal is normalised)
     same = select_plane_nodes(MESH, ((0.04, 0.003, 0.0), (-2.0, 0.0, 0.0)))
     np.testing.assert_array_equal(face, same)
-    assert mesh_size(MESH) == pytest.approx(0.01, rel=0.5)  # cells are 10 x 5 x 10 mm
+    # cells are 10 x 5 x 10 mm, 6 tets each: every tet has one edge along each axis (5, 10,
+    # 10 mm), two face diagonals (5 sqrt 5 or 10 sqrt 2 mm) and the 15 mm body diagonal, so
+    # half of all edges are <= 10 mm and the shortest of the other half is 5 sqrt 5 mm: the
+    # median of an even count is their mean, (10 + 5 sqrt 5) / 2 = 10.590 mm
+    expected = 0.5 * (0.010 + 0.005 * np.sqrt(5.0))
+    assert mesh_size(MESH) == pytest.approx(expected, rel=1e-12)  # round-off of linspace nodes and norms only
 
 
 def test_plane_selection_errors_say_what_to_do():

@@ -44,7 +44,10 @@ def test_page_is_self_contained_and_complete(run_folder):
     assert not re.search(r"<script|<link|src=\"https?:|url\(", page)  # nothing fetched from elsewhere
     assert "0.0123457" in page                                      # scalars at 6 significant digits
     assert "D1.CL" in page and "0.83" in page                       # records as a table
-    assert "mesh.quality" in page or "quality" in page              # nested tables
+    # nested tables: a heading per level, each leaf under its full dotted name with its value
+    assert "<h3><code>mesh</code></h3>" in page and "<h4><code>mesh.quality</code></h4>" in page
+    assert "<td><code>mesh.n_nodes</code></td><td>120</td>" in page
+    assert "<td><code>mesh.quality.min</code></td><td>0.3</td>" in page
     assert "100 values" in page                                     # long vectors folded
     assert '<a href="./hinge.vtu">hinge.vtu</a>' in page            # other files listed
 

@@ -5,7 +5,8 @@ import pytest
 
 from flexcal.model.assembly import mechanism_matrices
 from flexcal.model.parameters import parameter_space
-from flexcal.model.trajectory import WORKSPACE, standard_trajectory, travel_directions
+from flexcal.model.trajectory import (WORKSPACE, approach_directions, next_direction, standard_trajectory,
+                                     travel_directions)
 
 
 def test_standard_trajectory_layout():
@@ -48,3 +49,25 @@ def test_travel_directions_remember_the_last_move():
     jitter = x.copy()
     jitter[5, 1] -= 1e-12  # below MIN_MOVE: not a move
     np.testing.assert_array_equal(travel_directions(jitter), d)
+
+
+def test_one_step_rule_walked_point_by_point_is_travel_directions():
+    # batched == looped: next_direction walked along random sequences with sub-MIN_MOVE jitter,
+    # repeats and reversals gives travel_directions exactly (they are {+1, -1}, no tolerance)
+    rng = np.random.default_rng(0)
+    for n_points in (1, 2, 7, 50):
+        steps = rng.choice([-1e-4, 0.0, 1e-4], size=(n_points, 3)) + rng.uniform(-1e-12, 1e-12, (n_points, 3))
+        x = np.cumsum(steps, axis=0)
+        direction, walked = np.ones(3), []
+        for k in range(n_points):
+            direction = next_direction(direction, x[k] - x[k - 1] if k else np.zeros(3))
+            walked.append(direction)
+        np.testing.assert_array_equal(np.array(walked), travel_directions(x))
+
+
+def test_approach_directions_are_one_move_from_zero():
+    x = np.array([[1e-4, -1e-4, 0.0], [-1e-12, 1e-12, -2e-9], [0.0, 0.0, 0.0]])
+    for row, direction in zip(x, approach_directions(x)):
+        np.testing.assert_array_equal(direction, travel_directions(np.stack([np.zeros(3), row]))[-1])
+    # with min_move 0 every non-zero input is a move: the sign of the input, +1 at exactly 0
+    np.testing.assert_array_equal(approach_directions(x, min_move=0.0), np.where(x < 0.0, -1.0, 1.0))

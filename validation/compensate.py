@@ -200,7 +200,11 @@ def model_zero_angles(values: np.ndarray, space: ParameterSpace) -> np.ndarray:
 
 
 def _approach_directions(inputs: np.ndarray) -> np.ndarray:
-    return np.where(np.asarray(inputs) < 0.0, -1.0, 1.0)
+    """Each input reached straight from zero; any non-zero input counts as a move
+    (min_move 0: these inputs are solved, not jittery commands)."""
+    from flexcal.model.trajectory import approach_directions
+
+    return approach_directions(inputs, min_move=0.0)
 
 
 def calibrated_inputs(values: np.ndarray, targets: np.ndarray, space: ParameterSpace) -> np.ndarray:

@@ -35,6 +35,7 @@ import numpy as np
 import scipy.linalg
 
 from flexcal.geometry.params import MechanismParams
+from flexcal.model.trajectory import next_direction
 
 from .blas_threads import single_blas_thread
 from .fixed_point import anderson_step
@@ -65,7 +66,6 @@ GROUND_BODY = 28
 # (segments.rigid_mode_defect); exact condensations give ~1e-12, so 1e-6 only rejects
 # matrices that are not free-free segment stiffnesses at all (wrong frame or DOF order).
 RIGID_DEFECT_LIMIT = 1e-6
-MIN_MOVE = 1e-9  # [m] command steps below this are not moves (travel direction)
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -359,11 +359,8 @@ def _simulate(prototype: Prototype, inputs: np.ndarray, effects: tuple, progress
     start = time.perf_counter()
     for k in points:
         command = inputs[k]
-        # travel direction: sign of the last move > 1 nm, +1 before any (docs/conventions.md;
-        # the same rule as flexcal.model.trajectory.travel_directions)
-        move = command - last_command
-        moved = np.abs(move) > MIN_MOVE
-        direction = np.where(moved, np.sign(move), direction)
+        # travel direction: sign of the last move > MIN_MOVE, +1 before any (docs/conventions.md)
+        direction = next_direction(direction, command - last_command)
         last_command = command
         context = EffectContext(point_index=k, command=command.copy(), direction=direction.copy(),
                                 previous=previous_result, time=float(times[k]),
