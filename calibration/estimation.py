@@ -42,7 +42,7 @@ import numpy as np
 
 from flexcal.calibration.polish import batched_jacobian_fd, least_squares_polish
 
-__all__ = ["Prior", "uniform_prior", "Estimate", "estimate", "covariance", "standard_errors", "residual_autocorrelation", "choose_prior_scale", "CrossValidation",
+__all__ = ["Prior", "uniform_prior", "Estimate", "estimate", "posterior", "residual_autocorrelation", "choose_prior_scale", "CrossValidation",
            "held_out_folds", "PRIOR_SCALES"]
 
 Residuals = Callable[[np.ndarray], np.ndarray]
@@ -97,7 +97,8 @@ class Estimate:
     or "estimated from the residual (RSS / (m - p_eff))"); autocorrelation rho of the residual
     along the points and inflation (1 + rho)/(1 - rho) applied to the estimated noise variance
     (1 when the noise is given); n_observations m; p_eff effective
-    number of parameters; residual (m,) at x; rss; at_bound (d,) bool; n_evaluations
+    number of parameters; residual (m,) at x; jacobian (m, d) of the residual at x (forward
+    differences) [residual units per unit box]; rss; at_bound (d,) bool; n_evaluations
     (residual rows, Jacobians included); prior: the prior used."""
 
     x: np.ndarray
@@ -110,6 +111,7 @@ class Estimate:
     n_observations: int
     p_eff: float
     residual: np.ndarray
+    jacobian: np.ndarray
     rss: float
     at_bound: np.ndarray
     n_evaluations: int
@@ -120,33 +122,23 @@ class Estimate:
         return float(np.sqrt(self.rss / self.n_observations))
 
 
-def covariance(J: np.ndarray, noise: float, prior: Prior) -> tuple[np.ndarray, float]:
-    """(Sigma (d, d) [unit box^2], p_eff) of the linearized MAP: J (m, d) the data Jacobian
-    [residual units per unit box], noise sigma [residual units]. Sigma = (J^T J/sigma^2 +
-    diag(prior precision))^+, a pseudo-inverse: finite, and right for every combination the
-    data or the prior see (a base parameter's variance is c^T Sigma c); a single source in an
-    unseen direction has an unbounded variance (``standard_errors``); p_eff =
-    trace(J Sigma J^T)/sigma^2."""
+def posterior(J: np.ndarray, noise: float, prior: Prior) -> tuple[np.ndarray, float, np.ndarray]:
+    """(Sigma (d, d) [unit box^2], p_eff, std (d,) [unit box]) of the linearized MAP, from one
+    eigendecomposition of the information matrix. J (m, d) the data Jacobian [residual units
+    per unit box], noise sigma [residual units]. Sigma = (J^T J/sigma^2 + diag(prior
+    precision))^+, a pseudo-inverse: finite, and right for every combination the data or the
+    prior see (a base parameter's variance is c^T Sigma c); std = sqrt(diag Sigma), inf for a
+    source that takes part in a direction neither the data nor a prior sees (free least squares
+    on a rank-deficient problem); p_eff = trace(J Sigma J^T)/sigma^2."""
     W = J / noise
-    information = W.T @ W + np.diag(prior.precision)
-    eigenvalues, vectors = np.linalg.eigh(information)
+    eigenvalues, vectors = np.linalg.eigh(W.T @ W + np.diag(prior.precision))
     floor = max(eigenvalues.max(initial=0.0), 1e-300) * 1e-12  # below this a direction is numerically unseen
     seen = eigenvalues > floor
     sigma = (vectors[:, seen] / eigenvalues[seen]) @ vectors[:, seen].T
     p_eff = float(np.sum(np.sum((W @ vectors[:, seen]) ** 2, axis=0) / eigenvalues[seen]))
-    return sigma, p_eff
-
-
-def standard_errors(J: np.ndarray, noise: float, prior: Prior) -> np.ndarray:
-    """(d,) [unit box] sqrt(diag Sigma), inf for a source that takes part in a direction
-    neither the data nor a prior sees (free least squares on a rank-deficient problem)."""
-    W = J / noise
-    eigenvalues, vectors = np.linalg.eigh(W.T @ W + np.diag(prior.precision))
-    floor = max(eigenvalues.max(initial=0.0), 1e-300) * 1e-12
-    seen = eigenvalues > floor
     unbounded = np.any(vectors[:, ~seen] ** 2 > 1e-12, axis=1)
-    variance = np.sum(vectors[:, seen] ** 2 / eigenvalues[seen], axis=1)
-    return np.where(unbounded, np.inf, np.sqrt(variance))
+    std = np.where(unbounded, np.inf, np.sqrt(np.maximum(np.diag(sigma), 0.0)))
+    return sigma, p_eff, std
 
 
 def residual_autocorrelation(r: np.ndarray, point_size: int = 3) -> float:
@@ -211,7 +203,7 @@ def estimate(residuals: Residuals, prior: Prior, *, noise: float | None = None, 
         J, r = batched_jacobian_fd(residuals, x, step=FD_STEP)
         n_evaluations += d + 1
         rss = float(r @ r)
-        _, p_eff = covariance(J, sigma, prior)
+        _, p_eff, _ = posterior(J, sigma, prior)
         if given:
             break
         rho = residual_autocorrelation(r, point_size) if correlated else 0.0
@@ -220,15 +212,14 @@ def estimate(residuals: Residuals, prior: Prior, *, noise: float | None = None, 
         sigma = max(new, 1e-12)
         if converged:
             break
-    sigma_matrix, p_eff = covariance(J, sigma, prior)
-    std = standard_errors(J, sigma, prior)
+    sigma_matrix, p_eff, std = posterior(J, sigma, prior)
     rho = 0.0 if given or not correlated else residual_autocorrelation(r, point_size)
     at_bound = (x <= 1e-9) | (x >= 1.0 - 1e-9)
     return Estimate(x=x, std=std, covariance=sigma_matrix, noise=sigma,
                     noise_source="given" if given else "estimated from the residual (RSS / (m - p_eff)) x AR(1) "
                                                        "inflation (1 + rho) / (1 - rho)",
                     autocorrelation=rho, inflation=(1.0 + rho) / (1.0 - rho),
-                    n_observations=m, p_eff=p_eff, residual=r, rss=rss, at_bound=at_bound,
+                    n_observations=m, p_eff=p_eff, residual=r, jacobian=J, rss=rss, at_bound=at_bound,
                     n_evaluations=n_evaluations, prior=prior)
 
 

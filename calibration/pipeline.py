@@ -23,7 +23,6 @@ import numpy as np
 from flexcal.calibration.base_parameters import BaseParameters, base_parameters
 from flexcal.calibration.estimation import (PRIOR_SCALES, CrossValidation, Estimate, choose_prior_scale, estimate,
                                             held_out_folds, uniform_prior)
-from flexcal.calibration.polish import batched_jacobian_fd
 from flexcal.calibration.problem import CalibrationProblem
 from flexcal.model.parameters import ParameterSpace
 from flexcal.model.trajectory import travel_directions
@@ -121,8 +120,7 @@ def identify_all(space: ParameterSpace, inputs: np.ndarray, angles: np.ndarray, 
     prior = uniform_prior(space.n_params, scale)
     fit = estimate(problem.residuals, prior, noise=settings.noise,
                    max_evaluations=FREE_MAX_EVALUATIONS if math.isinf(scale) else None)
-    J, _ = batched_jacobian_fd(problem.residuals, fit.x)
-    base = base_parameters(J / fit.noise, space.names, max_std=settings.max_std)
+    base = base_parameters(fit.jacobian / fit.noise, space.names, max_std=settings.max_std)
     ranges = space.upper - space.lower
     values = space.full_values(space.from_unit(fit.x))
     std = np.zeros(len(space.parameters))

@@ -119,7 +119,7 @@ def design_point(path: str, space) -> np.ndarray:
 
 def run(args: argparse.Namespace) -> int:
     from flexcal.calibration.design import design_trajectory
-    from flexcal.calibration.estimation import uniform_prior
+    from flexcal.calibration.estimation import FD_STEP, uniform_prior
     from flexcal.calibration.polish import batched_jacobian_fd
     from flexcal.calibration.problem import CalibrationProblem
     from flexcal.model.assembly import mechanism_matrices
@@ -141,7 +141,7 @@ def run(args: argparse.Namespace) -> int:
 
     def jacobian(inputs: np.ndarray) -> np.ndarray:
         problem = CalibrationProblem(space=space, inputs=inputs, angles=np.zeros_like(inputs))
-        return batched_jacobian_fd(problem.residuals, x_design, step=1e-6)[0]
+        return batched_jacobian_fd(problem.residuals, x_design, step=FD_STEP)[0]
 
     gain = mechanism_matrices(space.nominal_full, space).input_gain[0, 3:, 3:]
     reference = standard_trajectory(space.mechanism, n_points=77).inputs

@@ -295,13 +295,10 @@ def _estimated_identification(measurement: Measurement, angles: np.ndarray, spac
                 "base_parameters": result.base.as_dict()}}}
 
 
-def _observability(values: np.ndarray, measurement: Measurement, space: ParameterSpace) -> dict[str, str]:
+def _observability(release: np.ndarray) -> dict[str, str]:
     """{drive source: why it cannot show} for the clearance and hysteresis of drives that the
-    identified model keeps compressed at every posture (their gap never opens: Eq. 6-7)."""
-    from flexcal.model.forward import forward
-
-    result = forward(values, measurement.inputs, space=space)
-    release = result.release[0]  # (n, 3) fx_A > 0: the load pulls the nut into the gap
+    identified model keeps compressed at every posture (their gap never opens: Eq. 6-7);
+    release (n, 3) [m] fx_A of D1-D3 at the identified values."""  # (n, 3) fx_A > 0: the load pulls the nut into the gap
     why = {}
     for i in range(3):
         if not np.any(release[:, i] > 0.0):
@@ -349,8 +346,9 @@ def run_verify(measurement: Measurement, space: ParameterSpace, settings: Verify
     values, fitted = core["values"], core["fitted"]
     residual = fitted - angles
     fit_rms = float(np.sqrt(np.mean(residual ** 2)))
-    classes = tuple(CLASS_NAMES[int(c)] for c in forward(values, measurement.inputs, space=space).point_class[0])
-    unobservable = _observability(values, measurement, space)
+    model = forward(values, measurement.inputs, space=space)
+    classes = tuple(CLASS_NAMES[int(c)] for c in model.point_class[0])
+    unobservable = _observability(model.release[0])
     rows = _parameter_rows(space, values, presets, core["selected"], core["identifiable"], std=core["std"],
                            unobservable=unobservable)
     per_point = np.linalg.norm(residual, axis=1)
