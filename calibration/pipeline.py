@@ -80,7 +80,9 @@ class Identification:
 
     @property
     def identifiable(self) -> tuple[str, ...]:
-        return self.base.base
+        """The sources the data identify alone (``BaseParameters.pure``): the ones whose own
+        values mean something, what the reports call identifiable."""
+        return self.base.pure()
 
 
 def check_determined(n_points: int, n_unknowns: int, what: str = "sources") -> None:

@@ -277,7 +277,7 @@ def _estimated_identification(measurement: Measurement, angles: np.ndarray, spac
         f"{time.perf_counter() - start:.1f} s; {result.base.n_base} base parameters")
     cv = result.cross_validation
     return {"values": result.values, "std": result.std, "fitted": result.fitted_angles, "selected": space.names,
-            "identifiable": set(result.base.pure()), "ident": None, "sobol": None, "pso": None, "polish": None,
+            "identifiable": set(result.identifiable), "ident": None, "sobol": None, "pso": None, "polish": None,
             "problem": result.problem, "n_evaluations": int(result.problem.log.n_candidates),
             "n_model_postures": int(result.problem.log.n_postures), "n_failed": int(result.problem.log.n_failures),
             "noise": fit.noise, "noise_source": fit.noise_source, "identification": result,
