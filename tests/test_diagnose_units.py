@@ -163,7 +163,7 @@ def test_baseline_escapes_the_false_clearance_mode():
     false clearance mode: a ~100 urad spike at a stroke end (measured 2026-11-22). The
     default baseline (best of several starts after the 45-source polish) must not; its good
     mode leaves ~2.4 urad at most (noise 0.5 urad plus the model gap)."""
-    from flexcal.validation.cmd_truth import stiffness_provider
+    from flexcal.validation.providers import stiffness_provider
     from flexcal.validation.diagnose_baseline import BaselineSettings, calibrate_baseline
     from flexcal.validation.diagnose_benchmark import benchmark_measurement
 

@@ -393,7 +393,7 @@ def test_an_error_caused_by_ctrl_c_counts_as_the_interrupt(tmp_path, capsys, mon
     # Ctrl-C while an extension module initialises surfaces as ImportError('initialization
     # failed') raised from the KeyboardInterrupt (seen when truth was stopped while importing
     # its plotting modules): still exit 130 and the interrupt line, not 'internal error'
-    from flexcal.validation import cmd_truth
+    from flexcal.validation import providers
 
     def interrupted_import(*args, **kwargs):
         try:
@@ -401,7 +401,7 @@ def test_an_error_caused_by_ctrl_c_counts_as_the_interrupt(tmp_path, capsys, mon
         except KeyboardInterrupt as interrupt:
             raise ImportError("initialization failed") from interrupt
 
-    monkeypatch.setattr(cmd_truth, "stiffness_provider", interrupted_import)
+    monkeypatch.setattr(providers, "stiffness_provider", interrupted_import)
     status = cli.main([*TRUTH, "--out", str(tmp_path / "out")])
     _one_line(capsys, status, 130, "interrupted")
     assert list(tmp_path.iterdir()) == []

@@ -97,7 +97,7 @@ def case_record(spec: dict, *, space=None) -> dict:
     record {"id", "spec", "row", "answer"} the case store keeps; space: the baseline's model."""
     from functools import partial
 
-    from .cmd_truth import stiffness_provider
+    from .providers import stiffness_provider
     from .diagnose import run_diagnosis
     from .diagnose_baseline import calibrate_baseline
     from .diagnose_benchmark import benchmark_measurement, run_case

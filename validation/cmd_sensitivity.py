@@ -56,7 +56,7 @@ def load_source(args: argparse.Namespace, space, *, progress: bool):
         raise ValueError(f"--noise-urad={args.noise_urad} must be >= 0")
     if args.scenario is not None:
         from .cli_common import load_scenario_with_trajectory
-        from .cmd_truth import stiffness_provider
+        from .providers import stiffness_provider
         from .truth import make_truth
 
         scenario = load_scenario_with_trajectory(args)

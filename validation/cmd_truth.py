@@ -41,18 +41,6 @@ def configure(parser: argparse.ArgumentParser) -> None:
     add_out(parser, what="curves.csv, curves.json, curves.png")
 
 
-def stiffness_provider(kind: str, *, progress: bool = True, workers: int | None = 0, scheduler: str | None = None):
-    """The segment stiffness provider by name; workers / scheduler: where the FEM
-    provider builds missing segments (``fem_provider``; 0 without a scheduler: here, in order)."""
-    if kind == "analytic":
-        from .segments import analytic_provider
-
-        return analytic_provider()
-    from .fem_provider import fem_provider
-
-    return fem_provider(progress=progress, workers=workers, scheduler=scheduler)
-
-
 def run(args: argparse.Namespace) -> int:
     from flexcal.model.forward import ideal_angles
 
@@ -66,6 +54,8 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError(f"--noise-urad={args.noise_urad} must be >= 0")
     scenario = load_scenario_with_trajectory(args)
     from .executor import executor_options
+
+    from .providers import stiffness_provider
 
     provider = stiffness_provider(args.provider, progress=not args.quiet, **executor_options(args))
     result = make_truth(scenario, provider, progress=not args.quiet)

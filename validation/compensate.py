@@ -120,7 +120,7 @@ def bench_driver(bench: Bench, log: list) -> Callable[[np.ndarray], np.ndarray]:
 
 def _provider_from_description(description: str, progress: bool, workers: int | None = 0,
                                scheduler: str | None = None):
-    from .cmd_truth import stiffness_provider
+    from .providers import stiffness_provider
 
     if description.startswith("FEM"):
         return stiffness_provider("fem", progress=progress, workers=workers, scheduler=scheduler)

@@ -1,0 +1,23 @@
+"""The virtual prototype's segment stiffness, chosen by name: ``fem`` (FEM condensation of the
+as-built solids, cached) or ``analytic`` (the closed-form compliance; truth then shares the
+model's hinge formulas, so it is for checks only)."""
+
+from __future__ import annotations
+
+__all__ = ["stiffness_provider", "PROVIDERS"]
+
+PROVIDERS = ("fem", "analytic")
+
+
+def stiffness_provider(kind: str, *, progress: bool = True, workers: int | None = 0, scheduler: str | None = None):
+    """The segment stiffness provider by name; workers / scheduler: where the FEM
+    provider builds missing segments (``fem_provider``; 0 without a scheduler: here, in order)."""
+    if kind not in PROVIDERS:
+        raise ValueError(f"unknown stiffness provider {kind!r}: use one of {', '.join(PROVIDERS)}")
+    if kind == "analytic":
+        from .segments import analytic_provider
+
+        return analytic_provider()
+    from .fem_provider import fem_provider
+
+    return fem_provider(progress=progress, workers=workers, scheduler=scheduler)
