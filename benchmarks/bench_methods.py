@@ -31,7 +31,7 @@ def _subset(measurement, points):
 def run_method(measurement, space, method: str, settings, presets):
     from flexcal.calibration.estimation import held_out_folds
     from flexcal.model.forward import forward
-    from flexcal.validation.verify import run_verify
+    from flexcal.validation.runs.verify import run_verify
 
     verify_settings = dataclasses.replace(settings, method=method)
     squares, count = 0.0, 0
@@ -58,9 +58,9 @@ def main(argv=None) -> int:
     from flexcal.calibration.pso_settings import PSOSettings
     from flexcal.model.parameters import parameter_space
     from flexcal.validation.measurements import read_measurement
-    from flexcal.validation.model_correction import model_space
-    from flexcal.validation.scenario import mechanism_from_metadata
-    from flexcal.validation.verify import VerifySettings
+    from flexcal.validation.runs.model_correction import model_space
+    from flexcal.validation.prototype.scenario import mechanism_from_metadata
+    from flexcal.validation.runs.verify import VerifySettings
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("files", nargs="+")

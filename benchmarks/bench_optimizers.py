@@ -200,15 +200,15 @@ def mechanism_problem():
 
     from flexcal.calibration.problem import CalibrationProblem
     from flexcal.model.parameters import parameter_space
-    from flexcal.validation.scenario import load_scenario
-    from flexcal.validation.segments import analytic_provider
-    from flexcal.validation.truth import make_truth
-    from flexcal.validation.verify import TABLE1_NAMES
+    from flexcal.validation.prototype.scenario import load_scenario
+    from flexcal.validation.prototype.segments import analytic_provider
+    from flexcal.validation.prototype.truth import make_truth
+    from flexcal.model.parameters import DRIVE_SOURCE_NAMES
 
     scenario = load_scenario("table1")
     measurement = make_truth(scenario, analytic_provider()).measurement
     space = parameter_space()
-    sub = space.subset(TABLE1_NAMES, fixed=dict(zip(space.all_names, scenario.values)))
+    sub = space.subset(DRIVE_SOURCE_NAMES, fixed=dict(zip(space.all_names, scenario.values)))
     problem = CalibrationProblem(space=sub, inputs=measurement.inputs, angles=measurement.angles)
     truth = np.array([scenario.values[space.index(n)] for n in sub.names])
     blind = {"D1.CL", "D1.mu", "D2.CL", "D2.mu"}

@@ -42,6 +42,8 @@ _DESCRIPTIONS = {
     "mu": "hysteresis coefficient", "CL": "equivalent clearance", "x0": "initial actuator position",
 }
 DIMENSION_TOLERANCE = 0.10  # P' = +-10 % of nominal (paper Sec. 3.1)
+# the nine drive sources (initial position, clearance, friction of D1..D3): the rows of Table 1
+DRIVE_SOURCE_NAMES = tuple(f"D{i}.{s}" for s in ("x0", "CL", "mu") for i in (1, 2, 3))
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -131,7 +131,7 @@ def test_debug_shows_the_traceback(tmp_path, capsys):
 
 
 def test_ctrl_c_exits_130_and_writes_nothing(tmp_path, capsys, monkeypatch):
-    from flexcal.validation import cmd_forward
+    from flexcal.validation.cli import forward as cmd_forward
 
     def interrupted(*args, **kwargs):
         raise KeyboardInterrupt
@@ -144,7 +144,7 @@ def test_ctrl_c_exits_130_and_writes_nothing(tmp_path, capsys, monkeypatch):
 
 
 def test_a_bug_is_one_line_with_status_1(tmp_path, capsys, monkeypatch):
-    from flexcal.validation import cmd_forward
+    from flexcal.validation.cli import forward as cmd_forward
 
     def broken(*args, **kwargs):
         raise TypeError("unsupported operand")
@@ -239,7 +239,7 @@ def test_unreadable_csv_is_one_line(tmp_path, capsys, content, words):
 
 def test_diagnose_refuses_a_short_file_before_any_fem(tmp_path, capsys, monkeypatch):
     # the 2-point file used to build the model's FEM correction (~30 s cold) first
-    import flexcal.validation.model_correction as correction
+    import flexcal.validation.runs.model_correction as correction
 
     def no_fem(*args, **kwargs):
         raise AssertionError("the FEM correction was built before the file was checked")

@@ -8,7 +8,7 @@ import tomllib
 import pytest
 
 from flexcal.validation import cli
-from flexcal.validation.cli_common import TIMING_KEYS, without_timings
+from flexcal.validation.cli.common import TIMING_KEYS, without_timings
 from flexcal.validation.config import check_default_config, merge_config
 
 HEADER = "point,time_s,leg,xa1_mm,xa2_mm,xa3_mm,theta_x_urad,theta_y_urad,theta_z_urad"
@@ -61,7 +61,7 @@ def test_top_level_help_lists_every_available_command(capsys):
 
 
 def test_print_config_round_trips_and_precedence(tmp_path, capsys):
-    from flexcal.validation.cmd_verify import DEFAULT_CONFIG
+    from flexcal.validation.cli.verify import DEFAULT_CONFIG
 
     assert cli.main(["verify", "--print-config"]) == 0  # no required option needed
     assert tomllib.loads(capsys.readouterr().out) == DEFAULT_CONFIG

@@ -84,7 +84,7 @@ def test_hinge_mesher_failure_exits_2_without_output(tmp_path, capsys, monkeypat
 
 
 def _without_timings(folder):
-    from flexcal.validation.cli_common import without_timings
+    from flexcal.validation.cli.common import without_timings
 
     return without_timings(json.loads((folder / "report.json").read_text()))
 

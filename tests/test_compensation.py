@@ -9,12 +9,11 @@ from flexcal.calibration.compensation import (LoopSettings, closed_loop, correct
 from flexcal.model.forward import forward, ideal_angles
 from flexcal.model.parameters import parameter_space
 from flexcal.model.trajectory import WORKSPACE, standard_trajectory
-from flexcal.validation.compensate import (calibrated_inputs, model_input_jacobian, model_states,
-                                           model_zero_angles, return_offsets, small_deflection_inputs)
+from flexcal.validation.runs.compensate import (calibrated_inputs, model_input_jacobian, model_states, model_zero_angles, return_offsets, small_deflection_inputs)
 from flexcal.validation.measurements import Measurement
-from flexcal.validation.scenario import load_scenario
-from flexcal.validation.targets import default_targets, read_targets, write_targets
-from flexcal.validation.verify import remove_return_offsets
+from flexcal.validation.prototype.scenario import load_scenario
+from flexcal.validation.runs.targets import default_targets, read_targets, write_targets
+from flexcal.validation.runs.verify import remove_return_offsets
 
 GAIN = np.array([[-1.0, -1.0, -1.6], [-3.2, -3.2, 0.1], [-0.8, 0.8, 0.0]])  # [rad/m], the mount's order
 

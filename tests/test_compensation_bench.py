@@ -8,15 +8,14 @@ import numpy as np
 import pytest
 
 from flexcal.calibration.compensation import LoopSettings, iterate
-from flexcal.validation.compensate import (Bench, bench_driver, bench_from_metadata, calibrated_inputs,
-                                           drive_targets, model_input_jacobian)
-from flexcal.validation.effect_injectors import Drift
-from flexcal.validation.prototype import build_prototype
-from flexcal.validation.scenario import load_scenario
-from flexcal.validation.segments import analytic_provider
-from flexcal.validation.targets import default_targets, write_targets
-from flexcal.validation.truth import as_built, make_truth
-from flexcal.validation.verify import remove_return_offsets
+from flexcal.validation.runs.compensate import (Bench, bench_driver, bench_from_metadata, calibrated_inputs, drive_targets, model_input_jacobian)
+from flexcal.validation.effects.injectors import Drift
+from flexcal.validation.prototype.mechanism import build_prototype
+from flexcal.validation.prototype.scenario import load_scenario
+from flexcal.validation.prototype.segments import analytic_provider
+from flexcal.validation.runs.targets import default_targets, write_targets
+from flexcal.validation.prototype.truth import as_built, make_truth
+from flexcal.validation.runs.verify import remove_return_offsets
 
 
 @pytest.fixture(scope="module")

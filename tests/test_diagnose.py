@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 
 from flexcal.validation import cli
-from flexcal.validation.diagnose import run_diagnosis
-from flexcal.validation.diagnose_benchmark import benchmark_measurement, run_case
+from flexcal.validation.diagnosis.diagnose import run_diagnosis
+from flexcal.validation.diagnosis.benchmark import benchmark_measurement, run_case
 from flexcal.validation.measurements import Measurement, read_measurement, write_measurement
-from flexcal.validation.segments import analytic_provider
+from flexcal.validation.prototype.segments import analytic_provider
 
 REQUIRED_KEYS = {"ranking", "top_effect", "where", "noise_floor_urad"}
 ROW_KEYS = {"effect", "score", "heldout_rms_before_urad", "heldout_rms_after_urad", "closure"}
@@ -111,7 +111,7 @@ def test_benchmark_command_tiny_grid_survives_a_failed_case_and_resumes(tmp_path
     the library) at 10x noise. A case that raises is listed and the command exits 1 with the
     others' figures; the finished cases are kept in DIR/cases and a rerun computes only the
     failed one."""
-    import flexcal.validation.diagnose_benchmark as bench
+    import flexcal.validation.diagnosis.benchmark as bench
 
     out = tmp_path / "bench"
     # --workers 0: the cases run in this process, where the monkeypatched failure applies

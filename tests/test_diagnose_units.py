@@ -6,11 +6,9 @@ import math
 import numpy as np
 import pytest
 
-from flexcal.validation.diagnose_where import (autocorrelation, noise_floor_differences, noise_floor_repeats,
-                                               periodicity, runs_test, strata)
-from flexcal.validation.diagnose_which import (aicc, bic, cross_validate, fit_terms, is_linear, leg_folds,
-                                               make_problem, principal_cosines)
-from flexcal.validation.effect_terms import ModelTerm, TermData
+from flexcal.validation.diagnosis.where import (autocorrelation, noise_floor_differences, noise_floor_repeats, periodicity, runs_test, strata)
+from flexcal.validation.diagnosis.which import (aicc, bic, cross_validate, fit_terms, is_linear, leg_folds, make_problem, principal_cosines)
+from flexcal.validation.effects.terms import ModelTerm, TermData
 
 
 def test_aicc_and_bic_against_hand_values():
@@ -100,7 +98,7 @@ def test_term_fit_recovers_a_linear_and_a_nonlinear_double():
 def test_linearity_check_and_principal_angles():
     data = _data()
     for term, linear in ((_linear_double(), True), (_nonlinear_double(), False)):
-        from flexcal.validation.diagnose_which import term_columns
+        from flexcal.validation.diagnosis.which import term_columns
 
         assert is_linear(term, data, term_columns(term, data)) is linear
     A = np.random.default_rng(2).normal(size=(50, 3))
@@ -163,9 +161,9 @@ def test_baseline_escapes_the_false_clearance_mode():
     false clearance mode: a ~100 urad spike at a stroke end (measured 2026-11-22). The
     default baseline (best of several starts after the 45-source polish) must not; its good
     mode leaves ~2.4 urad at most (noise 0.5 urad plus the model gap)."""
-    from flexcal.validation.providers import stiffness_provider
-    from flexcal.validation.diagnose_baseline import BaselineSettings, calibrate_baseline
-    from flexcal.validation.diagnose_benchmark import benchmark_measurement
+    from flexcal.validation.prototype.providers import stiffness_provider
+    from flexcal.validation.diagnosis.baseline import BaselineSettings, calibrate_baseline
+    from flexcal.validation.diagnosis.benchmark import benchmark_measurement
 
     measurement = benchmark_measurement("none", 0.0, 0, stiffness_provider("analytic", progress=False)).measurement
 

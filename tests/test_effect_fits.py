@@ -9,12 +9,12 @@ import numpy as np
 import pytest
 from scipy.optimize import least_squares
 
-from flexcal.validation.effect_library import EFFECT_IDS, OUT_OF_LIBRARY_IDS, make_injector, model_term
-from flexcal.validation.effect_magnitude import estimate_magnitude
-from flexcal.validation.effect_terms import build_term_data
-from flexcal.validation.scenario import load_scenario
-from flexcal.validation.segments import analytic_provider
-from flexcal.validation.truth import make_truth
+from flexcal.validation.effects.library import EFFECT_IDS, OUT_OF_LIBRARY_IDS, make_injector, model_term
+from flexcal.validation.effects.magnitude import estimate_magnitude
+from flexcal.validation.effects.terms import build_term_data
+from flexcal.validation.prototype.scenario import load_scenario
+from flexcal.validation.prototype.segments import analytic_provider
+from flexcal.validation.prototype.truth import make_truth
 
 MAGNITUDE_URAD = 10.0
 SEED = 1

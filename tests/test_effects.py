@@ -8,16 +8,15 @@ import numpy as np
 import pytest
 
 from flexcal.model.trajectory import standard_trajectory
-from flexcal.validation.effect_injectors import Drift, LeadError, SensorScale, StepLoss
-from flexcal.validation.effect_library import (EFFECT_IDS, LIBRARY, NONE, OUT_OF_LIBRARY_IDS, effects_from_scenario,
-                                               make_injector, model_term)
-from flexcal.validation.effect_magnitude import standard_setting
-from flexcal.validation.effect_terms import TERM_CREEP_TIME, path_fraction, relaxed
-from flexcal.validation.prototype import build_prototype, simulate
-from flexcal.validation.prototype_effects import EffectContext, room_temperature
-from flexcal.validation.scenario import load_scenario
-from flexcal.validation.segments import analytic_provider
-from flexcal.validation.truth import as_built, make_truth
+from flexcal.validation.effects.injectors import Drift, LeadError, SensorScale, StepLoss
+from flexcal.validation.effects.library import (EFFECT_IDS, LIBRARY, NONE, OUT_OF_LIBRARY_IDS, effects_from_scenario, make_injector, model_term)
+from flexcal.validation.effects.magnitude import standard_setting
+from flexcal.validation.effects.terms import TERM_CREEP_TIME, path_fraction, relaxed
+from flexcal.validation.prototype.mechanism import build_prototype, simulate
+from flexcal.validation.effects.hooks import EffectContext, room_temperature
+from flexcal.validation.prototype.scenario import load_scenario
+from flexcal.validation.prototype.segments import analytic_provider
+from flexcal.validation.prototype.truth import as_built, make_truth
 
 SHORT = standard_trajectory(n_points=17)  # both turning points of every leg, ~0.6 s per run
 GROWING_WITH_TIME = {"drift", "creep"}  # effects whose size grows with elapsed time

@@ -178,7 +178,7 @@ sys.exit(3)
 
 
 def test_sigterm_during_the_final_moves_lets_them_finish(tmp_path, monkeypatch):
-    from flexcal.validation.signals import Terminated, termination_raises
+    from flexcal.validation.cli.signals import Terminated, termination_raises
 
     out = tmp_path / "out"
     out.mkdir()
@@ -328,7 +328,7 @@ def test_hostile_scenario_name_is_escaped_in_the_html_report(tmp_path):
 
 
 def test_html_report_names_matrix_rows_and_columns_and_scrolls(tmp_path):
-    from flexcal.validation.html_report import render_run_folder
+    from flexcal.validation.reports.html import render_run_folder
 
     names = [f"P{j}.x<0>" for j in range(45)]
     write_json(tmp_path / "report.json", {"names": names, "outputs": ["overall", "tx", "ty", "tz"],
@@ -393,7 +393,7 @@ def test_an_error_caused_by_ctrl_c_counts_as_the_interrupt(tmp_path, capsys, mon
     # Ctrl-C while an extension module initialises surfaces as ImportError('initialization
     # failed') raised from the KeyboardInterrupt (seen when truth was stopped while importing
     # its plotting modules): still exit 130 and the interrupt line, not 'internal error'
-    from flexcal.validation import providers
+    from flexcal.validation.prototype.mechanism import providers
 
     def interrupted_import(*args, **kwargs):
         try:

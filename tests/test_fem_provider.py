@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from flexcal.geometry.params import ChainSegment, FlexureChain, reference_mechanism
-from flexcal.validation.fem_provider import fem_provider, mirror_segment_stiffness
-from flexcal.validation.segments import analytic_provider, section_nodes
+from flexcal.validation.prototype.fem_provider import fem_provider, mirror_segment_stiffness
+from flexcal.validation.prototype.segments import analytic_provider, section_nodes
 
 
 def test_segment_cuts_must_avoid_leaves():

@@ -13,8 +13,8 @@ Tolerances on the working rotation C_rz,Mz (and the coupled uy entries):
 import pytest
 
 from flexcal.geometry.params import STEEL, CircularNotchHinge
-from flexcal.validation.fem_report import compare_hinge
-from flexcal.validation.model_vs_fem import hinge_series
+from flexcal.validation.reports.fem import compare_hinge
+from flexcal.validation.reports.model_vs_fem import hinge_series
 
 NOTCHES = [h for h in hinge_series() if isinstance(h, CircularNotchHinge)]
 LEAVES = [h for h in hinge_series() if not isinstance(h, CircularNotchHinge)]

@@ -7,7 +7,7 @@ import re
 import pytest
 
 from flexcal.validation import cli
-from flexcal.validation.html_report import render_run_folder
+from flexcal.validation.reports.html import render_run_folder
 
 # the smallest valid PNG (1 x 1 pixel), so the test needs no plotting library
 PNG = base64.b64decode("iVBORw0KGgoAAAANSUhEUgAAAAEAAAABCAYAAAAfFcSJAAAADUlEQVR42mNk+M9QDwADhgGAWjR9awAAAABJRU5ErkJggg==")

@@ -23,7 +23,7 @@ ALLOWED = {
 def imported_packages(path: Path, package_dir: Path) -> dict[str, int]:
     """{flexcal package imported by the file: first line number}; relative imports that
     climb out of the package folder ``package_dir`` count as the package they reach."""
-    depth = len(path.relative_to(package_dir).parts) - (path.name == "__init__.py")  # 1 for package/x.py
+    depth = len(path.relative_to(package_dir).parts)  # package levels below flexcal: 1 for package/x.py, 2 for package/sub/x.py and package/sub/__init__.py
     found: dict[str, int] = {}
     for node in ast.walk(ast.parse(path.read_text(), filename=str(path))):
         names = []
@@ -63,4 +63,101 @@ def test_no_import_runs_up_the_picture(package):
              for path in files
              for target, line in imported_packages(path, ROOT / package).items()
              if target != package and target not in ALLOWED[package]]
+    assert not wrong, "\n".join(wrong)
+
+
+def module_name(path: Path) -> str:
+    """'validation.prototype.mechanism' for validation/prototype/mechanism.py (package folders
+    as the repository holds them; an __init__.py is its package)."""
+    parts = list(path.relative_to(ROOT).with_suffix("").parts)
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def module_arrows(path: Path) -> set[str]:
+    """The flexcal modules one file imports (lazy imports too), as ``module_name`` gives them:
+    ``from .x import a`` is an arrow to ``x`` when x is a module, ``from . import x`` to ``x``."""
+    here = module_name(path).split(".")
+    package = here if path.name == "__init__.py" else here[:-1]
+    found = set()
+    for node in ast.walk(ast.parse(path.read_text(), filename=str(path))):
+        bases = []
+        if isinstance(node, ast.Import):
+            bases = [alias.name.split(".")[1:] for alias in node.names if alias.name.startswith("flexcal.")]
+            names = [[]]
+        elif isinstance(node, ast.ImportFrom):
+            if node.level == 0:
+                if not (node.module or "").startswith("flexcal."):
+                    continue
+                bases = [node.module.split(".")[1:]]
+            else:
+                anchor = package[:len(package) - node.level + 1]
+                bases = [anchor + (node.module.split(".") if node.module else [])]
+            names = [[alias.name] for alias in node.names]
+        for base in bases:
+            for name in names:
+                for candidate in (base + name, base):  # a submodule, else the module it is taken from
+                    dotted = ".".join(candidate)
+                    if (ROOT.joinpath(*candidate).with_suffix(".py").exists()
+                            or (ROOT.joinpath(*candidate) / "__init__.py").exists()):
+                        found.add(dotted)
+                        break
+    return found - {module_name(path)}
+
+
+def import_graph() -> dict[str, set[str]]:
+    return {module_name(path): module_arrows(path)
+            for package in ALLOWED for path in sorted((ROOT / package).rglob("*.py"))}
+
+
+def test_the_module_reader_resolves_relative_imports():
+    arrows = module_arrows(ROOT / "validation" / "cli" / "truth.py")
+    assert "validation.cli.common" in arrows  # from .common import add_out
+    assert "validation.prototype.providers" in arrows  # from ..prototype.providers import ... (lazy)
+
+
+def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """Strongly connected components with more than one module (Tarjan), each sorted."""
+    index, low, stack, on_stack, found = {}, {}, [], set(), []
+
+    def visit(node):
+        index[node] = low[node] = len(index)
+        stack.append(node)
+        on_stack.add(node)
+        for target in graph.get(node, ()):
+            if target not in index:
+                visit(target)
+                low[node] = min(low[node], low[target])
+            elif target in on_stack:
+                low[node] = min(low[node], index[target])
+        if low[node] == index[node]:
+            component = []
+            while True:
+                member = stack.pop()
+                on_stack.discard(member)
+                component.append(member)
+                if member == node:
+                    break
+            if len(component) > 1:
+                found.append(sorted(component))
+
+    for node in sorted(graph):
+        if node not in index:
+            visit(node)
+    return found
+
+
+def test_the_cycle_finder_finds_a_circle():
+    assert cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+    assert cycles({"a": {"b"}, "b": set()}) == []
+
+
+def test_no_import_circle_between_modules():
+    assert cycles(import_graph()) == []
+
+
+def test_no_numerics_module_imports_the_command_line():
+    # the command line (validation/cli/) sits on top: it imports the numerics, never the reverse
+    wrong = [f"{module} imports {target}" for module, targets in import_graph().items()
+             if not module.startswith("validation.cli")
+             for target in targets if target.startswith("validation.cli")]
     assert not wrong, "\n".join(wrong)

@@ -28,7 +28,7 @@ def test_same_part_same_mesh_valid_and_on_the_surfaces(hinge):
 
 
 def test_working_rotation_against_the_closed_form():
-    from flexcal.validation.fem_report import compare_hinge
+    from flexcal.validation.reports.fem import compare_hinge
 
     result = compare_hinge(NOTCH, STEEL, elements_through_thickness=3, mesher="mapped")
     # 3-D FEM vs Euler-Bernoulli integral at t/R = 0.2: published agreement 0.1-9.4 %,

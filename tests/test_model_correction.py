@@ -1,4 +1,4 @@
-"""FEM-informed chain compliance of the analytic model (validation/model_correction.py)."""
+"""FEM-informed chain compliance of the analytic model (validation/runs/model_correction.py)."""
 
 import dataclasses
 
@@ -8,8 +8,8 @@ import pytest
 from flexcal.model.forward import forward
 from flexcal.model.parameters import parameter_space
 from flexcal.model.trajectory import standard_trajectory
-from flexcal.validation.model_correction import compliance_factors, corrected_space, provider_chain_compliance
-from flexcal.validation.segments import analytic_provider
+from flexcal.validation.runs.model_correction import (compliance_factors, corrected_space, provider_chain_compliance)
+from flexcal.validation.prototype.segments import analytic_provider
 
 
 def test_analytic_provider_gives_unit_factors():
@@ -59,9 +59,9 @@ def test_fem_correction_brings_the_model_closer_to_the_fem_prototype():
     # table1 scenario on the FEM prototype: at the true parameter values the corrected
     # model must be nearer the curve than the closed-form one (measured 2026-11-22: RMS
     # theta_x 10.6 -> 3.4 urad; the rest is the Eq. 4-5 parasitic approximation)
-    from flexcal.validation.fem_provider import fem_provider
-    from flexcal.validation.scenario import load_scenario
-    from flexcal.validation.truth import make_truth
+    from flexcal.validation.prototype.fem_provider import fem_provider
+    from flexcal.validation.prototype.scenario import load_scenario
+    from flexcal.validation.prototype.truth import make_truth
 
     provider = fem_provider(progress=False)
     scenario = load_scenario("table1")

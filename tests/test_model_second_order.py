@@ -68,9 +68,9 @@ def test_second_order_model_is_nearer_the_exact_kinematics_prototype():
     # from the model only in exact kinematics and transmission details; on the table1
     # scenario at the true values the terms cut the RMS per angle from 3.4 / 4.6 / 1.2 to
     # 0.59 / 1.68 / 0.34 urad (measured 2026-11-22); require at least a 1/3 cut on each angle
-    from flexcal.validation.scenario import load_scenario
-    from flexcal.validation.segments import analytic_provider
-    from flexcal.validation.truth import make_truth
+    from flexcal.validation.prototype.scenario import load_scenario
+    from flexcal.validation.prototype.segments import analytic_provider
+    from flexcal.validation.prototype.truth import make_truth
 
     scenario = load_scenario("table1")
     measured = make_truth(scenario, analytic_provider()).measurement.angles

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from flexcal.geometry.params import STEEL, LeafHinge, reference_mechanism
-from flexcal.validation.fem_report import compare_chain, compare_hinge
+from flexcal.validation.reports.fem import compare_chain, compare_hinge
 
 WORKING = [(1, 1), (1, 5), (5, 5)]  # uy/Fy, uy/Mz, rz/Mz
 

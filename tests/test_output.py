@@ -10,7 +10,7 @@ import signal
 import numpy as np
 import pytest
 
-from flexcal.validation.output import (atomic_path, interrupts_deferred, staged_output, write_json, write_text)
+from flexcal.validation.output import atomic_path, interrupts_deferred, staged_output, write_json, write_text
 
 
 def _everything(folder):

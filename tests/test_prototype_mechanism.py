@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 
 from flexcal.geometry.params import reference_mechanism
-from flexcal.validation.prototype import build_prototype, simulate
-from flexcal.validation.prototype_equilibrium import SolverSettings
-from flexcal.validation.segments import analytic_provider
-from flexcal.validation.transmission import ActuatorTransmission
+from flexcal.validation.prototype.mechanism import build_prototype, simulate
+from flexcal.validation.prototype.equilibrium import SolverSettings
+from flexcal.validation.prototype.segments import analytic_provider
+from flexcal.validation.prototype.transmission import ActuatorTransmission
 
 PROVIDER = analytic_provider()
 MECH = reference_mechanism()
@@ -37,7 +37,7 @@ def _linear_response(mech, transmissions, inputs):
     """Independent linear model: the provider's 12 x 12 segments assembled per chain in
     world coordinates, node B tied to the frame twist at O_C, nuts on springs, the weight
     at the centre of gravity; solved for each input row. Returns poses (n, 6) [m, rad]."""
-    from flexcal.validation.segments import section_nodes
+    from flexcal.validation.prototype.segments import section_nodes
 
     n_dof = 6 + 6 * 24 + 3
     k_glob = np.zeros((n_dof, n_dof))
@@ -108,9 +108,9 @@ def test_gravity_sag_is_close_to_linear_and_compresses_d1_d2():
 
 def test_the_chains_carry_the_weight_to_the_supports():
     """Balance of the whole: the chains' forces and moments on their A ends add up to the weight."""
-    from flexcal.validation.prototype import _loads
-    from flexcal.validation.prototype_effects import PointConditions
-    from flexcal.validation.prototype_equilibrium import node_poses, solve_equilibrium
+    from flexcal.validation.prototype.mechanism import _loads
+    from flexcal.validation.effects.hooks import PointConditions
+    from flexcal.validation.prototype.equilibrium import node_poses, solve_equilibrium
 
     proto = build_prototype(MECH, RIGID_NUTS, PROVIDER)
     command = np.array([0.5e-3, -0.3e-3, 0.4e-3])
@@ -227,9 +227,9 @@ def test_bad_inputs_are_refused():
 
 def test_assembled_tangent_is_the_derivative_of_the_residual():
     """Whole-mechanism tangent (segments + weight + nut springs) against central differences."""
-    from flexcal.validation.prototype import _loads
-    from flexcal.validation.prototype_effects import PointConditions
-    from flexcal.validation.prototype_equilibrium import _update, evaluate
+    from flexcal.validation.prototype.mechanism import _loads
+    from flexcal.validation.effects.hooks import PointConditions
+    from flexcal.validation.prototype.equilibrium import _update, evaluate
 
     proto = build_prototype(MECH, RIGID_NUTS, PROVIDER)
     weight = MECH.payload_mass * np.asarray(MECH.gravity)
@@ -309,7 +309,7 @@ def test_load_dependent_effect_is_solved_at_the_points_own_loads():
     at its *own* loads: re-solving every point on its own with the stiffness frozen at
     those loads gives the same angles (to the Newton tolerance's ~1e-11 rad), while the
     stiffness of the previous point's loads (the former one-point lag) is visibly off."""
-    from flexcal.validation.effect_injectors import GravitySag
+    from flexcal.validation.effects.injectors import GravitySag
 
     sag = GravitySag(exponent=(0.3, 0.3, 0.3), coefficient=(0.05, 0.05, 0.05, 0.1, 0.1, 0.1))
     prototype = build_prototype(MECH, RIGID_NUTS, PROVIDER)

@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 from flexcal.geometry.params import reference_mechanism
-from flexcal.validation.prototype import build_prototype, simulate
-from flexcal.validation.segments import analytic_provider
-from flexcal.validation.transmission import ActuatorTransmission, nut_offset, play_operator, point_class
+from flexcal.validation.prototype.mechanism import build_prototype, simulate
+from flexcal.validation.prototype.segments import analytic_provider
+from flexcal.validation.prototype.transmission import (ActuatorTransmission, nut_offset, play_operator, point_class)
 
 PROVIDER = analytic_provider()
 MECH = reference_mechanism()

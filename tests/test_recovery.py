@@ -18,9 +18,9 @@ from flexcal.calibration.problem import CalibrationProblem
 from flexcal.calibration.pso import identify
 from flexcal.calibration.pso_settings import PSOSettings
 from flexcal.model.parameters import parameter_space
-from flexcal.validation.scenario import load_scenario
-from flexcal.validation.segments import analytic_provider
-from flexcal.validation.truth import make_truth
+from flexcal.validation.prototype.scenario import load_scenario
+from flexcal.validation.prototype.segments import analytic_provider
+from flexcal.validation.prototype.truth import make_truth
 
 
 def test_drive_sources_recovered_from_prototype_truth():

@@ -17,10 +17,9 @@ from flexcal.fem.cache import load_cached, store_cached
 from flexcal.geometry.params import reference_mechanism
 from flexcal.validation import cli
 from flexcal.validation.executor import resolve_workers, run_jobs
-from flexcal.validation.fem_provider import (DEFAULT_ELEMENTS_THROUGH, build_segments, canonical_segment,
-                                             fem_provider, segment_cache_key)
-from flexcal.validation.prototype import build_prototype
-from flexcal.validation.segments import analytic_provider, chain_slices, section_nodes
+from flexcal.validation.prototype.fem_provider import (DEFAULT_ELEMENTS_THROUGH, build_segments, canonical_segment, fem_provider, segment_cache_key)
+from flexcal.validation.prototype.mechanism import build_prototype
+from flexcal.validation.prototype.segments import analytic_provider, chain_slices, section_nodes
 
 # `dask scheduler` / `dask worker` through this interpreter: the `dask` script's shebang may
 # name another environment's Python (a copied virtualenv), which imports another flexcal
@@ -178,8 +177,8 @@ def _is_strut(segment) -> bool:
 def test_truth_builds_its_missing_segment_on_the_cluster(dask_cluster, tmp_path, monkeypatch):
     """``flexcal truth --scheduler ADDRESS``: the one missing FEM segment is built on the
     cluster and handed back into this machine's cache (the workers have their own)."""
-    from flexcal.validation.scenario import load_scenario
-    from flexcal.validation.truth import as_built
+    from flexcal.validation.prototype.scenario import load_scenario
+    from flexcal.validation.prototype.truth import as_built
 
     cache = tmp_path / "cache"
     monkeypatch.setenv("FLEXCAL_CACHE_DIR", str(cache))
@@ -201,9 +200,9 @@ def test_truth_builds_its_missing_segment_on_the_cluster(dask_cluster, tmp_path,
 def test_compensate_bench_builds_on_the_cluster(dask_cluster, tmp_path, monkeypatch):
     """``compensate``'s bench (the prototype rebuilt from a FEM sidecar) builds its missing
     segment through ``--scheduler``; the bench drives themselves stay sequential."""
-    from flexcal.validation.compensate import bench_from_metadata
-    from flexcal.validation.scenario import load_scenario
-    from flexcal.validation.truth import as_built, make_truth
+    from flexcal.validation.runs.compensate import bench_from_metadata
+    from flexcal.validation.prototype.scenario import load_scenario
+    from flexcal.validation.prototype.truth import as_built, make_truth
 
     cache = tmp_path / "cache"
     monkeypatch.setenv("FLEXCAL_CACHE_DIR", str(cache))

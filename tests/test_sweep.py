@@ -9,10 +9,10 @@ import tomllib
 import numpy as np
 import pytest
 
-from flexcal.validation import sweep as sweep_module
+from flexcal.validation.sweep.run import run as sweep_module
 from flexcal.validation.cli import main
-from flexcal.validation.sweep import DesignStore, run_sweep
-from flexcal.validation.sweep_space import DEFAULT_CONFIG, design_id, designs_from_config, varied_names
+from flexcal.validation.sweep.run import DesignStore, run_sweep
+from flexcal.validation.sweep.space import DEFAULT_CONFIG, design_id, designs_from_config, varied_names
 
 # two cheap notch hinges (t/R = 0.2, 0.4): one tet through the neck, ~1.3k nodes, a few
 # seconds each cold
@@ -207,11 +207,11 @@ def test_identification_accuracy_on_the_design_mount():
     from flexcal.geometry.params import LeafHinge
     from flexcal.model.forward import forward
     from flexcal.model.parameters import parameter_space
-    from flexcal.validation.scenario import load_scenario
-    from flexcal.validation.segments import analytic_provider
-    from flexcal.validation.sweep_identify import identification_accuracy, mount_with_design
-    from flexcal.validation.sweep_space import DEFAULT_CONFIG
-    from flexcal.validation.truth import make_truth
+    from flexcal.validation.prototype.scenario import load_scenario
+    from flexcal.validation.prototype.segments import analytic_provider
+    from flexcal.validation.sweep.identify import identification_accuracy, mount_with_design
+    from flexcal.validation.sweep.space import DEFAULT_CONFIG
+    from flexcal.validation.prototype.truth import make_truth
 
     leaf = LeafHinge(length=18e-3, thickness=3.5e-3, width=40e-3, fillet=5e-3, block_length=9e-3)
     mount = mount_with_design(leaf)
@@ -241,7 +241,7 @@ def test_identification_accuracy_on_the_design_mount():
 @pytest.mark.slow
 def test_chain_design_record(tmp_path):
     """kind = chain: compliance at B with A clamped, FEM vs Eq. 1, on the shortest chain."""
-    from flexcal.validation.sweep_job import evaluate_design
+    from flexcal.validation.sweep.job import evaluate_design
 
     config = {"sweep": {"kind": "chain", "elements_through": 1.0},
               "chain": {"length_mm": [130.0], "t1_mm": [3.0, 4.0]}}

@@ -10,9 +10,9 @@ from flexcal.model.forward import forward, ideal_angles
 from flexcal.model.parameters import parameter_space
 from flexcal.validation import cli
 from flexcal.validation.measurements import read_measurement
-from flexcal.validation.scenario import TABLE1_PRESETS, load_scenario
-from flexcal.validation.segments import analytic_provider
-from flexcal.validation.truth import as_built, make_truth
+from flexcal.validation.prototype.scenario import TABLE1_PRESETS, load_scenario
+from flexcal.validation.prototype.segments import analytic_provider
+from flexcal.validation.prototype.truth import as_built, make_truth
 
 SPACE = parameter_space()
 
@@ -118,7 +118,7 @@ def test_fem_prototype_matches_model_within_the_chain_discrepancy(tmp_path):
     Measured 13.5 / 10.5 / 2.8 urad max; the bound 25 urad is under 1 % of the standard
     trajectory's theta_y travel (+-3.2 mrad) and would catch a wrong segment frame or DOF
     order, which give hundreds of urad."""
-    from flexcal.validation.fem_provider import fem_provider
+    from flexcal.validation.prototype.fem_provider import fem_provider
 
     truth = make_truth(load_scenario("nominal"), fem_provider(cache_directory=tmp_path, progress=False))
     model = forward(SPACE.nominal_full, truth.measurement.inputs).angles[0]
@@ -130,7 +130,7 @@ def test_fem_prototype_matches_model_within_the_chain_discrepancy(tmp_path):
 # issue 14: a user scenario holding only a name draws all 45 sources within their full
 # ranges; seeds 1 and 3 stopped at points 19 and 20 ("nut offsets ... did not converge"):
 # two driving chains in their clearance make the plain fixed point contract by ~0.7 per
-# round. Anderson acceleration (validation/fixed_point.py) settles them.
+# round. Anderson acceleration (validation/prototype/fixed_point.py) settles them.
 @pytest.mark.parametrize("seed", [1, 3])
 def test_user_scenario_with_only_a_name_converges(tmp_path, seed):
     scenario = tmp_path / "x.toml"
@@ -142,7 +142,7 @@ def test_user_scenario_with_only_a_name_converges(tmp_path, seed):
 
 
 def test_offsets_that_do_not_settle_name_the_knob(tmp_path, capsys, monkeypatch):
-    import flexcal.validation.prototype as prototype
+    import flexcal.validation.prototype.mechanism as prototype
 
     def damped_only(iterates, images, upper, **_):  # the plain damped iteration of before
         return np.clip(0.5 * (iterates[-1] + images[-1]), 0.0, upper), False

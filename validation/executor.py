@@ -20,12 +20,11 @@ Used by ``flexcal sweep`` (designs), the virtual prototype's FEM segment builds
 
 from __future__ import annotations
 
-import argparse
 import logging
 import os
 from typing import Any, Callable, Hashable, Sequence
 
-__all__ = ["run_jobs", "resolve_workers", "where", "add_executor_options", "executor_options", "JobFailures"]
+__all__ = ["run_jobs", "resolve_workers", "where", "JobFailures"]
 
 JobFailures = dict  # {item key: "ErrorType: message"}
 
@@ -45,24 +44,6 @@ def where(workers: int, scheduler: str | None) -> str:
     if scheduler is not None:
         return f"the Dask cluster at {scheduler}"
     return f"{workers} local worker process(es)" if workers else "this process"
-
-
-def add_executor_options(parser: argparse.ArgumentParser, *, what: str) -> None:
-    """``--workers N`` and ``--scheduler ADDRESS`` with the same meaning on every command."""
-    # default 0 (this process): on the 2-core reference machine two local workers were not
-    # faster under load (docs/scale.md); a user opts in with --workers N or --scheduler
-    parser.add_argument("--workers", type=int, metavar="N", default=0,
-                        help=f"local worker processes for {what} (default 0: run in this process; "
-                             "N > 0: N local worker processes)")
-    parser.add_argument("--scheduler", metavar="ADDRESS", default=None,
-                        help=f"address of a Dask scheduler (tcp://host:8786) to run {what} on; "
-                             "default: see --workers)")
-
-
-def executor_options(args: argparse.Namespace) -> dict[str, Any]:
-    """{"workers": ..., "scheduler": ...} of a parsed command line; a command without
-    ``add_executor_options`` runs in its own process (workers 0)."""
-    return {"workers": getattr(args, "workers", 0), "scheduler": getattr(args, "scheduler", None)}
 
 
 def run_jobs(items: Sequence[Any], job: Callable[..., Any], on_done: Callable[[Any, Any], None], *,

@@ -200,7 +200,7 @@ def write_measurement(path: str | os.PathLike, measurement: Measurement) -> None
     Inputs are written in mm with 9 decimals (1 pm), angles in µrad with 6 decimals
     (1 prad): far below any sensor's resolution, so a round trip is lossless for use.
     """
-    from flexcal.validation.output import write_json
+    from .output import write_json
 
     path = Path(path)
     header = list(REQUIRED_COLUMNS) + list(measurement.extras)

@@ -1,0 +1,197 @@
+"""The ``flexcal`` command line.
+
+Each sub-command lives in its own module ``flexcal.validation.cli.<name>`` exposing
+``configure(parser)`` (adds its arguments) and ``run(args) -> int``, and optionally
+``EXAMPLES`` (command lines shown in its ``--help``) and ``DEFAULT_CONFIG`` (TOML-able
+settings, giving it ``--config FILE`` and ``--print-config``). The module is imported
+only when its command runs, so ``flexcal --help`` stays fast and a command never pays
+for another's heavy imports (CadQuery, pyvista). The options every command shares
+(``-v/-q``, ``--debug``, ``--json``, ``--config``) are added here
+(``flexcal.validation.cli.common``; the convention: docs/cli.md).
+
+Errors about the input (``ValueError``, ``OSError``, a solver or mesher that fails,
+a bad option) print one line on stderr and exit with status 2; Ctrl-C exits 130, SIGTERM
+143 (one line; staging folders removed: ``flexcal.validation.cli.signals``); a bug
+prints one line and exits 1; ``--debug`` adds the traceback. Commands write their outputs
+only after the work succeeded (``flexcal.validation.output``), so a failed or
+interrupted run leaves nothing partial.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import importlib
+import importlib.util
+import os
+import re
+import sys
+import traceback
+
+__all__ = ["main", "COMMANDS", "build_parser"]
+
+# name -> (module, one-line help)
+COMMANDS: dict[str, tuple[str, str]] = {
+    "hinge": ("hinge", "FEM vs closed-form 6x6 compliance of one flexure hinge"),
+    "chain": ("chain", "FEM vs analytic 12x12 stiffness of one flexure chain"),
+    "forward": ("forward", "analytic model: actuator inputs -> pose, chain states, point class"),
+    "inverse": ("inverse", "analytic model: target angles -> actuator inputs"),
+    "design": ("design", "choose calibration postures (D-optimal) and write a trajectory file"),
+    "truth": ("truth", "virtual prototype: synthetic misalignment curves with preset errors"),
+    "sensitivity": ("sensitivity", "Sobol screening of the 45 error sources on a measurement or scenario"),
+    "identify": ("identify", "identify error sources from a measurement (improved PSO + polish)"),
+    "verify": ("verify", "Section 3.3 regression run: truth -> Sobol -> identification -> report"),
+    "compensate": ("compensate", "closed-loop compensation and Table 2-3 style report"),
+    "diagnose": ("diagnose", "sim-to-real gap diagnosis of a measurement file"),
+    "diagnose-benchmark": ("diagnose_benchmark", "blind benchmark of the gap diagnosis"),
+    "sweep": ("sweep", "FEM vs closed form over a grid or Latin hypercube of hinge/chain dimensions, locally or on Dask"),
+    "report": ("report", "turn a run folder into one self-contained HTML page"),
+}
+
+
+# A number, and a comma list of numbers, starting with a minus sign: an option's value, not
+# an option ('--target-urad -100,200,50'). argparse knows only single numbers ('-5', '-.5').
+_NUMBER = r"(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?"
+_NEGATIVE_NUMBERS = re.compile(rf"^-{_NUMBER}(\s*,\s*[-+]?{_NUMBER})*$")
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line usage errors ('flexcal hinge: error: ...', exit 2) and with
+    values such as '-100,200,50' taken as values (no '=' needed)."""
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        # argparse's own hook for "looks like a negative number" (used while no option
+        # of the parser itself looks like one); widened from single numbers to lists
+        self._negative_number_matcher = _NEGATIVE_NUMBERS
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: error: {message} (see '{self.prog} --help')\n")
+
+
+def _available() -> dict[str, tuple[str, str]]:
+    found = {}
+    for name, (module, text) in COMMANDS.items():
+        if importlib.util.find_spec(f"flexcal.validation.cli.{module}") is not None:
+            found[name] = (module, text)
+    return found
+
+
+def _description(text: str, module) -> str:
+    doc = (module.__doc__ or "").replace("``", "").strip()
+    body = doc.split("\n\n", 1)[1] if "\n\n" in doc else ""
+    return f"{text}.\n\n{body}".rstrip()
+
+
+def build_parser(only: str | None = None) -> argparse.ArgumentParser:
+    """The argument parser; with ``only`` set, only that sub-command is configured."""
+    from .common import examples_epilog, install_common_options
+
+    parser = _Parser(
+        prog="flexcal",
+        description="flexcal: finite-element verification of flexure-based precision adjustment "
+        "mechanisms (error model, calibration and sim-to-real diagnosis of a heavy-optics mount).",
+        epilog="Run 'flexcal <command> --help' for the options and examples of a command; "
+               "'flexcal <command> --print-config' for its settings. Start with: "
+               "flexcal verify --scenario table1 --out runs/table1 && flexcal report runs/table1",
+    )
+    sub = parser.add_subparsers(dest="command", metavar="<command>")
+    for name, (module_name, text) in _available().items():
+        if name != only:
+            sub.add_parser(name, help=text, description=text)
+            continue
+        module = importlib.import_module(f"flexcal.validation.cli.{module_name}")
+        command_parser = sub.add_parser(name, help=text, description=_description(text, module),
+                                        epilog=examples_epilog(module),
+                                        formatter_class=argparse.RawDescriptionHelpFormatter)
+        module.configure(command_parser)
+        install_common_options(command_parser, module)
+    return parser
+
+
+def _command_of(argv: list[str]) -> str | None:
+    return next((a for a in argv if not a.startswith("-")), None)
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    command = _command_of(argv)
+    if command is not None and command not in COMMANDS:
+        print(f"flexcal: error: unknown command {command!r}; 'flexcal --help' lists them", file=sys.stderr)
+        return 2
+    debug = "--debug" in argv
+    from .signals import termination_raises
+
+    try:
+        with termination_raises():
+            return _main(argv, command)
+    except SystemExit as stop:  # argparse: --help (0) or a usage error (2)
+        return stop.code if isinstance(stop.code, int) else 2
+    except BrokenPipeError:  # stdout closed early ('flexcal ... | head'): the reader wanted no more
+        with contextlib.suppress(OSError, ValueError, AttributeError):
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error at exit
+        return 0
+    except KeyboardInterrupt as interrupt:  # Ctrl-C, or SIGTERM (signals.Terminated)
+        return _interrupted(command, interrupt, debug)
+    except Exception as error:  # noqa: BLE001 - the one place that turns errors into exit codes
+        from .common import error_line, is_user_error
+        from .signals import interrupt_behind
+
+        interrupt = interrupt_behind(error)  # e.g. ImportError('initialization failed') from Ctrl-C
+        if interrupt is not None:
+            return _interrupted(command, interrupt, debug)
+        if debug:
+            traceback.print_exc()
+        print(error_line(command or "", error), file=sys.stderr)
+        return 2 if is_user_error(error) else 1
+
+
+def _interrupted(command: str | None, interrupt: KeyboardInterrupt, debug: bool) -> int:
+    """One line for Ctrl-C / SIGTERM; the exit status 130 / 143."""
+    from .signals import Terminated, exit_status
+
+    if debug:
+        traceback.print_exc()
+    kept = "; finished designs are kept in --out and a rerun resumes" if command == "sweep" else "; nothing was written to --out"
+    what = "terminated (SIGTERM)" if isinstance(interrupt, Terminated) else "interrupted"
+    print(f"flexcal {command}: {what}{kept}", file=sys.stderr)
+    return exit_status(interrupt)
+
+
+def _main(argv: list[str], command: str | None) -> int:
+    from .common import apply_config, configure_logging, effective_config, print_config, summary_of
+    from ..output import dumps_strict
+
+    parser = build_parser(only=command)
+    if command is None:
+        parser.parse_args(argv)  # --help exits here
+        parser.print_help()
+        return 2
+    command_parser = parser._subparsers._group_actions[0].choices[command]
+    module = importlib.import_module(f"flexcal.validation.cli.{COMMANDS[command][0]}")
+    merged = apply_config(command_parser, module, argv[argv.index(command) + 1:])
+    if merged is not None and "--print-config" in argv:
+        print_config(command_parser, module, argv[argv.index(command) + 1:], merged, command)
+        return 0
+    args = parser.parse_args(argv)
+    if merged is not None:
+        args.config = effective_config(command_parser, args, merged)
+    configure_logging(args.verbose, args.quiet)
+    if getattr(args, "out", None):
+        from ..output import out_folder
+
+        # one check of --out before any computation (writable; not another run's folder without --force)
+        out_folder(args.out, replace=getattr(args, "force", False), resume=getattr(module, "RESUMES_OUT", False))
+    central_json = "json" in args._central and args.json
+    with contextlib.ExitStack() as stack:
+        if central_json or args.quiet:
+            devnull = stack.enter_context(open(os.devnull, "w"))
+            stack.enter_context(contextlib.redirect_stdout(devnull))
+        status = int(module.run(args) or 0)
+    if central_json and status == 0 and args.out:
+        print(dumps_strict(summary_of(args.out), sort_keys=True))
+    return status
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,241 @@
+"""``flexcal design``: choose the calibration postures before measuring (D-optimal).
+
+Writes DIR/trajectory.csv (columns point, leg, xa1_mm, xa2_mm, xa3_mm: the file that
+``flexcal truth``, ``verify``, ``sensitivity`` and ``identify`` take with ``--trajectory``, and the
+order in which to measure a real mount), DIR/report.json, DIR/report.md and design.png (the
+expected standard error of each source with the designed and the standard trajectory).
+
+The design point is the prior mean (every source mid-range: Eq. 9), or with ``--at
+REPORT`` the values a previous ``flexcal verify``/``identify`` identified (sequential design:
+the information of a clearance or hysteresis source depends on the drive loads, which
+depend on the sources themselves); the prior is the paper's ranges scaled by ``--prior-scale``, the noise ``--noise-urad``; with ``--inadequacy analytic``
+(default) the model's own error at each candidate posture, measured once against the
+analytic virtual prototype at the nominal design, is added to the noise, so that postures
+where the model is known to be off (large combined rotations) weigh less
+(``flexcal.calibration.design``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+
+from .options import add_out, add_scenario
+
+__all__ = ["configure", "run", "EXAMPLES", "DEFAULT_CONFIG"]
+
+EXAMPLES = (
+    "flexcal design --out runs/design                                  # 77 postures from 2000 candidates",
+    "flexcal design --scenario paper --points 61 --out runs/design-paper",
+    "flexcal truth --scenario table1 --trajectory runs/design/trajectory.csv --noise-urad 0.5 --out runs/t1",
+    "flexcal design --at runs/first-verify/report.json --out runs/design-2   # design at the identified values",
+)
+DEFAULT_CONFIG = {"points": 77, "candidates": 2000, "noise_urad": 0.5, "prior_scale": 1.0, "points_per_leg": 11,
+                  "design_seed": 0, "inadequacy": "analytic", "at": "", "scenario": "table1", "model_stiffness": "fem",
+                  "second_order": True}
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
+    from .options import add_model_options
+
+    add_scenario(parser, required=False)
+    parser.add_argument("--points", type=int, metavar="N", help="postures to measure, the zero posture included "
+                                                                 "(default %(default)s)")
+    parser.add_argument("--candidates", type=int, metavar="N",
+                        help="candidate postures drawn inside the +-1/+-5/+-3 mrad workspace (default %(default)s)")
+    parser.add_argument("--noise-urad", type=float, metavar="S", help="sensor noise per channel [urad] (default "
+                                                                       "%(default)s)")
+    parser.add_argument("--prior-scale", type=float, metavar="S",
+                        help="prior std as a multiple of each range's spread (default %(default)s)")
+    parser.add_argument("--points-per-leg", type=int, metavar="N",
+                        help="postures per leg; legs are the held-out folds of the identification (default "
+                             "%(default)s)")
+    parser.add_argument("--at", metavar="REPORT",
+                        help="design at the values identified in this report.json (flexcal verify / identify) "
+                             "instead of the prior mean")
+    parser.add_argument("--design-seed", type=int, metavar="N", help="seed of the candidate draw (default %(default)s)")
+    parser.add_argument("--inadequacy", choices=("analytic", "none"),
+                        help="add the model's error at each candidate (against the analytic prototype at the nominal "
+                             "design) to the noise (default %(default)s)")
+    add_model_options(parser)
+    add_out(parser, what="trajectory.csv, report.json, report.md, design.png")
+
+
+def _check(args: argparse.Namespace) -> None:
+    if args.points < 2:
+        raise ValueError(f"--points={args.points} must be >= 2")
+    if args.candidates < args.points:
+        raise ValueError(f"--candidates={args.candidates} must be >= --points={args.points}")
+    if not args.noise_urad > 0:
+        raise ValueError(f"--noise-urad={args.noise_urad} must be > 0 (the design weighs postures by it)")
+    if not args.prior_scale > 0:
+        raise ValueError(f"--prior-scale={args.prior_scale} must be > 0")
+    if args.points_per_leg < 1:
+        raise ValueError(f"--points-per-leg={args.points_per_leg} must be >= 1")
+    if args.at:
+        from pathlib import Path
+
+        if not Path(args.at).is_file():
+            raise ValueError(f"--at {args.at}: no such file (a flexcal verify/identify report.json)")
+
+
+def _inadequacy(space, scenario_space, progress: bool):
+    """inputs (k, 3) -> (k, 3) [rad]: model minus analytic prototype at the nominal design."""
+    import dataclasses
+
+    from flexcal.calibration.problem import CalibrationProblem
+
+    from ..prototype.segments import analytic_provider
+    from ..prototype.scenario import load_scenario
+    from ..prototype.truth import make_truth
+
+    def delta(inputs: np.ndarray) -> np.ndarray:
+        nominal = load_scenario("nominal", space=scenario_space)
+        nominal = dataclasses.replace(nominal, inputs=inputs, leg=np.ones(len(inputs), int))
+        measured = make_truth(nominal, analytic_provider(), progress=progress).measurement.angles
+        problem = CalibrationProblem(space=space, inputs=inputs, angles=measured)
+        return np.abs(problem.residuals(space.to_unit(space.nominal_vector)[None])[0].reshape(-1, 3))
+
+    return delta
+
+
+def design_point(path: str, space) -> np.ndarray:
+    """Unit-box values (n_active,) of the sources identified in a report.json."""
+    import json
+    from pathlib import Path
+
+    try:
+        rows = json.loads(Path(path).read_text())["parameters"]
+        values = space.build_values({r["name"]: r["identified"] for r in rows}, display_units=True)
+    except FileNotFoundError:
+        raise ValueError(f"--at {path}: no such file") from None
+    except (KeyError, TypeError, json.JSONDecodeError):
+        raise ValueError(f"--at {path}: not a flexcal verify/identify report.json (needs 'parameters' rows with "
+                         f"'name' and 'identified')") from None
+    return space.to_unit(values[space.active_indices])
+
+
+def run(args: argparse.Namespace) -> int:
+    from flexcal.calibration.design import design_trajectory
+    from flexcal.calibration.estimation import FD_STEP, uniform_prior
+    from flexcal.calibration.polish import batched_jacobian_fd
+    from flexcal.calibration.problem import CalibrationProblem
+    from flexcal.model.assembly import mechanism_matrices
+    from flexcal.model.trajectory import WORKSPACE, standard_trajectory
+
+    from .common import show_progress
+    from ..runs.model_correction import model_space
+    from ..output import staged_output, write_json
+    from ..prototype.scenario import load_scenario
+
+    _check(args)
+    progress = show_progress(args)
+    start = time.perf_counter()
+    scenario = load_scenario(args.scenario)
+    space = model_space(args.model_stiffness, args.second_order, progress=progress,
+                        mechanism=scenario.space.mechanism)
+    prior = uniform_prior(space.n_params, args.prior_scale)
+    x_design = design_point(args.at, space) if args.at else prior.mean
+
+    def jacobian(inputs: np.ndarray) -> np.ndarray:
+        problem = CalibrationProblem(space=space, inputs=inputs, angles=np.zeros_like(inputs))
+        return batched_jacobian_fd(problem.residuals, x_design, step=FD_STEP)[0]
+
+    gain = mechanism_matrices(space.nominal_full, space).input_gain[0, 3:, 3:]
+    reference = standard_trajectory(space.mechanism, n_points=77).inputs
+    say = (lambda text: print(f"design: {text}")) if progress else None
+    design = design_trajectory(jacobian, gain, WORKSPACE, reference, n_points=args.points,
+                               n_candidates=args.candidates, noise=args.noise_urad * 1e-6,
+                               prior_precision=prior.precision, prior_scale=args.prior_scale,
+                               points_per_leg=args.points_per_leg, rng=args.design_seed, progress=say,
+                               inadequacy=_inadequacy(space, scenario.space, False) if args.inadequacy == "analytic"
+                               else None)
+    wall = time.perf_counter() - start
+    report = _report(design, space, args, wall)
+    with staged_output(args.out) as staging:
+        _write_trajectory(staging / "trajectory.csv", design)
+        write_json(staging / "report.json", report)
+        (staging / "report.md").write_text(_markdown(report))
+        _plot(staging / "design.png", design, space.names)
+    q, r = design.quality, design.reference_quality
+    print(f"flexcal design: {args.points} postures from {args.candidates} candidates in {wall:.1f} s; "
+          f"log det M {q.d_criterion:.1f} (standard trajectory {r.d_criterion:.1f}), rank {q.rank} ({r.rank}); "
+          f"wrote {args.out}/trajectory.csv")
+    return 0
+
+
+def _quality(q) -> dict:
+    return {"log_det_information": q.d_criterion, "d_efficiency": q.d_efficiency, "sigma_min": q.sigma_min,
+            "condition_number": q.condition_number if np.isfinite(q.condition_number) else None,
+            "rank": q.rank, "expected_std_of_range": q.expected_std.tolist(),
+            "n_sources_below_1pct": int(np.sum(q.expected_std <= 0.01))}
+
+
+def _report(design, space, args, wall: float) -> dict:
+    return {
+        "n_points": int(design.inputs.shape[0]), "n_candidates": int(design.candidates.shape[0]),
+        "noise_urad": design.noise * 1e6, "prior_scale": design.prior_scale, "scenario": args.scenario,
+        "design_seed": args.design_seed, "inadequacy": args.inadequacy,
+        "design_point": args.at or "prior mean (every source mid-range)",
+        "inadequacy_rms_urad": None if design.inadequacy is None else float(np.sqrt(np.mean(design.inadequacy ** 2))
+                                                                            * 1e6),
+        "criterion": "D-optimal: log det(W^T W + prior precision), W = model Jacobian / noise on the unit box, at "
+                     "the prior mean",
+        "names": list(space.names), "designed": _quality(design.quality),
+        "standard_trajectory": _quality(design.reference_quality), "wall_s": wall,
+        "note": "sigma_min and condition number are those of the data-only W (no prior); a rank below 45 means "
+                "some combinations stay at their prior",
+    }
+
+
+def _markdown(report: dict) -> str:
+    d, s = report["designed"], report["standard_trajectory"]
+    cond = lambda v: "inf (rank-deficient)" if v is None else f"{v:.3g}"  # noqa: E731
+    lines = ["# Designed calibration trajectory", "",
+             f"{report['n_points']} postures chosen from {report['n_candidates']} candidates, noise "
+             f"{report['noise_urad']:g} urad, prior scale {report['prior_scale']:g}, model inadequacy: "
+             f"{report['inadequacy']}; {report['wall_s']:.1f} s.", "",
+             "| figure | designed | standard trajectory (77) |", "|---|---:|---:|",
+             f"| log det M (D-criterion) | {d['log_det_information']:.2f} | {s['log_det_information']:.2f} |",
+             f"| det(M)^(1/45) | {d['d_efficiency']:.4g} | {s['d_efficiency']:.4g} |",
+             f"| rank of W | {d['rank']} | {s['rank']} |",
+             f"| sigma_min of W | {d['sigma_min']:.3g} | {s['sigma_min']:.3g} |",
+             f"| condition number of W | {cond(d['condition_number'])} | {cond(s['condition_number'])} |",
+             f"| sources with expected std <= 1 % of range | {d['n_sources_below_1pct']} | "
+             f"{s['n_sources_below_1pct']} |", "",
+             "![expected standard errors](design.png)", "", "## Expected standard error per source [% of range]", "",
+             "| source | designed | standard |", "|---|---:|---:|"]
+    for name, a, b in zip(report["names"], d["expected_std_of_range"], s["expected_std_of_range"]):
+        lines.append(f"| `{name}` | {100 * a:.3g} | {100 * b:.3g} |")
+    return "\n".join(lines) + "\n"
+
+
+def _write_trajectory(path, design) -> None:
+    from ..output import atomic_path
+
+    with atomic_path(path) as tmp:
+        rows = ["point,leg,xa1_mm,xa2_mm,xa3_mm"]
+        for k, (x, leg) in enumerate(zip(design.inputs * 1e3, design.leg), start=1):
+            rows.append(f"{k},{int(leg)},{x[0]:.9f},{x[1]:.9f},{x[2]:.9f}")
+        tmp.write_text("\n".join(rows) + "\n")
+
+
+def _plot(path, design, names) -> None:
+    from ..reports.plots import _pyplot
+
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(12, 4))
+    index = np.arange(len(names))
+    ax.semilogy(index, 100 * design.reference_quality.expected_std, "s", label="standard trajectory (77)", alpha=0.7)
+    ax.semilogy(index, 100 * design.quality.expected_std, "o", label=f"designed ({design.inputs.shape[0]})")
+    ax.axhline(100 / np.sqrt(12) * design.prior_scale, color="0.5", ls="--", lw=0.8, label="prior alone")
+    ax.axhline(1.0, color="k", ls=":", lw=0.8, label="1 % of range")
+    ax.set_xticks(index, names, rotation=90, fontsize=7)
+    ax.set_ylabel("expected standard error [% of range]")
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)

@@ -1,0 +1,277 @@
+"""``flexcal diagnose-benchmark``: the blind benchmark of the gap diagnosis.
+
+For every library effect, ``none`` and the out-of-library effects, at the grid's
+magnitudes (multiples of the sensor noise) and seeds: prototype data with the effect
+injected, the answer kept in ``DIR/answers.json`` (never given to the diagnosis), the
+diagnosis, the score. Writes DIR/report.json (rows, confusion matrix, goals), report.md,
+answers.json, diagnosis_confusion.png, diagnosis_detection.png, diagnosis_closure.png.
+
+Each finished case is written at once to DIR/cases/<id>.json (row and answer; the id
+hashes the case and the settings, not the code version: use a new DIR after a code
+change). A case already there is not run again, so an interrupted or partly failed grid
+resumes where it stopped; a case that raises is listed in the report and the command
+exits 1 after writing the figures of the others. The cases run in parallel on the shared
+executor (local worker processes by default, ``--workers N``, ``--scheduler ADDRESS``;
+docs/scale.md); with ``--provider fem`` the as-built mounts' segments are built first, on
+the same executor.
+
+    flexcal diagnose-benchmark --out runs/bench                 # small grid, analytic prototype
+    flexcal diagnose-benchmark --grid full --provider fem --out runs/bench-full
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+
+__all__ = ["configure", "run", "EXAMPLES"]
+
+# --out holds the finished designs of an earlier run, which a rerun resumes (no --force)
+RESUMES_OUT = True
+
+EXAMPLES = ("flexcal diagnose-benchmark --out runs/bench",
+            "flexcal diagnose-benchmark --grid full --provider fem --out runs/bench-full")
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
+    from .options import add_out, add_seed
+
+    parser.add_argument("--grid", choices=("tiny", "small", "full"), default="small",
+                        help="tiny: 10x noise, one seed; small (default): 3x and 10x, one seed, 4 none seeds; "
+                             "full: 1x, 3x, 10x, three seeds, 10 none seeds")
+    parser.add_argument("--provider", choices=("analytic", "fem"), default="analytic",
+                        help="prototype segment stiffness (default analytic: fast; fem for the full grid)")
+    parser.add_argument("--effects", default=None,
+                        help="comma-separated subset of effect ids (default: the whole library, none and the "
+                             "out-of-library ids)")
+    parser.add_argument("--noise-urad", type=float, default=0.5, help="sensor noise per channel [urad] (0.5)")
+    parser.add_argument("--cycles", type=int, default=2, help="standard trajectory repeated this often (2)")
+    parser.add_argument("--scenario-seed", type=int, default=None,
+                        help="one as-built mount (table1 draws and noise) for every case (default: 1000 + the case "
+                             "seed; a fixed one keeps the FEM cache warm)")
+    add_seed(parser, what="the baseline optimizer of every diagnosis", default=0)
+    from .options import add_executor_options
+
+    add_executor_options(parser, what="the cases (and, with --provider fem, the FEM segment builds)")
+    add_out(parser, what="report.json, report.md, answers.json, diagnosis_*.png, cases/",
+            when="each finished case is kept at once in DIR/cases/ and running the same command again resumes; the "
+                 "report is written at the end, also when some cases failed (they are listed, exit status 1)")
+
+
+def baseline_stiffness(provider_name: str) -> str:
+    """The chain stiffness of the diagnosis baseline's (second-order) model for a prototype
+    provider: the one the prototype's segments have (closed form for ``analytic``,
+    FEM-informed for ``fem``). What is withheld from the diagnosis is the effect, not the
+    mechanism's stiffness model; a user calibrates with the best model of their mount."""
+    return "closed-form" if provider_name == "analytic" else "fem"
+
+
+def case_spec(effect_id, magnitude, case_seed, *, provider_name, noise_urad, cycles, seed, scenario_seed) -> dict:
+    """Everything that decides one case's row: its id (``design_id`` of this) keys the
+    case store, so a rerun with other settings never reuses a row."""
+    return {"effect": effect_id, "magnitude_noise": float(magnitude), "seed": int(case_seed),
+            "provider": provider_name, "baseline_model": {"stiffness": baseline_stiffness(provider_name),
+                                                          "second_order": True},
+            "noise_urad": float(noise_urad), "cycles": int(cycles), "baseline_seed": int(seed),
+            "scenario_seed": scenario_seed}
+
+
+def grid_cases(ids, grid) -> list[tuple[str, float, int]]:
+    """(effect id, magnitude [x noise], case seed) of every case of a grid, in run order."""
+    from ..diagnosis.benchmark import GRIDS
+    from ..effects.library import NONE
+
+    magnitudes, seeds, none_seeds = GRIDS[grid]
+    cases = []
+    for effect_id in ids:
+        if effect_id == NONE:
+            cases += [(NONE, 0.0, s) for s in range(none_seeds)]
+        else:
+            cases += [(effect_id, m, s) for m in magnitudes for s in seeds]
+    return cases
+
+
+def case_record(spec: dict, *, space=None) -> dict:
+    """One case of ``case_spec`` run and scored (a pure function, run on a worker): the
+    record {"id", "spec", "row", "answer"} the case store keeps; space: the baseline's model."""
+    from functools import partial
+
+    from ..prototype.providers import stiffness_provider
+    from ..diagnosis.diagnose import run_diagnosis
+    from ..diagnosis.baseline import calibrate_baseline
+    from ..diagnosis.benchmark import benchmark_measurement, run_case
+    from ..sweep.space import design_id
+
+    start = time.perf_counter()
+    provider = stiffness_provider(spec["provider"], progress=False)  # FEM: the segments are cached by then
+    case = benchmark_measurement(spec["effect"], spec["magnitude_noise"], spec["seed"], provider,
+                                 cycles=spec["cycles"], noise_urad=spec["noise_urad"],
+                                 scenario_seed=spec["scenario_seed"])
+    row = run_case(case, lambda m: run_diagnosis(m, rng=spec["baseline_seed"],
+                                                 baseline=partial(calibrate_baseline, space=space)))
+    row["wall_s"] = time.perf_counter() - start
+    return {"id": design_id(spec), "spec": spec, "row": row, "answer": case.answer}
+
+
+def case_slices(specs) -> list:
+    """Every FEM segment slice the as-built mounts of ``specs`` ask for (``chain_slices``)."""
+    from ..prototype.scenario import load_scenario
+    from ..prototype.segments import chain_slices
+    from ..prototype.truth import as_built
+
+    chains = []
+    for spec in specs:
+        scenario_seed = 1000 + spec["seed"] if spec["scenario_seed"] is None else spec["scenario_seed"]
+        scenario = load_scenario("table1", seed=scenario_seed)
+        mechanism, _, _ = as_built(scenario.space, scenario.values)
+        chains += [p.chain for p in mechanism.chains]
+    return chain_slices(chains)
+
+
+def run_benchmark(ids, grid, *, noise_urad, cycles, seed, progress, scenario_seed=None, space=None,
+                  provider_name="analytic", store=None, log=None, workers: int | None = 0, scheduler=None):
+    """(rows, answers, failures) of every case of the grid, rows in grid order; space: the
+    baseline's model (default: the baseline's own default); store: a ``DesignStore`` of
+    finished cases (each saved as it finishes; a case already in it is not run again);
+    failures: {case label: error text} of the cases that raised (one bad case must not
+    sink a two-hour grid). workers / scheduler: the shared executor
+    (``flexcal.validation.executor``; 0 without a scheduler: one case after the other
+    here). With the FEM provider the as-built mounts' missing segments are built first,
+    all at once on the same executor, then the cases run on cached segments."""
+    from ..progress import progress_bar
+    from ..executor import resolve_workers, run_jobs, where
+    from ..sweep.space import design_id
+
+    log = log or (lambda text: None)
+    specs, labels = [], {}
+    for effect_id, magnitude, case_seed in grid_cases(ids, grid):
+        spec = case_spec(effect_id, magnitude, case_seed, provider_name=provider_name, noise_urad=noise_urad,
+                         cycles=cycles, seed=seed, scenario_seed=scenario_seed)
+        specs.append(spec)
+        labels[design_id(spec)] = f"{effect_id} {magnitude:g}x seed {case_seed}"
+    records = {} if store is None else {i: r for i in labels if (r := store.load(i)) is not None}
+    pending = list({design_id(s): s for s in specs if design_id(s) not in records}.values())
+    n_workers = resolve_workers(workers, len(pending))
+    if pending:
+        log(f"diagnose-benchmark: {len(labels)} cases, {len(labels) - len(pending)} already done, {len(pending)} to "
+            f"run on {where(n_workers, scheduler)}")
+    if pending and provider_name == "fem":
+        from ..prototype.fem_provider import build_segments
+
+        build_segments(case_slices(pending), workers=workers, scheduler=scheduler, progress=progress)
+    failures = {}
+    with progress_bar(len(specs), "diagnose-benchmark", enabled=progress, unit="case") as bar:
+        bar.update(len(specs) - len(pending))
+        def on_done(_spec, record):
+            if store is not None:
+                store.save(record)
+            records[record["id"]] = record
+            bar.update(1)
+
+        for identifier, text in run_jobs(pending, case_record, on_done, key=design_id, workers=n_workers,
+                                         scheduler=scheduler, job_options={"space": space},
+                                         task_prefix="case").items():
+            failures[labels[identifier]] = text
+            log(f"diagnose-benchmark: case {labels[identifier]} failed: {text}")
+    done = [records[design_id(s)] for s in specs if design_id(s) in records]
+    return [r["row"] for r in done], [r["answer"] for r in done], failures
+
+
+def _number(value, digits: int = 1) -> str:
+    return "" if value is None else f"{value:.{digits}f}"
+
+
+def _markdown(report) -> str:
+    s = report["summary"]
+    lines = ["# Blind benchmark of the gap diagnosis", "",
+             f"Grid `{report['grid']}`, prototype provider `{report['provider']}` (diagnosis baseline: second-order model, "
+             f"{report['baseline_model']['stiffness']} chain stiffness), noise {report['noise_urad']} urad, "
+             f"standard trajectory x{report['cycles']}; {len(report['rows'])} cases. Out-of-library effects "
+             f"(no model term): {', '.join(report['out_of_library'])}.", "", "## Goals", "",
+             "| goal | target | measured | met | margin |", "|---|---:|---:|---|---:|"]
+    for name, g in s["goals"].items():
+        lines.append(f"| {name} | {g['goal']:.2f} | {g['measured']:.3f} | {'yes' if g['met'] else 'NO'} | "
+                     f"{g['margin']:+.3f} |")
+    if s.get("detection_at_achieved_3x_or_more") is not None:
+        lines += ["", f"Detection by the magnitude really injected into each file (noise-free signature RMS, the "
+                  f"effect's run minus the same mount without it) >= 3x noise: "
+                  f"{s['detection_at_achieved_3x_or_more']:.3f} of {s['n_at_achieved_3x_or_more']} cases."]
+    lines += ["", f"Detection at >= 3x counting only effects the diagnosis did not report as undetectable "
+              f"(absorbed >= 0.99 by the baseline): {s['detection_at_3x_excluding_reported_undetectable']:.3f} "
+              f"({s['n_reported_undetectable_at_3x']} cases reported undetectable).", ""]
+    lines += ["", f"Out-of-library: no confident library claim in {s['out_of_library_no_confident_claim']} of cases; "
+              f"a concentrated stratum named in {s['out_of_library_where_named']}.", "",
+              "## Detection by magnitude (x noise)", ""]
+    lines += [f"- {m}x: {v:.2f}" for m, v in s["detection_by_magnitude"].items()]
+    if report["failures"]:
+        lines += ["", f"## Failed cases ({len(report['failures'])}; not in the figures)", ""]
+        lines += [f"- {label}: {text}" for label, text in report["failures"].items()]
+    lines += ["", "## Cases", "", "| effect | x noise | seed | predicted | group | confidence | correct | "
+              "true-term closure | absorbed by baseline | achieved x noise |", "|---|---:|---:|---|---|---|---|---:|---:|---:|"]
+    for r in report["rows"]:
+        closure, absorbed = _number(r.get("true_term_closure"), 2), _number(r.get("absorbed"), 3)
+        lines.append(f"| {r['effect']} | {r['magnitude_noise']:g} | {r['seed']} | {r['predicted']} | "
+                     f"{', '.join(r['group'])} | {r['confidence']} | {'yes' if r['correct'] else 'no'} | "
+                     f"{closure} | {absorbed} | {_number(r.get('achieved_magnitude_noise'))} |")
+    return "\n".join(lines) + "\n"
+
+
+def run(args: argparse.Namespace) -> int:
+    from .common import show_progress
+    from ..diagnosis.benchmark import summarize
+    from .options import executor_options
+    from ..diagnosis.plots import plot_benchmark
+    from ..effects.library import EFFECT_IDS, LIBRARY, NONE, OUT_OF_LIBRARY_IDS
+    from ..runs.model_correction import model_space
+    from ..output import out_folder, staged_output, write_json
+    from ..sweep.run import DesignStore
+
+    if args.noise_urad <= 0:
+        raise ValueError(f"--noise-urad={args.noise_urad} must be > 0 (magnitudes are multiples of it)")
+    if args.cycles < 2:
+        raise ValueError(f"--cycles={args.cycles} must be >= 2 so that every leg's motion repeats in another cycle")
+    ids = list(EFFECT_IDS) + [NONE] + list(OUT_OF_LIBRARY_IDS)
+    if args.effects:
+        ids = [e.strip() for e in args.effects.split(",") if e.strip()]
+        unknown = [e for e in ids if e != NONE and e not in LIBRARY]
+        if unknown:
+            raise ValueError(f"--effects: unknown id(s) {unknown}; known: {', '.join(LIBRARY)}, none")
+    progress = show_progress(args)
+    log = (lambda text: print(text, file=sys.stderr)) if progress else (lambda text: None)
+    store = DesignStore(out_folder(args.out, resume=True) / "cases")
+    executor = executor_options(args)
+    try:
+        rows, answers, failures = run_benchmark(
+            ids, args.grid, noise_urad=args.noise_urad, cycles=args.cycles, seed=args.seed,
+            progress=progress, scenario_seed=args.scenario_seed, provider_name=args.provider, store=store, log=log,
+            space=model_space(baseline_stiffness(args.provider), second_order=True, progress=progress, **executor),
+            **executor)
+    except KeyboardInterrupt:
+        log(f"diagnose-benchmark: interrupted; finished cases are kept in {store.folder}, run the same command "
+            f"again to resume")
+        raise
+    if not rows:
+        raise RuntimeError(f"every case failed, e.g. {next(iter(failures.values()))}")
+    summary = summarize(rows)
+    report = {"grid": args.grid, "provider": args.provider, "scenario_seed": args.scenario_seed,
+              "baseline_model": {"stiffness": baseline_stiffness(args.provider), "second_order": True},
+              "noise_urad": args.noise_urad, "cycles": args.cycles,
+              "out_of_library": list(OUT_OF_LIBRARY_IDS), "rows": rows, "failures": failures, "summary": summary,
+              "note": "answers.json holds what was injected; the diagnosis only received the measurement"}
+    with staged_output(args.out, resume=True) as staging:
+        write_json(staging / "answers.json", answers)
+        write_json(staging / "report.json", report)
+        (staging / "report.md").write_text(_markdown(report))
+        plot_benchmark(staging, rows, summary)
+    if progress:
+        goals = summary["goals"]
+        print("flexcal diagnose-benchmark: " + "; ".join(
+            f"{k} {g['measured']:.3f} ({'met' if g['met'] else 'missed'} by {abs(g['margin']):.3f})"
+            for k, g in goals.items()) + f"; wrote {args.out}/report.json")
+    if failures:
+        print(f"flexcal diagnose-benchmark: {len(failures)} case(s) failed (listed in {args.out}/report.json and "
+              f"report.md; the figures cover the {len(rows)} finished ones); run the same command again to retry "
+              f"them", file=sys.stderr)
+        return 1
+    return 0

@@ -1,0 +1,185 @@
+"""The option groups several commands share, each defined once: where results go
+(``--out``), what is measured (``--scenario`` | ``--data``, ``--seed``, ``--trajectory``,
+``--provider``), which model calibrates (``--second-order``, ``--model-stiffness``), how it
+identifies (``--method``, ``--prior-scale``, Sobol and PSO sizes) and where heavy items run
+(``--workers``, ``--scheduler``). A command's own options stay in its module.
+"""
+
+from __future__ import annotations
+
+import argparse
+from typing import Any
+
+from ..prototype.providers import PROVIDERS
+
+__all__ = ["add_out", "add_seed", "add_scenario", "add_trajectory", "load_scenario_with_trajectory",
+           "add_executor_options", "executor_options", "MODEL_DEFAULTS", "CALIBRATION_DEFAULTS", "add_model_options",
+           "add_identification_options", "add_method_options", "prior_scale_option", "add_calibration_options",
+           "add_source_options", "load_source", "check_sobol_options"]
+
+
+def add_out(parser: argparse.ArgumentParser, *, required: bool = True, what: str = "report.json, report.md, PNGs",
+            when: str = "written only when the run succeeds") -> None:
+    """``--out DIR``: the run folder (by default written whole or not at all)."""
+    parser.add_argument("--out", metavar="DIR", required=required, help=f"output folder ({what}); {when}")
+
+
+def add_seed(parser: argparse.ArgumentParser, *, what: str = "random draws", default: int | None = None) -> None:
+    """``--seed N``: the one seed of a command's randomness."""
+    parser.add_argument("--seed", type=int, metavar="N", default=default,
+                        help=f"seed for {what}; the same seed gives the same report" +
+                             ("" if default is None else " (default %(default)s)"))
+
+
+def add_scenario(parser: argparse.ArgumentParser, *, required: bool = True, group=None) -> None:
+    """``--scenario NAME|FILE``: a built-in virtual-prototype scenario or a scenario TOML."""
+    (group or parser).add_argument("--scenario", metavar="NAME|FILE", required=required if group is None else False,
+                                   help="virtual-prototype scenario: table1, paper (drives pass through their "
+                                        "clearance), nominal or a scenario TOML file (format: "
+                                        "flexcal.validation.prototype.scenario)")
+
+
+def add_trajectory(parser: argparse.ArgumentParser) -> None:
+    """``--trajectory CSV``: drive the scenario along a trajectory file instead of its own."""
+    parser.add_argument("--trajectory", metavar="CSV",
+                        help="drive the scenario along this trajectory (flexcal design's trajectory.csv: columns "
+                             "xa1_mm, xa2_mm, xa3_mm[, leg]) instead of the scenario's own")
+
+
+def load_scenario_with_trajectory(args: argparse.Namespace):
+    """The scenario of ``--scenario``/``--seed``/``--noise-urad``, along ``--trajectory`` if given."""
+    from ..prototype.scenario import load_scenario
+
+    scenario = load_scenario(args.scenario, seed=args.seed, noise_urad=args.noise_urad)
+    trajectory = getattr(args, "trajectory", None)
+    return scenario.with_trajectory(trajectory) if trajectory else scenario
+
+
+def add_executor_options(parser: argparse.ArgumentParser, *, what: str) -> None:
+    """``--workers N`` and ``--scheduler ADDRESS`` with the same meaning on every command."""
+    # default 0 (this process): on the 2-core reference machine two local workers were not
+    # faster under load (docs/scale.md); a user opts in with --workers N or --scheduler
+    parser.add_argument("--workers", type=int, metavar="N", default=0,
+                        help=f"local worker processes for {what} (default 0: run in this process; "
+                             "N > 0: N local worker processes)")
+    parser.add_argument("--scheduler", metavar="ADDRESS", default=None,
+                        help=f"address of a Dask scheduler (tcp://host:8786) to run {what} on; "
+                             "default: see --workers)")
+
+
+def executor_options(args: argparse.Namespace) -> dict[str, Any]:
+    """{"workers": ..., "scheduler": ...} of a parsed command line; a command without
+    ``add_executor_options`` runs in its own process (workers 0)."""
+    return {"workers": getattr(args, "workers", 0), "scheduler": getattr(args, "scheduler", None)}
+
+
+MODEL_DEFAULTS = {"model_stiffness": "fem", "second_order": True}
+
+
+CALIBRATION_DEFAULTS = {"sobol_n": 512, "sobol_threshold": 0.01, "particles": 300, "iterations": 150,
+                        "polish": True, "remove_offset": False, "calibration_seed": 0, "method": "map",
+                        "prior_scale": 0.0, **MODEL_DEFAULTS}
+
+
+def add_model_options(parser: argparse.ArgumentParser) -> None:
+    """Which model the calibration uses (``verify``, ``sensitivity``, ``identify``,
+    ``compensate``); defaults from the command's DEFAULT_CONFIG (``MODEL_DEFAULTS``)."""
+    parser.add_argument("--second-order", action=argparse.BooleanOptionalAction,
+                        help="the model's second-order geometric terms: chain-force P-delta and rigid second-order "
+                             "frame kinematics (docs/model.md 8; default: on; --no-second-order = the paper's model)")
+    parser.add_argument("--model-stiffness", choices=("fem", "closed-form"),
+                        help="the model's chain compliance: closed-form (the paper's Eq. 1) or corrected by the FEM "
+                             "at the nominal design (docs/model.md 7; default %(default)s)")
+
+    add_executor_options(parser, what="the FEM segment builds (cold cache only)")
+
+
+def add_identification_options(parser: argparse.ArgumentParser) -> None:
+    """PSO size, polish and offset removal (``verify``, ``identify``); defaults from DEFAULT_CONFIG."""
+    parser.add_argument("--particles", type=int, help="PSO particles (paper: 300; default %(default)s)")
+    parser.add_argument("--iterations", type=int, help="PSO iterations (paper: 150; default %(default)s)")
+    parser.add_argument("--polish", action=argparse.BooleanOptionalAction,
+                        help="least-squares polish of the swarm's best points (default: on)")
+    parser.add_argument("--remove-offset", action=argparse.BooleanOptionalAction,
+                        help="remove each leg's return offset first (paper Sec. 4.2; default: off)")
+
+
+def add_method_options(parser: argparse.ArgumentParser) -> None:
+    """--method and --prior-scale (``verify``, ``identify``, ``compensate``)."""
+    parser.add_argument("--method", choices=("map", "free", "paper"),
+                        help="map: all 45 sources with the paper's ranges as a cross-validated prior, standard errors "
+                             "and base parameters; free: all 45 without a prior; paper: Sobol screening + improved "
+                             "PSO on the selected sources (default %(default)s)")
+    parser.add_argument("--prior-scale", type=float, metavar="S",
+                        help="MAP prior std as a multiple of each range's own spread (range/sqrt(12)); 0 = choose by "
+                             "held-out cross-validation (default %(default)s)")
+
+
+def prior_scale_option(args: argparse.Namespace) -> float | None:
+    """--prior-scale as VerifySettings takes it: None (cross-validate) for 0."""
+    scale = getattr(args, "prior_scale", 0.0) or 0.0
+    if scale < 0:
+        raise ValueError(f"--prior-scale={scale} must be > 0, or 0 to choose it by cross-validation")
+    return scale or None
+
+
+def add_calibration_options(parser: argparse.ArgumentParser) -> None:
+    """The screening and identification settings (``verify``, ``sensitivity``, ``identify``);
+    their defaults come from the command's DEFAULT_CONFIG."""
+    add_method_options(parser)
+    parser.add_argument("--sobol-n", type=int, metavar="N", help="Sobol base sample N (power of two; default %(default)s)")
+    parser.add_argument("--sobol-threshold", type=float, metavar="S",
+                        help="identify sources whose total Sobol index reaches this on any output "
+                             "(default %(default)s; 0 identifies all 45)")
+    add_identification_options(parser)
+    parser.add_argument("--calibration-seed", type=int, metavar="N",
+                        help="seed of the Sobol sample and the PSO (default %(default)s)")
+    add_model_options(parser)
+
+
+def add_source_options(parser: argparse.ArgumentParser) -> None:
+    """``--scenario`` | ``--data`` (one required), ``--seed``, ``--noise-urad``, ``--provider``."""
+    source = parser.add_mutually_exclusive_group(required=True)
+    add_scenario(parser, group=source)
+    source.add_argument("--data", metavar="CSV", help="a measurement CSV (synthetic or real); its JSON sidecar's "
+                                                      "presets, if any, give the error columns")
+    add_seed(parser, what="the scenario's drawn errors and noise (default: the scenario's)")
+    parser.add_argument("--noise-urad", type=float, default=None, help="sensor noise of the scenario [urad]")
+    parser.add_argument("--provider", choices=PROVIDERS,
+                        help="prototype segment stiffness for --scenario (default %(default)s)")
+    add_trajectory(parser)
+
+
+def load_source(args: argparse.Namespace, space, *, progress: bool):
+    """(measurement, presets (45,) [SI] or None) from ``--scenario`` or ``--data``."""
+    from ..measurements import read_measurement
+
+    if args.noise_urad is not None and args.noise_urad < 0:
+        raise ValueError(f"--noise-urad={args.noise_urad} must be >= 0")
+    if args.scenario is not None:
+        from ..prototype.providers import stiffness_provider
+        from ..prototype.truth import make_truth
+
+        scenario = load_scenario_with_trajectory(args)
+
+        provider = stiffness_provider(args.provider, progress=progress, **executor_options(args))
+        truth = make_truth(scenario, provider, progress=progress)
+        return truth.measurement, scenario.values
+    if getattr(args, "trajectory", None):
+        raise ValueError("--trajectory drives a --scenario; a --data file already holds its own trajectory")
+    try:
+        measurement = read_measurement(args.data)
+    except ValueError as error:  # name the file in every message (some name only the row)
+        if str(args.data) in str(error):
+            raise
+        raise ValueError(f"{args.data}: {error}") from None
+    found = measurement.metadata.get("preset_errors")
+    presets = space.build_values({e["name"]: e["value"] for e in found}, display_units=True) if found else None
+    return measurement, presets
+
+
+def check_sobol_options(args: argparse.Namespace) -> None:
+    if args.sobol_n < 2 or args.sobol_n & (args.sobol_n - 1):
+        raise ValueError(f"--sobol-n={args.sobol_n} must be a power of two (e.g. 512)")
+    if not 0.0 <= args.sobol_threshold <= 1.0:
+        raise ValueError(f"--sobol-threshold={args.sobol_threshold} must be in [0, 1]")

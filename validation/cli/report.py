@@ -1,0 +1,52 @@
+"""``flexcal report``: one self-contained HTML page from a run folder.
+
+Reads DIR/report.md, DIR/report.json and the PNGs of DIR (any flexcal command's
+``--out`` folder) and writes DIR/report.html (or ``--html FILE``): the markdown report,
+the pictures embedded, every report.json figure as a table, links to the other files.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import tempfile
+from pathlib import Path
+
+__all__ = ["configure", "run", "EXAMPLES", "write_html_report"]
+
+EXAMPLES = (
+    "flexcal report runs/table1                  # -> runs/table1/report.html",
+    "flexcal report runs/hinge --html hinge.html",
+)
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("folder", metavar="DIR", help="a run folder (the --out of another flexcal command)")
+    parser.add_argument("--html", metavar="FILE", help="where to write the page (default DIR/report.html)")
+
+
+def write_html_report(folder: str | os.PathLike, target: str | os.PathLike | None = None) -> Path:
+    """Render ``folder`` and write the page whole or not at all; returns its path."""
+    from ..reports.html import render_run_folder
+
+    page = render_run_folder(folder)
+    target = Path(target) if target is not None else Path(folder) / "report.html"
+    if target.is_dir():
+        raise ValueError(f"--html {target} is a folder; give a file name")
+    target.parent.mkdir(parents=True, exist_ok=True)
+    handle, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
+    try:
+        with os.fdopen(handle, "w", encoding="utf-8") as stream:
+            stream.write(page)
+        os.chmod(tmp, 0o644)
+        os.replace(tmp, target)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return target
+
+
+def run(args: argparse.Namespace) -> int:
+    target = write_html_report(args.folder, args.html)
+    print(f"flexcal report: wrote {target} ({target.stat().st_size / 1e3:.0f} kB, self-contained)")
+    return 0

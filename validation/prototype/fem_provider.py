@@ -1,0 +1,189 @@
+"""The virtual prototype's FEM stiffness provider: each chain segment (``ChainSegment``)
+is built as a CadQuery solid, meshed with quadratic tets and condensed onto its two
+section reference points (12 x 12, chain frame, SI), through the content-addressed cache
+of ``flexcal.fem.cache`` so a segment solved once is never solved again.
+
+Symmetry: a chain is mirror-symmetric about its middle; the segment [L - b, L - a] is
+the segment [a, b] turned by pi about the local z axis (x -> -x, y -> -y), a proper
+rotation. Its stiffness is that rotation applied to both nodes' twists, with the nodes
+swapped, so only the first half of a chain (and the strut) is ever meshed.
+
+Parallel builds: ``fem_provider(workers=..., scheduler=...)`` gives the provider a
+``prepare(slices)`` hook that ``build_prototype`` and ``compliance_factors`` call with
+every slice they are about to ask for; the segments missing from the cache are then
+built at once on the shared executor (``flexcal.validation.executor``: local worker
+processes or a Dask cluster), each under the same cache key as a sequential build, and
+the provider's calls that follow are all cache hits (``build_segments``).
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from typing import Any, Callable, Iterable
+
+import numpy as np
+
+from flexcal.geometry.params import STEEL, ChainSegment, FlexureChain, Material
+
+__all__ = ["fem_provider", "segment_stiffness_fem", "mirror_segment_stiffness", "DEFAULT_ELEMENTS_THROUGH",
+           "canonical_segment", "segment_cache_key", "build_segments", "build_segment_job"]
+
+# 3 quadratic tets through the thinnest leaf section: within ~0.3 % of the converged
+# bending compliance on the reference notch hinge after snapping (docs/meshing.md), at a
+# third of the cost of 4.
+DEFAULT_ELEMENTS_THROUGH = 3
+_TURN_Z = np.diag([-1.0, -1.0, 1.0])  # rotation by pi about local z
+
+
+def mirror_segment_stiffness(stiffness: np.ndarray) -> np.ndarray:
+    """12 x 12 of the mirror image (turned by pi about z, nodes swapped) of a segment."""
+    T = np.kron(np.eye(4), _TURN_Z)
+    swap = np.block([[np.zeros((6, 6)), np.eye(6)], [np.eye(6), np.zeros((6, 6))]])
+    P = swap @ T
+    return P @ stiffness @ P.T
+
+
+def _segment_parts(segment: ChainSegment, material: Material, elements_through_thickness: float) -> dict:
+    return {"kind": "chain_segment_stiffness", "segment": segment, "material": material,
+            "mesh": {"elements_through_thickness": float(elements_through_thickness)}}
+
+
+def segment_cache_key(segment: ChainSegment, material: Material = STEEL, *,
+                      elements_through_thickness: float = DEFAULT_ELEMENTS_THROUGH) -> str:
+    """The FEM cache key of a segment's stiffness (``flexcal.fem.cache.cache_key``)."""
+    from flexcal.fem.cache import cache_key
+
+    return cache_key(_segment_parts(segment, material, elements_through_thickness))
+
+
+def canonical_segment(chain: FlexureChain, x_start: float, x_end: float) -> tuple[ChainSegment, bool]:
+    """(segment that is meshed, mirrored?) for the slice [x_start, x_end] [m] of ``chain``:
+    a slice in the second half is the mirror image of one in the first (module docstring)."""
+    length = chain.length
+    mirrored = x_start > 0.5 * length + 1e-12 and x_end > 0.5 * length
+    a, b = (length - x_end, length - x_start) if mirrored else (x_start, x_end)
+    # cut positions to 1 pm: L - (L - x) must find the same cache entry as x
+    return ChainSegment(chain=chain, x_start=round(max(a, 0.0), 12), x_end=round(min(b, length), 12)), mirrored
+
+
+def segment_stiffness_fem(segment: ChainSegment, material: Material = STEEL, *,
+                          elements_through_thickness: float = DEFAULT_ELEMENTS_THROUGH,
+                          cache_directory=None) -> np.ndarray:
+    """Condensed 12 x 12 stiffness [SI] of one chain segment between its end-face centres
+    (node A at x_start, node B at x_end; DOF order ux, uy, uz, rx, ry, rz), cached."""
+    from flexcal.fem.cache import cached
+
+    def compute() -> dict[str, np.ndarray]:
+        from flexcal.fem.condense import chain_stiffness
+        from flexcal.fem.mesh import mesh_part
+        from flexcal.geometry.solids import segment_solid
+
+        part = segment_solid(segment)
+        mesh, _report = mesh_part(part, elements_through_thickness=elements_through_thickness)
+        (plane_a, plane_b) = (part.end_planes["A"], part.end_planes["B"])
+        stiffness = chain_stiffness(mesh, material, plane_a, part.reference_points["A"], plane_b,
+                                    part.reference_points["B"])
+        return {"stiffness": 0.5 * (stiffness + stiffness.T)}
+
+    return cached(_segment_parts(segment, material, elements_through_thickness), compute,
+                  cache_directory)["stiffness"]
+
+
+def build_segment_job(segment: ChainSegment, *, material: Material, elements_through_thickness: float,
+                      cache_directory=None) -> dict[str, Any]:
+    """One segment build on a worker: {"key": its cache key there, "stiffness": (12, 12),
+    "wall_s": [s]}; the worker's cache gets the entry too (``segment_stiffness_fem``)."""
+    start = time.perf_counter()
+    stiffness = segment_stiffness_fem(segment, material, elements_through_thickness=elements_through_thickness,
+                                      cache_directory=cache_directory)
+    return {"key": segment_cache_key(segment, material, elements_through_thickness=elements_through_thickness),
+            "stiffness": stiffness, "wall_s": time.perf_counter() - start}
+
+
+def build_segments(slices: Iterable[tuple[FlexureChain, float, float]], material: Material = STEEL, *,
+                   elements_through_thickness: float = DEFAULT_ELEMENTS_THROUGH, cache_directory=None,
+                   workers: int | None = None, scheduler: str | None = None, progress: bool = True) -> int:
+    """Build the FEM segments of ``slices`` [(chain, x_start [m], x_end [m])] that the cache
+    lacks, in parallel on the shared executor, into the cache; returns how many were built.
+
+    workers: local worker processes (default min(cores, missing segments); 0: this
+    process); scheduler: a Dask scheduler address. Each result is stored under the key a
+    sequential build uses (the worker's own cache write makes that a no-op on shared
+    storage; a remote worker without it hands the matrix back). A worker whose flexcal
+    code differs (other cache key) is an error: its matrix is not this version's.
+    """
+    from flexcal.fem.cache import load_cached, store_cached
+
+    from ..executor import resolve_workers, run_jobs, where
+
+    missing: dict[str, ChainSegment] = {}
+    for chain, x_start, x_end in slices:
+        segment, _ = canonical_segment(chain, float(x_start), float(x_end))
+        key = segment_cache_key(segment, material, elements_through_thickness=elements_through_thickness)
+        if key not in missing and load_cached(key, cache_directory) is None:
+            missing[key] = segment
+    if not missing:
+        return 0
+    n_workers = resolve_workers(workers, len(missing))
+    log = (lambda text: print(text, file=sys.stderr, flush=True)) if progress else (lambda text: None)
+    log(f"  FEM segments: {len(missing)} to build on {where(n_workers, scheduler)}")
+    start, built = time.perf_counter(), []
+    keys = {id(segment): key for key, segment in missing.items()}
+
+    def on_done(segment: ChainSegment, result: dict[str, Any]) -> None:
+        key = keys[id(segment)]
+        if result["key"] != key:
+            raise RuntimeError("a Dask worker runs another flexcal version (its FEM cache key differs); install the "
+                               "same flexcal on the workers as on this machine")
+        if load_cached(key, cache_directory) is None:
+            store_cached(key, {"stiffness": result["stiffness"]}, cache_directory)
+        built.append(key)
+        log(f"  FEM segment [{segment.x_start * 1e3:.1f}, {segment.x_end * 1e3:.1f}] mm of a "
+            f"{segment.chain.length * 1e3:.1f} mm chain: {result['wall_s']:.1f} s ({len(built)}/{len(missing)}, "
+            f"{time.perf_counter() - start:.0f} s elapsed)")
+
+    # the workers write into the same folder when it is shared (LocalCluster: always)
+    options = {"material": material, "elements_through_thickness": float(elements_through_thickness),
+               "cache_directory": None if cache_directory is None else str(cache_directory)}
+    failures = run_jobs(list(missing.values()), build_segment_job, on_done, key=lambda seg: keys[id(seg)][:16],
+                        workers=n_workers, scheduler=scheduler, job_options=options, task_prefix="fem-segment")
+    if failures:
+        key, text = next(iter(failures.items()))
+        raise RuntimeError(f"{len(failures)} FEM segment build(s) failed, e.g. {text}; the {len(built)} finished "
+                           "segment(s) are cached, run the same command again to retry (--workers 0 builds them "
+                           "in this process)")
+    return len(built)
+
+
+def fem_provider(material: Material = STEEL, *, elements_through_thickness: float = DEFAULT_ELEMENTS_THROUGH,
+                 cache_directory=None, progress: bool = True, workers: int | None = 0,
+                 scheduler: str | None = None) -> Callable[[FlexureChain, float, float], np.ndarray]:
+    """A provider ``(chain, x_start, x_end) -> (12, 12)`` for ``build_prototype``.
+
+    workers / scheduler: where ``provider.prepare(slices)`` builds the missing segments
+    (``build_segments``); the default ``workers=0`` without a scheduler builds them one
+    after the other in this process as the provider is called (the command line's
+    default is local worker processes: ``--workers``).
+    """
+
+    def provider(chain: FlexureChain, x_start: float, x_end: float) -> np.ndarray:
+        segment, mirrored = canonical_segment(chain, x_start, x_end)
+        start = time.perf_counter()
+        stiffness = segment_stiffness_fem(segment, material, elements_through_thickness=elements_through_thickness,
+                                          cache_directory=cache_directory)
+        if progress and time.perf_counter() - start > 0.5:
+            print(f"  FEM segment [{segment.x_start * 1e3:.1f}, {segment.x_end * 1e3:.1f}] mm of a "
+                  f"{chain.length * 1e3:.1f} mm chain: {time.perf_counter() - start:.1f} s", file=sys.stderr)
+        return mirror_segment_stiffness(stiffness) if mirrored else stiffness
+
+    def prepare(slices: Iterable[tuple[FlexureChain, float, float]]) -> int:
+        if scheduler is None and workers == 0:
+            return 0  # built lazily, in order, by the calls that follow
+        return build_segments(slices, material, elements_through_thickness=elements_through_thickness,
+                              cache_directory=cache_directory, workers=workers, scheduler=scheduler,
+                              progress=progress)
+
+    provider.prepare = prepare
+    provider.description = f"FEM (quadratic tets, {elements_through_thickness:g} through the thinnest section)"
+    return provider

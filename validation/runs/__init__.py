@@ -1,0 +1,4 @@
+"""Whole runs of the model against data: the Section 3.3 regression (`verify.py`), closed-loop
+compensation (`compensate.py`, `targets.py`) and the FEM-corrected model the runs calibrate
+(`model_correction.py`). docs/verification-table1.md, docs/compensation.md.
+"""
