@@ -1,12 +1,15 @@
-"""One identification of all error sources from one measured curve: MAP or free least squares.
+"""The one identification pipeline: error sources from one measured curve, by MAP, free least
+squares or the paper's improved PSO.
 
 ``identify_all`` is what ``flexcal verify``, ``identify`` and ``compensate`` run by default
 (``--method map``): every one of the 45 sources estimated at once with the paper's ranges as
 the prior (``calibration.estimation``), the prior scale cross-validated on held-out legs, a
 standard error for each source, and the base parameters (``calibration.base_parameters``)
 saying which sources or combinations the data identify. ``--method free`` is the same
-without a prior (bounded least squares from mid-range). The paper's method (Sobol screening
-+ improved PSO) stays in ``flexcal.validation.verify``.
+without a prior (bounded least squares from mid-range). ``identify_swarm`` is the paper's
+identification of chosen sources (improved PSO, least-squares polish of the swarm's good
+points, Eq. 13 refinement, identifiability); the Sobol screening that chooses them for
+``--method paper`` is ``flexcal.validation.runs.verify``'s first step.
 
 Values are SI throughout (``Identification.values``, ``.std``); display units are the
 reports' business.
@@ -23,12 +26,16 @@ import numpy as np
 from flexcal.calibration.base_parameters import BaseParameters, base_parameters
 from flexcal.calibration.estimation import (PRIOR_SCALES, CrossValidation, Estimate, choose_prior_scale, estimate,
                                             held_out_folds, uniform_prior)
+from flexcal.calibration.identifiability import IdentifiabilityReport, identifiability
+from flexcal.calibration.polish import PolishResult, norm_sum_polish, polish_candidates
 from flexcal.calibration.problem import CalibrationProblem
+from flexcal.calibration.pso import identify
+from flexcal.calibration.pso_settings import PSOResult, PSOSettings
 from flexcal.model.parameters import ParameterSpace
 from flexcal.model.trajectory import travel_directions
 
 __all__ = ["IdentificationSettings", "Identification", "identify_all", "METHODS", "FREE_MAX_EVALUATIONS",
-           "check_determined"]
+           "check_determined", "SwarmIdentification", "identify_swarm"]
 
 METHODS = ("map", "free", "paper")
 # free least squares on the rank-deficient 45-source problem creeps along its null space: cap
@@ -130,3 +137,70 @@ def identify_all(space: ParameterSpace, inputs: np.ndarray, angles: np.ndarray, 
     fitted = problem.model_angles(fit.x[None])[0][0]
     return Identification(method=settings.method, values=values, std=std, x_unit=fit.x, estimate=fit, base=base,
                           cross_validation=cv, prior_scale=scale, problem=problem, fitted_angles=fitted)
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class SwarmIdentification:
+    """values (45,) [SI]: the chosen sources identified, the others as the space fixes them;
+    std (45,) [SI]: standard errors of the chosen sources (nan: not identified, no error
+    bar); x_unit: the chosen sources on the unit box; selected: their names; identifiable:
+    the ones the identifiability analysis finds determined; noise [rad] and where it came
+    from; pso, polish (or None), ident: what each step left; problem over the chosen sources;
+    fitted_angles (n, 3) [rad]."""
+
+    values: np.ndarray
+    std: np.ndarray
+    x_unit: np.ndarray
+    selected: tuple[str, ...]
+    identifiable: tuple[str, ...]
+    noise: float
+    noise_source: str
+    pso: PSOResult
+    polish: PolishResult | None
+    ident: IdentifiabilityReport
+    problem: CalibrationProblem
+    fitted_angles: np.ndarray
+
+
+def identify_swarm(space: ParameterSpace, inputs: np.ndarray, angles: np.ndarray, selected: tuple[str, ...],
+                   pso_settings: PSOSettings = PSOSettings(), *, seed: int = 0, sensitivity: np.ndarray | None = None,
+                   polish: bool = True, noise: float | None = None,
+                   callback: Callable[[object], None] | None = None) -> SwarmIdentification:
+    """The paper's identification (Sec. 3.2) of the ``selected`` sources, the others fixed as
+    ``space`` holds them: the improved multi-subgroup PSO on Eq. 13 (``sensitivity``: their
+    total Sobol indices, which seed the subgroups), then (``polish``) the least-squares polish
+    of the swarm's distinct good points and an Eq. 13 refinement (IRLS), and the
+    identifiability at the solution with ``noise`` [rad] (None: the fit RMS). callback(optimizer) after
+    each PSO iteration (progress)."""
+    inputs, angles = np.asarray(inputs, float), np.asarray(angles, float)
+    check_determined(inputs.shape[0], len(selected))
+    sub = space.subset(selected)
+    problem = CalibrationProblem(space=sub, inputs=inputs, angles=angles)
+    pso = identify(problem.fitness, sub.n_params, pso_settings, rng=seed, sensitivity=sensitivity, callback=callback)
+    x_best, polished = pso.x_best, None
+    if polish:
+        # polish the swarm's distinct good points (overall, global swarm, subgroups: the
+        # paper's Fig. 11 "relatively optimal solutions"), keep the best; budget: as many
+        # rows as the swarm used, so the polish never more than doubles the cost
+        polished, _, _ = polish_candidates(problem.residuals, pso.candidates(), max_evaluations=pso.n_evaluations,
+                                           select=problem.fitness)
+        if problem.fitness(polished.x[None])[0] <= pso.f_best:
+            x_best = polished.x
+        # the sum of squares' minimizer is not Eq. 13's when the model cannot fit exactly:
+        # finish on Eq. 13 itself (IRLS), within what the polish left of its budget
+        # (capped at 200 Jacobians' worth: with 45 sources an uncapped IRLS took minutes
+        # of single-row calls for a last-digit gain)
+        left = min(max(pso.n_evaluations - polished.n_evaluations, 4 * (sub.n_params + 1)), 200 * (sub.n_params + 1))
+        refined = norm_sum_polish(problem.residuals, x_best, max_evaluations=left)
+        if problem.fitness(refined.x[None])[0] < problem.fitness(x_best[None])[0]:
+            x_best = refined.x
+    fitted = problem.model_angles(x_best[None])[0][0]
+    fit_rms = float(np.sqrt(np.mean((fitted - angles) ** 2)))
+    used_noise = noise if noise else max(fit_rms, 1e-9)
+    ident = identifiability(problem.residuals, x_best, sub.names, noise=used_noise)
+    std = np.full(len(space.parameters), np.nan)  # sources not chosen: fixed, no error bar
+    std[sub.active_indices] = ident.parameter_std * (sub.upper - sub.lower)
+    return SwarmIdentification(values=sub.full_values(sub.from_unit(x_best)), std=std, x_unit=x_best,
+                               selected=tuple(selected), identifiable=tuple(ident.meaningful_names),
+                               noise=used_noise, noise_source="given" if noise else "fit RMS", pso=pso,
+                               polish=polished, ident=ident, problem=problem, fitted_angles=fitted)

@@ -57,7 +57,7 @@ def _removed(nominal, effect_id, signature):
     def residual(p):  # in urad: least_squares' default tolerances are absolute on the gradient
         return (term.evaluate(p * term.scale, data) - signature).ravel() * 1e6
 
-    # the diagnosis's starts (diagnose_which.fit_terms): zero, +-1 scale and two seeded draws;
+    # the diagnosis's starts (diagnosis.which.fit_terms): zero, +-1 scale and two seeded draws;
     # a linear term reaches the same optimum from each
     k = term.n_params
     starts = [np.zeros(k), np.ones(k), -np.ones(k), *np.random.default_rng(0).normal(size=(2, k))]

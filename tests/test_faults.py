@@ -3,7 +3,7 @@ points, ``--out`` folders that cannot be used, outputs that must be strict JSON 
 HTML reports fed hostile strings.
 
 A run is stopped at a point it announces itself: off a terminal every progress stage
-prints one line (``cli_common.LineProgress``), the test waits for that line and sends
+prints one line (``progress.LineProgress``), the test waits for that line and sends
 the signal then. Afterwards: the right exit status (130 Ctrl-C, 143 SIGTERM), one line
 that says so, no ``--out`` folder, no staging folder, nothing in the working directory,
 and the same command run again succeeds.
@@ -393,7 +393,7 @@ def test_an_error_caused_by_ctrl_c_counts_as_the_interrupt(tmp_path, capsys, mon
     # Ctrl-C while an extension module initialises surfaces as ImportError('initialization
     # failed') raised from the KeyboardInterrupt (seen when truth was stopped while importing
     # its plotting modules): still exit 130 and the interrupt line, not 'internal error'
-    from flexcal.validation.prototype.mechanism import providers
+    from flexcal.validation.prototype import providers
 
     def interrupted_import(*args, **kwargs):
         try:

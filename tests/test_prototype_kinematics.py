@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from flexcal.validation.prototype.mechanism import kinematics as kin
+from flexcal.validation.prototype import kinematics as kin
 
 
 def _twists(rng, n, rotation_scale):

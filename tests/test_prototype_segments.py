@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from flexcal.geometry.params import STEEL, FlexureChain, reference_mechanism
-from flexcal.validation.prototype.mechanism import segments as seg
+from flexcal.validation.prototype import segments as seg
 
 
 def _circular_notch_rotation(radius, thickness, width, e):

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from flexcal.geometry.params import reference_mechanism
-from flexcal.validation.prototype.mechanism import superelement as se
+from flexcal.validation.prototype import superelement as se
 from flexcal.validation.prototype.kinematics import pose, se3_exp, se3_inverse, translation_pose
 from flexcal.validation.prototype.equilibrium import Loads, SolverSettings, build_assembly, solve_equilibrium
 from flexcal.validation.prototype.segments import analytic_provider, end_stiffness, section_nodes

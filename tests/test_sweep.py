@@ -9,7 +9,7 @@ import tomllib
 import numpy as np
 import pytest
 
-from flexcal.validation.sweep.run import run as sweep_module
+from flexcal.validation.sweep import run as sweep_module
 from flexcal.validation.cli import main
 from flexcal.validation.sweep.run import DesignStore, run_sweep
 from flexcal.validation.sweep.space import DEFAULT_CONFIG, design_id, designs_from_config, varied_names

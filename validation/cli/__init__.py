@@ -192,6 +192,3 @@ def _main(argv: list[str], command: str | None) -> int:
         print(dumps_strict(summary_of(args.out), sort_keys=True))
     return status
 
-
-if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())

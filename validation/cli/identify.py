@@ -1,11 +1,14 @@
 """``flexcal identify``: identification alone (paper Sec. 3.2, Eq. 13).
 
-Identifies the chosen error sources from a measurement CSV (or a scenario's synthetic
-curves) with the improved multi-subgroup PSO and the least-squares polish, the other
-sources staying at nominal; no Sobol screening (``flexcal sensitivity`` gives the
-ranking, ``flexcal verify`` runs both). Writes DIR/report.json (identified values, the
-errors against the presets when the data are synthetic, fit, identifiability),
-DIR/report.md, DIR/fit.png and DIR/convergence.png.
+Identifies the chosen error sources (``--sources``) from a measurement CSV (or a scenario's
+synthetic curves), the other sources staying at nominal, through the same pipeline as
+``flexcal verify`` (``runs.verify.run_verify`` with ``VerifySettings.sources``): by default
+the paper's improved multi-subgroup PSO with the least-squares polish (``--method paper``;
+no Sobol screening: ``flexcal sensitivity`` gives the ranking, ``flexcal verify`` runs
+both), or MAP / free least squares (``--method map|free``) with standard errors. Writes
+DIR/report.json (identified values and standard errors, the errors against the presets when
+the data are synthetic, fit, identifiability), DIR/report.md, DIR/fit.png and (PSO)
+DIR/convergence.png.
 """
 
 from __future__ import annotations
@@ -13,8 +16,6 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import time
-
-import numpy as np
 
 from .options import add_out
 from .options import add_source_options, load_source
@@ -27,16 +28,17 @@ EXAMPLES = (
     "flexcal identify --scenario table1 --provider analytic --particles 40 --iterations 20 --out runs/quick",
 )
 DEFAULT_CONFIG = {"model_stiffness": "fem", "second_order": True, "provider": "fem", "sources": "table1", "particles": 300, "iterations": 150, "polish": True,
-                  "remove_offset": False, "calibration_seed": 0}
+                  "remove_offset": False, "calibration_seed": 0, "method": "paper", "prior_scale": 0.0}
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
-    from .options import add_identification_options, add_model_options
+    from .options import add_identification_options, add_method_options, add_model_options
 
     add_source_options(parser)
     parser.add_argument("--sources", metavar="NAMES",
                         help="comma-separated error sources to identify (docs/parameters.md), 'table1' (the nine "
                              "drive sources x0, CL, mu) or 'all' (default %(default)s)")
+    add_method_options(parser)
     add_identification_options(parser)
     add_model_options(parser)
     parser.add_argument("--calibration-seed", type=int, metavar="N", help="seed of the PSO (default %(default)s)")
@@ -59,81 +61,74 @@ def parse_sources(text: str, names: tuple[str, ...]) -> tuple[str, ...]:
 
 
 def run(args: argparse.Namespace) -> int:
-    from flexcal.calibration.identifiability import identifiability
     from flexcal.calibration.plots import plot_convergence
-    from flexcal.calibration.polish import polish_candidates
-    from flexcal.calibration.problem import CalibrationProblem
-    from flexcal.calibration.pso import identify
     from flexcal.calibration.pso_settings import PSOSettings
     from flexcal.model.forward import ideal_angles
     from flexcal.model.parameters import parameter_space
 
-    from ..progress import progress_bar
-    from .common import show_progress
-    from ..runs.model_correction import model_space
     from ..output import staged_output, write_json
+    from ..prototype.scenario import mechanism_from_metadata
     from ..reports.plots import plot_misalignment_curves
-    from ..runs.verify import _parameter_rows, remove_return_offsets
+    from ..runs.model_correction import model_space
+    from ..runs.verify import VerifySettings, run_verify
+    from .common import show_progress
+    from .options import executor_options, prior_scale_option
 
     if args.particles < 2 or args.iterations < 1:
         raise ValueError(f"--particles={args.particles} must be >= 2 and --iterations={args.iterations} >= 1")
     selected = parse_sources(args.sources, parameter_space().names)
-    settings = dataclasses.replace(PSOSettings(), n_particles=args.particles, max_iterations=args.iterations)
     progress = show_progress(args)
     measurement, presets = load_source(args, parameter_space(), progress=progress)
+    settings = VerifySettings(method=args.method, prior_scale=prior_scale_option(args), sources=selected,
+                              polish=args.polish, seed=args.calibration_seed, remove_offset=args.remove_offset,
+                              noise_urad=args.noise_urad if args.noise_urad else None,
+                              pso=dataclasses.replace(PSOSettings(), n_particles=args.particles,
+                                                      max_iterations=args.iterations))
     from flexcal.calibration.pipeline import check_determined
-
-    from .options import executor_options
-    from ..prototype.scenario import mechanism_from_metadata
 
     check_determined(measurement.n_points, len(selected))
     space = model_space(args.model_stiffness, args.second_order, progress=progress,
                         mechanism=mechanism_from_metadata(measurement.metadata), **executor_options(args))
-    angles = remove_return_offsets(measurement) if args.remove_offset else measurement.angles
-    sub = space.subset(selected)
-    problem = CalibrationProblem(space=sub, inputs=measurement.inputs, angles=angles)
     start = time.perf_counter()
-    with progress_bar(args.iterations, "PSO", enabled=progress, unit="iteration") as bar:
-        pso = identify(problem.fitness, sub.n_params, settings, rng=args.calibration_seed,
-                       callback=lambda _: bar.update(1))
-    x_best, polish = pso.x_best, None
-    if args.polish:
-        polish, _, _ = polish_candidates(problem.residuals, pso.candidates(), max_evaluations=pso.n_evaluations)
-        if problem.fitness(polish.x[None])[0] <= pso.f_best:
-            x_best = polish.x
+    result = run_verify(measurement, space, settings, presets=presets, progress=False)
     wall_s = time.perf_counter() - start
-    fitted = problem.model_angles(x_best[None])[0][0]
-    residual = fitted - angles
-    per_point = np.linalg.norm(residual, axis=1)
-    fit_rms = float(np.sqrt(np.mean(residual ** 2)))
-    noise = args.noise_urad * 1e-6 if args.noise_urad else max(fit_rms, 1e-9)
-    ident = identifiability(problem.residuals, x_best, sub.names, noise=noise)
-    identified = sub.full_values(sub.from_unit(x_best))
-    rows = _parameter_rows(space, identified, presets, selected, set(ident.meaningful_names))
-    summary = {"n_points": measurement.n_points, "n_identified": len(selected), "fit_rms_urad": fit_rms * 1e6,
-               "fit_max_urad": float(per_point.max() * 1e6), "fitness_eq13_urad": float(per_point.mean() * 1e6),
-               "n_evaluations": int(problem.log.n_candidates), "rank": int(ident.rank),
-               "condition_number": float(ident.condition_number), "seed": args.calibration_seed}
+    verified = result.report
+    angles = result.problem.angles
+    fitted = result.fitted_angles
+    rows = verified["parameters"]
+    fit_rms = verified["fit_rms_urad"] * 1e-6
+    ident = verified["identifiability"]
+    summary = {"n_points": measurement.n_points, "n_identified": len(selected), "method": args.method,
+               "fit_rms_urad": verified["fit_rms_urad"], "fit_max_urad": verified["fit_max_urad"],
+               "fitness_eq13_urad": verified["fitness_eq13_urad"], "n_evaluations": verified["n_evaluations"],
+               "rank": int(ident["rank"]), "seed": args.calibration_seed}
+    if "condition_number" in ident:
+        summary["condition_number"] = float(ident["condition_number"])
     report = {
         "summary": summary, "config": args.config, "selected": list(selected), "parameters": rows,
-        "identifiability": {"rank": ident.rank, "n_parameters": len(ident.names),
-                            "condition_number": ident.condition_number, "groups": [list(g) for g in ident.groups],
-                            "meaningful": list(ident.meaningful_names)},
-        "pso": {"n_evaluations": pso.n_evaluations, "history_best_f_urad": pso.history_best_f * 1e6},
-        "polish": None if polish is None else {"rms_urad": polish.rms * 1e6, "used": bool(np.array_equal(x_best, polish.x))},
+        "identifiability": ident,
+        "pso": verified.get("pso"), "polish": verified.get("polish"),
+        "estimation": verified.get("estimation"), "base_parameters": verified.get("base_parameters"),
+        "noise_urad": verified["noise_urad"], "noise_source": verified["noise_source"],
         "offset_removed": bool(args.remove_offset),
         "wall_s": wall_s,
     }
     has_preset = presets is not None
-    lines = ["# Identification (improved PSO + polish)", "",
+    how = {"paper": "improved PSO + polish", "map": "MAP with the paper's ranges as prior",
+           "free": "free least squares"}[args.method]
+    lines = [f"# Identification ({how})", "",
              f"{len(selected)} sources identified from {measurement.n_points} postures; fit RMS {fit_rms * 1e6:.4g} urad, "
-             f"max ||Δθ|| {summary['fit_max_urad']:.4g} urad; identifiability rank {ident.rank} of {len(ident.names)}, "
-             f"condition number {ident.condition_number:.3g}.", "",
-             "![fit](fit.png)", "", "![convergence](convergence.png)", "", "## Identified sources", "",
-             "| parameter | unit | identified | " + ("preset | abs error | " if has_preset else "") + "identifiable |",
-             "|---|---|---:|" + ("---:|---:|" if has_preset else "") + "---|"]
+             f"max ||Δθ|| {summary['fit_max_urad']:.4g} urad; identifiability rank {ident['rank']} of "
+             f"{ident['n_parameters']}" + (f", condition number {ident['condition_number']:.3g}."
+                                           if "condition_number" in ident else "."), "",
+             "![fit](fit.png)", ""] + (["![convergence](convergence.png)", ""] if result.pso is not None else []) + [
+             "## Identified sources", "",
+             "| parameter | unit | identified | std error | " + ("preset | abs error | " if has_preset else "")
+             + "identifiable |",
+             "|---|---|---:|---:|" + ("---:|---:|" if has_preset else "") + "---|"]
     for r in (r for r in rows if r["was_identified"]):
-        cells = [f"`{r['name']}`", r["unit"], f"{r['identified']:.5g}"]
+        cells = [f"`{r['name']}`", r["unit"], f"{r['identified']:.5g}",
+                 "–" if r["std_error"] is None else f"{r['std_error']:.3g}"]
         if has_preset:
             cells += [f"{r['preset']:.5g}", f"{r['abs_error']:.3g}"]
         lines.append("| " + " | ".join(cells + ["yes" if r["identifiable"] else "no"]) + " |")
@@ -144,8 +139,9 @@ def run(args: argparse.Namespace) -> int:
         classes = measurement.metadata.get("prototype", {}).get("point_class") or ["S3"] * measurement.n_points
         plot_misalignment_curves(staging / "fit.png", angles - ideal, classes, leg=measurement.leg,
                                  fitted=fitted - ideal, title="misalignment (measured − ideal) and the identified model")
-        plot_convergence(pso, staging / "convergence.png", ylabel="Eq. 13 fitness [rad]")
-    print(f"flexcal identify: {len(selected)} sources, fit RMS {fit_rms * 1e6:.3g} urad, max "
-          f"{summary['fit_max_urad']:.3g} urad, {wall_s:.1f} s; wrote {args.out}/report.json, report.md, fit.png, "
-          f"convergence.png")
+        if result.pso is not None:
+            plot_convergence(result.pso, staging / "convergence.png", ylabel="Eq. 13 fitness [rad]")
+    print(f"flexcal identify: {len(selected)} sources ({args.method}), fit RMS {fit_rms * 1e6:.3g} urad, max "
+          f"{summary['fit_max_urad']:.3g} urad, {wall_s:.1f} s; wrote {args.out}/report.json, report.md, fit.png"
+          + (", convergence.png" if result.pso is not None else ""))
     return 0

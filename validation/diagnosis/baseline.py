@@ -121,9 +121,9 @@ def calibrate_baseline(measurement: Measurement, rng=None, progress: bool = Fals
 
 
 def _calibrate(measurement: Measurement, rng, settings: BaselineSettings, space: ParameterSpace) -> BaselineFit:
+    from flexcal.calibration.pipeline import identify_swarm
     from flexcal.calibration.polish import batched_jacobian_fd, least_squares_polish
     from flexcal.calibration.problem import CalibrationProblem
-    from flexcal.calibration.pso import identify
     from flexcal.calibration.pso_settings import PSOSettings
     from flexcal.model.forward import CLASS_NAMES, forward
     from flexcal.model.trajectory import travel_directions
@@ -132,17 +132,18 @@ def _calibrate(measurement: Measurement, rng, settings: BaselineSettings, space:
     if settings.starts < 1:
         raise ValueError(f"BaselineSettings.starts must be >= 1, got {settings.starts}")
     seeds = np.random.default_rng(rng).integers(2**31, size=settings.starts)
-    drives = space.subset(DRIVE_SOURCE_NAMES)
-    problem = CalibrationProblem(space=drives, inputs=measurement.inputs, angles=measurement.angles)
     pso_settings = dataclasses.replace(PSOSettings(), n_particles=settings.particles,
                                        max_iterations=settings.iterations)
     names = space.all_names if settings.polish_all else DRIVE_SOURCE_NAMES
 
     def polished_start(seed: int):
-        """(sum of squares, subspace, unit-box solution) of one start: PSO and polish on the
-        nine drive sources, then (polish_all) the polish over all 45 from there."""
-        pso = identify(problem.fitness, drives.n_params, pso_settings, rng=seed)
-        x = least_squares_polish(problem.residuals, pso.x_best, max_evaluations=POLISH_BUDGET, ftol=1e-10,
+        """(sum of squares, subspace, unit-box solution) of one start: the identification
+        pipeline's PSO on the nine drive sources (``identify_swarm``, without its polish),
+        a tight least-squares polish on the nine, then (polish_all) over all 45 from there."""
+        found = identify_swarm(space, measurement.inputs, measurement.angles, DRIVE_SOURCE_NAMES, pso_settings,
+                               seed=seed, polish=False)
+        drives = found.problem.space
+        x = least_squares_polish(found.problem.residuals, found.x_unit, max_evaluations=POLISH_BUDGET, ftol=1e-10,
                                  xtol=1e-10, gtol=1e-10).x
         values = drives.full_values(drives.from_unit(x))
         broad = space.subset(names, fixed=dict(zip(space.all_names, values)))

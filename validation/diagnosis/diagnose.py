@@ -1,8 +1,8 @@
 """The sim-to-real gap diagnosis of one measurement (issue #7, docs/diagnosis.md).
 
-``run_diagnosis(measurement)``: calibrate the baseline (``diagnose_baseline``, swappable),
-say where the residual lies (``diagnose_where``), rank the effect library's terms on
-held-out legs with information criteria and collinearity groups (``diagnose_which``), add
+``run_diagnosis(measurement)``: calibrate the baseline (``diagnosis.baseline``, swappable),
+say where the residual lies (``diagnosis.where``), rank the effect library's terms on
+held-out legs with information criteria and collinearity groups (``diagnosis.which``), add
 the winner and repeat on what is left. The measurement's JSON sidecar is never read here
 (a blind benchmark keeps its answer in a separate file anyway).
 """

@@ -1,10 +1,10 @@
 """Prototype-side physics of the effect library (issue #7): injectors for
-``flexcal.validation.prototype.mechanism.simulate`` (hooks in ``prototype_effects``).
+``flexcal.validation.prototype.mechanism.simulate`` (hooks in ``effects.hooks``).
 
 Each injector is a frozen dataclass with its physical parameters in SI (per-actuator or
 per-channel values as 3-tuples, per-chain as 6-tuples L1..L3, D1..D3), a ``name`` (the
 effect id) and ``parameters`` (JSON-able). They are deliberately richer than the model
-terms of ``effect_terms`` (docs/effects.md): extra harmonics, load-dependent friction,
+terms of ``effects.terms`` (docs/effects.md): extra harmonics, load-dependent friction,
 a thermal lag, two creep time constants... Path-dependent state (friction memory, creep,
 lost steps) is recomputed from the context's history, so an injector holds no state and
 equal runs give equal results.

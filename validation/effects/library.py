@@ -3,7 +3,7 @@
 
 ``make_injector(id, magnitude_urad, rng)`` draws an injector's shape (signs, channels,
 phases, time constants) from ``rng`` and scales its strength so that the linearized
-angle signature on the standard trajectory (``effect_magnitude``) has RMS
+angle signature on the standard trajectory (``effects.magnitude``) has RMS
 ``magnitude_urad``; ``effects_from_scenario`` turns a scenario's ``[[effects]]`` tables
 into injectors. The ids outside ``EFFECT_IDS`` (``OUT_OF_LIBRARY_IDS``) have an injector
 but no model term: the blind benchmark's "something else" cases.
@@ -121,7 +121,7 @@ def _step_loss(magnitude: float, rng: np.random.Generator):
 
 def make_injector(effect_id: str, magnitude_urad: float, rng: np.random.Generator | int | None = None):
     """An injector of ``effect_id`` whose linearized signature on the standard trajectory
-    has RMS ~``magnitude_urad`` [urad] (``effect_magnitude``); shape drawn from ``rng``."""
+    has RMS ~``magnitude_urad`` [urad] (``effects.magnitude``); shape drawn from ``rng``."""
     if effect_id not in LIBRARY:
         raise ValueError(f"unknown effect id {effect_id!r}; known: {', '.join(LIBRARY)}")
     if not (np.isfinite(magnitude_urad) and magnitude_urad > 0):
@@ -158,7 +158,7 @@ def effects_from_scenario(entries: tuple[dict[str, Any], ...]) -> tuple:
     """Injectors from a scenario's ``[[effects]]`` tables.
 
     Each table is ``{"name": id, <field>: value, ...}`` with the injector's fields in SI
-    (``effect_injectors``), or ``{"name": id, "magnitude_urad": m, "seed": s}`` for
+    (``effects.injectors``), or ``{"name": id, "magnitude_urad": m, "seed": s}`` for
     ``make_injector``. Raises ValueError naming an unknown id or parameter.
     """
     effects = []

@@ -1,5 +1,5 @@
 """Closed-form (linearized) angle signature of an injector along the standard trajectory,
-for ``effect_library.make_injector`` to choose physical parameters (docs/effects.md).
+for ``effects.library.make_injector`` to choose physical parameters (docs/effects.md).
 
 The injector's hooks are called on contexts built from the nominal analytic model
 (``flexcal.model.forward``: angles and chain loads at every point of the standard

@@ -7,7 +7,7 @@ directions, the baseline model's angles, loads and input Jacobian, optional colu
 Every term is zero at zero parameters (= effect absent). Screw-side terms give a screw
 displacement Δx (n, 3) [m] per actuator and map it to angles with the input Jacobian,
 ``Δθ = J Δx``; sensor-side terms act on the model angles; ``thermal`` on the
-``temperature_c`` column. The prototype's injectors (``effect_injectors``) are richer
+``temperature_c`` column. The prototype's injectors (``effects.injectors``) are richer
 than these formulas, so a fit of a term to its injector's signature is a real test.
 """
 

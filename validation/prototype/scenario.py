@@ -25,7 +25,7 @@ A scenario file::
     rate = [5e-8, 5e-8, 1.5e-7]  # injector fields in SI (flexcal.validation.effects.injectors)
     [[effects]]
     name = "lead_error"
-    magnitude_urad = 8.0       # or: a drawn injector of that size (effect_library.make_injector)
+    magnitude_urad = 8.0       # or: a drawn injector of that size (effects.library.make_injector)
     seed = 3
 
 The built-in scenario ``table1`` uses the paper's Table 1 presets (initial positions

@@ -63,9 +63,9 @@ def make_truth(scenario: Scenario, provider: Callable, *, effects: tuple = (), p
 
     provider: segment stiffness provider (FEM or analytic, ``flexcal.validation.prototype.segments``);
     effects: effect objects injected into the physics (gap diagnosis), after the ones the
-    scenario's ``[[effects]]`` tables name (``effect_library.effects_from_scenario``). The
+    scenario's ``[[effects]]`` tables name (``effects.library.effects_from_scenario``). The
     points are ``scenario.dwell`` apart in time; the room temperature
-    (``prototype_effects.room_temperature`` of the scenario seed) reaches the effects and is
+    (``effects.hooks.room_temperature`` of the scenario seed) reaches the effects and is
     written as column ``temperature_c`` whatever effects are injected. Sensor noise is
     Gaussian per channel from its own stream of the scenario seed, so the same seed
     gives the same file; offsets are added as given.

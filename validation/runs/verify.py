@@ -31,7 +31,6 @@ identified values mean something.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
@@ -39,11 +38,8 @@ from typing import Any
 
 import numpy as np
 
-from flexcal.calibration.identifiability import identifiability
-from flexcal.calibration.pipeline import IdentificationSettings, check_determined, identify_all
-from flexcal.calibration.polish import norm_sum_polish, polish_candidates
+from flexcal.calibration.pipeline import IdentificationSettings, identify_all, identify_swarm
 from flexcal.calibration.problem import CalibrationProblem
-from flexcal.calibration.pso import identify
 from flexcal.calibration.pso_settings import PSOSettings
 from flexcal.calibration.sensitivity import select_parameters, sobol_indices
 from flexcal.model.parameters import DRIVE_SOURCE_NAMES, ParameterSpace
@@ -72,7 +68,8 @@ class VerifySettings:
     remove_offset: subtract each leg's return offset first (paper Sec. 4.2);
     noise_urad: the sensor noise level [urad] (the paper method's identifiability; the
     noise floor of the fit-RMS goal; None: from the fit); method: "map", "free" or "paper";
-    prior_scale: the MAP prior scale (None: cross-validated)."""
+    prior_scale: the MAP prior scale (None: cross-validated); sources: identify only these
+    (the others at nominal; with "paper" instead of the Sobol selection; ``flexcal identify``)."""
 
     sobol_n: int = 512
     sobol_threshold: float = 0.01
@@ -83,10 +80,13 @@ class VerifySettings:
     noise_urad: float | None = None
     method: str = "map"
     prior_scale: float | None = None
+    sources: tuple[str, ...] | None = None
 
     def __post_init__(self) -> None:
         if self.method not in ("map", "free", "paper"):
             raise ValueError(f"method={self.method!r} must be 'map', 'free' or 'paper'")
+        if self.sources is not None and not self.sources:
+            raise ValueError("sources=() names no source to identify")
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -199,65 +199,45 @@ def remove_return_offsets(measurement: Measurement) -> np.ndarray:
 
 def _paper_identification(measurement: Measurement, angles: np.ndarray, space: ParameterSpace,
                           settings: VerifySettings, log, progress: bool) -> dict[str, Any]:
-    """The paper's method: Sobol screening, improved PSO on the selected sources, polish."""
+    """The paper's method: Sobol screening (skipped when ``settings.sources`` names the
+    sources), then ``identify_swarm``: improved PSO on the selected sources, polish."""
     screening = CalibrationProblem(space=space, inputs=measurement.inputs, angles=angles)
-    start = time.perf_counter()
-    with progress_bar(settings.sobol_n * (space.n_params + 2), "Sobol", enabled=progress, unit="run") as bar:
-        sobol = sobol_indices(with_progress(screening.deviation_from_ideal, bar), [[0.0, 1.0]] * space.n_params,
-                              settings.sobol_n, seed=settings.seed, names=space.names, outputs=OUTPUTS,
-                              chunk_size=max(64, settings.sobol_n))  # chunks only so that the bar moves
-    sobol_s = time.perf_counter() - start
-    log(f"verify: Sobol screening, {sobol.n_evaluations} model runs in {sobol_s:.1f} s")
-    selected = select_parameters(sobol, threshold=settings.sobol_threshold, always=DRIVE_SOURCE_NAMES)
-    check_determined(measurement.n_points, len(selected))
-    sub = space.subset(selected)
-    problem = CalibrationProblem(space=sub, inputs=measurement.inputs, angles=angles)
-    st = sobol.ST[0, [space.names.index(n) for n in selected]]
+    sobol, sobol_s, st = None, 0.0, None
+    if settings.sources is None:
+        start = time.perf_counter()
+        with progress_bar(settings.sobol_n * (space.n_params + 2), "Sobol", enabled=progress, unit="run") as bar:
+            sobol = sobol_indices(with_progress(screening.deviation_from_ideal, bar), [[0.0, 1.0]] * space.n_params,
+                                  settings.sobol_n, seed=settings.seed, names=space.names, outputs=OUTPUTS,
+                                  chunk_size=max(64, settings.sobol_n))  # chunks only so that the bar moves
+        sobol_s = time.perf_counter() - start
+        log(f"verify: Sobol screening, {sobol.n_evaluations} model runs in {sobol_s:.1f} s")
+        selected = select_parameters(sobol, threshold=settings.sobol_threshold, always=DRIVE_SOURCE_NAMES)
+        st = sobol.ST[0, [space.names.index(n) for n in selected]]
+    else:
+        selected = settings.sources
     log(f"verify: identifying {len(selected)} of {space.n_params} sources with the improved PSO "
         f"({settings.pso.n_particles} particles x {settings.pso.max_iterations} iterations)")
     start = time.perf_counter()
     with progress_bar(settings.pso.max_iterations, "PSO", enabled=progress, unit="iteration") as bar:
-        pso = identify(problem.fitness, sub.n_params, settings.pso, rng=settings.seed, sensitivity=st,
-                       callback=lambda _: bar.update(1))
+        found = identify_swarm(space, measurement.inputs, angles, selected, settings.pso, seed=settings.seed,
+                               sensitivity=st, polish=settings.polish,
+                               noise=settings.noise_urad * 1e-6 if settings.noise_urad else None,
+                               callback=lambda _: bar.update(1))
     pso_s = time.perf_counter() - start
-    x_best = pso.x_best
-    polish = None
-    if settings.polish:
-        start = time.perf_counter()
-        # polish the swarm's distinct good points (overall, global swarm, subgroups: the
-        # paper's Fig. 11 "relatively optimal solutions"), keep the best; budget: as many
-        # rows as the swarm used, so the polish never more than doubles the cost
-        polish, _, _ = polish_candidates(problem.residuals, pso.candidates(), max_evaluations=pso.n_evaluations,
-                                         select=problem.fitness)
-        if problem.fitness(polish.x[None])[0] <= pso.f_best:
-            x_best = polish.x
-        # the sum of squares' minimizer is not Eq. 13's when the model cannot fit exactly:
-        # finish on Eq. 13 itself (IRLS), within what the polish left of its budget
-        # (capped at 200 Jacobians' worth: with 45 sources an uncapped IRLS took minutes
-        # of single-row calls for a last-digit gain)
-        left = min(max(pso.n_evaluations - polish.n_evaluations, 4 * (sub.n_params + 1)), 200 * (sub.n_params + 1))
-        refined = norm_sum_polish(problem.residuals, x_best, max_evaluations=left)
-        if problem.fitness(refined.x[None])[0] < problem.fitness(x_best[None])[0]:
-            x_best = refined.x
-        log(f"verify: polish {time.perf_counter() - start:.1f} s")
-    fitted = problem.model_angles(x_best[None])[0][0]
-    fit_rms = float(np.sqrt(np.mean((fitted - angles) ** 2)))
-    noise = settings.noise_urad * 1e-6 if settings.noise_urad else max(fit_rms, 1e-9)
-    ident = identifiability(problem.residuals, x_best, sub.names, noise=noise)
-    values = sub.full_values(sub.from_unit(x_best))
-    std = np.full(len(space.parameters), np.nan)  # screened-out sources: fixed, no error bar
-    std[sub.active_indices] = ident.parameter_std * (sub.upper - sub.lower)
+    pso, polish, ident, problem = found.pso, found.polish, found.ident, found.problem
+    values, std, fitted, noise, x_best = found.values, found.std, found.fitted_angles, found.noise, found.x_unit
     return {"values": values, "std": std, "fitted": fitted, "selected": selected,
-            "identifiable": set(ident.meaningful_names), "ident": ident, "sobol": sobol, "pso": pso, "polish": polish,
+            "identifiable": set(found.identifiable), "ident": ident, "sobol": sobol, "pso": pso, "polish": polish,
             "problem": problem, "n_evaluations": int(problem.log.n_candidates + screening.log.n_candidates),
             "n_model_postures": int(problem.log.n_postures + screening.log.n_postures),
             "n_failed": int(problem.log.n_failures + screening.log.n_failures),
             "noise": noise, "noise_source": "given (--noise-urad)" if settings.noise_urad else "fit RMS",
             "timings_s": {"sobol": sobol_s, "pso": pso_s},
             "extra": {
-                "sobol": {"n_base": sobol.n_base, "n_evaluations": sobol.n_evaluations, "outputs": list(OUTPUTS),
-                          "names": list(sobol.names), "ST": sobol.ST, "ST_conf": sobol.ST_conf, "S1": sobol.S1,
-                          "note": "N = 512 instead of the paper's 500 (Sobol sequences need a power of two)"},
+                "sobol": None if sobol is None else {
+                    "n_base": sobol.n_base, "n_evaluations": sobol.n_evaluations, "outputs": list(OUTPUTS),
+                    "names": list(sobol.names), "ST": sobol.ST, "ST_conf": sobol.ST_conf, "S1": sobol.S1,
+                    "note": "N = 512 instead of the paper's 500 (Sobol sequences need a power of two)"},
                 "pso": {"n_evaluations": pso.n_evaluations, "stagnation_iterations": list(pso.stagnation_iterations),
                         "n_subgroups": len(pso.subgroups), "history_best_f_urad": pso.history_best_f * 1e6},
                 "polish": None if polish is None else {"n_evaluations": polish.n_evaluations,
@@ -269,6 +249,8 @@ def _estimated_identification(measurement: Measurement, angles: np.ndarray, spac
                               settings: VerifySettings, log) -> dict[str, Any]:
     """MAP (cross-validated prior) or free least squares over all sources (``identify_all``)."""
     start = time.perf_counter()
+    if settings.sources is not None:
+        space = space.subset(settings.sources)
     result = identify_all(space, measurement.inputs, angles, measurement.leg,
                           IdentificationSettings(method=settings.method, prior_scale=settings.prior_scale), log=log)
     fit = result.estimate
@@ -385,11 +367,12 @@ def run_verify(measurement: Measurement, space: ParameterSpace, settings: Verify
                                      "meaningful": list(ident.meaningful_names)}
     else:
         base = core["identification"].base
-        report["identifiability"] = {"rank": base.n_base, "n_parameters": space.n_params,
+        report["identifiability"] = {"rank": base.n_base, "n_parameters": len(core["selected"]),
                                      "base_parameters": list(base.labels), "groups": [],
                                      "meaningful": list(base.base)}
     if core.get("identification") is not None:
-        report["base_parameters"] = _base_table(core["identification"], space, presets)
+        identified = core["identification"]
+        report["base_parameters"] = _base_table(identified, identified.problem.space, presets)
     if presets is not None:
         z = [r["z_score"] for r in rows if r["identifiable"] and r.get("z_score") is not None]
         report["z_rms_identifiable"] = float(np.sqrt(np.mean(np.square(z)))) if z else None

@@ -94,7 +94,7 @@ def evaluate_design(design: dict[str, Any], *, cache_directory: str | None = Non
     """The record of one design (plain JSON types): the design, FEM and closed-form
     compliance (6 x 6, SI), diagonal discrepancy [%], peak stress per unit rotation
     [Pa/rad] (FEM and beam-theory nominal), node count, wall time [s], and, when the
-    design asks for it, identification accuracy (``sweep_identify``)."""
+    design asks for it, identification accuracy (``sweep.identify``)."""
     from flexcal.geometry.params import STEEL
 
     from ..blas_threads import single_blas_thread

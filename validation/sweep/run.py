@@ -1,7 +1,7 @@
 """Hinge-dimension sweeps: designs -> workers -> a resumable store -> table and plots.
 
 ``run_sweep(config, out)`` evaluates every design of the config
-(``sweep_space.designs_from_config``) with ``sweep_job.evaluate_design``:
+(``sweep.space.designs_from_config``) with ``sweep.job.evaluate_design``:
 
 - ``workers=0``: one after the other in this process (debugging, tiny sweeps);
 - default: a Dask ``LocalCluster`` of ``workers`` single-threaded worker processes;

@@ -17,7 +17,7 @@ A sweep config (``examples/sweep_notch.toml``; every key and its default:
     width_mm = [10.0]
     block_mm = [5.0]
 
-    [identification]         # optional, off by default (sweep_identify.py)
+    [identification]         # optional, off by default (sweep/identify.py)
     enabled = false
 
 A design is a flat dict of plain numbers and strings: ``kind``, the kind's dimensions in
