@@ -126,3 +126,24 @@ def test_design_beats_the_standard_trajectory_and_drives_truth(tmp_path):
                      str(out / "trajectory.csv"), "--out", str(tmp_path / "t"), "-q"]) == 0
     truth = (tmp_path / "t" / "curves.csv").read_text().splitlines()
     assert len(truth) == 42
+
+
+def test_identify_goes_through_the_one_pipeline_with_error_bars(tmp_path):
+    """identify --method map: the nine drive sources by MAP through run_verify (the pipeline
+    verify and compensate use), each with a standard error; on the analytic prototype (the
+    model's own physics, 0.5 urad noise) D3's initial position, which the standard
+    trajectory sees well, lands within 4 standard errors of its preset (|z| <= 4: a 1-in-15,000
+    miss for an honest Gaussian error bar)."""
+    out = tmp_path / "id"
+    status = cli.main(["identify", "--scenario", "table1", "--provider", "analytic", "--noise-urad", "0.5",
+                       "--model-stiffness", "closed-form", "--method", "map", "--prior-scale", "2",
+                       "--out", str(out), "-q"])
+    assert status == 0
+    report = json.loads((out / "report.json").read_text())
+    assert report["summary"]["method"] == "map"
+    assert sorted(report["selected"]) == sorted(f"D{i}.{s}" for s in ("x0", "CL", "mu") for i in (1, 2, 3))
+    rows = {r["name"]: r for r in report["parameters"]}
+    assert all(rows[n]["std_error"] is not None and rows[n]["std_error"] > 0 for n in report["selected"])
+    assert rows["D3.x0"]["z_score"] is not None and abs(rows["D3.x0"]["z_score"]) <= 4.0
+    assert rows["L1.w"]["std_error"] is None and not rows["L1.w"]["was_identified"]  # not chosen: stays nominal
+    assert not (out / "convergence.png").exists()  # no swarm, no convergence picture
