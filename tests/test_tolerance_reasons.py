@@ -13,6 +13,8 @@ What counts as a tolerance, found with ``ast``:
 A tolerance has its reason when a comment (found with ``tokenize``; ``noqa``/``type:``/
 ``pragma`` markers do not count) sits on the line of the tolerance's value or on the line
 directly above it. For a threshold the tolerance's line is the line of its float literal.
+A keyword whose value is a bare name (``rtol=VOLUME_RTOL``) may instead have its reason
+at an assignment of that name in the same file (the "one tolerance helper" habit).
 
 The test below enforces the rule for both kinds; ``python tests/test_tolerance_reasons.py``
 prints the counts per file.
@@ -93,9 +95,18 @@ def find_tolerances(source: str) -> list[Tolerance]:
                         for constant in _nonzero_floats(operand):
                             add("threshold", constant)
 
+    named_reasons = {}  # name -> reason comment at one of its assignments
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Assign) and len(node.targets) == 1 and isinstance(node.targets[0], ast.Name):
+            reason = comments.get(node.lineno) or comments.get(node.lineno - 1)
+            if reason:
+                named_reasons[node.targets[0].id] = reason
+
     tolerances = []
     for (line, _), (kind, text) in sorted(found.items()):
         reason = comments.get(line) or comments.get(line - 1)
+        if reason is None and kind == "keyword" and text.isidentifier():
+            reason = named_reasons.get(text)
         tolerances.append(
             Tolerance(
                 line=line,
@@ -154,6 +165,17 @@ def test_finds_every_kind_of_tolerance_in_a_synthetic_file():
         (18, "threshold", "2.0", False),
         (22, "keyword", "1e-06", True),
     ]
+
+
+def test_a_named_tolerance_may_carry_its_reason_where_it_is_defined():
+    source = (
+        "# OCC integrates planes and cylinders to round-off\n"
+        "VOLUME_RTOL = 1e-9\n"
+        "BOX_ATOL = 1e-6\n"
+        "assert v == pytest.approx(w, rel=VOLUME_RTOL)\n"
+        "assert v == pytest.approx(w, abs=BOX_ATOL)\n"
+    )
+    assert [(t.line, t.has_reason) for t in find_tolerances(source)] == [(4, True), (5, False)]
 
 
 def test_a_todo_counts_as_a_reason_but_is_flagged():
