@@ -4,7 +4,8 @@ has a comment saying why it is that number").
 What counts as a tolerance, found with ``ast``:
 
 - *keyword*: a keyword argument ``rel``, ``abs``, ``rtol``, ``atol`` or ``decimal`` of any
-  call (``pytest.approx``, ``np.testing.assert_allclose``, ``np.allclose``, ``np.isclose``, ...);
+  call (``pytest.approx``, ``np.testing.assert_allclose``, ``np.allclose``, ``np.isclose``, ...),
+  except a literal 0 (``rtol=0`` switches that part off: nothing is tolerated);
 - *threshold*: inside an ``assert`` statement, an ordering comparison (``<``, ``<=``, ``>``,
   ``>=``) with a non-zero float literal among its operands (``assert err < 0.05``,
   ``assert np.all(ratio > 0.9)``), and ``np.testing.assert_array_less`` with a non-zero
@@ -58,11 +59,14 @@ def comments_by_line(source: str) -> dict[int, str]:
 
 
 def _nonzero_floats(node: ast.AST) -> list[ast.Constant]:
-    return [
-        n
-        for n in ast.walk(node)
-        if isinstance(n, ast.Constant) and type(n.value) is float and n.value != 0.0
-    ]
+    """Non-zero float literals of an operand, not looking into calls: in
+    ``eigvalsh(0.5 * (C + C.T)) > 0`` or ``abs(ratio - 1.0) < 0.05`` only the 0.05 is a
+    threshold."""
+    if isinstance(node, ast.Call):
+        return []
+    if isinstance(node, ast.Constant):
+        return [node] if type(node.value) is float and node.value != 0.0 else []
+    return [c for child in ast.iter_child_nodes(node) for c in _nonzero_floats(child)]
 
 
 def _call_name(call: ast.Call) -> str:
@@ -82,10 +86,11 @@ def find_tolerances(source: str) -> list[Tolerance]:
     for node in ast.walk(tree):
         if isinstance(node, ast.Call):
             for keyword in node.keywords:
-                if keyword.arg in TOLERANCE_KEYWORDS:
-                    add("keyword", keyword.value)
+                value = keyword.value
+                if keyword.arg in TOLERANCE_KEYWORDS and not (isinstance(value, ast.Constant) and value.value == 0):
+                    add("keyword", value)
             if _call_name(node) == "assert_array_less":
-                for constant in _nonzero_floats(ast.Tuple(elts=node.args, ctx=ast.Load())):
+                for constant in (c for arg in node.args for c in _nonzero_floats(arg)):
                     add("threshold", constant)
         if isinstance(node, ast.Assert):
             for compare in ast.walk(node.test):
@@ -136,13 +141,14 @@ def test_a():
     assert y == pytest.approx(2.0, abs=1e-6)
     np.testing.assert_allclose(
         a,
-        b,
+        b, rtol=0,
         atol=1e-12,  # noqa: E501
     )
     assert err < 0.05
     assert n_points > 3
     assert np.all(err <= 1e-3)  # 3 sigma of the 0.3e-3 noise
     assert 0.0 < ratio
+    assert np.linalg.eigvalsh(0.5 * (C + C.T))[0] > 0 and abs(ratio - 1.0) < 0.05
     np.testing.assert_array_less(err, 2.0 * conf)
     assert np.isclose(
         a,
@@ -162,8 +168,9 @@ def test_finds_every_kind_of_tolerance_in_a_synthetic_file():
         (12, "keyword", "1e-12", False),  # a noqa marker is not a reason
         (14, "threshold", "0.05", False),
         (16, "threshold", "0.001", True),
-        (18, "threshold", "2.0", False),
-        (22, "keyword", "1e-06", True),
+        (18, "threshold", "0.05", False),
+        (19, "threshold", "2.0", False),
+        (23, "keyword", "1e-06", True),
     ]
 
 
