@@ -120,6 +120,7 @@ def test_default_targets_spread_over_the_workspace_off_the_calibration_axes():
     targets = default_targets()
     assert targets.shape == (30, 3)
     np.testing.assert_array_equal(targets, default_targets())  # deterministic
+    # targets are drawn within +-80 % of the workspace; 1e-18 for rounding
     assert np.all(np.abs(targets) <= 0.8 * WORKSPACE + 1e-18)
     # spread: every angle covers most of its +-80 % range, both signs
     assert np.all(targets.max(axis=0) > 0.6 * WORKSPACE) and np.all(targets.min(axis=0) < -0.6 * WORKSPACE)

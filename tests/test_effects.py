@@ -79,6 +79,7 @@ def test_sensor_scale_exactly_scales_the_measured_angles(prototype, baseline):
     scale = np.array([1e-3, -2e-3, 3e-3])
     run = _run(prototype, SensorScale(scale=scale))
     np.testing.assert_array_equal(run.true_angles, baseline.true_angles)  # sensor side only
+    # the same product: round-off only
     np.testing.assert_allclose(run.angles, baseline.angles * (1 + scale), rtol=1e-14, atol=0)
 
 

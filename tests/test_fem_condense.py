@@ -59,7 +59,7 @@ def test_pure_bending_and_tension_are_exact():
     # bound is eps x the Jacobi-scaled condition number (~1e7)
     assert C[5, 5] == pytest.approx(beam["moment"], rel=1e-9)
     assert C[4, 4] == pytest.approx(beam["moment"], rel=1e-9)  # square section
-    assert C[1, 5] == pytest.approx(beam["moment_deflection"], rel=1e-9)
+    assert C[1, 5] == pytest.approx(beam["moment_deflection"], rel=1e-9)  # round-off, as above
     assert C[2, 4] == pytest.approx(-beam["moment_deflection"], rel=1e-9)  # round-off, as above
     assert C[0, 0] == pytest.approx(beam["axial"], rel=1e-9)  # round-off, as above
 

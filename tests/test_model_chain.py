@@ -66,6 +66,7 @@ def test_chain_compliance_is_frame_invariant():
                                     rotation @ np.array([ch.length, 0, 0]) + offset)
     back = twist_transform(rotation, np.zeros(3))  # chain-frame twist at B -> global twist at B
     assert relative_error(back.T @ moved @ back, local) < 1e-11  # relative to each entry; rounding of R
+    # rounding of R, as above, against the largest entry
     np.testing.assert_allclose(back.T @ moved @ back, local, rtol=0, atol=1e-13 * np.abs(local).max())
 
 

@@ -43,7 +43,7 @@ def test_the_correction_is_of_second_order():
     full = second_order_pose(m, pose, loads) - pose
     half = second_order_pose(m, 0.5 * pose, loads) - 0.5 * pose
     assert np.max(np.abs(full)) > 1e-8  # it does something at mrad rotations
-    np.testing.assert_allclose(half, 0.25 * full, rtol=1e-9, atol=1e-15)
+    np.testing.assert_allclose(half, 0.25 * full, rtol=1e-9, atol=1e-15)  # rounding of the corrections, as stated above
     np.testing.assert_array_equal(second_order_pose(m, np.zeros_like(pose), loads), np.zeros_like(pose))
 
 

@@ -33,7 +33,7 @@ def test_batched_jacobian_matches_analytic_and_loop(scheme, step, tol):
     f = Counting(quadratic_residuals)
     J, r0 = batched_jacobian_fd(f, x, step=step, scheme=scheme)
     assert f.calls == 1  # one batched call of all perturbed points
-    np.testing.assert_allclose(J, quadratic_jacobian(x), atol=tol)
+    np.testing.assert_allclose(J, quadratic_jacobian(x), atol=tol)  # tol: the parametrized bounds above
     # the unperturbed point of the same batch: round-off only
     np.testing.assert_allclose(r0, quadratic_residuals(x[None])[0], atol=1e-15)
     if scheme == "forward":  # batched == looped, to rounding

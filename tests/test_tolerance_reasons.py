@@ -13,7 +13,8 @@ What counts as a tolerance, found with ``ast``:
 
 A tolerance has its reason when a comment (found with ``tokenize``; ``noqa``/``type:``/
 ``pragma`` markers do not count) sits on the line of the tolerance's value or on the line
-directly above it. For a threshold the tolerance's line is the line of its float literal.
+directly above it, the latter either a comment line of its own or a line of the same
+statement (the trailing comment of the previous statement explains that statement). For a threshold the tolerance's line is the line of its float literal.
 A keyword whose value is a bare name (``rtol=VOLUME_RTOL``) may instead have its reason
 at an assignment of that name in the same file (the "one tolerance helper" habit).
 
@@ -47,15 +48,18 @@ class Tolerance:
     todo: bool  # its reason is a "TODO(tolerance)"
 
 
-def comments_by_line(source: str) -> dict[int, str]:
-    """Comment text (without '#') per 1-based line, markers like ``noqa`` left out."""
-    comments = {}
+def comments_by_line(source: str) -> tuple[dict[int, str], set[int]]:
+    """Comment text (without '#') per 1-based line, markers like ``noqa`` left out, and
+    the lines that hold nothing but a comment."""
+    comments, alone = {}, set()
     for token in tokenize.generate_tokens(io.StringIO(source).readline):
         if token.type == tokenize.COMMENT:
             text = token.string.lstrip("#").strip()
             if text and not text.lower().startswith(NOT_A_REASON):
                 comments[token.start[0]] = text
-    return comments
+                if not token.line[: token.start[1]].strip():
+                    alone.add(token.start[0])
+    return comments, alone
 
 
 def _nonzero_floats(node: ast.AST) -> list[ast.Constant]:
@@ -77,7 +81,25 @@ def _call_name(call: ast.Call) -> str:
 def find_tolerances(source: str) -> list[Tolerance]:
     """All tolerances in one test file's source, in line order."""
     tree = ast.parse(source)
-    comments = comments_by_line(source)
+    comments, alone = comments_by_line(source)
+    statements = sorted(
+        ((node.lineno, node.end_lineno) for node in ast.walk(tree) if isinstance(node, ast.stmt)),
+        key=lambda span: span[1] - span[0],
+    )
+
+    def reason_at(line: int, statement_start: int) -> str | None:
+        """The comment on ``line``, or on the line above when that line is a comment of its
+        own or belongs to the same statement (a trailing comment of the previous statement
+        explains that statement, not this one)."""
+        above = line - 1
+        if line in comments:
+            return comments[line]
+        if above in comments and (above in alone or above >= statement_start):
+            return comments[above]
+        return None
+
+    def statement_start(line: int) -> int:
+        return next((start for start, end in statements if start <= line <= end), line)
     found: dict[tuple[int, int], tuple[str, str]] = {}  # (line, column) -> (kind, text)
 
     def add(kind: str, node: ast.AST) -> None:
@@ -103,13 +125,13 @@ def find_tolerances(source: str) -> list[Tolerance]:
     named_reasons = {}  # name -> reason comment at one of its assignments
     for node in ast.walk(tree):
         if isinstance(node, ast.Assign) and len(node.targets) == 1 and isinstance(node.targets[0], ast.Name):
-            reason = comments.get(node.lineno) or comments.get(node.lineno - 1)
+            reason = reason_at(node.lineno, node.lineno)
             if reason:
                 named_reasons[node.targets[0].id] = reason
 
     tolerances = []
     for (line, _), (kind, text) in sorted(found.items()):
-        reason = comments.get(line) or comments.get(line - 1)
+        reason = reason_at(line, statement_start(line))
         if reason is None and kind == "keyword" and text.isidentifier():
             reason = named_reasons.get(text)
         tolerances.append(
@@ -147,7 +169,7 @@ def test_a():
     assert err < 0.05
     assert n_points > 3
     assert np.all(err <= 1e-3)  # 3 sigma of the 0.3e-3 noise
-    assert 0.0 < ratio
+    assert 0.0 < ratio  # a sign, not a tolerance
     assert np.linalg.eigvalsh(0.5 * (C + C.T))[0] > 0 and abs(ratio - 1.0) < 0.05
     np.testing.assert_array_less(err, 2.0 * conf)
     assert np.isclose(
