@@ -119,12 +119,14 @@ def test_default_targets_spread_over_the_workspace_off_the_calibration_axes():
     targets = default_targets()
     assert targets.shape == (30, 3)
     np.testing.assert_array_equal(targets, default_targets())  # deterministic
+    # targets are drawn within +-80 % of the workspace; 1e-18 for rounding
     assert np.all(np.abs(targets) <= 0.8 * WORKSPACE + 1e-18)
     # spread: every angle covers most of its +-80 % range, both signs
     assert np.all(targets.max(axis=0) > 0.6 * WORKSPACE) and np.all(targets.min(axis=0) < -0.6 * WORKSPACE)
     # validation points, not sampling points: the calibration sweeps move one actuator at a
     # time, so their inputs have one non-zero entry; the targets' inputs never do
     inputs = small_deflection_inputs(targets, parameter_space())
+    # 1 um: far below the targets' mm inputs, far above round-off of a zero entry
     assert np.all(np.sum(np.abs(inputs) > 1e-6, axis=1) >= 2)
 
 
@@ -170,11 +172,13 @@ def test_return_offset_removal_recovers_an_injected_linear_drift():
     for leg, offset in offsets.items():
         index = np.flatnonzero(drifted.leg == leg)
         duration = drifted.time[index[-1]] - drifted.time[index[0] - 1]
+        # rate x duration vs differences of ~1e-3 rad angles: round-off, as above
         np.testing.assert_allclose(offset, rate * duration, rtol=0, atol=1e-15)
 
 
 def test_return_offset_removal_leaves_a_drift_free_curve_alone():
     clean = ideal_angles(standard_trajectory().inputs)
+    # a clean curve: offsets are differences of equal angles, round-off of ~1e-3 rad (2e-19)
     np.testing.assert_allclose(remove_return_offsets(_curve(clean)), clean, rtol=0, atol=1e-18)
 
 

@@ -53,7 +53,7 @@ def test_zero_referenced_readings_cancel_sensor_drift(table1_prototype):
     # only the drift over one dwell (zero posture -> target) is left in a reading
     dwell = 2.0
     np.testing.assert_allclose(drifted.measured - plain.measured, np.broadcast_to(rate * dwell, (3, 3)),
-                               rtol=0, atol=1e-15)
+                               rtol=0, atol=1e-15)  # round-off of ~1e-3 rad readings (1 ulp = 2e-19 rad)
     np.testing.assert_allclose(drifted.true, plain.true, rtol=0, atol=0)
 
 
@@ -63,7 +63,7 @@ def test_offset_removal_undoes_drift_injected_in_the_prototype():
     rate = (-10e-6 / 150, -11e-6 / 150, 25e-6 / 150)  # the paper's Fig. 10 return offsets over ~150 s
     clean = make_truth(scenario, provider).measurement
     drifted = make_truth(scenario, provider, effects=(Drift(rate=rate),)).measurement
-    assert np.max(np.abs(drifted.angles - clean.angles)) > 5e-6
+    assert np.max(np.abs(drifted.angles - clean.angles)) > 5e-6  # the paper's 10-25 urad over a run: > 5 urad somewhere
     # the sensor drift is linear in time and the legs return: removal is exact to rounding
     np.testing.assert_allclose(remove_return_offsets(drifted), remove_return_offsets(clean), rtol=0, atol=1e-14)
 
@@ -119,6 +119,7 @@ def test_bench_from_metadata_rebuilds_the_scenario():
     np.testing.assert_allclose(bench.noise, 0.5e-6)
     assert bench.start_time == 154.0 and bench.n_readings == 4
     tr = bench.prototype.transmissions
+    # written to and read back from the metadata: round-off only
     np.testing.assert_allclose([t.initial_position for t in tr], [-0.2e-3, 0.32e-3, 0.4e-3], rtol=1e-12)
     assert bench_from_metadata({}, scenario.space) is None  # a real measurement has no prototype
 

@@ -91,5 +91,7 @@ def test_term_fits_the_other_injectors(nominal, effect_id):
 def test_out_of_library_effect_has_the_asked_magnitude(nominal, effect_id):
     effect = make_injector(effect_id, MAGNITUDE_URAD, SEED)
     achieved = np.sqrt(np.mean(_signature(nominal, effect) ** 2)) * 1e6
+    # the linearized mapping's factor 2 (issue #7), as in _check
     assert 0.5 * MAGNITUDE_URAD < achieved < 2.0 * MAGNITUDE_URAD, achieved
-    assert estimate_magnitude(effect) * 1e6 == pytest.approx(MAGNITUDE_URAD, rel=0.05)
+    # make_injector rescales until within 1 % (effect_library.py); was rel=0.05
+    assert estimate_magnitude(effect) * 1e6 == pytest.approx(MAGNITUDE_URAD, rel=0.01)

@@ -78,6 +78,7 @@ def test_sensor_scale_exactly_scales_the_measured_angles(prototype, baseline):
     scale = np.array([1e-3, -2e-3, 3e-3])
     run = _run(prototype, SensorScale(scale=scale))
     np.testing.assert_array_equal(run.true_angles, baseline.true_angles)  # sensor side only
+    # the same product: round-off only
     np.testing.assert_allclose(run.angles, baseline.angles * (1 + scale), rtol=1e-14, atol=0)
 
 
@@ -85,11 +86,12 @@ def test_drift_grows_linearly_in_time_and_steps_at_reversals(prototype, baseline
     rate = np.array([1e-7, -2e-7, 5e-8])  # [rad/s]
     run = _run(prototype, Drift(rate=rate))
     time = 2.0 * np.arange(SHORT.n_points)
+    # the drift is added to ~mrad angles: round-off (1 ulp of 1 mrad = 2e-19 rad)
     np.testing.assert_allclose(run.angles - run.true_angles, np.outer(time, rate), rtol=0, atol=1e-18)
     stepped = _run(prototype, Drift(reversal_step=(1e-6, 0, 0)))
     offsets = (stepped.angles - stepped.true_angles)[:, 0]
     reversals = np.sum(np.diff(SHORT.directions, axis=0) != 0, axis=1)
-    np.testing.assert_allclose(offsets, 1e-6 * np.r_[0, np.cumsum(reversals)], rtol=0, atol=1e-18)
+    np.testing.assert_allclose(offsets, 1e-6 * np.r_[0, np.cumsum(reversals)], rtol=0, atol=1e-18)  # as above
     assert offsets[-1] == pytest.approx(6e-6)  # each actuator reverses twice (at +A and at -A)
 
 
@@ -140,11 +142,12 @@ def test_step_loss_term_is_a_whole_step_at_a_move_and_slides_between_moves():
     lost = 5e-6  # [m] one motor step
     at = np.array([0.0, lost, 0.0, 0.0, fraction[m - 1, 1] - 0.5, 0.0])  # place at the point before the move
     expected = np.einsum("nai,n->na", data.input_jacobian[:, :, 1:2], lost * (np.arange(len(data.time)) >= m))
-    np.testing.assert_allclose(term.evaluate(at, data), expected, rtol=1e-9, atol=1e-18)
+    # place 0.5 + (f - 0.5) over one move: round-off ~1e-14 relative (was rtol 1e-9)
+    np.testing.assert_allclose(term.evaluate(at, data), expected, rtol=1e-12, atol=1e-18)
     # half a move later: the point after the move carries half the step (the place is continuous)
     half = term.evaluate(at + np.array([0, 0, 0, 0, move[1] / 2, 0]), data)
-    np.testing.assert_allclose(half[m], expected[m] / 2, rtol=1e-9, atol=1e-18)
-    np.testing.assert_allclose(half[m + 1:], expected[m + 1:], rtol=1e-9, atol=1e-18)
+    np.testing.assert_allclose(half[m], expected[m] / 2, rtol=1e-12, atol=1e-18)  # as above
+    np.testing.assert_allclose(half[m + 1:], expected[m + 1:], rtol=1e-12, atol=1e-18)  # as above
 
 
 def test_creep_term_has_a_free_time_constant():
@@ -155,6 +158,7 @@ def test_creep_term_has_a_free_time_constant():
     for log_tau in (-1.0, 0.0, 1.0):
         tau = TERM_CREEP_TIME * np.exp(log_tau)
         expected = np.einsum("nai,ni->na", data.input_jacobian, kappa * (relaxed(load, data.time, tau) - load[0]))
+        # the same formula: round-off only
         np.testing.assert_allclose(term.evaluate(np.append(kappa, log_tau), data), expected, rtol=1e-12, atol=1e-20)
     # an absurd time constant is clipped, not overflowed: tau = 20 s e^5 at most
     assert np.all(np.isfinite(term.evaluate(np.append(kappa, 1e4), data)))
@@ -210,4 +214,5 @@ def test_thermal_follows_the_given_temperature(prototype):
     hot = simulate(prototype, inputs, effects=[effect], temperature=[20.0, 21.0, 22.0])
     cold = simulate(prototype, inputs, effects=[effect], temperature=[20.0, 20.0, 20.0])
     np.testing.assert_allclose(hot.screw_positions - cold.screw_positions,
+                               # alpha x dT added to mm screw positions: round-off (1 ulp of 1 mm = 2e-19 m)
                                np.outer([0.0, 1.0, 2.0], effect.expansion), rtol=1e-12, atol=1e-18)

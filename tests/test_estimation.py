@@ -43,7 +43,7 @@ def test_z_scores_of_a_linear_model_are_standard_normal():
         fit = estimate(residuals, uniform_prior(A.shape[1], np.inf), point_size=1)
         z.extend((fit.x - truth) / fit.std)
     rms = float(np.sqrt(np.mean(np.square(z))))
-    assert abs(rms - 1.0) < 0.12, rms
+    assert abs(rms - 1.0) < 0.12, rms  # 3.4 standard deviations of the RMS (docstring)
 
 
 def test_noise_estimate_recovers_the_noise():
@@ -51,7 +51,7 @@ def test_noise_estimate_recovers_the_noise():
     ~ 1/sqrt(2 * 2000) = 1.6 %; 5 % is 3 of those."""
     A, _, _, sigma, residuals = _linear_problem(1, m=2000, sigma=0.02)
     fit = estimate(residuals, uniform_prior(A.shape[1], 1.0), point_size=1)
-    assert fit.noise == pytest.approx(sigma, rel=0.05)
+    assert fit.noise == pytest.approx(sigma, rel=0.05)  # 3 standard deviations of the noise estimate (docstring)
     assert fit.p_eff == pytest.approx(A.shape[1], abs=0.05)  # data dominate a weak prior: p_eff -> d
 
 
@@ -79,8 +79,9 @@ def test_duplicated_parameter_is_regrouped_into_the_base():
     assert result.labels[k] == "c + 0.5 a"
     # the data only see the combination: two x with the same beta give the same W x
     x1, x2 = np.array([0.2, 0.3, 0.4]), np.array([0.6, 0.3, 0.2])
+    # QR round-off in the coefficients (see above)
     np.testing.assert_allclose(result.values(x1, ("a", "b", "c")), result.values(x2, ("a", "b", "c")), atol=1e-12)
-    np.testing.assert_allclose(W @ x1, W @ x2, atol=1e-9)
+    np.testing.assert_allclose(W @ x1, W @ x2, atol=1e-12)  # entries ~1e2: round-off, measured 6e-14 (was 1e-9)
 
 
 def test_pivot_ties_go_to_the_lower_index():
@@ -91,6 +92,7 @@ def test_pivot_ties_go_to_the_lower_index():
     assert "q" in result.base and "r" in result.regrouped
     _, R, pivots = pivoted_qr(W)
     assert list(pivots[:1]) == [1]
+    # Householder QR: R[0, 0] = +-|column| to round-off
     np.testing.assert_allclose(np.abs(R[0, 0]), np.linalg.norm(W[:, 1]), rtol=1e-12)
 
 
@@ -102,7 +104,8 @@ def test_identifiability_takes_a_tall_jacobian_without_a_square_u():
     report = analyze_jacobian(J, [f"p{i}" for i in range(45)], noise=1.0)
     assert report.rank == 45
     s = np.linalg.svd(J, compute_uv=False)
-    np.testing.assert_allclose(report.singular_values, s, rtol=1e-10)
+    # thin vs values-only SVD of a well-conditioned J: round-off, measured 1e-15 (was 1e-10)
+    np.testing.assert_allclose(report.singular_values, s, rtol=1e-13)
 
 
 def test_underdetermined_data_are_refused():
@@ -128,12 +131,14 @@ def test_greedy_d_optimal_beats_random_and_exchange_is_a_local_optimum():
         pick = np.random.default_rng(seed).choice(300, 12, replace=False)
         random_value = design_quality(candidates[pick].reshape(-1, 6), precision).d_criterion
         assert random_value < value
+    # M built by rank-3 updates vs rebuilt: round-off in log det (measured 0)
     assert value == pytest.approx(design_quality(candidates[chosen].reshape(-1, 6), precision).d_criterion, rel=1e-10)
     # no single swap improves it (what the exchange passes stop on), checked by brute force
     for position in range(12):
         for other in range(0, 300, 7):
             trial = chosen.copy()
             trial[position] = other
+            # the exchange stops when no swap gains > 1e-9 in log det (design.py), plus round-off
             assert design_quality(candidates[trial].reshape(-1, 6), precision).d_criterion <= value + 1e-8
 
 
@@ -158,7 +163,8 @@ def test_correlated_misfit_inflates_the_error_bars():
     plain = estimate(lambda X: np.atleast_2d(X) @ A.T - y - drift, uniform_prior(4, np.inf), point_size=1,
                      correlated=False)
     inflated = estimate(lambda X: np.atleast_2d(X) @ A.T - y - drift, uniform_prior(4, np.inf), point_size=1)
-    assert inflated.inflation > 5.0 and np.all(inflated.std > 2.0 * plain.std)
+    # drift 5x the noise: rho ~ 25/26, inflation ~26; measured 18.6 and std 4.3x (was > 5 and > 2x)
+    assert inflated.inflation > 10.0 and np.all(inflated.std > 3.0 * plain.std)
 
 
 def test_many_legs_are_merged_into_five_folds():

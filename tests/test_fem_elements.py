@@ -52,6 +52,7 @@ def test_quadrature_degree_is_not_higher_than_claimed():
     """The 4-point rule must miss some degree-3 monomial (else the degree claim is
     meaningless as a test)."""
     x, y, z = TET_4POINT.points.T
+    # it misses by 3.6e-4 (of 1/120): far above round-off, far below a wrong rule
     assert abs(TET_4POINT.weights @ x**3 - _monomial_integral(3, 0, 0)) > 1e-4
 
 
@@ -59,7 +60,9 @@ def test_shape_functions_are_nodal_and_a_partition_of_unity():
     N = shape_functions(REFERENCE_NODES)
     np.testing.assert_allclose(N, np.eye(10), atol=1e-15)  # exact arithmetic on 0, 1/2, 1
     points = np.random.default_rng(0).dirichlet(np.ones(4), size=50)[:, 1:]
+    # round-off of a sum of 10 terms <= 1
     np.testing.assert_allclose(shape_functions(points).sum(axis=1), 1.0, atol=1e-14)
+    # round-off of 10 gradient terms of size <= 4
     np.testing.assert_allclose(shape_gradients(points).sum(axis=1), 0.0, atol=1e-13)
 
 
@@ -92,6 +95,7 @@ def test_batched_equals_looped():
     coords = _random_tets(np.random.default_rng(3), 7, curved=True)
     batched = element_stiffness(coords, STEEL)
     looped = np.stack([element_stiffness(c[None], STEEL)[0] for c in coords])
+    # same arithmetic, batched: round-off only
     np.testing.assert_allclose(batched, looped, rtol=0, atol=1e-14 * np.abs(looped).max())
 
 
@@ -99,16 +103,20 @@ def test_automatic_rule_choice():
     coords = np.concatenate([_random_tets(np.random.default_rng(4), 3, False), _random_tets(np.random.default_rng(5), 3, True)])
     np.testing.assert_array_equal(affine_elements(coords), [True] * 3 + [False] * 3)
     auto = element_stiffness(coords, STEEL)
+    # the same rule chosen automatically: round-off only
     np.testing.assert_allclose(auto[:3], element_stiffness(coords[:3], STEEL, TET_4POINT), rtol=1e-13, atol=0)
+    # as above
     np.testing.assert_allclose(auto[3:], element_stiffness(coords[3:], STEEL, TET_14POINT), rtol=1e-13, atol=0)
     # on straight tets both rules are exact: they agree to round-off
     scale = np.abs(auto[:3]).max()
+    # round-off (see the comment above)
     np.testing.assert_allclose(element_stiffness(coords[:3], STEEL, TET_14POINT), auto[:3], atol=1e-12 * scale)
 
 
 def test_volume_of_straight_tet():
     coords = _random_tets(np.random.default_rng(6), 4, curved=False)
     exact = np.linalg.det(coords[:, 1:4] - coords[:, :1]) / 6.0
+    # det / 6 vs the quadrature's volume: round-off only
     np.testing.assert_allclose(element_volumes(coords), exact, rtol=1e-13)
 
 
@@ -150,7 +158,7 @@ def test_element_stiffness_is_symmetric_psd_with_rigid_null_space(seed, poisson,
     # K r = 0 up to round-off: ~1e-15 relative to ||K|| (x 30 terms)
     assert np.abs(K @ modes).max() <= 1e-12 * scale
     eigenvalues = np.linalg.eigvalsh(K)
-    assert eigenvalues[0] >= -1e-12 * scale
+    assert eigenvalues[0] >= -1e-12 * scale  # PSD up to eigvalsh round-off ~ eps ||K|| sqrt(30)
     # exactly 6 zero modes: the 7th eigenvalue is a real deformation mode, far above round-off
     assert eigenvalues[6] > 1e-6 * scale
 
@@ -158,4 +166,5 @@ def test_element_stiffness_is_symmetric_psd_with_rigid_null_space(seed, poisson,
 def test_skew_matches_cross_product():
     rng = np.random.default_rng(9)
     a, b = rng.standard_normal((2, 5, 3))
+    # round-off of products of N(0, 1) numbers
     np.testing.assert_allclose(skew(a) @ b[..., None], np.cross(a, b)[..., None], atol=1e-15)

@@ -56,7 +56,9 @@ def test_vtu_round_trip(tmp_path):
     peak = np.abs(expected).max()  # 12 MPa
     # exact field: round-off of the solve (1e-11 relative) amplified by differentiation
     np.testing.assert_allclose(grid.point_data["stress"][:, 0], expected, atol=1e-7 * peak)
+    # as above: the exact stress is uniaxial
     np.testing.assert_allclose(grid.point_data["stress"][:, 1:], 0.0, atol=1e-7 * peak)
+    # von Mises combines the six components, each to 1e-7 of the peak
     np.testing.assert_allclose(grid.point_data["von_mises"], np.abs(expected), atol=1e-6 * peak)
     with pytest.raises(ValueError, match=".vtu"):
         write_vtu(MESH, tmp_path / "beam.vtk", u)

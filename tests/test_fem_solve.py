@@ -30,10 +30,10 @@ def test_methods_solve_several_right_hand_sides(method):
     assert X.shape == rhs.shape
     # direct: eps x cond (~3e2) ~ 1e-13; AMG-CG: relative residual 1e-10 x cond ~ 3e-8
     tolerance = 1e-6 if method == "amg" else 1e-10
-    np.testing.assert_allclose(X, X_true, atol=tolerance * np.abs(X_true).max())
+    np.testing.assert_allclose(X, X_true, atol=tolerance * np.abs(X_true).max())  # bounds from the comment above
     x = solve_spd(K, rhs[:, 0], method=method, near_null_space=near_null)
     assert x.shape == (K.shape[0],)
-    np.testing.assert_allclose(x, X[:, 0], atol=tolerance * np.abs(X_true).max())
+    np.testing.assert_allclose(x, X[:, 0], atol=tolerance * np.abs(X_true).max())  # as above
 
 
 def test_errors_say_what_to_do():

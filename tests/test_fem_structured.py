@@ -48,6 +48,7 @@ def test_box_mesh_is_conforming():
 
 def test_graded_grid_and_errors():
     mesh = grid_tet_mesh(np.array([0.0, 0.1, 0.3, 0.7]), np.array([0.0, 1.0]), np.array([0.0, 0.5, 1.0]))
+    # box 0.7 x 1 x 1 as tets: round-off only
     assert element_volumes(mesh.nodes[mesh.tets]).sum() == pytest.approx(0.7, rel=1e-13)
     with pytest.raises(ValueError, match="strictly increasing"):
         grid_tet_mesh(np.array([0.0, 0.0, 1.0]), np.array([0.0, 1.0]), np.array([0.0, 1.0]))
@@ -71,6 +72,7 @@ def test_notch_mesh_geometry():
     assert abs(v_straight / exact - 1) > 10 * abs(v_curved / exact - 1)
     # the neck: nodes at x = 0 span exactly the thickness t
     neck = np.abs(curved.nodes[:, 0]) < 1e-12
+    # neck nodes at +-t/2 from the profile: round-off only
     assert np.ptp(curved.nodes[neck, 1]) == pytest.approx(HINGE.thickness, rel=1e-12)
     # boundary nodes lie on the profile |y| = h(x)/2 or on block faces
     np.testing.assert_allclose(curved.nodes[:, 0].min(), -HINGE.total_length / 2, rtol=1e-14)
@@ -84,4 +86,5 @@ def test_notch_mesh_geometry():
 
 def test_notch_height_profile():
     x = np.array([0.0, 3e-3, 5e-3, 7e-3])
+    # the closed-form profile: round-off only
     np.testing.assert_allclose(notch_height(HINGE, x), [1e-3, 11e-3 - 2 * 4e-3, 11e-3, 11e-3], rtol=1e-12)

@@ -37,4 +37,5 @@ def test_notch_hinges_against_closed_form(hinge):
 @pytest.mark.parametrize("hinge", LEAVES, ids=lambda h: f"t={h.thickness * 1e3:g}mm")
 def test_leaf_hinges_against_closed_form(hinge):
     for ratio in _ratios(hinge):
+        # 9.4 %: the largest published closed-form vs FEM disagreement (docstring)
         assert abs(ratio - 1.0) <= 0.094, ratio

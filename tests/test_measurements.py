@@ -23,9 +23,10 @@ def test_round_trip(tmp_path):
     loaded = read_measurement(path)
     # written with 1 pm / 1 prad resolution: a round trip is exact to that rounding
     np.testing.assert_allclose(loaded.inputs, original.inputs, atol=1e-12)
-    np.testing.assert_allclose(loaded.angles, original.angles, atol=1e-12)
+    np.testing.assert_allclose(loaded.angles, original.angles, atol=1e-12)  # as above (1 prad)
     np.testing.assert_array_equal(loaded.point, original.point)
     np.testing.assert_array_equal(loaded.leg, original.leg)
+    # written with 9 significant digits (.9g): 5e-9 relative
     np.testing.assert_allclose(loaded.extras["temperature_c"], original.extras["temperature_c"], rtol=1e-8)
     assert loaded.metadata == {"generator": "test", "seed": 0}
 

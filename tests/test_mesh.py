@@ -90,7 +90,7 @@ def test_tetmesh_contract():
     mesh = TetMesh(nodes10, tets10)  # positional, as the FEM builds it
     assert (mesh.n_nodes, mesh.n_tets, mesh.n_dof) == (len(nodes10), 6, 3 * len(nodes10))
     np.testing.assert_array_equal(mesh.corner_tets, tets4)
-    assert mesh.volume == pytest.approx(1.0, rel=1e-14)
+    assert mesh.volume == pytest.approx(1.0, rel=1e-14)  # unit cube as six tets: exact but for float64 round-off
     with pytest.raises(ValueError):
         mesh.nodes[0, 0] = 5.0  # read-only
     with pytest.raises(ValueError, match=r"\(n_tets, 10\)"):
@@ -127,10 +127,11 @@ def test_unique_rows_equals_numpy_unique():
 
 def test_kuhn_grid_is_conforming():
     nodes, tets = grid_mesh(np.linspace(0, 3, 4), np.linspace(0, 2, 3), np.linspace(0, 1, 2))
+    # 3 x 2 x 1 box: exact but for round-off in the sum
     assert corner_volumes(nodes, tets).sum() == pytest.approx(6.0, rel=1e-14)
     # a conforming mesh has exactly the surface triangles of the box: 2 per cell face
     assert len(boundary_faces(tets)) == 2 * 2 * (3 * 2 + 3 * 1 + 2 * 1)
-    assert radius_ratio(nodes, tets).min() > 0.5
+    assert radius_ratio(nodes, tets).min() > 0.71  # every Kuhn tet of a cubic cell has the radius ratio 0.7174
 
 
 # ----------------------------------------------------------------------------------------
@@ -143,9 +144,11 @@ def test_target_size_fine_in_the_neck_coarse_elsewhere():
     size = target_size(NOTCH, np.array([[0, 0, 0], [0, 0.4e-3, 4e-3], [2e-3, 0, 0], [-9e-3, 0, 0],
                                         [0, 3e-3, 0]]), n_through=n, h_max=h_max)
     t_2mm = t + 2 * R - 2 * np.sqrt(R**2 - 4e-6)
+    # the same closed form (circular notch profile / n): round-off only
     np.testing.assert_allclose(size[:3], [t / n, t / n, t_2mm / n], rtol=1e-12)
     assert size[3] == h_max  # in a block
     # inside the notch's cut-out (outside the material) the size grows with the distance
+    # closed form as above: round-off only
     np.testing.assert_allclose(size[4], t / n + 0.5 * (3e-3 - t / 2), rtol=1e-12)
 
 
@@ -153,8 +156,9 @@ def test_sizing_grid_covers_the_part_with_positive_tets():
     points, tets, values = sizing_grid(FlexureChain(length=0.15, thickness_1=3e-3, thickness_2=3e-3),
                                        n_through=3, h_max=0.02)
     assert corner_volumes(points, tets).min() > 0
+    # min = t / n = 3 mm / 3 exactly (round-off); max = h_max
     assert values.min() == pytest.approx(1e-3, rel=1e-12) and values.max() == pytest.approx(0.02)
-    assert points[:, 0].min() < 0 and points[:, 0].max() > 0.15
+    assert points[:, 0].min() < 0 and points[:, 0].max() > 0.15  # the grid reaches beyond both ends of the 0.15 m chain
 
 
 # ----------------------------------------------------------------------------------------
@@ -167,7 +171,9 @@ def test_project_onto_edge_of_plane_and_cylinder():
     point = np.array([[5.02e-3, 5.47e-3, 1e-3]])
     edge = project_onto(point, [top, notch])
     assert top.surface_distance(edge)[0] == 0.0
+    # exact edge point: round-off of 5 mm coordinates (1 ulp = 0.9e-18 m)
     assert notch.surface_distance(edge)[0] < 1e-18
+    # a few ulp of the 5.5 mm coordinate (1 ulp = 0.9e-18 m)
     np.testing.assert_allclose(edge, [[5e-3, 5.5e-3, 1e-3]], atol=1e-17)
 
 
@@ -189,15 +195,18 @@ def test_snap_restores_sharp_edges_exactly():
     mesh, measured = snap_to_part(STEPPED, off, tets, tolerance=tol)
     assert measured["volume_error_raw"] != 0.0  # the perturbation did change the volume
     assert abs(measured["volume_error"]) < 1e-13  # planar faces: exact up to round-off
-    assert measured["max_surface_deviation"] < 1e-18
+    assert measured["max_surface_deviation"] < 1e-18  # vertices snapped exactly (1 ulp of 10 mm = 1.7e-18 m)
     assert measured["end_plane_deviation"] == 0.0
     assert (measured["n_demoted"], measured["n_unsnapped"], measured["n_unassigned"]) == (0, 0, 0)
     # nodes on three faces (vertices of the solid) are back exactly where they were
     half = np.array([STEPPED.total_length / 2, STEPPED.height / 2, STEPPED.width / 2])
+    # picks the box corners: far above linspace round-off, far below the 0.3 mm grid step
     corners = np.nonzero(np.all(np.isclose(np.abs(nodes), half, rtol=0, atol=1e-15), axis=1))[0]
     assert len(corners) == 8
+    # vertex = intersection of three planes: bit-exact (1 ulp of 16 mm = 3.5e-18 m)
     np.testing.assert_allclose(mesh.nodes[corners], nodes[corners], rtol=0, atol=1e-18)
     (neck,) = measured["necks"]
+    # flat leaf faces snapped onto their planes: round-off only
     assert neck.thickness_mesh == pytest.approx(STEPPED.thickness, rel=1e-14)
 
 
@@ -210,6 +219,7 @@ def test_snap_puts_corner_and_mid_nodes_on_the_notch():
     notch_ids = {k for k, p in enumerate(patches) if isinstance(p, CylinderPatch)}
     on_notch = np.array([i for i, ks in node_sets.items() if notch_ids.intersection(ks)])
     radius = np.hypot(mesh.nodes[on_notch, 0], np.abs(mesh.nodes[on_notch, 1]) - NOTCH.height / 2)
+    # corner nodes projected onto the cylinder: round-off only
     np.testing.assert_allclose(radius, NOTCH.radius, rtol=1e-14)
     # mid-nodes of boundary edges on the notch lie on the circle too (not on the chord)
     mids = mesh.tets[:, 4:][np.isin(mesh.tets[:, EDGES[:, 0]], on_notch)
@@ -217,15 +227,17 @@ def test_snap_puts_corner_and_mid_nodes_on_the_notch():
     p = mesh.nodes[np.unique(mids)]
     on_circle = np.abs(np.hypot(p[:, 0], np.abs(p[:, 1]) - NOTCH.height / 2) - NOTCH.radius) < 1e-12
     assert on_circle.mean() > 0.5  # boundary edges; the rest are interior chords between notch nodes
-    assert measured["max_surface_deviation"] < 1e-17
+    assert measured["max_surface_deviation"] < 1e-17  # projection onto the circle: a few ulp of 5 mm coordinates
     assert measured["end_plane_deviation"] == 0.0
     (neck,) = measured["necks"]
+    # neck nodes lie exactly on the notch circles: round-off only (relative error)
     assert abs(neck.thickness_error) < 1e-12
     # Arcs of pi/32 rad are exact to 5e-8 R as quadratics, but the mapped cells next to the
     # blocks are 24 um wide and 2.5 mm tall: curving their edges would fold them, so they
     # stay straight (n_straight_mid). Their chords cut <= R (1 - cos(pi/64)) = 6 um over
     # <= 2 cells x 4 ends x 0.5 mm x 10 mm of notch surface: <= 0.16 mm^3 = 1.1e-4 of the volume.
     assert 0 < measured["n_straight_mid"] < 0.1 * len(on_notch)
+    # chord bound derived above; the raw mesh is off by more
     assert abs(measured["volume_error"]) < 1.1e-4 < abs(measured["volume_error_raw"])
     interior = np.setdiff1d(np.arange(len(nodes)), np.unique(boundary_faces(tets)))
     assert np.abs(mesh.nodes[interior] - off[interior]).max() > 0  # the interior followed (morph)
@@ -276,18 +288,22 @@ def test_coarse_notch_mesh_is_valid_and_exact_where_it_matters(coarse_notch):
         distance = (mesh.nodes - np.array(point)) @ np.array(normal, float)
         face = np.abs(distance) < 1e-3 * NOTCH.thickness  # well inside an element
         assert face.sum() >= 3
-        assert np.abs(distance[face]).max() <= 1e-12 * length
-    assert report.end_plane_deviation <= 1e-12 * length
+        # end-face nodes set onto the plane: measured 0; 1e-15 = a few ulp of 10 mm
+        assert np.abs(distance[face]).max() <= 1e-15 * length
+    assert report.end_plane_deviation <= 1e-15 * length  # as above: measured 0
     # fTetWild alone leaves the surface tens of um off; snapped, it is exact to round-off
     assert report.max_surface_deviation_raw > 1e-6
-    assert report.max_surface_deviation < 1e-12 * length
+    # projection onto planes/cylinders: measured 9e-17 x length (1 ulp); 1e-15 leaves 10x
+    assert report.max_surface_deviation < 1e-15 * length
     # what remains is the quadratic interpolation of arcs of <= 0.5 rad (curvature cap):
     # radial error <= 1.2e-4 R over the notch surfaces (2 pi R b) -> 1.3e-4 of the volume
     assert abs(report.volume_error) < 1.3e-4
+    # the same quadratic-arc bound as volume_error above
     assert mesh.volume == pytest.approx(exact_volume(NOTCH), rel=1.3e-4)
     (neck,) = report.necks
-    assert abs(neck.thickness_error) < 1e-9
-    assert neck.thickness_min == pytest.approx(NOTCH.thickness, rel=1e-9)
+    # neck nodes lie on the notch circles: measured 9e-16 (round-off); 1e-13 leaves 100x
+    assert abs(neck.thickness_error) < 1e-13
+    assert neck.thickness_min == pytest.approx(NOTCH.thickness, rel=1e-13)  # as above: measured 2.6e-15
 
 
 def test_coarse_notch_has_the_requested_elements_through_the_neck(coarse_notch):
@@ -311,8 +327,9 @@ def test_coarse_notch_mid_nodes(coarse_notch):
     assert curved.any()
     p = mids[curved]
     on_circle = np.hypot(p[:, 0], np.abs(p[:, 1]) - NOTCH.height / 2)
-    np.testing.assert_allclose(on_circle, NOTCH.radius, rtol=1e-12)
-    assert offset.max() < 0.031 * NOTCH.radius
+    # mid-nodes projected onto the circle: measured 3e-16 (round-off); 1e-14 leaves 30x
+    np.testing.assert_allclose(on_circle, NOTCH.radius, rtol=1e-14)
+    assert offset.max() < 0.031 * NOTCH.radius  # sagitta bound derived above (measured 0.009 R)
     assert mesh.tets[:, 4:].min() >= n_corner
 
 
@@ -344,7 +361,9 @@ def test_reference_parts_mesh_exactly(params, n, tmp_path, monkeypatch):
     mesh, report = mesh_part(part, elements_through_thickness=n)
     assert list(tmp_path.iterdir()) == []
     size = float(np.ptp(mesh.nodes, axis=0).max())
+    # end-face nodes set onto the plane: round-off only (measured 0 on the coarse notch)
     assert report.end_plane_deviation <= 1e-12 * size
+    # projection onto the exact surfaces: round-off only (1e-12 not measured tighter on these slow meshes)
     assert report.max_surface_deviation < 1e-12 * size
     assert report.min_jacobian_ratio > 0
     # fillet arcs of <= 0.5 rad: radial error <= 1.2e-4 a on the fillet surfaces

@@ -39,6 +39,7 @@ def test_sign_of_the_offset_matters():
     assert wrong[1, 5] < c[1, 5] < right[1, 5]  # an output further from the clamp couples more
     # closed form: beam of length l clamped at 0, rigid arm to x = 0.3: C_uy,Mz = l^2/(2EI) + 0.2 l/(EI)
     ei = STEEL.youngs_modulus * 0.02 * 0.01**3 / 12
+    # the same closed form: round-off only
     assert right[1, 5] == pytest.approx(0.1**2 / (2 * ei) + 0.2 * 0.1 / ei, rel=1e-13)
 
 
@@ -65,6 +66,7 @@ def test_chain_compliance_is_frame_invariant():
                                     rotation @ np.array([ch.length, 0, 0]) + offset)
     back = twist_transform(rotation, np.zeros(3))  # chain-frame twist at B -> global twist at B
     assert relative_error(back.T @ moved @ back, local) < 1e-11  # relative to each entry; rounding of R
+    # rounding of R, as above, against the largest entry
     np.testing.assert_allclose(back.T @ moved @ back, local, rtol=0, atol=1e-13 * np.abs(local).max())
 
 
@@ -73,6 +75,7 @@ def test_reference_chains_are_spd_with_and_without_actuator():
     for placement in mech.chains:
         for actuator in (None, mech.actuator_stiffness):
             c = chain.chain_compliance_matrix(placement.chain, STEEL, actuator)
+            # T C T^T sums are symmetric by construction: round-off only
             assert np.allclose(c, c.T, rtol=0, atol=1e-16 * np.abs(c).max())
             assert np.all(np.linalg.eigvalsh(c) > 0)
             k = chain.invert_axial_compliance(c)
@@ -80,6 +83,7 @@ def test_reference_chains_are_spd_with_and_without_actuator():
             assert np.all(np.linalg.eigvalsh(k) > 0)
     with_actuator = chain.chain_compliance_matrix(mech.chains[3].chain, STEEL, mech.actuator_stiffness)
     without = chain.chain_compliance_matrix(mech.chains[3].chain, STEEL)
+    # the actuator adds 1/k in series: round-off only
     assert with_actuator[0, 0] - without[0, 0] == pytest.approx(1 / mech.actuator_stiffness, rel=1e-12)
 
 
@@ -89,12 +93,13 @@ def test_strut_is_not_rigid():
     ch = reference_mechanism().chains[0].chain
     leaf = hinge.leaf_compliance(ch.hinge_length, ch.thickness_1, ch.width, ch.fillet, STEEL)[0, 0]
     strut = hinge.beam_compliance(ch.strut_length, ch.section, ch.section, STEEL)[0, 0]
-    assert 0.1 < strut / leaf < 10
+    assert 0.1 < strut / leaf < 10  # 'of the order of': within a decade
 
 
 def test_chain_stiffness_has_the_six_rigid_body_modes():
     ch = reference_mechanism().chains[3].chain
     k = chain.chain_stiffness_matrix(ch, STEEL)
+    # round-off of inverting C (cond ~1e6, as above): ~1e-10
     assert np.allclose(k, k.T, rtol=0, atol=1e-9 * np.abs(k).max())
     w = twist_transform(np.eye(3), np.array([-ch.length, 0.0, 0.0]))
     modes = np.vstack([np.eye(6), w])  # A moves by a twist, B with it rigidly

@@ -74,5 +74,6 @@ def test_the_qp_matrix_is_positive_definite():
     m, coupling = coupled_instances(50, 3)
     scale = m.mu / m.nut_stiffness
     matrix = (np.eye(3) - coupling) / scale[:, :, None]  # diag(s/mu)(I - B)
+    # symmetric up to round-off of the scaling
     np.testing.assert_allclose(matrix, np.swapaxes(matrix, 1, 2), rtol=1e-12, atol=0)
     assert np.all(np.linalg.eigvalsh(0.5 * (matrix + np.swapaxes(matrix, 1, 2))) > 0)

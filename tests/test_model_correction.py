@@ -18,7 +18,7 @@ def test_analytic_provider_gives_unit_factors():
     # (condition numbers ~1e8 of the segment stiffness -> 1e-8 relative)
     factors = compliance_factors(parameter_space(), analytic_provider())
     assert factors.shape == (6, 8)
-    np.testing.assert_allclose(factors, 1.0, rtol=0, atol=1e-7)
+    np.testing.assert_allclose(factors, 1.0, rtol=0, atol=1e-7)  # the 1e-8 inversion rounding above, 10x
 
 
 def test_chain_compliance_of_provider_is_spd_and_collinear():
@@ -27,8 +27,9 @@ def test_chain_compliance_of_provider_is_spd_and_collinear():
     assert np.all(np.linalg.eigvalsh(c) > 0)
     # a chain collinear with x: ux and rx uncoupled from everything else (beam theory)
     scale = np.sqrt(np.outer(np.diag(c), np.diag(c)))
-    assert np.max(np.abs(c[0, 1:]) / scale[0, 1:]) < 1e-9
-    assert np.max(np.abs(c[3, [0, 1, 2, 4, 5]]) / scale[3, [0, 1, 2, 4, 5]]) < 1e-9
+    # structural zeros of beam theory: measured exactly 0 (was 1e-9)
+    assert np.max(np.abs(c[0, 1:]) / scale[0, 1:]) < 1e-15
+    assert np.max(np.abs(c[3, [0, 1, 2, 4, 5]]) / scale[3, [0, 1, 2, 4, 5]]) < 1e-15  # as above
 
 
 def test_unit_factors_leave_the_model_unchanged_and_others_change_it():
@@ -43,7 +44,7 @@ def test_unit_factors_leave_the_model_unchanged_and_others_change_it():
     stiffer[3:, 0] = 1.15
     softer_drive = dataclasses.replace(space, compliance_factors=tuple(map(tuple, stiffer)))
     changed = forward(space.nominal_full, inputs, space=softer_drive).angles
-    assert np.max(np.abs(changed - plain)) > 1e-6
+    assert np.max(np.abs(changed - plain)) > 1e-6  # 'visibly at the microradian level' (comment above)
 
 
 def test_bad_factors_are_rejected():
@@ -71,4 +72,4 @@ def test_fem_correction_brings_the_model_closer_to_the_fem_prototype():
     for label, sp in (("plain", space), ("fem", corrected_space(space, provider))):
         model = forward(scenario.values, scenario.inputs, space=sp).angles[0]
         rms[label] = np.sqrt(np.mean((model - measured) ** 2))
-    assert rms["fem"] < 0.7 * rms["plain"]
+    assert rms["fem"] < 0.7 * rms["plain"]  # measured 10.6 -> 3.4 urad, ratio 0.32 (comment above)

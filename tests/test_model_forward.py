@@ -144,6 +144,7 @@ def test_engines_and_the_plain_reference_agree():
     if kernel.available():
         compiled = forward(values, TRAJECTORY.inputs, engine="numba", clearance_mode="directional")
         np.testing.assert_allclose(compiled.pose, numpy_result.pose, rtol=0, atol=ANGLE_TOL)
+        # 1 pm: the fixed point stops at |du| <= 1e-13 m
         np.testing.assert_allclose(compiled.clearance, numpy_result.clearance, rtol=0, atol=1e-12)
         np.testing.assert_array_equal(compiled.chain_states, numpy_result.chain_states)
     threaded = forward(values, TRAJECTORY.inputs, n_threads=2, clearance_mode="directional")
@@ -171,8 +172,9 @@ def test_eq7_holds_and_states_match_it(seed, scale):
     # tolerance 1e-13 m times the nut's gain on the load)
     np.testing.assert_allclose(y, np.clip(mu * result.release, 0.0, limit), rtol=0, atol=1e-12)
     engaged = result.chain_states == 0
-    assert np.all(np.abs(result.clearance[engaged]) <= 1e-12)
+    assert np.all(np.abs(result.clearance[engaged]) <= 1e-12)  # 1 pm: the fixed-point tolerance, as above
     far = result.chain_states == 2
+    # as above
     assert np.allclose(np.abs(result.clearance[far]), np.broadcast_to(limit, y.shape)[far], rtol=0, atol=1e-12)
     s2 = np.any(result.chain_states > 0, axis=-1)
     assert np.all((result.point_class == 2) == s2)
@@ -213,6 +215,7 @@ def test_every_stiffness_of_random_candidates_is_spd():
     m = mechanism_matrices(random_values(50, 8), SPACE)
     for matrices in (m.chain_stiffness.reshape(-1, 6, 6), m.frame_stiffness):
         scale = np.abs(matrices).max(axis=(1, 2), keepdims=True)
+        # symmetric by construction: round-off only
         np.testing.assert_allclose(matrices, np.swapaxes(matrices, 1, 2), rtol=0, atol=1e-12 * scale.max())
         assert np.all(np.linalg.eigvalsh(matrices / scale) > 0)
     np.testing.assert_allclose(m.coupling, np.swapaxes(m.coupling, 1, 2), rtol=1e-9)  # m_ij = g_i^T K^-1 g_j

@@ -114,10 +114,11 @@ def test_hinge_matrix_is_spd_and_moved_to_the_free_face(make):
         else hinge.circular_notch_compliance(h.radius, h.thickness, h.width, STEEL)
     # rigid block of length b in front of the notch: C_rz,Mz unchanged, C_uy,Fy grows by 2 b C_uy,Mz + b^2 C_rz,Mz
     b = h.block_length
-    assert c[5, 5] == pytest.approx(notch[5, 5], rel=1e-14)
+    assert c[5, 5] == pytest.approx(notch[5, 5], rel=1e-14)  # a rigid block leaves C_rz,Mz unchanged: round-off only
+    # the closed form above: round-off only
     assert c[1, 1] == pytest.approx(notch[1, 1] + 2 * b * notch[1, 5] + b * b * notch[5, 5], rel=1e-13)
     t = twist_transform(np.eye(3), np.array([-b, 0, 0]))
-    np.testing.assert_allclose(c, t @ notch @ t.T, rtol=1e-14, atol=0)
+    np.testing.assert_allclose(c, t @ notch @ t.T, rtol=1e-14, atol=0)  # as above
 
 
 @pytest.mark.parametrize("shape", [(), (1,), (4,), (2, 3), (3, 1, 2)])

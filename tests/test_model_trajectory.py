@@ -20,8 +20,8 @@ def test_standard_trajectory_layout():
         sweep = leg[:, k]
         n = len(sweep)
         assert sweep[n // 4 - 1] == pytest.approx(tr.amplitudes[k], rel=1e-15)  # turning points sampled exactly
-        assert sweep[3 * n // 4 - 1] == pytest.approx(-tr.amplitudes[k], rel=1e-15)
-        assert sweep[-1] == pytest.approx(0.0, abs=1e-18)
+        assert sweep[3 * n // 4 - 1] == pytest.approx(-tr.amplitudes[k], rel=1e-15)  # as above
+        assert sweep[-1] == pytest.approx(0.0, abs=1e-18)  # back to zero: round-off of mm inputs (1 ulp = 2e-19 m)
 
 
 def test_amplitudes_reach_the_workspace_limit_of_the_nominal_linear_model():

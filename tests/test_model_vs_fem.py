@@ -21,9 +21,11 @@ WORKING = [(1, 1), (1, 5), (5, 5)]  # uy/Fy, uy/Mz, rz/Mz
 def _check(result):
     fem, ana = result.compliance_fem, result.compliance_analytic
     for i, j in WORKING:
+        # closed forms' published accuracy vs the measured +1.0..+2.8 % (docstring)
         assert fem[i, j] == pytest.approx(ana[i, j], rel=0.05), (i, j, fem[i, j] / ana[i, j])
     assert fem[3, 3] < 0.5 * ana[3, 3]  # torsion: FEM much stiffer (documented gap)
-    np.testing.assert_allclose(fem, fem.T, atol=1e-6 * np.abs(fem).max())
+    # solver round-off bound as in test_fem_condense; measured 1.4e-16 (was atol 1e-6 with the default rtol 1e-7)
+    np.testing.assert_allclose(fem, fem.T, rtol=0, atol=1e-8 * np.abs(fem).max())
     assert np.all(np.linalg.eigvalsh(0.5 * (fem + fem.T)) > 0)
 
 

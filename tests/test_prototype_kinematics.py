@@ -36,6 +36,7 @@ def test_series_and_closed_forms_meet_at_the_switch():
     # (the closed forms' cancellation error at 0.1 rad, see kinematics._SERIES_ANGLE)
     axis = np.array([0.3, -0.5, 0.8]) / np.linalg.norm([0.3, -0.5, 0.8])
     below, above = (kin.se3_left_jacobian_inverse(np.r_[0.1, 0.2, -0.1, a * axis]) for a in (0.1 - 1e-12, 0.1 + 1e-12))
+    # the closed forms' cancellation error at 0.1 rad (comment above)
     assert np.allclose(below, above, rtol=1e-9, atol=1e-9)
 
 
@@ -54,7 +55,8 @@ def test_small_adjoint_is_the_lie_bracket():
     hat4 = lambda x: np.block([[kin.hat(x[3:]), x[:3, None]], [np.zeros((1, 4))]])
     bracket = hat4(a) @ hat4(b) - hat4(b) @ hat4(a)
     expected = np.r_[bracket[:3, 3], kin.vee(bracket[:3, :3])]
-    assert np.allclose(kin.se3_ad(a) @ b, expected, atol=1e-14)
+    # products of O(1) numbers: round-off only; rtol=0 (default 1e-5 hid it)
+    assert np.allclose(kin.se3_ad(a) @ b, expected, rtol=0, atol=1e-14)
 
 
 @pytest.mark.parametrize("rotation_scale", [1e-6, 0.03, 0.5, 1.5])
@@ -71,15 +73,16 @@ def test_jacobians_against_finite_differences(rotation_scale):
             left = (kin.se3_log(kin.se3_exp(e) @ t) - kin.se3_log(kin.se3_exp(-e) @ t)) / (2 * h)
             right = (kin.se3_log(t @ kin.se3_exp(e)) - kin.se3_log(t @ kin.se3_exp(-e))) / (2 * h)
             # central differences: O(h^2) ~ 1e-12 truncation, ~1e-10 round-off (1e-16 / h)
-            assert np.allclose(left, j_l_inv[:, k], atol=1e-8)
-            assert np.allclose(right, j_r_inv[:, k], atol=1e-8)
+            assert np.allclose(left, j_l_inv[:, k], rtol=0, atol=1e-8)
+            # as above; rtol=0 (default 1e-5 hid it)
+            assert np.allclose(right, j_r_inv[:, k], rtol=0, atol=1e-8)
             # forward Jacobians: exp(xi + e) = exp(J_l e) exp(xi) = exp(xi) exp(J_r e)
             moved = (kin.se3_exp(xi + e) - kin.se3_exp(xi - e)) / (2 * h)
             assert np.allclose(moved, (kin.se3_exp(j_l[:, k] * h) - kin.se3_exp(-j_l[:, k] * h)) / (2 * h) @ t,
-                               atol=1e-8)
+                               rtol=0, atol=1e-8)  # as above
             assert np.allclose(moved, t @ (kin.se3_exp(j_r[:, k] * h) - kin.se3_exp(-j_r[:, k] * h)) / (2 * h),
-                               atol=1e-8)
-        assert np.allclose(j_l @ j_l_inv, np.eye(6), atol=1e-12)  # inverse pair to round-off
+                               rtol=0, atol=1e-8)  # as above
+        assert np.allclose(j_l @ j_l_inv, np.eye(6), rtol=0, atol=1e-12)  # inverse pair to round-off
 
 
 def test_batched_equals_looped():
@@ -95,8 +98,9 @@ def test_orthonormalize_removes_drift():
     drifted = t.copy()
     drifted[:3, :3] *= 1 + 1e-9
     fixed = kin.orthonormalize(drifted)
-    assert np.allclose(fixed[:3, :3] @ fixed[:3, :3].T, np.eye(3), atol=1e-15)
-    assert np.allclose(fixed, t, atol=1e-14)
+    # a rotation scaled by 1 + 1e-9, orthonormalized: round-off only; rtol=0 (default 1e-5 hid it)
+    assert np.allclose(fixed[:3, :3] @ fixed[:3, :3].T, np.eye(3), rtol=0, atol=1e-15)
+    assert np.allclose(fixed, t, rtol=0, atol=1e-14)  # as above
 
 
 def test_log_near_pi_is_refused():

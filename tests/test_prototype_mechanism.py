@@ -89,11 +89,13 @@ def test_small_motions_match_an_independent_linear_solve():
     # tolerance (3e-6 N over the tripod's ~1e8 N/m at O_C) allows ~3e-14 m, ~1e-6 of the
     # ~2.5e-8 m translations (measured 7e-7): 1e-5 of the largest component bounds both
     for part in (slice(0, 3), slice(3, 6)):
+        # bound from the comment above
         assert np.allclose(odd[:, part], linear[:, part], rtol=0, atol=1e-5 * np.max(np.abs(linear[:, part])))
     print("odd part vs linear, relative:", [np.max(np.abs(odd[:, p] - linear[:, p])) / np.max(np.abs(linear[:, p]))
                                             for p in (slice(0, 3), slice(3, 6))])
     # the even part is the geometric nonlinearity: second order, ~ (1e-5)^1 of the response
     even = 0.5 * (run.pose[1:5] + run.pose[5:9])
+    # second order: ~1e-5 of the response (comment above), 10x margin
     assert np.max(np.abs(even[:, 3:])) < 1e-4 * np.max(np.abs(linear[:, 3:]))
 
 
@@ -133,7 +135,7 @@ def test_the_chains_carry_the_weight_to_the_supports():
     # 25 free bodies each in balance to <= 1e-5 N and 1e-5 N m (SolverSettings), levers
     # <= 0.7 m: 1e-3 N and 1e-3 N m bound the sum of their errors
     assert np.allclose(force, weight, rtol=0, atol=1e-3)
-    assert np.allclose(moment, np.cross(centre, weight), rtol=0, atol=1e-3)
+    assert np.allclose(moment, np.cross(centre, weight), rtol=0, atol=1e-3)  # as above
 
 
 def test_newton_converges_on_the_standard_trajectory_with_table1_transmissions():
@@ -196,6 +198,7 @@ def test_an_effect_acts_inside_the_physics_and_is_recorded():
     baseline = simulate(plain, inputs)
     # the effect is the same physics as a shifted initial position (to round-off of x + x0 + d)
     assert np.allclose(with_effect.axial_loads, reference.axial_loads, rtol=0, atol=1e-6)
+    # same Newton path: only x + x0 + d rounds differently
     assert np.allclose(with_effect.angles, reference.angles, rtol=0, atol=1e-12)
     # and it changes the loads in the chains, not only the angles (50 um against ~1.6e6 N/m)
     assert np.min(np.abs(with_effect.axial_loads[:, 3] - baseline.axial_loads[:, 3])) > 10.0
@@ -210,7 +213,8 @@ def test_sensor_effects_change_only_the_measurement():
     run = simulate(proto, inputs, effects=[SensorOffset(offset=(1e-6, 0.0, -2e-6))])
     assert np.array_equal(run.true_angles, base.true_angles)
     assert np.array_equal(run.axial_loads, base.axial_loads)
-    assert np.allclose(run.angles - base.angles, [1e-6, 0.0, -2e-6], atol=1e-18)
+    # offset added to ~1e-3 rad angles: round-off (1 ulp = 2e-19 rad); rtol=0 (default 1e-5 hid it)
+    assert np.allclose(run.angles - base.angles, [1e-6, 0.0, -2e-6], rtol=0, atol=1e-18)
 
 
 def test_bad_inputs_are_refused():
@@ -293,7 +297,8 @@ def test_mount_offsets_build_chains_to_fit_without_prestress():
     a0 = np.asarray(MECH.chains[0].point_a)
     axes = MECH.chains[0].rotation
     moved = np.asarray(proto.mechanism.chains[0].point_a)
-    assert np.allclose(moved - a0, 2e-3 * (np.cos(0.3) * axes[:, 1] + np.sin(0.3) * axes[:, 2]), atol=1e-15)
+    # round-off of ~0.5 m coordinates (1 ulp = 1e-16 m); rtol=0 (default 1e-5 hid it)
+    assert np.allclose(moved - a0, 2e-3 * (np.cos(0.3) * axes[:, 1] + np.sin(0.3) * axes[:, 2]), rtol=0, atol=1e-15)
     run = simulate(proto, np.zeros((1, 3)))
     assert np.all(np.abs(run.pose) < 1e-15) and np.all(np.abs(run.axial_loads) < 1e-6)  # unstressed
     loaded = simulate(build_prototype(MECH, RIGID_NUTS, PROVIDER, mount_offsets=offsets), np.zeros((1, 3)))
@@ -327,8 +332,8 @@ def test_load_dependent_effect_is_solved_at_the_points_own_loads():
     for k in range(1, len(inputs)):
         own = simulate(prototype, inputs[k:k + 1], effects=[FrozenAt(run.axial_loads[k])])
         lagged = simulate(prototype, inputs[k:k + 1], effects=[FrozenAt(run.axial_loads[k - 1])])
-        assert np.max(np.abs(own.angles[0] - run.angles[k])) < 1e-10
-        assert np.max(np.abs(lagged.angles[0] - run.angles[k])) > 1e-8
+        assert np.max(np.abs(own.angles[0] - run.angles[k])) < 1e-10  # the Newton tolerance's ~1e-11 rad (docstring)
+        assert np.max(np.abs(lagged.angles[0] - run.angles[k])) > 1e-8  # the one-point lag: > 100x the Newton tolerance
 
 
 @pytest.mark.parametrize("hook", ["modify_mechanism", "modify_loaded_mechanism"])

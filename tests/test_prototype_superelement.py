@@ -38,7 +38,7 @@ def test_large_rigid_motions_make_no_energy_and_no_force(segment):
         grad = se.segment_gradient(rel, REF_INV[segment], KJJ[segment])
         # round-off: positions ~1 m stored to ~1e-16 m, times K <= 2e9 N/m -> ~1e-6 N at most
         assert energy < 1e-20
-        assert np.max(np.abs(grad)) < 1e-5
+        assert np.max(np.abs(grad)) < 1e-5  # the ~1e-6 N round-off bound above
 
 
 @pytest.mark.parametrize("segment", range(5))
@@ -55,6 +55,7 @@ def test_small_motions_reproduce_the_linear_12x12(segment):
         # the difference is second order: |grad - K u| / |K u| ~ |u| / length ~ 1e-5 .. 1e-6
         assert np.allclose(grad, linear, rtol=0, atol=30 * scale / LENGTHS[segment] * np.max(np.abs(linear)))
         energy = se.segment_energy(rel, REF_INV[segment], KJJ[segment])
+        # second order, as above
         assert energy == pytest.approx(0.5 * u @ K12[segment] @ u, rel=30 * scale / LENGTHS[segment])
 
 
@@ -96,7 +97,7 @@ def test_tangent_is_the_hessian_of_the_pulled_back_energy(segment):
     # ~(h / length)^2 ~ 1e-7 relative plus round-off, far below the geometric terms
     # (axial load x rotation, ~1e-4 of the largest entries) the tangent must carry
     assert np.allclose(hessian, hessian.T, atol=1e-7 * np.max(np.abs(hessian)))
-    assert np.allclose(tangent, hessian, rtol=0, atol=1e-7 * np.max(np.abs(hessian)))
+    assert np.allclose(tangent, hessian, rtol=0, atol=1e-7 * np.max(np.abs(hessian)))  # as above
     geometric = tangent - K12[segment]
     assert np.max(np.abs(geometric)) > 1e-6 * np.max(np.abs(tangent))  # the test above could see it
 

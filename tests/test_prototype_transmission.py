@@ -111,6 +111,7 @@ def test_lost_motion_and_hysteresis_when_the_load_changes_sign():
     # pushing compresses D3: the nut sits on its flank and nothing is lost
     assert np.all(tight.axial_loads[pushing, 5] < 0)
     assert np.all(run.nut_offsets[pushing, 2] == 0)
+    # nut offset exactly 0: the same equilibrium problem, to round-off
     assert np.allclose(run.angles[pushing], tight.angles[pushing], rtol=0, atol=1e-12)
     # pulling: the nut takes up slack, theta_x lags the tight mechanism (lost motion)
     lost = np.abs(tight.angles[pulling, 0]) - np.abs(run.angles[pulling, 0])
@@ -132,4 +133,5 @@ def test_lost_motion_and_hysteresis_when_the_load_changes_sign():
                                                                       breakaway_force=0.0)]
     free = simulate(build_prototype(weightless, memoryless, PROVIDER), inputs)
     for i, j in pairs:
+        # the 1e-12 m offset tolerance (comment above), 10x
         assert free.nut_offsets[j, 2] == pytest.approx(free.nut_offsets[i, 2], abs=1e-11)

@@ -76,7 +76,7 @@ def test_isolation_partition_and_projection_helpers():
     f = rng.random(60)
     chosen = select_isolated(x, np.ones(60, bool), centre, radius=0.1, max_isolated=20)
     assert chosen.size == 20
-    assert np.all(np.linalg.norm(x[chosen] - centre, axis=1) <= 0.1)
+    assert np.all(np.linalg.norm(x[chosen] - centre, axis=1) <= 0.1)  # the radius given to select_isolated
     others = np.setdiff1d(np.arange(60), chosen)
     assert np.linalg.norm(x[chosen] - centre, axis=1).max() <= np.linalg.norm(x[others] - centre, axis=1).min()
     groups = partition_isolated(x, f, chosen, 6)
@@ -134,8 +134,8 @@ def test_rosenbrock_valley_to_stated_accuracy():
     # the least-squares polish finishes the job (tests/test_polish.py).
     problem = tf.rosenbrock(5)
     finals = [identify(problem.fitness, 5, PSOSettings(), rng=seed).f_best for seed in range(3)]
-    assert max(finals) <= 0.5
-    assert np.median(finals) <= 0.1
+    assert max(finals) <= 0.5  # the stated accuracy (comment above; worst of 10 seeds 0.14)
+    assert np.median(finals) <= 0.1  # median of 10 seeds was 0.004 (comment above)
 
 
 def test_improved_beats_plain_on_a_deceptive_multimodal_problem():
@@ -148,6 +148,7 @@ def test_improved_beats_plain_on_a_deceptive_multimodal_problem():
     for seed in range(9):
         improved.append(identify(problem.fitness, 10, PSOSettings(), rng=seed).f_best)
         plain.append(identify(problem.fitness, 10, plain_settings(), rng=seed).f_best)
+    # the 15 % margin of the comment above (measured 1070 vs 1460 over 11 seeds)
     assert np.median(improved) < 0.85 * np.median(plain)
     assert sum(i < p for i, p in zip(improved, plain)) >= 6
 
@@ -182,7 +183,7 @@ def test_subgroup_mechanics_on_the_state():
             # confinement: every member inside its (moving, shrinking) box
             lower, upper = opt._box(g)
             xm = opt.x[opt.group == g.index]
-            assert np.all((xm >= lower - 1e-12) & (xm <= upper + 1e-12))
+            assert np.all((xm >= lower - 1e-12) & (xm <= upper + 1e-12))  # round-off of the box bounds centre +- half
             # decoupling: no global particle inside a local domain
             assert not np.any(inside_box(opt.x[opt.group == -1], g.centre, g.half))
         assert np.all((opt.x >= 0) & (opt.x <= 1))

@@ -60,13 +60,15 @@ LEAF_VARIANTS = [
 def test_notch_hinge_volume_box_and_ends():
     part = hinge_solid(NOTCH)
     assert part.volume == pytest.approx(notch_volume(NOTCH), rel=VOLUME_RTOL)
+    # two closed forms of the same volume: round-off only
     assert exact_volume(NOTCH) == pytest.approx(notch_volume(NOTCH), rel=1e-14)
     box = part.shape.BoundingBox()
     half = [NOTCH.total_length / 2, NOTCH.height / 2, NOTCH.width / 2]
     np.testing.assert_allclose([box.xmin, box.ymin, box.zmin], np.negative(half), atol=BOX_ATOL)
     np.testing.assert_allclose([box.xmax, box.ymax, box.zmax], half, atol=BOX_ATOL)
+    # computed from the parameters: round-off (1 ulp of 10 mm = 1.7e-18 m)
     np.testing.assert_allclose(part.reference_points["fixed"], [-NOTCH.total_length / 2, 0, 0], atol=1e-15)
-    np.testing.assert_allclose(part.reference_points["free"], [NOTCH.total_length / 2, 0, 0], atol=1e-15)
+    np.testing.assert_allclose(part.reference_points["free"], [NOTCH.total_length / 2, 0, 0], atol=1e-15)  # as above
     # the thinnest section of the CAD solid is t: the solid holds (0, +-t/2) but not beyond
     for y, inside in ((0.499e-3, True), (0.501e-3, False)):
         assert part.shape.isInside(cq.Vector(0.0, y, 0.0), 1e-9) is inside
@@ -103,8 +105,9 @@ def test_chain_volume_box_and_ends():
                                    atol=BOX_ATOL)
         np.testing.assert_allclose([box.xmax, box.ymax, box.zmax], [chain.length, chain.section / 2,
                                                                     chain.section / 2], atol=BOX_ATOL)
+        # computed from the parameters: round-off (1 ulp of 0.15 m = 2.8e-17 m)
         np.testing.assert_allclose(part.reference_points["A"], [0, 0, 0], atol=1e-15)
-        np.testing.assert_allclose(part.reference_points["B"], [chain.length, 0, 0], atol=1e-15)
+        np.testing.assert_allclose(part.reference_points["B"], [chain.length, 0, 0], atol=1e-15)  # as above
 
 
 def test_chain_leaves_are_thin_in_the_right_direction():
@@ -123,9 +126,11 @@ def test_chain_leaves_are_thin_in_the_right_direction():
 def test_end_planes_are_faces_of_the_solid(params):
     part = hinge_solid(params) if not isinstance(params, FlexureChain) else chain_solid(params)
     for name, (point, normal) in part.end_planes.items():
-        matches = [f for f in part.shape.Faces()
+        matches = [f for f in part.shape.Faces()  # as above, for the unit normal
                    if f.geomType() == "PLANE"
+                   # OCC face centre/normal: round-off (~1e-17 m); 1e-12 is far below any feature
                    and np.allclose(f.Center().toTuple(), point, atol=1e-12)
+                   # (the same for the unit normal)
                    and np.allclose(f.normalAt().toTuple(), normal, atol=1e-12)]
         assert len(matches) == 1, name
         np.testing.assert_allclose(part.reference_points[name], point)
@@ -152,6 +157,7 @@ def test_thin_sections_match_the_parameters():
     (notch,) = thin_sections(NOTCH)
     x = np.array([0.0, 2e-3, 5e-3])
     expected = NOTCH.thickness + 2 * NOTCH.radius - 2 * np.sqrt(NOTCH.radius**2 - x**2)
+    # the same closed form (circular notch profile): round-off only
     np.testing.assert_allclose(notch.thickness(x), expected, rtol=1e-14)
     leaves = thin_sections(DRIVING)
     assert [s.thin_axis for s in leaves] == [1, 2, 2, 1]
@@ -188,6 +194,7 @@ def test_stl_export_in_millimetres_within_tolerance(tmp_path):
     # chords deviate from the surface by at most `tolerance` (float32 adds ~1e-7 relative)
     assert abs(volume - part.volume) <= tolerance * part.shape.Area()
     np.testing.assert_allclose(triangles.reshape(-1, 3).max(axis=0),
+                               # vertices are B-rep corners; float32 in the file: 6e-8 relative
                                [NOTCH.total_length / 2, NOTCH.height / 2, NOTCH.width / 2], rtol=1e-6)
     with pytest.raises(ValueError, match="tolerance"):
         export_stl(part, tmp_path / "bad.stl", tolerance=0.0)
@@ -208,6 +215,7 @@ def test_mechanism_assembly_places_every_chain(tmp_path):
         for local, expected in (((0.0, 0.0, 0.0), placement.point_a),
                                 ((placement.chain.length, 0.0, 0.0), placement.point_b)):
             p = cq.Vector(*local).transform(cq.Matrix(trsf))
+            # rotation and translation of 0.15 m chains in float64: round-off ~1e-17 m
             np.testing.assert_allclose(p.toTuple(), expected, atol=1e-12)
     path = export_step(assembly, tmp_path / "mechanism.step")
     total = sum(chain_volume(c.chain) for c in mech.chains)

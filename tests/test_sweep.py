@@ -227,7 +227,7 @@ def test_identification_accuracy_on_the_design_mount():
     # Learned nothing (nominal values): 400 um, 0.42 mm, 20.5 %, 538 urad RMS.
     # x0 and CL: the paper's Table 1 accuracy (2.7 um, 0.02 mm), which the run is compared to
     assert figures["initial_position_max_abs_error_um"] < 2.7
-    assert figures["clearance_max_abs_error_mm"] < 0.02
+    assert figures["clearance_max_abs_error_mm"] < 0.02  # the paper's Table 1 (comment above; measured 0.00094 mm)
     # mu: measured at about the paper's 1.3 %; 2x that is still 1/8 of learned-nothing
     assert figures["hysteresis_max_rel_error_pct"] < 2.6
     # the fit: no worse than the model at the true (preset) values fits the same truth
@@ -253,4 +253,5 @@ def test_chain_design_record(tmp_path):
         # bending of the chain about z: leaves in series with the strut; 15 % covers one
         # tet through the leaves (docs/sweep.md)
         assert abs(record["discrepancy_percent"]["rz_Mz"]) < 15.0
-        assert 0.5 < record["stress_per_rad_fem"] / record["stress_per_rad_nominal"] < 2.0
+        # measured 1.03 / 0.99 with one tet through the leaves (was 0.5 .. 2)
+        assert 0.8 < record["stress_per_rad_fem"] / record["stress_per_rad_nominal"] < 1.25

@@ -76,6 +76,7 @@ def test_map_recovers_the_drive_sources_with_honest_error_bars(tmp_path):
     assert all(r["z_score"] is not None for r in rows.values())
     assert {"D1.x0", "D2.x0", "D3.x0"} <= set(report["identifiable"])
     assert max(rows[f"D{i}.x0"]["abs_error"] for i in (1, 2, 3)) * 1e3 < 2.7  # [um], paper Table 1
+    # the honesty band (docstring; measured 1.10-1.32)
     assert report["n_z_scores"] >= 4 and 0.5 <= report["z_rms_identifiable"] <= 2.0
     cv = report["estimation"]["cross_validation"]
     assert cv["n_folds"] == 3 and report["estimation"]["prior_scale"] in cv["scales"]
