@@ -14,9 +14,11 @@ import argparse
 
 import numpy as np
 
+from .options import add_point_model_options
+
 from ..output import dumps_strict
 
-__all__ = ["configure", "run", "parse_triple", "parse_directions", "load_values", "add_model_options",
+__all__ = ["configure", "run", "parse_triple", "parse_directions", "load_values",
            "point_report", "print_point", "write_point", "EXAMPLES"]
 
 EXAMPLES = (
@@ -45,22 +47,6 @@ def parse_directions(text: str | None) -> np.ndarray | None:
     if not np.all(np.abs(values) == 1.0):
         raise ValueError(f"--directions must be +1 or -1 for each actuator, got {text!r}")
     return values
-
-
-def add_model_options(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--directions", metavar="D1,D2,D3",
-                        help="travel direction of each actuator, +1 (last move towards the payload) or -1; "
-                             "default +1,+1,+1")
-    parser.add_argument("--params", metavar="FILE",
-                        help="TOML/JSON file of error sources in display units, e.g. \"D1.CL\" = 0.25 "
-                             "(names and ranges: docs/parameters.md); default all nominal")
-    parser.add_argument("--no-parasitic", action="store_true", help="leave out the parasitic shortening (Eq. 4-5)")
-    parser.add_argument("--no-clearance", action="store_true", help="leave out clearance and hysteresis (Eq. 6-7)")
-    parser.add_argument("--clearance-mode", choices=("force_only", "directional"), default="force_only",
-                        help="how the travel direction enters the clearance (docs/model.md); default force_only")
-    parser.add_argument("--json", action="store_true", help="print one JSON object instead of text")
-    parser.add_argument("--out", metavar="DIR",
-                        help="also write the point as DIR/report.json and DIR/report.md (optional)")
 
 
 def load_values(path: str | None):
@@ -158,7 +144,7 @@ def plot_point(report: dict, path, title: str) -> None:
 def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--inputs-mm", required=True, metavar="X1,X2,X3",
                         help="actuator inputs x_A1,x_A2,x_A3 [mm]; use --inputs-mm=-0.5,0,0 for a negative first value")
-    add_model_options(parser)
+    add_point_model_options(parser)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -11,7 +11,8 @@ from __future__ import annotations
 
 import argparse
 
-from .forward import (add_model_options, load_values, parse_directions, parse_triple, point_report, print_point, write_point)
+from .options import add_point_model_options
+from .forward import (load_values, parse_directions, parse_triple, point_report, print_point, write_point)
 from ..output import dumps_strict
 
 __all__ = ["configure", "run", "EXAMPLES"]
@@ -27,7 +28,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--target-urad", required=True, metavar="TX,TY,TZ",
                         help="target angles theta_x,theta_y,theta_z [urad]; use --target-urad=-100,0,0 for a "
                              "negative first value")
-    add_model_options(parser)
+    add_point_model_options(parser)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -15,7 +15,7 @@ from ..prototype.providers import PROVIDERS
 __all__ = ["add_out", "add_seed", "add_scenario", "add_trajectory", "load_scenario_with_trajectory",
            "add_executor_options", "executor_options", "MODEL_DEFAULTS", "CALIBRATION_DEFAULTS", "add_model_options",
            "add_identification_options", "add_method_options", "prior_scale_option", "add_calibration_options",
-           "add_source_options", "load_source", "check_sobol_options"]
+           "add_source_options", "load_source", "check_sobol_options", "add_point_model_options"]
 
 
 def add_out(parser: argparse.ArgumentParser, *, required: bool = True, what: str = "report.json, report.md, PNGs",
@@ -183,3 +183,21 @@ def check_sobol_options(args: argparse.Namespace) -> None:
         raise ValueError(f"--sobol-n={args.sobol_n} must be a power of two (e.g. 512)")
     if not 0.0 <= args.sobol_threshold <= 1.0:
         raise ValueError(f"--sobol-threshold={args.sobol_threshold} must be in [0, 1]")
+
+
+def add_point_model_options(parser: argparse.ArgumentParser) -> None:
+    """The analytic model at one point (``forward``, ``inverse``): travel directions, error
+    sources from a file, which model terms, output form."""
+    parser.add_argument("--directions", metavar="D1,D2,D3",
+                        help="travel direction of each actuator, +1 (last move towards the payload) or -1; "
+                             "default +1,+1,+1")
+    parser.add_argument("--params", metavar="FILE",
+                        help="TOML/JSON file of error sources in display units, e.g. \"D1.CL\" = 0.25 "
+                             "(names and ranges: docs/parameters.md); default all nominal")
+    parser.add_argument("--no-parasitic", action="store_true", help="leave out the parasitic shortening (Eq. 4-5)")
+    parser.add_argument("--no-clearance", action="store_true", help="leave out clearance and hysteresis (Eq. 6-7)")
+    parser.add_argument("--clearance-mode", choices=("force_only", "directional"), default="force_only",
+                        help="how the travel direction enters the clearance (docs/model.md); default force_only")
+    parser.add_argument("--json", action="store_true", help="print one JSON object instead of text")
+    parser.add_argument("--out", metavar="DIR",
+                        help="also write the point as DIR/report.json and DIR/report.md (optional)")
