@@ -67,11 +67,7 @@ _EXPORTS = {
     "payload_wrench": "assembly",
     "N_CHAINS": "assembly",
     "DRIVING": "assembly",
-    "skew": "frames",
-    "twist_transform": "frames",
-    "frame_to_point_transform": "frames",
     "axis_rotation": "frames",
-    "rotation_about_x": "frames",
     "read_parameter_file": "param_file",
 }
 

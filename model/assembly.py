@@ -28,12 +28,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from flexcal.geometry.frames import frame_to_point_transform
 from flexcal.geometry.params import MechanismParams
 
 from . import kernel
 from .chain import chain_compliance_entries, stiffness_from_entries
 from .second_order import preload_geometric_stiffness
-from .frames import axis_rotation, frame_to_point_transform
+from .frames import axis_rotation
 from .parameters import CHAIN_NAMES, ParameterSpace
 
 __all__ = ["MechanismMatrices", "mechanism_matrices", "payload_wrench", "N_CHAINS", "DRIVING"]

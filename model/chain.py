@@ -1,7 +1,7 @@
 """Paper Eq. 1: the compliance of a flexure chain as a serial sum of element compliances.
 
 ``C_out = sum_i T_i C_i T_i^T`` with the adjoint ``T_i = [[R_i, [r_i]x R_i], [0, R_i]]``,
-``r_i = p_i - p_out`` (``frames.twist_transform``): element i is clamped at its A-side end,
+``r_i = p_i - p_out`` (``geometry.frames.twist_transform``): element i is clamped at its A-side end,
 loaded at ``p_i`` (its B-side end), with local axes ``R_i``; the elements are in series
 between the clamped end A and the output point.
 
@@ -18,10 +18,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from flexcal.geometry.frames import twist_transform
 from flexcal.geometry.params import CircularNotchHinge, FlexureChain, LeafHinge, Material
 
 from . import kernel
-from .frames import twist_transform
 from .hinge import (ENTRY_INDEX, _gauss_legendre, beam_compliance, circular_notch_compliance, entries_to_matrix,
                     gauss_node_count, leaf_compliance, segment_entries, shear_coefficient, torsion_constant)
 

@@ -55,9 +55,8 @@ import functools
 
 import numpy as np
 
+from flexcal.geometry.frames import twist_transform
 from flexcal.geometry.params import CircularNotchHinge, LeafHinge, Material
-
-from .frames import twist_transform
 
 __all__ = [
     "segment_compliance",
