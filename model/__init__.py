@@ -65,8 +65,8 @@ _EXPORTS = {
     "MechanismMatrices": "assembly",
     "mechanism_matrices": "assembly",
     "payload_wrench": "assembly",
-    "N_CHAINS": "assembly",
-    "DRIVING": "assembly",
+    "N_CHAINS": "parameters",
+    "DRIVING": "parameters",
     "axis_rotation": "frames",
     "read_parameter_file": "param_file",
 }

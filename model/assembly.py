@@ -35,12 +35,10 @@ from . import kernel
 from .chain import chain_compliance_entries, stiffness_from_entries
 from .second_order import preload_geometric_stiffness
 from .frames import axis_rotation
-from .parameters import CHAIN_NAMES, ParameterSpace
+from .parameters import CHAIN_NAMES, DRIVING, N_CHAINS, ParameterSpace
 
-__all__ = ["MechanismMatrices", "mechanism_matrices", "payload_wrench", "N_CHAINS", "DRIVING"]
+__all__ = ["MechanismMatrices", "mechanism_matrices", "payload_wrench"]
 
-N_CHAINS = 6
-DRIVING = slice(3, 6)
 COMPILED_MIN_CANDIDATES = 32  # batches this large use the compiled linear algebra (tested equal)
 
 

@@ -160,7 +160,8 @@ def chain_compliance_entries(length, hinge_length, width, fillet, thickness_1, t
         nodes, weights = _gauss_legendre(gauss_node_count(1.0 / tau[np.broadcast_to(a, tau.shape) > 0]))
         actuator = 0.0 if actuator_stiffness is None else 1.0 / np.asarray(actuator_stiffness, dtype=float)
         out = kernel.chain_entries_compiled(length, l, w, a, t1, t2, section, connector_length, end_block_length,
-                                            actuator, material, nodes, weights)
+                                            actuator, material, shear_coefficient(material.poisson_ratio), nodes,
+                                            weights)
         return {key: out[..., i] for i, key in enumerate(_KEYS)}
     e, nu = material.youngs_modulus, material.poisson_ratio
     shape = length.shape

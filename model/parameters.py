@@ -30,9 +30,11 @@ import numpy as np
 from flexcal.geometry.params import MechanismParams, reference_mechanism
 
 __all__ = ["Parameter", "ParameterSpace", "parameter_space", "parameter_table_markdown",
-           "DIMENSION_SYMBOLS", "CHAIN_NAMES"]
+           "DIMENSION_SYMBOLS", "CHAIN_NAMES", "N_CHAINS", "DRIVING"]
 
 CHAIN_NAMES = ("L1", "L2", "L3", "D1", "D2", "D3")
+N_CHAINS = len(CHAIN_NAMES)
+DRIVING = slice(CHAIN_NAMES.index("D1"), CHAIN_NAMES.index("D3") + 1)  # the driving chains on a chain axis
 DIMENSION_SYMBOLS = ("w", "a", "l", "t1", "t2")
 _DIMENSION_FIELDS = {"w": "width", "a": "fillet", "l": "hinge_length", "t1": "thickness_1", "t2": "thickness_2"}
 _DESCRIPTIONS = {
