@@ -66,6 +66,7 @@ _EXPORTS = {
     "mechanism_matrices": "assembly",
     "payload_wrench": "assembly",
     "N_CHAINS": "parameters",
+    "LOAD": "parameters",
     "DRIVING": "parameters",
     "axis_rotation": "frames",
     "read_parameter_file": "param_file",
