@@ -22,10 +22,11 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
+from flexcal.geometry.frames import skew, twist_transform
 from flexcal.geometry.params import Material
 
 from .assembly import assemble_stiffness, check_mesh
-from .coupling import DEFAULT_PLANE_TOLERANCE, CouplingMap, RigidCoupling, coupling_map, select_plane_nodes, skew
+from .coupling import DEFAULT_PLANE_TOLERANCE, CouplingMap, RigidCoupling, coupling_map, select_plane_nodes
 from .solve import solve_spd
 
 __all__ = [
@@ -37,7 +38,7 @@ __all__ = [
     "solve_chain",
     "chain_stiffness",
     "chain_displacement",
-    "twist_transform",
+    "frame_axes_transform",
     "reduced_system",
     "reduced_rigid_body_modes",
 ]
@@ -76,15 +77,14 @@ class ChainSolution:
     n_reduced_dofs: int
 
 
-def twist_transform(frame: np.ndarray) -> np.ndarray:
+def frame_axes_transform(frame: np.ndarray) -> np.ndarray:
     """(6, 6) block-diag(R^T, R^T) taking a twist or wrench from mesh axes to the axes of
-    ``frame`` (3, 3) (columns = frame axes in mesh coordinates, orthonormal)."""
+    ``frame`` (3, 3) (columns = frame axes in mesh coordinates, orthonormal): a change of
+    axes at the same point, ``geometry.frames.twist_transform(R^T, 0)``."""
     R = np.asarray(frame, float)
     if R.shape != (3, 3) or not np.allclose(R.T @ R, np.eye(3), atol=1e-9):
         raise ValueError("frame must be a (3, 3) orthonormal matrix whose columns are the frame axes")
-    A = np.zeros((6, 6))
-    A[:3, :3] = A[3:, 3:] = R.T
-    return A
+    return twist_transform(R.T, np.zeros(3))
 
 
 def reduced_system(
@@ -150,7 +150,7 @@ def solve_hinge(
     ]
     nodes, cmap, K_r = reduced_system(mesh, material, couplings, stiffness)
     master = cmap.master_dofs[1]
-    A = np.eye(6) if frame is None else twist_transform(frame)
+    A = np.eye(6) if frame is None else frame_axes_transform(frame)
     rhs = np.zeros((cmap.n_reduced, 6))
     rhs[master] = A.T  # column k: unit load k given in frame axes, in mesh axes
     near_null = reduced_rigid_body_modes(nodes, cmap, couplings) if method == "amg" else None
@@ -226,7 +226,7 @@ def solve_chain(
     u_r[m] = np.eye(12)
     fields = (cmap.transform @ u_r).T.reshape(12, len(nodes), 3)
     if frame is not None:
-        A = np.kron(np.eye(2), twist_transform(frame))
+        A = np.kron(np.eye(2), frame_axes_transform(frame))
         K_c = A @ K_c @ A.T
         fields = np.einsum("kl,lni->kni", A, fields)
     return ChainSolution(

@@ -22,6 +22,8 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
+from flexcal.geometry.frames import skew
+
 __all__ = [
     "DEFAULT_PLANE_TOLERANCE",
     "RigidCoupling",
@@ -29,7 +31,6 @@ __all__ = [
     "mesh_size",
     "select_plane_nodes",
     "coupling_map",
-    "skew",
     "rigid_body_modes",
     "eliminate_dofs",
 ]
@@ -73,16 +74,6 @@ class CouplingMap:
     @property
     def n_reduced(self) -> int:
         return self.transform.shape[1]
-
-
-def skew(vectors: np.ndarray) -> np.ndarray:
-    """Cross-product matrices [v]x (..., 3, 3) of vectors (..., 3): [v]x @ w = v x w."""
-    v = np.asarray(vectors, float)
-    S = np.zeros(v.shape[:-1] + (3, 3))
-    S[..., 0, 1], S[..., 0, 2] = -v[..., 2], v[..., 1]
-    S[..., 1, 0], S[..., 1, 2] = v[..., 2], -v[..., 0]
-    S[..., 2, 0], S[..., 2, 1] = -v[..., 1], v[..., 0]
-    return S
 
 
 def mesh_size(mesh) -> float:

@@ -1,4 +1,4 @@
-"""flexcal.geometry: parametric flexure hinges, chains and the reference mechanism (CadQuery solids load lazily).
+"""flexcal.geometry: parametric flexure hinges, chains and the reference mechanism, rigid-body frame algebra (CadQuery solids load lazily).
 
 Public names load on first use (``flexcal.geometry._lazy``).
 """
@@ -30,6 +30,28 @@ _EXPORTS = {
     "end_planes": "exact",
     "reference_points": "exact",
     "bounding_box": "exact",
+    "skew": "frames",
+    "vee": "frames",
+    "cross": "frames",
+    "twist_transform": "frames",
+    "frame_to_point_transform": "frames",
+    "rotation_about_x": "frames",
+    "so3_exp": "frames",
+    "so3_log": "frames",
+    "so3_left_jacobian": "frames",
+    "so3_right_jacobian": "frames",
+    "so3_left_jacobian_inverse": "frames",
+    "pose": "frames",
+    "translation_pose": "frames",
+    "se3_exp": "frames",
+    "se3_log": "frames",
+    "se3_inverse": "frames",
+    "se3_adjoint": "frames",
+    "se3_ad": "frames",
+    "se3_left_jacobian": "frames",
+    "se3_right_jacobian": "frames",
+    "se3_left_jacobian_inverse": "frames",
+    "se3_right_jacobian_inverse": "frames",
     "PlanePatch": "surfaces",
     "CylinderPatch": "surfaces",
     "Patch": "surfaces",

@@ -65,13 +65,10 @@ _EXPORTS = {
     "MechanismMatrices": "assembly",
     "mechanism_matrices": "assembly",
     "payload_wrench": "assembly",
-    "N_CHAINS": "assembly",
-    "DRIVING": "assembly",
-    "skew": "frames",
-    "twist_transform": "frames",
-    "frame_to_point_transform": "frames",
+    "N_CHAINS": "parameters",
+    "LOAD": "parameters",
+    "DRIVING": "parameters",
     "axis_rotation": "frames",
-    "rotation_about_x": "frames",
     "read_parameter_file": "param_file",
 }
 

@@ -6,13 +6,13 @@ threads this lets LLVM optimize the outlined loop body (measured 3x faster than 
 loop compiled serially, even on one thread). First compilation takes ~20 s, then cached.
 ``_segment_entries`` and ``chain_entries`` repeat the formulas of ``hinge.segment_entries``
 and ``chain.chain_compliance_entries`` (tests hold them equal to 1e-14).
-Status codes: 0 converged, 1 no convergence in max_iter, 2 diverged, 3 clearance failed.
+Status codes: ``point_status`` (0 converged, 1 no convergence in max_iter, 2 diverged, 3 clearance failed).
 """
 
 import numpy as np
 from numba import njit, prange
 
-from .kernel import CLEARANCE_FAILED, DIVERGED, NOT_CONVERGED, OK  # noqa: F401
+from .point_status import CLEARANCE_FAILED, DIVERGED, NOT_CONVERGED, OK
 
 # reassociation and fused multiply-add, but no "no NaN/inf" assumptions: divergence and NaN
 # checks must survive optimization

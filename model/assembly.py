@@ -28,18 +28,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from flexcal.geometry.frames import frame_to_point_transform
 from flexcal.geometry.params import MechanismParams
 
 from . import kernel
 from .chain import chain_compliance_entries, stiffness_from_entries
 from .second_order import preload_geometric_stiffness
-from .frames import axis_rotation, frame_to_point_transform
-from .parameters import CHAIN_NAMES, ParameterSpace
+from .frames import axis_rotation
+from .parameters import CHAIN_NAMES, DRIVING, LOAD, N_CHAINS, ParameterSpace
 
-__all__ = ["MechanismMatrices", "mechanism_matrices", "payload_wrench", "N_CHAINS", "DRIVING"]
+__all__ = ["MechanismMatrices", "mechanism_matrices", "payload_wrench"]
 
-N_CHAINS = 6
-DRIVING = slice(3, 6)
 COMPILED_MIN_CANDIDATES = 32  # batches this large use the compiled linear algebra (tested equal)
 
 
@@ -98,26 +97,31 @@ def payload_wrench(mech: MechanismParams) -> np.ndarray:
     return np.concatenate([force, np.cross(np.asarray(mech.centre_of_gravity, dtype=float), force)])
 
 
+# valid values by symbol (every value finite; the symbols not named here > 0)
 _RULES = {"a": "0 <= a <= l/2", "mu": "0 <= mu <= 1", "d": ">= 0", "CL": ">= 0", "phi": "finite", "x0": "finite"}
 
 
-def _validate(values: np.ndarray, names: tuple[str, ...], candidate_offset: int = 0) -> None:
+@functools.lru_cache(maxsize=16)
+def _range_masks(names: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(n_params,) masks of the parameters that must be > 0, >= 0 and <= 1 (``_RULES``), by symbol."""
+    symbol = np.array([name.split(".")[1] for name in names])
+    positive = ~np.isin(symbol, tuple(_RULES))
+    return positive, np.isin(symbol, ("a", "d", "mu", "CL")), symbol == "mu"
+
+
+def _validate(values: np.ndarray, space: ParameterSpace, candidate_offset: int = 0) -> None:
     """Raise ``ValueError`` naming the first candidate and parameter with an invalid value."""
-    n_c = values.shape[0]
+    positive, non_negative, at_most_one = _range_masks(space.all_names)
+    fillet, length = space.chain_indices("a", "l").T
     with np.errstate(invalid="ignore"):
-        problem = ~np.isfinite(values)
-        dims = values[:, :30].reshape(n_c, N_CHAINS, 5)
-        dim_bad = dims <= 0
-        dim_bad[..., 1] = (dims[..., 1] < 0) | (2.0 * dims[..., 1] > dims[..., 2])
-        problem[:, :30] |= dim_bad.reshape(n_c, 30)
-        problem[:, 30:36:2] |= values[:, 30:36:2] < 0
-        problem[:, 36::3] |= (values[:, 36::3] < 0) | (values[:, 36::3] > 1)
-        problem[:, 37::3] |= values[:, 37::3] < 0
+        problem = (~np.isfinite(values) | (positive & (values <= 0)) | (non_negative & (values < 0))
+                   | (at_most_one & (values > 1)))
+        problem[:, fillet] |= 2.0 * values[:, fillet] > values[:, length]
     if np.any(problem):
         cand, col = np.argwhere(problem)[0]
-        symbol = names[col].split(".")[1]
-        rule = _RULES.get(symbol, "> 0")
-        raise ValueError(f"candidate {cand + candidate_offset}: parameter {names[col]}={values[cand, col]!r} (SI) is invalid: "
+        name = space.all_names[col]
+        rule = _RULES.get(name.split(".")[1], "> 0")
+        raise ValueError(f"candidate {cand + candidate_offset}: parameter {name}={values[cand, col]!r} (SI) is invalid: "
                          f"must be finite and {rule}")
 
 
@@ -164,18 +168,17 @@ def mechanism_matrices(values, space: ParameterSpace, *, candidate_offset: int =
     if values.ndim != 2 or values.shape[1] != len(space.parameters):
         raise ValueError(f"parameter values must have shape (n_candidates, {len(space.parameters)}) with all "
                          f"parameters (use ParameterSpace.full_values for a subset), got {values.shape}")
-    _validate(values, space.all_names, candidate_offset)
+    _validate(values, space, candidate_offset)
     mech = space.mechanism
     n_c = values.shape[0]
-    dims = values[:, :30].reshape(n_c, N_CHAINS, 5)
-    w, a, l, t1, t2 = (dims[..., j] for j in range(5))
+    w, a, l, t1, t2 = np.moveaxis(values[:, space.chain_indices("w", "a", "l", "t1", "t2")], -1, 0)  # (n_c, 6) each
     fixed = _mechanism_constants(mech)
     point_a0, point_b, roll, nominal_rotation = fixed["point_a"], fixed["point_b"], fixed["roll"], fixed["rotation"]
     section, connector, end_block, actuator = fixed["section"], fixed["connector"], fixed["end_block"], fixed["actuator"]
     offset = np.zeros((n_c, N_CHAINS, 3))
-    d, phi = values[:, 30:36:2], values[:, 31:36:2]
-    offset[:, :3] = d[..., None] * (np.cos(phi)[..., None] * nominal_rotation[:3, :, 1]
-                                     + np.sin(phi)[..., None] * nominal_rotation[:3, :, 2])
+    d, phi = np.moveaxis(values[:, space.chain_indices("d", "phi")], -1, 0)  # (n_c, 3): the load chains
+    offset[:, LOAD] = d[..., None] * (np.cos(phi)[..., None] * nominal_rotation[LOAD, :, 1]
+                                       + np.sin(phi)[..., None] * nominal_rotation[LOAD, :, 2])
     point_a = point_a0 + offset
     rotation = axis_rotation(point_a, point_b, roll)
     length = np.linalg.norm(point_b - point_a, axis=-1)
@@ -238,8 +241,10 @@ def mechanism_matrices(values, space: ParameterSpace, *, candidate_offset: int =
     nut = axial_stiffness[:, DRIVING] - np.diagonal(coupling, axis1=1, axis2=2)[:, DRIVING]
     if np.any(nut <= 0):
         cand, chain = np.argwhere(nut <= 0)[0]
-        raise ValueError(f"candidate {cand + candidate_offset}: driving chain D{chain + 1} has no stiffness of its own "
-                         f"(s = {nut[cand, chain]:.3g} N/m); the mechanism is singular for these parameters")
+        raise ValueError(f"candidate {cand + candidate_offset}: driving chain {CHAIN_NAMES[DRIVING][chain]} has no "
+                         f"stiffness of its own (s = {nut[cand, chain]:.3g} N/m); the mechanism is singular for these "
+                         f"parameters")
+    mu, clearance, initial_position = np.moveaxis(values[:, space.chain_indices("mu", "CL", "x0")], -1, 0)  # drives
     return MechanismMatrices(
         chain_stiffness=stiffness, frame_transform=transform, rotation=rotation, point_a=point_a,
         frame_stiffness=frame_stiffness, axial_gain=axial_gain, input_gain=input_gain, gravity_pose=gravity_pose,
@@ -247,7 +252,7 @@ def mechanism_matrices(values, space: ParameterSpace, *, candidate_offset: int =
         axial_stiffness=axial_stiffness, load_gain=load_gain, nut_stiffness=nut,
         parasitic_rows=parasitic_rows, parasitic_gain=parasitic_gain, parasitic_gravity=parasitic_gravity,
         parasitic_coefficient=0.5 / pivot_distance,
-        mu=values[:, 36::3].copy(), clearance=values[:, 37::3].copy(), initial_position=values[:, 38::3].copy(),
+        mu=mu.copy(), clearance=clearance.copy(), initial_position=initial_position.copy(),
         point_b=np.broadcast_to(point_b, (n_c,) + point_b.shape).copy(),
         second_order=np.full(n_c, bool(space.second_order)),
     )

@@ -1,7 +1,7 @@
 """Paper Eq. 1: the compliance of a flexure chain as a serial sum of element compliances.
 
 ``C_out = sum_i T_i C_i T_i^T`` with the adjoint ``T_i = [[R_i, [r_i]x R_i], [0, R_i]]``,
-``r_i = p_i - p_out`` (``frames.twist_transform``): element i is clamped at its A-side end,
+``r_i = p_i - p_out`` (``geometry.frames.twist_transform``): element i is clamped at its A-side end,
 loaded at ``p_i`` (its B-side end), with local axes ``R_i``; the elements are in series
 between the clamped end A and the output point.
 
@@ -18,10 +18,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from flexcal.geometry.frames import twist_transform
 from flexcal.geometry.params import CircularNotchHinge, FlexureChain, LeafHinge, Material
 
 from . import kernel
-from .frames import twist_transform
 from .hinge import (ENTRY_INDEX, _gauss_legendre, beam_compliance, circular_notch_compliance, entries_to_matrix,
                     gauss_node_count, leaf_compliance, segment_entries, shear_coefficient, torsion_constant)
 
@@ -160,7 +160,8 @@ def chain_compliance_entries(length, hinge_length, width, fillet, thickness_1, t
         nodes, weights = _gauss_legendre(gauss_node_count(1.0 / tau[np.broadcast_to(a, tau.shape) > 0]))
         actuator = 0.0 if actuator_stiffness is None else 1.0 / np.asarray(actuator_stiffness, dtype=float)
         out = kernel.chain_entries_compiled(length, l, w, a, t1, t2, section, connector_length, end_block_length,
-                                            actuator, material, nodes, weights)
+                                            actuator, material, shear_coefficient(material.poisson_ratio), nodes,
+                                            weights)
         return {key: out[..., i] for i, key in enumerate(_KEYS)}
     e, nu = material.youngs_modulus, material.poisson_ratio
     shape = length.shape

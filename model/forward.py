@@ -31,10 +31,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import kernel, solver
-from .assembly import DRIVING, MechanismMatrices, mechanism_matrices
+from . import kernel, point_status, solver
+from .assembly import MechanismMatrices, mechanism_matrices
 from .clearance import ConvergenceError
-from .parameters import ParameterSpace, parameter_space
+from .parameters import DRIVING, ParameterSpace, parameter_space
 from .second_order import second_order_pose
 from .trajectory import travel_directions
 
@@ -129,14 +129,14 @@ def resolve_engine(engine: str, n_postures: int | None = None) -> str:
 
 
 def _raise_for_codes(codes: np.ndarray, max_iter: int, tol: float, offset: int) -> None:
-    bad = codes != kernel.OK
+    bad = codes != point_status.OK
     if not np.any(bad):
         return
     cand, point = (int(i) for i in np.argwhere(bad)[0])
-    reason = {kernel.NOT_CONVERGED: f"no convergence in {max_iter} iterations (tol = {tol:g} m)",
-              kernel.DIVERGED: "the parasitic/clearance iteration diverges; the inputs are too large for the "
+    reason = {point_status.NOT_CONVERGED: f"no convergence in {max_iter} iterations (tol = {tol:g} m)",
+              point_status.DIVERGED: "the parasitic/clearance iteration diverges; the inputs are too large for the "
                                "small-deflection model",
-              kernel.CLEARANCE_FAILED: "clearance solve found no consistent state"}[int(codes[cand, point])]
+              point_status.CLEARANCE_FAILED: "clearance solve found no consistent state"}[int(codes[cand, point])]
     raise ConvergenceError(reason, candidate=cand + offset, point=point)
 
 

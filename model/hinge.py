@@ -55,9 +55,10 @@ import functools
 
 import numpy as np
 
+from flexcal.geometry.frames import twist_transform
 from flexcal.geometry.params import CircularNotchHinge, LeafHinge, Material
 
-from .frames import twist_transform
+from . import kernel
 
 __all__ = [
     "segment_compliance",
@@ -161,8 +162,6 @@ def _arc_first_moments(radius: np.ndarray, thickness: np.ndarray) -> tuple[np.nd
 
 def _arc_quadrature(radius: np.ndarray, thickness: np.ndarray, width: np.ndarray) -> dict[str, np.ndarray]:
     """``_arc_quadrature_numpy``, compiled (``kernel.arc_quadrature_compiled``) when numba is there."""
-    from . import kernel
-
     r, t, w = np.broadcast_arrays(np.asarray(radius, float), np.asarray(thickness, float), np.asarray(width, float))
     if r.size < COMPILED_MIN_ARCS or not kernel.available():
         return _arc_quadrature_numpy(r, t, w)

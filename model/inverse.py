@@ -27,10 +27,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .assembly import DRIVING, MechanismMatrices, mechanism_matrices
+from .assembly import MechanismMatrices, mechanism_matrices
 from .clearance import ConvergenceError
 from .forward import ForwardResult, resolve_engine, solve_matrices
-from .parameters import ParameterSpace, parameter_space
+from .parameters import DRIVING, ParameterSpace, parameter_space
 from .trajectory import travel_directions
 
 __all__ = ["InverseResult", "inverse", "NotInvertibleError", "forward_jacobian"]

@@ -12,8 +12,8 @@ from the previous point's parasitic term, clearance and chain statuses. Iterate
 
 until max |dv| <= tol at that point. The clearance box QP is solved by active-set sweeps
 from the warm start, falling back to enumerating its 27 faces. Status codes per point:
-0 converged, 1 no convergence in max_iter, 2 diverged, 3 clearance solve failed; pose,
-loads, release, states and class are computed in the same pass.
+0 converged, 1 no convergence in max_iter, 2 diverged, 3 clearance solve failed
+(``point_status``); pose, loads, release, states and class are computed in the same pass.
 
 numba is imported only when a compiled function runs (``import flexcal.model`` stays
 fast); ``available()`` says whether it can be. It comes with CadQuery here.
@@ -25,10 +25,8 @@ import functools
 
 import numpy as np
 
-__all__ = ["available", "solve_points_compiled", "arc_quadrature_compiled", "chain_entries_compiled", "assemble_compiled", "OK",
-           "NOT_CONVERGED", "DIVERGED", "CLEARANCE_FAILED"]
+__all__ = ["available", "solve_points_compiled", "arc_quadrature_compiled", "chain_entries_compiled", "assemble_compiled"]
 
-OK, NOT_CONVERGED, DIVERGED, CLEARANCE_FAILED = 0, 1, 2, 3
 _FACES = np.array([[i, j, k] for i in range(3) for j in range(3) for k in range(3)], dtype=np.int64)
 
 
@@ -70,10 +68,11 @@ def assemble_compiled(stiffness, rotation, point_b, centre, wrench) -> dict[str,
 
 
 def chain_entries_compiled(length, hinge_length, width, fillet, thickness_1, thickness_2, section, connector,
-                           end_block, actuator_compliance, material, nodes, weights) -> np.ndarray:
-    """Compiled ``chain.chain_compliance_entries``: broadcast inputs -> (..., 8) entries."""
-    from .hinge import shear_coefficient
+                           end_block, actuator_compliance, material, shear_coefficient, nodes, weights) -> np.ndarray:
+    """Compiled ``chain.chain_compliance_entries``: broadcast inputs -> (..., 8) entries.
 
+    shear_coefficient [-]: Timoshenko's coefficient of ``material`` (``hinge.shear_coefficient``).
+    """
     arrays = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (
         length, hinge_length, width, fillet, thickness_1, thickness_2, section, connector, end_block,
         actuator_compliance)))
@@ -81,7 +80,7 @@ def chain_entries_compiled(length, hinge_length, width, fillet, thickness_1, thi
     flat = [np.ascontiguousarray(v).reshape(-1) for v in arrays]
     out = np.empty((flat[0].size, 8))
     _kernels()[2](*flat, float(material.youngs_modulus), float(material.shear_modulus),
-                  float(shear_coefficient(material.poisson_ratio)), np.asarray(nodes, float),
+                  float(shear_coefficient), np.asarray(nodes, float),
                   np.asarray(weights, float), out)
     return out.reshape(shape + (8,))
 
@@ -106,8 +105,8 @@ def solve_points_compiled(matrices, inputs: np.ndarray, directions: np.ndarray, 
     """
     import numba
 
-    from .assembly import DRIVING
     from .clearance import clearance_coupling
+    from .parameters import DRIVING
 
     m = matrices
     n_c, n_p = m.n_candidates, inputs.shape[0]

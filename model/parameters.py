@@ -21,6 +21,7 @@ Values are SI ([m], [rad], [-]); ``display_scale`` converts to the display unit
 from __future__ import annotations
 
 import dataclasses
+import fnmatch
 import functools
 import math
 from dataclasses import dataclass, field
@@ -30,9 +31,12 @@ import numpy as np
 from flexcal.geometry.params import MechanismParams, reference_mechanism
 
 __all__ = ["Parameter", "ParameterSpace", "parameter_space", "parameter_table_markdown",
-           "DIMENSION_SYMBOLS", "CHAIN_NAMES"]
+           "DIMENSION_SYMBOLS", "CHAIN_NAMES", "N_CHAINS", "LOAD", "DRIVING"]
 
 CHAIN_NAMES = ("L1", "L2", "L3", "D1", "D2", "D3")
+N_CHAINS = len(CHAIN_NAMES)
+LOAD = slice(CHAIN_NAMES.index("L1"), CHAIN_NAMES.index("L3") + 1)  # the load chains on a chain axis
+DRIVING = slice(CHAIN_NAMES.index("D1"), CHAIN_NAMES.index("D3") + 1)  # the driving chains on a chain axis
 DIMENSION_SYMBOLS = ("w", "a", "l", "t1", "t2")
 _DIMENSION_FIELDS = {"w": "width", "a": "fillet", "l": "hinge_length", "t1": "thickness_1", "t2": "thickness_2"}
 _DESCRIPTIONS = {
@@ -148,8 +152,9 @@ class ParameterSpace:
             raise ValueError(f"base_values must have {len(self.parameters)} entries, got {len(self.base_values)}")
 
     # --- names and indices -------------------------------------------------------------
-    @property
+    @functools.cached_property
     def all_names(self) -> tuple[str, ...]:
+        """Names of all parameters, in space order (computed once per space)."""
         return tuple(p.name for p in self.parameters)
 
     @property
@@ -175,6 +180,17 @@ class ParameterSpace:
 
     def parameter(self, name: str) -> Parameter:
         return self.parameters[self.index(name)]
+
+    def indices(self, pattern: str) -> np.ndarray:
+        """Positions among all parameters of the names matching ``pattern`` (``fnmatch``:
+        ``"D*.x0"``, ``"*.w"``, ``"L1.*"``), in space order: (n,) int, read-only."""
+        return _matching_indices(self.all_names, pattern)
+
+    def chain_indices(self, *symbols: str) -> np.ndarray:
+        """(n_chains, n_symbols) positions of ``"<chain>.<symbol>"`` for the chains that have
+        these symbols, chains in space order, read-only: ``values[..., space.chain_indices("mu",
+        "CL")]`` is (..., 3, 2), the drives' hysteresis and clearance side by side."""
+        return _chain_indices(self.all_names, symbols)
 
     # --- vectors ---------------------------------------------------------------------------
     @property
@@ -269,6 +285,26 @@ class ParameterSpace:
         if values.ndim == 0 or values.shape[-1] != width:
             raise ValueError(f"{what} must have shape (..., {width}), got {values.shape}")
         return values
+
+
+@functools.lru_cache(maxsize=256)
+def _matching_indices(names: tuple[str, ...], pattern: str) -> np.ndarray:
+    found = np.array([i for i, name in enumerate(names) if fnmatch.fnmatchcase(name, pattern)], dtype=int)
+    if found.size == 0:
+        raise ValueError(f"no parameter name matches {pattern!r}; names look like 'L1.w', 'D2.CL' (docs/parameters.md)")
+    found.flags.writeable = False
+    return found
+
+
+@functools.lru_cache(maxsize=64)
+def _chain_indices(names: tuple[str, ...], symbols: tuple[str, ...]) -> np.ndarray:
+    columns = [_matching_indices(names, f"*.{symbol}") for symbol in symbols]
+    chains = [[names[i].split(".")[0] for i in column] for column in columns]
+    if any(c != chains[0] for c in chains):
+        raise ValueError(f"the symbols {symbols} do not belong to the same chains: {dict(zip(symbols, chains))}")
+    found = np.stack(columns, axis=-1)
+    found.flags.writeable = False
+    return found
 
 
 def parameter_space(mech: MechanismParams | None = None) -> ParameterSpace:

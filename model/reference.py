@@ -16,8 +16,9 @@ import itertools
 
 import numpy as np
 
-from .assembly import DRIVING, MechanismMatrices, payload_wrench
+from .assembly import MechanismMatrices, payload_wrench
 from .clearance import ConvergenceError
+from .parameters import DRIVING
 
 __all__ = ["reference_point", "reference_forward"]
 

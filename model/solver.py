@@ -15,8 +15,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from .assembly import DRIVING, MechanismMatrices
+from .assembly import MechanismMatrices
 from .clearance import ConvergenceError, FixedFaces, clearance_coupling, solve_clearance
+from .parameters import DRIVING
 
 __all__ = ["solve_points", "FULL_CLEARANCE_SOLVES"]
 

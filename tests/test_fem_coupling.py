@@ -13,9 +13,9 @@ from flexcal.fem.coupling import (
     mesh_size,
     rigid_body_modes,
     select_plane_nodes,
-    skew,
 )
 from flexcal.fem.structured import box_tet_mesh
+from flexcal.geometry.frames import skew
 
 MESH = box_tet_mesh(0.04, 0.01, 0.02, 4, 2, 2)
 

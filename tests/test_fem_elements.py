@@ -23,7 +23,7 @@ from flexcal.fem.elements import (
     strain_displacement,
     _physical_gradients,
 )
-from flexcal.fem.coupling import rigid_body_modes, skew
+from flexcal.fem.coupling import rigid_body_modes
 from flexcal.geometry.params import Material
 
 from helpers import well_shaped_p2_tets as _random_tets
@@ -161,10 +161,3 @@ def test_element_stiffness_is_symmetric_psd_with_rigid_null_space(seed, poisson,
     assert eigenvalues[0] >= -1e-12 * scale  # PSD up to eigvalsh round-off ~ eps ||K|| sqrt(30)
     # exactly 6 zero modes: the 7th eigenvalue is a real deformation mode, far above round-off
     assert eigenvalues[6] > 1e-6 * scale
-
-
-def test_skew_matches_cross_product():
-    rng = np.random.default_rng(9)
-    a, b = rng.standard_normal((2, 5, 3))
-    # round-off of products of N(0, 1) numbers
-    np.testing.assert_allclose(skew(a) @ b[..., None], np.cross(a, b)[..., None], atol=1e-15)

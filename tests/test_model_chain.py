@@ -6,9 +6,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
+from flexcal.geometry.frames import twist_transform
 from flexcal.geometry.params import STEEL, reference_mechanism
 from flexcal.model import chain, hinge
-from flexcal.model.frames import twist_transform
 
 
 def relative_error(a, b):

@@ -7,8 +7,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from flexcal.model import clearance
-from flexcal.model.assembly import DRIVING, mechanism_matrices
-from flexcal.model.parameters import parameter_space
+from flexcal.model.assembly import mechanism_matrices
+from flexcal.model.parameters import DRIVING, parameter_space
 
 SPACE = parameter_space()
 

@@ -162,7 +162,7 @@ def test_eq7_holds_and_states_match_it(seed, scale):
     values = random_values(4, seed)
     rng = np.random.default_rng(seed)
     inputs = scale * rng.uniform(-1e-3, 1e-3, (12, 3))
-    mu, limit = values[:, 36::3][:, None, :], values[:, 37::3][:, None, :]
+    mu, limit = values[:, SPACE.indices("*.mu")][:, None, :], values[:, SPACE.indices("*.CL")][:, None, :]
     force_only = forward(values, inputs, clearance_mode="force_only")
     # force-only reading: d_i = +1, C = clip(mu fx, 0, CL) with fx = N(C_i = 0)/s
     np.testing.assert_allclose(force_only.clearance, np.clip(mu * force_only.release, 0.0, limit), rtol=0, atol=1e-12)

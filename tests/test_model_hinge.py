@@ -7,9 +7,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.integrate import quad
 
+from flexcal.geometry.frames import twist_transform
 from flexcal.geometry.params import STEEL, CircularNotchHinge, LeafHinge, Material
 from flexcal.model import hinge
-from flexcal.model.frames import twist_transform
 
 
 def quad_entries(flat_half, fillet, thickness, width, material=STEEL):

@@ -23,6 +23,20 @@ def test_the_45_sources_in_the_agreed_order():
     assert names[36:] == ("D1.mu", "D1.CL", "D1.x0", "D2.mu", "D2.CL", "D2.x0", "D3.mu", "D3.CL", "D3.x0")
 
 
+def test_parameters_are_found_by_name():
+    names = np.array(SPACE.all_names)
+    assert names[SPACE.indices("D*.x0")].tolist() == ["D1.x0", "D2.x0", "D3.x0"]
+    assert names[SPACE.indices("L1.*")].tolist() == ["L1.w", "L1.a", "L1.l", "L1.t1", "L1.t2", "L1.d", "L1.phi"]
+    table = names[SPACE.chain_indices("mu", "CL", "x0")]  # (chains, symbols)
+    assert table.tolist() == [[f"{c}.{s}" for s in ("mu", "CL", "x0")] for c in ("D1", "D2", "D3")]
+    assert names[SPACE.chain_indices("w", "t2")].shape == (6, 2)
+    assert not SPACE.indices("*.d").flags.writeable  # cached: nobody may change them
+    with pytest.raises(ValueError, match="no parameter name matches 'D1.x9'"):
+        SPACE.indices("D1.x9")
+    with pytest.raises(ValueError, match="same chains"):
+        SPACE.chain_indices("d", "mu")  # load chains vs drives
+
+
 def test_bounds_follow_the_paper():
     p = SPACE.parameter("D1.t1")
     assert p.nominal == pytest.approx(3e-3) and (p.lower, p.upper) == pytest.approx((2.7e-3, 3.3e-3))

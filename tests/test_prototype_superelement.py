@@ -4,9 +4,9 @@ gradient and tangent against finite differences, and parasitic foreshortening.""
 import numpy as np
 import pytest
 
+from flexcal.geometry.frames import pose, se3_exp, se3_inverse, se3_right_jacobian, translation_pose
 from flexcal.geometry.params import reference_mechanism
 from flexcal.validation.prototype import superelement as se
-from flexcal.validation.prototype.kinematics import pose, se3_exp, se3_inverse, translation_pose
 from flexcal.validation.prototype.equilibrium import Loads, SolverSettings, build_assembly, solve_equilibrium
 from flexcal.validation.prototype.segments import analytic_provider, end_stiffness, section_nodes
 
@@ -87,7 +87,6 @@ def test_tangent_is_the_hessian_of_the_pulled_back_energy(segment):
 
     def gradient_of_pullback(d):
         """grad of f(d) = U(T_i exp(d_i), T_j exp(d_j)) at d, via J_r(d)^T (chain rule)."""
-        from flexcal.validation.prototype.kinematics import se3_right_jacobian
         g = se.segment_gradient(se.relative_pose(start @ se3_exp(d[:6]), end @ se3_exp(d[6:])),
                                 REF_INV[segment], KJJ[segment])
         return np.r_[se3_right_jacobian(d[:6]).T @ g[:6], se3_right_jacobian(d[6:]).T @ g[6:]]

@@ -144,7 +144,7 @@ def end_compliance(chain: FlexureChain, x_start: float, x_end: float, material: 
     cut anywhere (uniform Timoshenko beams of the square section). Uses the analytic
     model's hinge compliances (``flexcal.model.hinge``) and Eq. 1.
     """
-    from flexcal.model.frames import rotation_about_x, twist_transform
+    from flexcal.geometry.frames import rotation_about_x, twist_transform
     from flexcal.model.hinge import beam_compliance, leaf_compliance
 
     if not 0.0 <= x_start < x_end <= chain.length + 1e-12:

@@ -21,9 +21,9 @@ import dataclasses
 
 import numpy as np
 
+from flexcal.geometry.frames import twist_transform
 from flexcal.geometry.params import FlexureChain
 from flexcal.model.chain import chain_compliance_matrix
-from flexcal.model.frames import twist_transform
 from flexcal.model.hinge import ENTRY_INDEX
 from flexcal.model.parameters import ParameterSpace
 
