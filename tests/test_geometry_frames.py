@@ -111,7 +111,7 @@ def test_log_of_a_rotation_about_one_axis_is_its_angle(angle):
     # relative 1e-13: the Taylor series (truncated after theta^6) err < 1e-13 relative at the
     # 0.1 rad switch (measured 2.7e-14); elsewhere the error is round-off, ~1e-16 relative
     np.testing.assert_allclose(fr.so3_log(about_z), [0.0, 0.0, angle], rtol=1e-13, atol=0)
-    np.testing.assert_allclose(fr.so3_log(Rotation.from_rotvec(phi).as_matrix()), phi, rtol=1e-13, atol=1e-13 * angle)
+    np.testing.assert_allclose(fr.so3_log(Rotation.from_rotvec(phi).as_matrix()), phi, rtol=1e-13, atol=1e-13 * angle)  # as above
 
 
 def test_tiny_rotation_keeps_relative_precision():
@@ -125,7 +125,7 @@ def test_series_and_closed_forms_meet_at_the_switch():
     # (the closed forms' cancellation error at 0.1 rad, see frames._SERIES_ANGLE)
     axis = np.array([0.3, -0.5, 0.8]) / np.linalg.norm([0.3, -0.5, 0.8])
     below, above = (fr.se3_left_jacobian_inverse(np.r_[0.1, 0.2, -0.1, a * axis]) for a in (0.1 - 1e-12, 0.1 + 1e-12))
-    assert np.allclose(below, above, rtol=1e-9, atol=1e-9)
+    assert np.allclose(below, above, rtol=1e-9, atol=1e-9)  # cancellation error at 0.1 rad (above)
 
 
 def test_adjoint_is_a_homomorphism():
@@ -133,7 +133,7 @@ def test_adjoint_is_a_homomorphism():
     t1, t2 = (fr.se3_exp(_twists(rng, 30, 1.0)) for _ in range(2))
     # 6x6 products of O(1) entries: measured 2.2e-16, 1e-14 is ~50 ulps of margin
     np.testing.assert_allclose(fr.se3_adjoint(t1 @ t2), fr.se3_adjoint(t1) @ fr.se3_adjoint(t2), atol=1e-14)
-    np.testing.assert_allclose(fr.se3_adjoint(fr.se3_inverse(t1)), np.linalg.inv(fr.se3_adjoint(t1)), atol=1e-14)
+    np.testing.assert_allclose(fr.se3_adjoint(fr.se3_inverse(t1)), np.linalg.inv(fr.se3_adjoint(t1)), atol=1e-14)  # as above
 
 
 def test_adjoint_is_the_twist_transform_of_the_pose():
@@ -173,14 +173,14 @@ def test_jacobians_against_finite_differences(rotation_scale):
             left = (fr.se3_log(fr.se3_exp(e) @ t) - fr.se3_log(fr.se3_exp(-e) @ t)) / (2 * h)
             right = (fr.se3_log(t @ fr.se3_exp(e)) - fr.se3_log(t @ fr.se3_exp(-e))) / (2 * h)
             # central differences: O(h^2) ~ 1e-12 truncation, ~1e-10 round-off (1e-16 / h)
-            assert np.allclose(left, j_l_inv[:, k], atol=1e-8)
-            assert np.allclose(right, j_r_inv[:, k], atol=1e-8)
+            assert np.allclose(left, j_l_inv[:, k], rtol=0, atol=1e-8)
+            assert np.allclose(right, j_r_inv[:, k], rtol=0, atol=1e-8)  # as above; rtol=0 (default 1e-5 hid it)
             # forward Jacobians: exp(xi + e) = exp(J_l e) exp(xi) = exp(xi) exp(J_r e)
             moved = (fr.se3_exp(xi + e) - fr.se3_exp(xi - e)) / (2 * h)
             assert np.allclose(moved, (fr.se3_exp(j_l[:, k] * h) - fr.se3_exp(-j_l[:, k] * h)) / (2 * h) @ t,
-                               atol=1e-8)
+                               rtol=0, atol=1e-8)  # as above
             assert np.allclose(moved, t @ (fr.se3_exp(j_r[:, k] * h) - fr.se3_exp(-j_r[:, k] * h)) / (2 * h),
-                               atol=1e-8)
+                               rtol=0, atol=1e-8)  # as above
         assert np.allclose(j_l @ j_l_inv, np.eye(6), atol=1e-12)  # inverse pair to round-off
 
 
