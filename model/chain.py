@@ -56,6 +56,19 @@ def serial_compliance(element_compliance: np.ndarray, element_rotation: np.ndarr
     return np.sum(transform @ element_compliance @ np.swapaxes(transform, -1, -2), axis=-3)
 
 
+def _dimensions(length, hinge_length, width, fillet, thickness_1, thickness_2, end_block_length,
+                connector_length):
+    """The chain's dimensions broadcast to one batch shape, and its strut length [m];
+    ``ValueError`` when the hinges and blocks leave no strut."""
+    length, l, w, a, t1, t2 = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in
+                                                    (length, hinge_length, width, fillet, thickness_1, thickness_2)))
+    strut = length - 2.0 * end_block_length - 4.0 * l - 2.0 * connector_length
+    if np.any(strut <= 0):
+        raise ValueError("chain length must exceed 2*end_block + 4*hinge_length + 2*connector "
+                         "(the strut length came out <= 0); shorten the hinges or lengthen the chain")
+    return length, l, w, a, t1, t2, strut
+
+
 def chain_elements(length, hinge_length, width, fillet, thickness_1, thickness_2, *, section: float,
                    connector_length: float, end_block_length: float, material: Material):
     """The nine elements of a chain from A to B, for ``serial_compliance``.
@@ -64,12 +77,8 @@ def chain_elements(length, hinge_length, width, fillet, thickness_1, thickness_2
     [m] broadcast over a batch; section, connector_length, end_block_length [m] scalars.
     Returns (compliance (..., 9, 6, 6), rotation (9, 3, 3), loaded-end point (..., 9, 3)).
     """
-    length, l, w, a, t1, t2 = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in
-                                                    (length, hinge_length, width, fillet, thickness_1, thickness_2)))
-    strut = length - 2.0 * end_block_length - 4.0 * l - 2.0 * connector_length
-    if np.any(strut <= 0):
-        raise ValueError("chain length must exceed 2*end_block + 4*hinge_length + 2*connector "
-                         "(the strut length came out <= 0); shorten the hinges or lengthen the chain")
+    length, l, w, a, t1, t2, strut = _dimensions(length, hinge_length, width, fillet, thickness_1, thickness_2,
+                                                 end_block_length, connector_length)
     leaves = leaf_compliance(l[..., None], np.stack([t1, t2], axis=-1), w[..., None], a[..., None], material)
     blocks = beam_compliance(np.array([end_block_length, connector_length]), section, section, material)
     strut_c = beam_compliance(strut, section, section, material)
@@ -147,12 +156,8 @@ def chain_compliance_entries(length, hinge_length, width, fillet, thickness_1, t
     transforms reduce to ``_shift_along_axis`` and a quarter turn); identical to
     ``serial_compliance(*chain_elements(...))`` to rounding (tests/test_model_chain.py).
     """
-    length, l, w, a, t1, t2 = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in
-                                                    (length, hinge_length, width, fillet, thickness_1, thickness_2)))
-    strut = length - 2.0 * end_block_length - 4.0 * l - 2.0 * connector_length
-    if np.any(strut <= 0):
-        raise ValueError("chain length must exceed 2*end_block + 4*hinge_length + 2*connector "
-                         "(the strut length came out <= 0); shorten the hinges or lengthen the chain")
+    length, l, w, a, t1, t2, strut = _dimensions(length, hinge_length, width, fillet, thickness_1, thickness_2,
+                                                 end_block_length, connector_length)
     if np.any(a < 0) or np.any(2.0 * a > l * (1.0 + 1e-12)):
         raise ValueError("leaf fillet a must satisfy 0 <= a <= l/2 (both fillets must fit the segment)")
     if length.size >= COMPILED_MIN_CHAINS and kernel.available():
