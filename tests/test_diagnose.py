@@ -242,19 +242,37 @@ def test_diagnose_reads_a_measurement_on_a_designed_trajectory(tmp_path, capsys)
     assert "give one" in capsys.readouterr().err
 
 
+# Detection at >= 3x noise that the full FEM grid reached (docs/diagnosis.md, session 4): 59 of
+# its 66 cases (0.894; the goal 0.90 is missed by one case, reported there, not asserted here).
+# A rerun can flip marginal cases (fTetWild's meshes vary from run to run; another BLAS build
+# moves a baseline fit), so the test allows two binomial standard errors of a rate over 66
+# cases, 2 sqrt(0.894 (1 - 0.894) / 66) = 0.076: down to 0.818 (54 of 66) passes, 5 more misses
+# than measured; 6 or more is a regression of the diagnosis, not run-to-run scatter.
+FEM_FULL_GRID_DETECTION, FEM_FULL_GRID_N_AT_3X = 59 / 66, 66
+
+
 @pytest.mark.slow
 def test_full_benchmark_grid_on_the_fem_prototype(tmp_path):
-    """The full grid on the FEM prototype (hours on 2 cores): the goals of issue #7.
+    """The full grid on the FEM prototype (1 h 23 min on 2 cores, session 4): the goals of
+    issue #7 that are met (false alarms on none, closure) and the detection figure the grid
+    reached, each asserted. Runs its cases on both cores (--workers 2): run it alone."""
+    import math
 
-    The detection goal (>= 0.90 correct at >= 3x noise) is not met yet (measured figures in
-    docs/diagnosis.md): it is checked as its own expected failure, so that the run, the
-    false-alarm and the closure goals stay enforced; once the goal is met the test passes."""
+    from flexcal.validation.effects.library import EFFECT_IDS
+
     out = tmp_path / "bench"
-    assert cli.main(["diagnose-benchmark", "--grid", "full", "--provider", "fem", "--out", str(out), "--quiet"]) == 0
-    goals = json.loads((out / "report.json").read_text())["summary"]["goals"]
+    assert cli.main(["diagnose-benchmark", "--grid", "full", "--provider", "fem", "--workers", "2", "--out", str(out),
+                     "--quiet"]) == 0
+    report = json.loads((out / "report.json").read_text())
+    goals = report["summary"]["goals"]
     assert goals["false_alarms_none"]["met"] and goals["closure_median"]["met"], goals
-    if not goals["detection_at_3x"]["met"]:
-        pytest.xfail(f"issue #7 detection goal missed: {goals['detection_at_3x']['measured']:.3f} < 0.90")
+    strong = [r for r in report["rows"] if r["effect"] in EFFECT_IDS and r["magnitude_noise"] >= 3.0]
+    assert len(strong) == FEM_FULL_GRID_N_AT_3X  # the same grid as the recorded figure
+    p, n = FEM_FULL_GRID_DETECTION, FEM_FULL_GRID_N_AT_3X
+    floor = p - 2 * math.sqrt(p * (1 - p) / n)
+    detected = goals["detection_at_3x"]["measured"]
+    assert detected >= floor, (f"detection at >= 3x noise {detected:.3f} ({sum(r['correct'] for r in strong)} of {n}) "
+                               f"< {floor:.3f}: the recorded {p:.3f} minus two binomial standard errors")
 
 
 def test_step_loss_found_when_its_leg_is_held_out(provider):
