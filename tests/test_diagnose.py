@@ -156,19 +156,126 @@ def test_benchmark_command_tiny_grid_survives_a_failed_case_and_resumes(tmp_path
         assert (out / name).stat().st_size > 1000
 
 
+def _designed_trajectory(folder):
+    """A small ``flexcal design`` trajectory (41 postures from 300 candidates: 4 legs of up to
+    11 after the zero posture; the model without its inadequacy weight, seconds)."""
+    assert cli.main(["design", "--points", "41", "--candidates", "300", "--model-stiffness", "closed-form",
+                     "--inadequacy", "none", "--out", str(folder), "-q"]) == 0
+    return folder / "trajectory.csv"
+
+
+def test_benchmark_measures_every_case_along_a_given_trajectory(tmp_path, monkeypatch, capsys):
+    """``diagnose-benchmark --trajectory``: every case's measurement is the design's
+    trajectory twice (legs numbered on in the second cycle), the report names the file and
+    its hash, and the case ids differ from the standard trajectory's. The diagnosis is a
+    stub here (the real one on designed data: the next test and docs/diagnosis.md)."""
+    import flexcal.validation.diagnosis.diagnose as diagnose
+    from flexcal.validation.diagnosis.benchmark import repeated_trajectory, trajectory_digest
+    from flexcal.validation.prototype.scenario import read_trajectory
+
+    trajectory = _designed_trajectory(tmp_path / "design")
+    inputs, leg = read_trajectory(trajectory)
+    seen = []
+
+    class Stub:
+        report = {"top_effect": "none", "top_group": [], "confidence": "none", "noise_floor_urad": 0.5,
+                  "how_far": {"closure": 0.0}, "ranking": [], "where": {"concentrated": [], "structure": []},
+                  "collinearity": {"absorbed_by_baseline": {}}, "undetectable": []}
+
+    def stub(measurement, **_):
+        seen.append(measurement)
+        return Stub()
+
+    monkeypatch.setattr(diagnose, "run_diagnosis", stub)
+    out = tmp_path / "bench"
+    command = ["diagnose-benchmark", "--grid", "tiny", "--effects", "drift,none", "--workers", "0", "-q"]
+    assert cli.main([*command, "--trajectory", str(trajectory), "--out", str(out)]) == 0
+    expected_inputs, expected_leg = repeated_trajectory(2, (inputs, leg))
+    assert len(seen) == 2 and expected_leg.max() == 2 * leg.max() == 8
+    for measurement in seen:
+        np.testing.assert_allclose(measurement.inputs, expected_inputs, rtol=0, atol=1e-12)  # [m]
+        np.testing.assert_array_equal(measurement.leg, expected_leg)
+    report = json.loads((out / "report.json").read_text())
+    digest = trajectory_digest(inputs, leg)
+    assert report["trajectory"] == {"kind": "file", "file": str(trajectory), "sha256": digest, "n_points": 41,
+                                    "n_legs": 4}
+    assert f"sha256 {digest}" in (out / "report.md").read_text()
+    cases = [json.loads(p.read_text()) for p in sorted((out / "cases").glob("*.json"))]
+    assert {c["spec"]["trajectory"] for c in cases} == {digest}
+    assert {c["answer"]["trajectory"] for c in cases} == {digest}
+    # the standard trajectory: other case ids (no "trajectory" key in the spec), 153 points
+    assert cli.main([*command, "--out", str(tmp_path / "standard")]) == 0
+    standard = {p.name for p in (tmp_path / "standard" / "cases").glob("*.json")}
+    assert len(standard) == 2 and not standard & {p.name for p in (out / "cases").glob("*.json")}
+    assert seen[-1].n_points == 153
+    assert json.loads((tmp_path / "standard" / "report.json").read_text())["trajectory"]["kind"] == "standard"
+    # a trajectory too short for the diagnosis is refused before any case runs
+    short = tmp_path / "short.csv"
+    short.write_text("\n".join(trajectory.read_text().splitlines()[:6]) + "\n")
+    capsys.readouterr()
+    assert cli.main([*command, "--trajectory", str(short), "--out", str(tmp_path / "short")]) == 2
+    assert "at least 20" in capsys.readouterr().err and len(seen) == 4
+
+
+def test_diagnose_reads_a_measurement_on_a_designed_trajectory(tmp_path, capsys):
+    """``flexcal design`` -> ``flexcal truth --trajectory`` -> ``flexcal diagnose --data``
+    (analytic prototype, 0.5 urad noise): the legs are the design's (one held-out fold per
+    leg), the noise floor is the sensor's, and since one pass of a designed trajectory
+    measures each posture in one leg only, the command warns that the held-out scores
+    extrapolate (docs/diagnosis.md, Designed trajectory)."""
+    trajectory = _designed_trajectory(tmp_path / "design")
+    truth = tmp_path / "truth"
+    assert cli.main(["truth", "--scenario", "table1", "--provider", "analytic", "--noise-urad", "0.5",
+                     "--trajectory", str(trajectory), "--out", str(truth), "-q"]) == 0
+    data = truth / "curves.csv"
+    assert read_measurement(data).leg.max() == 4
+    capsys.readouterr()
+    out = tmp_path / "diagnosis"
+    assert cli.main(["diagnose", "--data", str(data), "--out", str(out), "--model-stiffness", "closed-form"]) == 0
+    report = json.loads((out / "report.json").read_text())
+    assert report["n_points"] == 41 and report["heldout"]["unit"] == "leg" and report["heldout"]["n_folds"] == 4
+    assert report["heldout"]["share_not_repeated"] > 0.5
+    assert "extrapolate" in capsys.readouterr().err
+    # the noise floor: 0.5 urad within what the structure adds (as on the standard trajectory: 0.45..0.8)
+    assert 0.45 <= report["noise_floor_urad"] <= 0.8
+    assert REQUIRED_KEYS <= set(report)
+    # one measurement, named once
+    assert cli.main(["diagnose", str(data), "--data", str(tmp_path / "other.csv"), "--out",
+                     str(tmp_path / "two")]) == 2
+    assert "give one" in capsys.readouterr().err
+
+
+# Detection at >= 3x noise that the full FEM grid reached (docs/diagnosis.md, session 4): 59 of
+# its 66 cases (0.894; the goal 0.90 is missed by one case, reported there, not asserted here).
+# A rerun can flip marginal cases (fTetWild's meshes vary from run to run; another BLAS build
+# moves a baseline fit), so the test allows two binomial standard errors of a rate over 66
+# cases, 2 sqrt(0.894 (1 - 0.894) / 66) = 0.076: down to 0.818 (54 of 66) passes, 5 more misses
+# than measured; 6 or more is a regression of the diagnosis, not run-to-run scatter.
+FEM_FULL_GRID_DETECTION, FEM_FULL_GRID_N_AT_3X = 59 / 66, 66
+
+
 @pytest.mark.slow
 def test_full_benchmark_grid_on_the_fem_prototype(tmp_path):
-    """The full grid on the FEM prototype (hours on 2 cores): the goals of issue #7.
+    """The full grid on the FEM prototype (1 h 23 min on 2 cores, session 4): the goals of
+    issue #7 that are met (false alarms on none, closure) and the detection figure the grid
+    reached, each asserted. Runs its cases on both cores (--workers 2): run it alone."""
+    import math
 
-    The detection goal (>= 0.90 correct at >= 3x noise) is not met yet (measured figures in
-    docs/diagnosis.md): it is checked as its own expected failure, so that the run, the
-    false-alarm and the closure goals stay enforced; once the goal is met the test passes."""
+    from flexcal.validation.effects.library import EFFECT_IDS
+
     out = tmp_path / "bench"
-    assert cli.main(["diagnose-benchmark", "--grid", "full", "--provider", "fem", "--out", str(out), "--quiet"]) == 0
-    goals = json.loads((out / "report.json").read_text())["summary"]["goals"]
+    assert cli.main(["diagnose-benchmark", "--grid", "full", "--provider", "fem", "--workers", "2", "--out", str(out),
+                     "--quiet"]) == 0
+    report = json.loads((out / "report.json").read_text())
+    goals = report["summary"]["goals"]
     assert goals["false_alarms_none"]["met"] and goals["closure_median"]["met"], goals
-    if not goals["detection_at_3x"]["met"]:
-        pytest.xfail(f"issue #7 detection goal missed: {goals['detection_at_3x']['measured']:.3f} < 0.90")
+    strong = [r for r in report["rows"] if r["effect"] in EFFECT_IDS and r["magnitude_noise"] >= 3.0]
+    assert len(strong) == FEM_FULL_GRID_N_AT_3X  # the same grid as the recorded figure
+    p, n = FEM_FULL_GRID_DETECTION, FEM_FULL_GRID_N_AT_3X
+    floor = p - 2 * math.sqrt(p * (1 - p) / n)
+    detected = goals["detection_at_3x"]["measured"]
+    assert detected >= floor, (f"detection at >= 3x noise {detected:.3f} ({sum(r['correct'] for r in strong)} of {n}) "
+                               f"< {floor:.3f}: the recorded {p:.3f} minus two binomial standard errors")
 
 
 def test_step_loss_found_when_its_leg_is_held_out(provider):

@@ -50,6 +50,28 @@ def test_leg_folds_leave_whole_legs_out():
         assert len(index) >= 2 and np.all(np.diff(index) == 1)  # contiguous
 
 
+def test_share_of_held_out_postures_measured_in_no_other_leg():
+    """0 when every held-out posture is repeated in the training legs (two cycles), 1 when
+    each leg visits its own postures (one pass of a designed trajectory); a posture that a
+    leg measures twice in a row is still alone when that leg is held out."""
+    from flexcal.model.trajectory import travel_directions
+    from flexcal.validation.diagnosis.benchmark import repeated_trajectory
+    from flexcal.validation.diagnosis.diagnose import share_not_repeated
+
+    inputs, leg = _two_cycle_legs()
+    folds, _ = leg_folds(leg, inputs, travel_directions(inputs))
+    assert share_not_repeated(inputs, folds) == 0.0
+    postures = np.random.default_rng(0).uniform(-1e-3, 1e-3, size=(12, 3))
+    designed = np.vstack([np.zeros((1, 3)), postures[:6], postures[5:6], postures[6:]])  # posture 6 twice in a row
+    designed_leg = np.concatenate([[0], np.repeat([1, 2, 3], [4, 5, 4])])
+    folds, unit = leg_folds(designed_leg, designed, travel_directions(designed))
+    assert unit == "leg" and share_not_repeated(designed, folds) == 1.0
+    inputs, leg = repeated_trajectory(2, (designed, designed_leg))
+    np.testing.assert_array_equal(leg, np.concatenate([designed_leg, designed_leg[1:] + 3]))
+    folds, _ = leg_folds(leg, inputs, travel_directions(inputs))
+    assert len(folds) == 6 and share_not_repeated(inputs, folds) == 0.0
+
+
 def _data(n=120, seed=0):
     rng = np.random.default_rng(seed)
     t = np.arange(n, dtype=float)

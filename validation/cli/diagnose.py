@@ -6,6 +6,13 @@ evidence), DIR/report.md and the figures residual.png (held-out residual before/
 strata.png (residual RMS per stratum), heldout.png (held-out RMS per candidate).
 
     flexcal diagnose curves.csv --out runs/diagnosis
+    flexcal diagnose --data curves.csv --out runs/diagnosis     # the same, spelled as verify/identify take it
+
+A measurement on a ``flexcal design`` trajectory is read with its legs as the design wrote
+them (the held-out folds) and its travel directions from the inputs. When most held-out
+postures are measured in no other leg (one pass of a designed trajectory), the held-out
+scores extrapolate the baseline: the command warns and the report says how many
+(``heldout.share_not_repeated``); measure the trajectory twice (docs/diagnosis.md).
 """
 
 from __future__ import annotations
@@ -19,6 +26,7 @@ __all__ = ["configure", "run", "EXAMPLES", "DEFAULT_CONFIG", "markdown"]
 DEFAULT_CONFIG = {"model_stiffness": "fem", "second_order": True, "particles": 80, "iterations": 60}
 
 EXAMPLES = ("flexcal diagnose curves.csv --out runs/diagnosis",
+            "flexcal diagnose --data runs/t/curves.csv --out runs/d",
             "flexcal truth --scenario table1 --provider analytic --noise-urad 0.5 --out runs/t && "
             "flexcal diagnose runs/t/curves.csv --out runs/d")
 
@@ -27,7 +35,10 @@ def configure(parser: argparse.ArgumentParser) -> None:
     from .options import add_out, add_seed
     from .options import add_model_options
 
-    parser.add_argument("data", metavar="DATA.csv", help="measurement CSV (format: flexcal.validation.measurements)")
+    parser.add_argument("data", metavar="DATA.csv", nargs="?",
+                        help="measurement CSV (format: flexcal.validation.measurements)")
+    parser.add_argument("--data", dest="data_option", metavar="CSV",
+                        help="the measurement CSV, as verify and identify take it (instead of DATA.csv)")
     add_seed(parser, what="the baseline calibration's optimizer", default=0)
     parser.add_argument("--particles", type=int, help="PSO particles of each baseline start (default %(default)s)")
     parser.add_argument("--iterations", type=int, help="PSO iterations of each baseline start (default %(default)s)")
@@ -85,7 +96,23 @@ def markdown(report) -> str:
     return "\n".join(lines) + "\n"
 
 
+def data_path(args: argparse.Namespace) -> str:
+    """The measurement file of ``DATA.csv`` or ``--data`` (one of them)."""
+    given = [path for path in (args.data, getattr(args, "data_option", None)) if path]
+    if not given:
+        raise ValueError("no measurement: flexcal diagnose DATA.csv --out DIR (or --data DATA.csv)")
+    if len(given) == 2 and given[0] != given[1]:
+        raise ValueError(f"two measurements, {given[0]} and --data {given[1]}: give one")
+    return given[0]
+
+
+# a held-out scoring where most held-out postures are in no training leg extrapolates the
+# baseline (one pass of a designed trajectory: 1.0); the standard trajectory twice: 0.0
+EXTRAPOLATION_WARNING_SHARE = 0.5
+
+
 def run(args: argparse.Namespace) -> int:
+    import logging
     from functools import partial
 
     from .common import show_progress
@@ -98,7 +125,7 @@ def run(args: argparse.Namespace) -> int:
 
     if args.particles < 2 or args.iterations < 1:
         raise ValueError("--particles must be >= 2 and --iterations >= 1")
-    measurement = read_measurement(args.data)
+    measurement = read_measurement(data_path(args))
     check_measurement(measurement)  # before the model's FEM correction (~30 s cold)
     from .options import executor_options
     from ..prototype.scenario import mechanism_from_metadata
@@ -111,6 +138,12 @@ def run(args: argparse.Namespace) -> int:
     report = diagnosis.report
     report["baseline"]["model_stiffness"] = args.model_stiffness
     report["baseline"]["second_order"] = bool(args.second_order)
+    share = report["heldout"]["share_not_repeated"]
+    if share > EXTRAPOLATION_WARNING_SHARE:
+        logging.getLogger("flexcal.diagnose").warning(
+            f"{100 * share:.0f} % of the held-out points are at postures no other leg measures (one pass of a designed "
+            f"trajectory?): the held-out scores extrapolate the baseline and may name a wrong effect; measure the "
+            f"trajectory twice (docs/diagnosis.md, Designed trajectory)")
     with staged_output(args.out, replace=args.force) as staging:
         write_json(staging / "report.json", report)
         (staging / "report.md").write_text(markdown(report))

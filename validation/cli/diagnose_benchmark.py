@@ -13,10 +13,13 @@ resumes where it stopped; a case that raises is listed in the report and the com
 exits 1 after writing the figures of the others. The cases run in parallel on the shared
 executor (local worker processes by default, ``--workers N``, ``--scheduler ADDRESS``;
 docs/scale.md); with ``--provider fem`` the as-built mounts' segments are built first, on
-the same executor.
+the same executor. With ``--trajectory FILE`` (``flexcal design``'s trajectory.csv) every
+case is measured along that trajectory, ``--cycles`` times, instead of the standard one; the
+report names it (file and content hash), and the case ids include its hash.
 
     flexcal diagnose-benchmark --out runs/bench                 # small grid, analytic prototype
     flexcal diagnose-benchmark --grid full --provider fem --out runs/bench-full
+    flexcal diagnose-benchmark --trajectory runs/design/trajectory.csv --out runs/bench-designed
 """
 
 from __future__ import annotations
@@ -25,17 +28,21 @@ import argparse
 import sys
 import time
 
+import numpy as np
+
 __all__ = ["configure", "run", "EXAMPLES"]
 
 # --out holds the finished designs of an earlier run, which a rerun resumes (no --force)
 RESUMES_OUT = True
 
 EXAMPLES = ("flexcal diagnose-benchmark --out runs/bench",
-            "flexcal diagnose-benchmark --grid full --provider fem --out runs/bench-full")
+            "flexcal diagnose-benchmark --grid full --provider fem --out runs/bench-full",
+            "flexcal design --points 77 --model-stiffness closed-form --out runs/design && "
+            "flexcal diagnose-benchmark --trajectory runs/design/trajectory.csv --out runs/bench-designed")
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
-    from .options import add_out, add_seed
+    from .options import add_out, add_seed, add_trajectory
 
     parser.add_argument("--grid", choices=("tiny", "small", "full"), default="small",
                         help="tiny: 10x noise, one seed; small (default): 3x and 10x, one seed, 4 none seeds; "
@@ -46,7 +53,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="comma-separated subset of effect ids (default: the whole library, none and the "
                              "out-of-library ids)")
     parser.add_argument("--noise-urad", type=float, default=0.5, help="sensor noise per channel [urad] (0.5)")
-    parser.add_argument("--cycles", type=int, default=2, help="standard trajectory repeated this often (2)")
+    parser.add_argument("--cycles", type=int, default=2,
+                        help="the trajectory (standard or --trajectory) measured this often in a row (2)")
+    add_trajectory(parser)
     parser.add_argument("--scenario-seed", type=int, default=None,
                         help="one as-built mount (table1 draws and noise) for every case (default: 1000 + the case "
                              "seed; a fixed one keeps the FEM cache warm)")
@@ -67,14 +76,20 @@ def baseline_stiffness(provider_name: str) -> str:
     return "closed-form" if provider_name == "analytic" else "fem"
 
 
-def case_spec(effect_id, magnitude, case_seed, *, provider_name, noise_urad, cycles, seed, scenario_seed) -> dict:
+def case_spec(effect_id, magnitude, case_seed, *, provider_name, noise_urad, cycles, seed, scenario_seed,
+              trajectory: str | None = None) -> dict:
     """Everything that decides one case's row: its id (``design_id`` of this) keys the
-    case store, so a rerun with other settings never reuses a row."""
-    return {"effect": effect_id, "magnitude_noise": float(magnitude), "seed": int(case_seed),
+    case store, so a rerun with other settings never reuses a row. trajectory: the
+    ``trajectory_digest`` of a trajectory file, None for the standard trajectory (no key:
+    the ids of standard-trajectory cases stay those of earlier runs)."""
+    spec = {"effect": effect_id, "magnitude_noise": float(magnitude), "seed": int(case_seed),
             "provider": provider_name, "baseline_model": {"stiffness": baseline_stiffness(provider_name),
                                                           "second_order": True},
             "noise_urad": float(noise_urad), "cycles": int(cycles), "baseline_seed": int(seed),
             "scenario_seed": scenario_seed}
+    if trajectory is not None:
+        spec["trajectory"] = trajectory
+    return spec
 
 
 def grid_cases(ids, grid) -> list[tuple[str, float, int]]:
@@ -92,22 +107,28 @@ def grid_cases(ids, grid) -> list[tuple[str, float, int]]:
     return cases
 
 
-def case_record(spec: dict, *, space=None) -> dict:
+def case_record(spec: dict, *, space=None, trajectory=None) -> dict:
     """One case of ``case_spec`` run and scored (a pure function, run on a worker): the
-    record {"id", "spec", "row", "answer"} the case store keeps; space: the baseline's model."""
+    record {"id", "spec", "row", "answer"} the case store keeps; space: the baseline's model;
+    trajectory: (inputs (k, 3) [m], leg (k,)) of one cycle, the one whose digest the spec
+    names (None: the standard trajectory)."""
     from functools import partial
 
     from ..prototype.providers import stiffness_provider
     from ..diagnosis.diagnose import run_diagnosis
     from ..diagnosis.baseline import calibrate_baseline
-    from ..diagnosis.benchmark import benchmark_measurement, run_case
+    from ..diagnosis.benchmark import benchmark_measurement, run_case, trajectory_digest
     from ..sweep.space import design_id
 
+    given = None if trajectory is None else trajectory_digest(*trajectory)
+    if spec.get("trajectory") != given:
+        raise ValueError(f"case {spec['effect']}: its trajectory {spec.get('trajectory') or 'standard'} is not the "
+                         f"one given ({given or 'standard'})")
     start = time.perf_counter()
     provider = stiffness_provider(spec["provider"], progress=False)  # FEM: the segments are cached by then
     case = benchmark_measurement(spec["effect"], spec["magnitude_noise"], spec["seed"], provider,
                                  cycles=spec["cycles"], noise_urad=spec["noise_urad"],
-                                 scenario_seed=spec["scenario_seed"])
+                                 scenario_seed=spec["scenario_seed"], trajectory=trajectory)
     row = run_case(case, lambda m: run_diagnosis(m, rng=spec["baseline_seed"],
                                                  baseline=partial(calibrate_baseline, space=space)))
     row["wall_s"] = time.perf_counter() - start
@@ -130,9 +151,12 @@ def case_slices(specs) -> list:
 
 
 def run_benchmark(ids, grid, *, noise_urad, cycles, seed, progress, scenario_seed=None, space=None,
-                  provider_name="analytic", store=None, log=None, workers: int | None = 0, scheduler=None):
+                  provider_name="analytic", store=None, log=None, workers: int | None = 0, scheduler=None,
+                  trajectory=None):
     """(rows, answers, failures) of every case of the grid, rows in grid order; space: the
-    baseline's model (default: the baseline's own default); store: a ``DesignStore`` of
+    baseline's model (default: the baseline's own default); trajectory: (inputs (k, 3) [m],
+    leg (k,)) of one cycle every case is measured along (None: the standard trajectory);
+    store: a ``DesignStore`` of
     finished cases (each saved as it finishes; a case already in it is not run again);
     failures: {case label: error text} of the cases that raised (one bad case must not
     sink a two-hour grid). workers / scheduler: the shared executor
@@ -140,14 +164,16 @@ def run_benchmark(ids, grid, *, noise_urad, cycles, seed, progress, scenario_see
     here). With the FEM provider the as-built mounts' missing segments are built first,
     all at once on the same executor, then the cases run on cached segments."""
     from ..progress import progress_bar
+    from ..diagnosis.benchmark import trajectory_digest
     from ..executor import resolve_workers, run_jobs, where
     from ..sweep.space import design_id
 
     log = log or (lambda text: None)
+    digest = None if trajectory is None else trajectory_digest(*trajectory)
     specs, labels = [], {}
     for effect_id, magnitude, case_seed in grid_cases(ids, grid):
         spec = case_spec(effect_id, magnitude, case_seed, provider_name=provider_name, noise_urad=noise_urad,
-                         cycles=cycles, seed=seed, scenario_seed=scenario_seed)
+                         cycles=cycles, seed=seed, scenario_seed=scenario_seed, trajectory=digest)
         specs.append(spec)
         labels[design_id(spec)] = f"{effect_id} {magnitude:g}x seed {case_seed}"
     records = {} if store is None else {i: r for i in labels if (r := store.load(i)) is not None}
@@ -170,7 +196,7 @@ def run_benchmark(ids, grid, *, noise_urad, cycles, seed, progress, scenario_see
             bar.update(1)
 
         for identifier, text in run_jobs(pending, case_record, on_done, key=design_id, workers=n_workers,
-                                         scheduler=scheduler, job_options={"space": space},
+                                         scheduler=scheduler, job_options={"space": space, "trajectory": trajectory},
                                          task_prefix="case").items():
             failures[labels[identifier]] = text
             log(f"diagnose-benchmark: case {labels[identifier]} failed: {text}")
@@ -182,12 +208,20 @@ def _number(value, digits: int = 1) -> str:
     return "" if value is None else f"{value:.{digits}f}"
 
 
+def _trajectory_text(trajectory: dict) -> str:
+    if trajectory["kind"] == "standard":
+        return "standard trajectory"
+    return (f"trajectory `{trajectory['file']}` ({trajectory['n_points']} points, {trajectory['n_legs']} legs, "
+            f"sha256 {trajectory['sha256']})")
+
+
 def _markdown(report) -> str:
     s = report["summary"]
     lines = ["# Blind benchmark of the gap diagnosis", "",
              f"Grid `{report['grid']}`, prototype provider `{report['provider']}` (diagnosis baseline: second-order model, "
              f"{report['baseline_model']['stiffness']} chain stiffness), noise {report['noise_urad']} urad, "
-             f"standard trajectory x{report['cycles']}; {len(report['rows'])} cases. Out-of-library effects "
+             f"{_trajectory_text(report['trajectory'])} x{report['cycles']}; {len(report['rows'])} cases. "
+             f"Out-of-library effects "
              f"(no model term): {', '.join(report['out_of_library'])}.", "", "## Goals", "",
              "| goal | target | measured | met | margin |", "|---|---:|---:|---|---:|"]
     for name, g in s["goals"].items():
@@ -217,6 +251,24 @@ def _markdown(report) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _trajectory(args: argparse.Namespace):
+    """((inputs (k, 3) [m], leg (k,)) of ``--trajectory`` or None, its report entry);
+    ValueError (one line) for a file the diagnosis could not use."""
+    from ..diagnosis.benchmark import repeated_trajectory, trajectory_digest
+    from ..diagnosis.diagnose import MIN_POINTS
+    from ..prototype.scenario import read_trajectory
+
+    if not args.trajectory:
+        return None, {"kind": "standard", "n_points": 77}
+    inputs, leg = read_trajectory(args.trajectory)
+    n_points = repeated_trajectory(args.cycles, (inputs, leg))[0].shape[0]
+    if n_points < MIN_POINTS:
+        raise ValueError(f"--trajectory {args.trajectory}: {inputs.shape[0]} points x{args.cycles} cycles = "
+                         f"{n_points} points; the diagnosis needs at least {MIN_POINTS}")
+    return (inputs, leg), {"kind": "file", "file": str(args.trajectory), "sha256": trajectory_digest(inputs, leg),
+                           "n_points": int(inputs.shape[0]), "n_legs": len(np.unique(leg[leg > 0]))}
+
+
 def run(args: argparse.Namespace) -> int:
     from .common import show_progress
     from ..diagnosis.benchmark import summarize
@@ -231,6 +283,7 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError(f"--noise-urad={args.noise_urad} must be > 0 (magnitudes are multiples of it)")
     if args.cycles < 2:
         raise ValueError(f"--cycles={args.cycles} must be >= 2 so that every leg's motion repeats in another cycle")
+    trajectory, trajectory_report = _trajectory(args)
     ids = list(EFFECT_IDS) + [NONE] + list(OUT_OF_LIBRARY_IDS)
     if args.effects:
         ids = [e.strip() for e in args.effects.split(",") if e.strip()]
@@ -246,7 +299,7 @@ def run(args: argparse.Namespace) -> int:
             ids, args.grid, noise_urad=args.noise_urad, cycles=args.cycles, seed=args.seed,
             progress=progress, scenario_seed=args.scenario_seed, provider_name=args.provider, store=store, log=log,
             space=model_space(baseline_stiffness(args.provider), second_order=True, progress=progress, **executor),
-            **executor)
+            trajectory=trajectory, **executor)
     except KeyboardInterrupt:
         log(f"diagnose-benchmark: interrupted; finished cases are kept in {store.folder}, run the same command "
             f"again to resume")
@@ -256,7 +309,7 @@ def run(args: argparse.Namespace) -> int:
     summary = summarize(rows)
     report = {"grid": args.grid, "provider": args.provider, "scenario_seed": args.scenario_seed,
               "baseline_model": {"stiffness": baseline_stiffness(args.provider), "second_order": True},
-              "noise_urad": args.noise_urad, "cycles": args.cycles,
+              "noise_urad": args.noise_urad, "cycles": args.cycles, "trajectory": trajectory_report,
               "out_of_library": list(OUT_OF_LIBRARY_IDS), "rows": rows, "failures": failures, "summary": summary,
               "note": "answers.json holds what was injected; the diagnosis only received the measurement"}
     with staged_output(args.out, resume=True) as staging:

@@ -8,9 +8,10 @@ sidecar), diagnose, and score: confusion matrix, detection rate against magnitud
 alarms on ``none``, predicted against achieved shrink on held-out legs.
 
 Benchmark data: the table1 scenario (seeded draws of the other 42 sources vary with the
-case seed), the standard trajectory repeated ``cycles`` times (legs numbered uniquely per
-cycle, so leaving one leg out still leaves that actuator's motion in another cycle), noise
-``noise_urad`` per channel. Provider: analytic segments (fast; CI grid) or FEM (slow grid).
+case seed), the standard trajectory (or a given one, e.g. ``flexcal design``'s) repeated
+``cycles`` times (legs numbered uniquely per cycle, so leaving one leg out still leaves that
+actuator's motion in another cycle), noise ``noise_urad`` per channel. Provider: analytic
+segments (fast; CI grid) or FEM (slow grid).
 """
 
 from __future__ import annotations
@@ -23,7 +24,8 @@ import numpy as np
 
 from ..measurements import Measurement
 
-__all__ = ["BenchmarkCase", "benchmark_measurement", "run_case", "summarize", "GRIDS", "repeated_trajectory"]
+__all__ = ["BenchmarkCase", "benchmark_measurement", "run_case", "summarize", "GRIDS", "repeated_trajectory",
+           "trajectory_digest"]
 
 # name -> (magnitudes [x noise], seeds, extra none seeds)
 GRIDS = {
@@ -44,32 +46,58 @@ class BenchmarkCase:
     answer: dict[str, Any]
 
 
-def repeated_trajectory(cycles: int) -> tuple[np.ndarray, np.ndarray]:
-    """The standard trajectory ``cycles`` times: (inputs (n, 3) [m], leg (n,)), legs 1..3 c."""
+def repeated_trajectory(cycles: int, trajectory: tuple[np.ndarray, np.ndarray] | None = None
+                        ) -> tuple[np.ndarray, np.ndarray]:
+    """A trajectory ``cycles`` times: (inputs (n, 3) [m], leg (n,)).
+
+    trajectory: (inputs (k, 3) [m], leg (k,)) of one cycle (default: the standard
+    trajectory, legs 0, 1..3). The first cycle is the whole trajectory; each later one
+    repeats its points of legs >= 1 (the start posture, leg 0, is not measured again) with
+    the legs numbered on after the previous cycle's (leg + c max(leg)): the standard
+    trajectory twice has legs 0, 1..6."""
     from flexcal.model.trajectory import standard_trajectory
 
     if cycles < 1:
         raise ValueError(f"cycles={cycles} must be >= 1")
-    trajectory = standard_trajectory()
-    inputs = [trajectory.inputs] + [trajectory.inputs[1:]] * (cycles - 1)
-    legs = [trajectory.leg] + [trajectory.leg[1:] + 3 * c for c in range(1, cycles)]
-    return np.concatenate(inputs), np.concatenate(legs)
+    if trajectory is None:
+        standard = standard_trajectory()
+        trajectory = (standard.inputs, standard.leg)
+    inputs, leg = np.asarray(trajectory[0], float), np.asarray(trajectory[1], int)
+    if inputs.ndim != 2 or inputs.shape[1] != 3 or leg.shape != inputs.shape[:1]:
+        raise ValueError(f"trajectory inputs {inputs.shape} and leg {leg.shape} must be (n, 3) and (n,)")
+    body = leg > 0
+    n_legs = int(leg.max(initial=0))
+    return (np.concatenate([inputs] + [inputs[body]] * (cycles - 1)),
+            np.concatenate([leg] + [leg[body] + n_legs * c for c in range(1, cycles)]))
+
+
+def trajectory_digest(inputs: np.ndarray, leg: np.ndarray) -> str:
+    """A short content hash of a trajectory (inputs (n, 3) [m] to 1 nm, leg (n,)): the
+    benchmark's case ids and report name a trajectory file by it, not by its path."""
+    import hashlib
+
+    nanometres = np.round(np.asarray(inputs, float) * 1e9).astype(np.int64)
+    text = nanometres.tobytes() + np.asarray(leg, np.int64).tobytes()
+    return hashlib.sha256(text).hexdigest()[:16]
 
 
 def benchmark_measurement(effect_id: str, magnitude: float, seed: int, provider, *, cycles: int = 2,
-                          noise_urad: float = 0.5, scenario_seed: int | None = None) -> BenchmarkCase:
+                          noise_urad: float = 0.5, scenario_seed: int | None = None,
+                          trajectory: tuple[np.ndarray, np.ndarray] | None = None) -> BenchmarkCase:
     """One blind case. effect_id: a library id, an out-of-library id or "none"; magnitude:
-    the injected signature RMS in multiples of ``noise_urad`` [-] (the answer also holds the
-    achieved one on this file: ``achieved_magnitude_noise``); scenario_seed: the table1
-    draws and the sensor noise (default 1000 + seed, a new as-built mount per case; a fixed
-    one keeps the FEM cache warm but repeats the noise)."""
+    the injected signature RMS in multiples of ``noise_urad`` [-] on the standard trajectory
+    (``make_injector``; the answer also holds the achieved one on this file:
+    ``achieved_magnitude_noise``); scenario_seed: the table1 draws and the sensor noise
+    (default 1000 + seed, a new as-built mount per case; a fixed one keeps the FEM cache
+    warm but repeats the noise); trajectory: (inputs (k, 3) [m], leg (k,)) of one cycle
+    (default the standard trajectory), measured ``cycles`` times (``repeated_trajectory``)."""
     from ..effects.library import NONE, make_injector
     from ..prototype.scenario import load_scenario
     from ..prototype.truth import make_truth
 
     scenario = load_scenario("table1", seed=1000 + seed if scenario_seed is None else scenario_seed,
                              noise_urad=noise_urad)
-    inputs, leg = repeated_trajectory(cycles)
+    inputs, leg = repeated_trajectory(cycles, trajectory)
     scenario = dataclasses.replace(scenario, inputs=inputs, leg=leg)
     effects = ()
     if effect_id != NONE:
@@ -79,7 +107,8 @@ def benchmark_measurement(effect_id: str, magnitude: float, seed: int, provider,
     blind = dataclasses.replace(truth.measurement, metadata={})
     answer = {"effect": effect_id, "magnitude_noise": float(magnitude), "magnitude_urad": float(magnitude * noise_urad),
               "seed": int(seed), "scenario_seed": int(scenario.seed), "noise_urad": float(noise_urad),
-              "cycles": int(cycles), "injected": truth.measurement.metadata.get("injected_effects", [])}
+              "cycles": int(cycles), "trajectory": "standard" if trajectory is None else trajectory_digest(*trajectory),
+              "injected": truth.measurement.metadata.get("injected_effects", [])}
     if effects:
         # what was really injected into this file: the noise-free angles with the effect minus
         # the same mount without it (the nominal magnitude is a linearized estimate on one

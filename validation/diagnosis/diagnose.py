@@ -19,7 +19,8 @@ from .where import concentration, noise_floor, strata, structure_tests
 from .which import (CriterionSettings, Candidate, cross_validate, fit_terms, leg_folds, make_problem, principal_cosines, score_candidates)
 from ..measurements import Measurement
 
-__all__ = ["Diagnosis", "run_diagnosis", "library_terms", "check_measurement", "MIN_POINTS", "MAX_STAGES"]
+__all__ = ["Diagnosis", "run_diagnosis", "library_terms", "check_measurement", "share_not_repeated", "MIN_POINTS",
+           "MAX_STAGES"]
 
 MIN_POINTS = 20  # fewer points cannot support a 45-source baseline plus a held-out leg
 ABSORBED_LIMIT = 0.99  # a term whose signature the baseline mimics to this share is undetectable on the trajectory
@@ -64,6 +65,21 @@ def check_measurement(measurement: Measurement) -> None:
     if len(np.unique(measurement.leg[measurement.leg > 0])) < 2:
         raise ValueError("the measurement has fewer than two legs (column 'leg' >= 1); held-out scoring leaves "
                          "whole legs out, so number the legs of the trajectory")
+
+
+def share_not_repeated(inputs: np.ndarray, folds, atol: float = 1e-9) -> float:
+    """Share [-] of the held-out points whose posture (inputs (n, 3) [m], equal within
+    ``atol`` [m]) is measured at no point outside their fold. 0 when every held-out posture
+    is repeated in the training legs (the standard trajectory measured twice); near 1 for
+    one pass of a designed trajectory, where each leg visits its own postures and the held-out
+    scores extrapolate the baseline (docs/diagnosis.md, "Designed trajectory")."""
+    key = np.round(np.asarray(inputs, float) / atol).astype(np.int64)
+    held, alone = 0, 0
+    for fold in folds:
+        training = {tuple(row) for row in key[~fold]}
+        held += int(np.count_nonzero(fold))
+        alone += sum(tuple(row) not in training for row in key[fold])
+    return alone / held if held else 0.0
 
 
 def _effective_dof(J: np.ndarray, prior_sd: np.ndarray) -> float:
@@ -207,7 +223,8 @@ def _report(measurement, fit, residual, floor, unit, folds, ranking, stages, gro
         "baseline": {"description": fit.description, "n_sources": len(fit.names),
                      "effective_parameters": k_baseline, "wall_s": fit.wall_s,
                      "in_sample_rms_urad": overall},
-        "heldout": {"unit": unit, "n_folds": len(folds)},
+        "heldout": {"unit": unit, "n_folds": len(folds),
+                    "share_not_repeated": share_not_repeated(measurement.inputs, folds)},
         "skipped_terms": skipped,
         "criteria": {"min_delta_bic": settings.min_delta_bic, "min_closure": settings.min_closure,
                      "min_gain_noise": settings.min_gain_noise, "group_ratio": settings.group_ratio,

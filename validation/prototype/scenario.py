@@ -56,8 +56,8 @@ import numpy as np
 from flexcal.model.parameters import ParameterSpace, parameter_space
 from flexcal.model.trajectory import standard_trajectory
 
-__all__ = ["Scenario", "load_scenario", "BUILTIN_SCENARIOS", "scenario_trajectory", "mechanism_from_metadata",
-           "mechanism_overrides"]
+__all__ = ["Scenario", "load_scenario", "BUILTIN_SCENARIOS", "scenario_trajectory", "read_trajectory",
+           "mechanism_from_metadata", "mechanism_overrides"]
 
 TABLE1_PRESETS = {  # paper Table 1, display units (mm, -)
     "D1.x0": -0.20, "D2.x0": 0.32, "D3.x0": 0.40,
@@ -133,7 +133,7 @@ class Scenario:
         trajectory.csv: columns xa1_mm, xa2_mm, xa3_mm[, leg])."""
         import dataclasses
 
-        inputs, leg = _read_inputs_file(Path(path))
+        inputs, leg = read_trajectory(path)
         return dataclasses.replace(self, inputs=inputs, leg=leg)
 
     def provenance(self) -> dict[str, Any]:
@@ -163,7 +163,10 @@ def _per_channel(value: Any, what: str) -> np.ndarray:
     return array
 
 
-def _read_inputs_file(path: Path) -> tuple[np.ndarray, np.ndarray]:
+def read_trajectory(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
+    """(inputs (n, 3) [m], leg (n,)) of a trajectory file: columns xa1_mm, xa2_mm, xa3_mm
+    [mm] and optionally leg (default 1), e.g. ``flexcal design``'s trajectory.csv."""
+    path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"trajectory file {path} does not exist")
     with path.open() as handle:
@@ -195,7 +198,7 @@ def scenario_trajectory(spec: dict[str, Any], space: ParameterSpace, base: Path)
     if kind == "file":
         if "file" not in spec:
             raise ValueError("[trajectory] kind = 'file' needs file = 'inputs.csv'")
-        return _read_inputs_file((base / spec["file"]).resolve())
+        return read_trajectory((base / spec["file"]).resolve())
     raise ValueError(f"[trajectory] kind={kind!r} must be 'standard' or 'file'")
 
 
