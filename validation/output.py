@@ -19,6 +19,11 @@ or new), with Ctrl-C and SIGTERM held back until the moves are done.
 ``atomic_path(path)`` yields a temporary name beside ``path`` for any writer (matplotlib,
 numpy, csv); on success it is renamed onto ``path``, on error deleted. ``write_json`` and
 ``write_text`` use it.
+
+``write_report(folder, report)`` is how every command writes its report: ``report.json``
+holds the results only, the same bytes for the same input; the wall-clock and CPU seconds
+(the ``TIMING_KEYS`` anywhere in the report) go to ``timings.json``, the one file of a run
+folder that differs from run to run (docs/cli.md, "Byte-identical reports").
 """
 
 from __future__ import annotations
@@ -39,7 +44,11 @@ from typing import Any, Iterator
 import numpy as np
 
 __all__ = ["out_folder", "staged_output", "atomic_path", "write_json", "write_text", "to_jsonable", "dumps_strict",
-           "interrupts_deferred"]
+           "interrupts_deferred", "TIMING_KEYS", "split_timings", "write_report"]
+
+# Report keys that hold wall-clock or CPU times [s]: they differ between two runs of the
+# same input, so ``write_report`` moves them from report.json to timings.json.
+TIMING_KEYS = frozenset({"wall_s", "timings_s", "elapsed_s"})
 
 _UMASK = os.umask(0o022)  # read the process umask (only settable, not readable) ...
 os.umask(_UMASK)  # ... and put it back: folders made by mkdtemp get the usual permissions
@@ -279,3 +288,40 @@ def write_json(path: str | os.PathLike, data: Any, *, fsync: bool = False) -> No
     """Write ``data`` as indented strict JSON (non-finite numbers as null with a note;
     atomically: temporary file, then rename)."""
     write_text(path, dumps_strict(data, indent=2) + "\n", fsync=fsync)
+
+
+def split_timings(value: Any) -> tuple[Any, Any]:
+    """(``value`` without its ``TIMING_KEYS`` entries, those entries in the same nesting),
+    recursively through dicts and lists. The second is None where ``value`` holds no
+    timing; a list with timings in some entries keeps one entry per item (``{}`` for an
+    item without), so ``rows[k]``'s time is ``timings["rows"][k]``."""
+    if isinstance(value, dict):
+        results: dict[str, Any] = {}
+        timings: dict[str, Any] = {}
+        for key, item in value.items():
+            if key in TIMING_KEYS:
+                timings[key] = item
+                continue
+            results[key], inner = split_timings(item)
+            if inner is not None:
+                timings[key] = inner
+        return results, (timings or None)
+    if isinstance(value, (list, tuple)):
+        pairs = [split_timings(item) for item in value]
+        results_list = [r for r, _ in pairs]
+        if all(t is None for _, t in pairs):
+            return results_list, None
+        return results_list, [{} if t is None else t for _, t in pairs]
+    return value, None
+
+
+def write_report(folder: str | os.PathLike, report: dict[str, Any]) -> dict[str, Any]:
+    """``folder/report.json``: ``report`` without its timing keys (strict JSON, atomic);
+    ``folder/timings.json``: those keys [s] in the same nesting, when it has any. Returns
+    what report.json holds."""
+    folder = Path(folder)
+    results, timings = split_timings(report)
+    write_json(folder / "report.json", results)
+    if timings is not None:
+        write_json(folder / "timings.json", timings)
+    return results
