@@ -85,10 +85,19 @@ def to_pyvista(mesh, displacement: np.ndarray | None = None, material: Material 
     return grid
 
 
+_UMASK = os.umask(0o022)  # read the process umask (only settable, not readable) ...
+os.umask(_UMASK)  # ... and put it back
+
+
 def _atomic_target(path: Path, suffix: str) -> Path:
+    """A fresh temporary file beside ``path``, with the permissions a new file gets
+    (mkstemp makes it 0600, which the writers keep: a VTU or PNG then read-only for its owner)."""
     path.parent.mkdir(parents=True, exist_ok=True)
     handle, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=suffix, dir=path.parent)
-    os.close(handle)
+    try:
+        os.fchmod(handle, 0o666 & ~_UMASK)
+    finally:
+        os.close(handle)
     return Path(tmp)
 
 

@@ -8,7 +8,8 @@ import tomllib
 import pytest
 
 from flexcal.validation import cli
-from flexcal.validation.cli.common import TIMING_KEYS, without_timings
+from flexcal.validation.cli.common import without_timings
+from flexcal.validation.output import TIMING_KEYS
 from flexcal.validation.config import check_default_config, merge_config
 
 HEADER = "point,time_s,leg,xa1_mm,xa2_mm,xa3_mm,theta_x_urad,theta_y_urad,theta_z_urad"
@@ -104,6 +105,31 @@ def test_without_timings_removes_only_timing_keys():
     assert TIMING_KEYS == {"wall_s", "timings_s", "elapsed_s"}
 
 
+def test_split_timings_keeps_the_nesting():
+    from flexcal.validation.output import split_timings
+
+    report = {"wall_s": 3.0, "fit": 1.0, "pso": {"timings_s": {"a": 1}, "n": 2},
+              "rows": [{"elapsed_s": 1, "x": 0}, {"x": 1}], "names": ["a", "b"]}
+    results, timings = split_timings(report)
+    assert results == {"fit": 1.0, "pso": {"n": 2}, "rows": [{"x": 0}, {"x": 1}], "names": ["a", "b"]}
+    # rows[k]'s time is timings["rows"][k]; branches without a time are left out
+    assert timings == {"wall_s": 3.0, "pso": {"timings_s": {"a": 1}}, "rows": [{"elapsed_s": 1}, {}]}
+    assert split_timings({"fit": 1.0}) == ({"fit": 1.0}, None)
+
+
+def test_json_summary_takes_the_times_from_timings_json(tmp_path):
+    from flexcal.validation.cli.common import summary_of
+    from flexcal.validation.output import write_report
+
+    write_report(tmp_path, {"n": 3, "wall_s": 1.5, "rows": [{"wall_s": 0.5}]})
+    assert json.loads((tmp_path / "report.json").read_text()) == {"n": 3, "rows": [{}]}
+    assert summary_of(tmp_path) == {"n": 3, "wall_s": 1.5, "out": str(tmp_path),
+                                    "files": ["report.json", "timings.json"]}
+    (tmp_path / "timings.json").unlink()
+    write_report(tmp_path, {"summary": {"n": 3, "wall_s": 2.0}, "x": 1})
+    assert summary_of(tmp_path)["wall_s"] == 2.0
+
+
 def run_twice(tmp_path, argv, names):
     """The files ``names`` of two runs of ``argv`` (with --out appended)."""
     runs = []
@@ -117,10 +143,11 @@ def run_twice(tmp_path, argv, names):
 def test_same_seed_same_report_identify(tmp_path, small_csv):
     first, second = run_twice(tmp_path, ["identify", "--data", str(small_csv), "--sources", "D1.x0,D1.CL,D1.mu",
                                          "--particles", "40", "--iterations", "5", "--calibration-seed", "3"],
-                              ["report.json", "report.md"])
-    a, b = (without_timings(json.loads(r["report.json"])) for r in (first, second))
-    assert json.dumps(a, sort_keys=True) == json.dumps(b, sort_keys=True)
-    assert first["report.md"] == second["report.md"]  # the markdown holds no timing
+                              ["report.json", "report.md", "timings.json"])
+    # the wall-clock times are in timings.json only: report.json and report.md repeat to the byte
+    assert first["report.json"] == second["report.json"] and first["report.md"] == second["report.md"]
+    report, timings = (json.loads(first[name]) for name in ("report.json", "timings.json"))
+    assert without_timings(report) == report and timings["wall_s"] > 0
 
 
 def test_same_seed_same_report_sensitivity_and_forward(tmp_path, small_csv):
@@ -141,7 +168,7 @@ def test_same_seed_same_truth_curves(tmp_path):
 
 def test_same_seed_same_diagnosis_and_compensation(tmp_path):
     # a noisy analytic-prototype curve, then the two long jobs twice each: their reports
-    # must agree to the byte once the timing keys are removed (the markdown has no timings)
+    # must agree to the byte (the wall-clock times are in timings.json)
     assert cli.main(["truth", "--scenario", "table1", "--provider", "analytic", "--noise-urad", "0.5",
                      "--out", str(tmp_path / "t"), "-q"]) == 0
     curves = str(tmp_path / "t" / "curves.csv")
@@ -149,5 +176,4 @@ def test_same_seed_same_diagnosis_and_compensation(tmp_path):
                        (["compensate", "--data", curves, "--particles", "60", "--iterations", "10",
                          "--sobol-n", "32", "--max-rounds", "2"], "comp")):
         first, second = run_twice(tmp_path / name, argv, ["report.json", "report.md"])
-        assert first["report.md"] == second["report.md"]
-        assert without_timings(json.loads(first["report.json"])) == without_timings(json.loads(second["report.json"]))
+        assert first == second

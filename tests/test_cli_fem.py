@@ -84,10 +84,12 @@ def test_hinge_mesher_failure_exits_2_without_output(tmp_path, capsys, monkeypat
     assert not out.exists()
 
 
-def _without_timings(folder):
-    from flexcal.validation.cli.common import without_timings
+def _report(folder):
+    return json.loads((folder / "report.json").read_text())
 
-    return without_timings(json.loads((folder / "report.json").read_text()))
+
+def _timings(folder):
+    return json.loads((folder / "timings.json").read_text())["timings_s"]
 
 
 HINGE_ARGS = ["hinge", "--type", "circular", "--radius-mm", "5", "--thickness-mm", "1", "--width-mm", "10",
@@ -102,9 +104,43 @@ def test_hinge_is_deterministic_without_a_shared_cache(tmp_path, monkeypatch):
         monkeypatch.setenv("FLEXCAL_CACHE_DIR", str(tmp_path / f"cache-{name}"))
         assert cli.main([*HINGE_ARGS, "--out", str(tmp_path / name)]) == 0
         runs.append(tmp_path / name)
-    assert _without_timings(runs[0]) == _without_timings(runs[1])
-    for name in ("hinge.vtu", "report.md"):
+    for name in ("report.json", "hinge.vtu", "report.md"):
         assert (runs[0] / name).read_bytes() == (runs[1] / name).read_bytes(), name
+
+
+def _same_bytes_but_timings(folders):
+    """Every file of ``folders`` byte-identical, except timings.json (wall-clock seconds),
+    which must hold the same keys; the names of the files the same too."""
+    names = [sorted(p.name for p in folder.iterdir()) for folder in folders]
+    assert all(n == names[0] for n in names), names
+    assert "timings.json" in names[0] and "report.json" in names[0]
+    for name in names[0]:
+        contents = [(folder / name).read_bytes() for folder in folders]
+        if name == "timings.json":
+            keys = [json.loads(c)["timings_s"].keys() for c in contents]
+            assert all(k == keys[0] for k in keys), keys
+        else:
+            assert all(c == contents[0] for c in contents), f"{name} differs between runs"
+
+
+def test_three_hinge_runs_on_fresh_caches_write_the_same_bytes(tmp_path):
+    """Issue 14's goal, as a user runs it: three ``flexcal hinge`` processes with the default
+    options, each with an empty FLEXCAL_CACHE_DIR and a new --out, write the same bytes in
+    every file (report.json, report.md, hinge.vtu, both PNGs); only timings.json differs.
+    ~5 s a run on the 2-core machine."""
+    import os
+    import subprocess
+    import sys
+
+    folders = []
+    for k in range(3):
+        out = tmp_path / f"run{k}"
+        env = {**os.environ, "FLEXCAL_CACHE_DIR": str(tmp_path / f"cache{k}")}
+        subprocess.run([sys.executable, "-m", "flexcal.validation.cli", "hinge", "--type", "circular",
+                        "--radius-mm", "5", "--thickness-mm", "1", "--width-mm", "10", "--out", str(out), "-q"],
+                       env=env, check=True, stdin=subprocess.DEVNULL, timeout=600)
+        folders.append(out)
+    _same_bytes_but_timings(folders)
 
 
 def test_hinge_uses_the_cache_and_recomputes_edited_entries(tmp_path, monkeypatch):
@@ -113,14 +149,14 @@ def test_hinge_uses_the_cache_and_recomputes_edited_entries(tmp_path, monkeypatc
     is recomputed rather than served."""
     monkeypatch.setenv("FLEXCAL_CACHE_DIR", str(tmp_path / "cache"))
     assert cli.main([*HINGE_ARGS, "--out", str(tmp_path / "first")]) == 0
-    reference = _without_timings(tmp_path / "first")
+    reference = _report(tmp_path / "first")
     entries = list((tmp_path / "cache").glob("*.npz"))
     assert len(entries) == 1
 
     out = tmp_path / "hit"
     assert cli.main([*HINGE_ARGS, "--out", str(out)]) == 0
-    assert set(json.loads((out / "report.json").read_text())["timings_s"]) == {"cache", "mesh_stages"}
-    assert _without_timings(out) == reference
+    assert set(_timings(out)) == {"cache", "mesh_stages"}
+    assert _report(out) == reference
 
     for legacy in (False, True):
         with np.load(entries[0]) as stored:
@@ -131,8 +167,8 @@ def test_hinge_uses_the_cache_and_recomputes_edited_entries(tmp_path, monkeypatc
         np.savez(entries[0], **arrays)
         out = tmp_path / f"edited-{legacy}"
         assert cli.main([*HINGE_ARGS, "--out", str(out)]) == 0
-        assert "fem_solve" in json.loads((out / "report.json").read_text())["timings_s"]  # recomputed
-        assert _without_timings(out) == reference
+        assert "fem_solve" in _timings(out)  # recomputed
+        assert _report(out) == reference
 
 
 def test_hinge_outside_the_closed_form_range_warns_once(tmp_path, capsys, monkeypatch):
@@ -156,6 +192,6 @@ def test_chain_uses_the_cache(tmp_path, monkeypatch):
     args = ["chain", "--reference", "D1", "--elements-through", "1", "-q"]
     assert cli.main([*args, "--out", str(tmp_path / "a")]) == 0
     assert cli.main([*args, "--out", str(tmp_path / "b")]) == 0
-    assert set(json.loads((tmp_path / "b" / "report.json").read_text())["timings_s"]) == {"cache", "mesh_stages"}
-    assert _without_timings(tmp_path / "a") == _without_timings(tmp_path / "b")
+    assert set(_timings(tmp_path / "b")) == {"cache", "mesh_stages"}
+    assert _report(tmp_path / "a") == _report(tmp_path / "b")
     assert (tmp_path / "a" / "chain.vtu").read_bytes() == (tmp_path / "b" / "chain.vtu").read_bytes()

@@ -197,6 +197,80 @@ def test_sigterm_during_the_final_moves_lets_them_finish(tmp_path, monkeypatch):
     assert sorted(p.name for p in tmp_path.rglob("*")) == ["a.txt", "b.txt", "out"]
 
 
+# the default mapped mesher: a hinge run of a few seconds whose staging step (VTU and pictures) lasts ~1 s
+MAPPED_HINGE = ["hinge", "--type", "circular", "--radius-mm", "5", "--thickness-mm", "1", "--width-mm", "10",
+                "--elements-through", "2"]
+
+
+def _staging_folders(where: Path) -> list[Path]:
+    return sorted(p for p in where.iterdir() if p.name.startswith(".out.") and p.is_dir())
+
+
+@pytest.mark.parametrize("existing_out", [False, True], ids=["new-out", "existing-out"])
+def test_staging_folder_of_a_killed_run_is_removed_by_the_next_run(tmp_path, existing_out):
+    """SIGKILL cannot be caught: the run's staging folder stays (beside a new --out, inside
+    an existing one). The next run that stages there sees its owner is gone and removes it."""
+    out = tmp_path / "out"
+    extra = []
+    if existing_out:
+        out.mkdir()
+        (out / "old.txt").write_text("an earlier run")
+        extra = ["--force"]
+    where = out if existing_out else tmp_path
+    env = {"FLEXCAL_CACHE_DIR": str(tmp_path.parent / f"{tmp_path.name}-cache")}
+    run = Run([*MAPPED_HINGE, "--out", str(out), *extra], tmp_path, env)
+    assert run.wait_for("VTU, pictures"), run.lines
+    deadline = time.monotonic() + WAIT_S
+    while not _staging_folders(where) and run.process.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.005)
+    run.process.send_signal(signal.SIGKILL)
+    assert run.finish() == -signal.SIGKILL
+    left = _staging_folders(where)
+    assert len(left) == 1 and f"-{run.process.pid}-" in left[0].name, left  # the pid is in the name
+    assert (out / "old.txt").is_file() if existing_out else not out.exists()  # --out untouched
+
+    assert subprocess.run([*FLEXCAL, *MAPPED_HINGE, "--out", str(out), "--force", "-q"], cwd=tmp_path,
+                          env={**os.environ, **env}, timeout=WAIT_S).returncode == 0
+    assert _staging_folders(where) == [] and (out / "report.json").is_file()
+
+
+def test_only_the_staging_folders_of_gone_processes_are_removed(tmp_path):
+    from flexcal.validation.output import _host_hash, _process_state, remove_stale_staging
+
+    def folder(name: str) -> Path:
+        path = tmp_path / name
+        path.mkdir()
+        (path / "report.json").write_text("{}")
+        return path
+
+    def staging_name(pid: int, start: int, host: str = _host_hash()) -> str:
+        return f".out.flexcal-{host}-{pid}-{start}.abcd_123"
+
+    alive = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    zombie = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    gone = subprocess.Popen([sys.executable, "-c", "pass"])
+    gone.wait()
+    try:
+        zombie.kill()  # killed but not reaped: a zombie, which counts as gone
+        while _process_state(zombie.pid)[0] != "Z":
+            time.sleep(0.01)
+        start = _process_state(alive.pid)[1]
+        keep = [folder(staging_name(alive.pid, start)),                # a live process
+                folder(staging_name(os.getpid(), 0)),                  # this one (start unknown)
+                folder(staging_name(gone.pid, 0, host="0badc0de")),    # another host's: its pids mean nothing here
+                folder(".out.abcd_123"),                               # the older name, no owner recorded
+                folder("out.flexcal-00000000-1-1.abcd_123")]           # not hidden: not a staging folder
+        removed = [folder(staging_name(gone.pid, 0)),                  # exited
+                   folder(staging_name(zombie.pid, 0)),                # killed, not reaped
+                   folder(staging_name(alive.pid, start + 1))]         # the pid now belongs to another process
+        assert sorted(remove_stale_staging(tmp_path)) == sorted(p.name for p in removed)
+        assert all(p.is_dir() for p in keep) and not any(p.exists() for p in removed)
+    finally:
+        for process in (alive, zombie):
+            process.kill()
+            process.wait()
+
+
 # ----------------------------------------------------------------------------------------
 # --out
 

@@ -150,7 +150,10 @@ def test_sweep_on_a_local_cluster_then_resume(tmp_path, fem_cache):
     rows = list(csv.DictReader((tmp_path / "sweep.csv").open()))
     assert [r["id"] for r in rows] == ids
     assert {p.name for p in tmp_path.iterdir()} >= {"designs", "sweep.csv", "report.json", "report.md",
-                                                     "discrepancy.png", "stress.png"}
+                                                     "timings.json", "discrepancy.png", "stress.png"}
+    assert "wall_s" not in rows[0]  # the times are in timings.json: the table repeats to the byte
+    timings = json.loads((tmp_path / "timings.json").read_text())
+    assert set(timings["timings_s"]["designs"]) == set(ids) and timings["wall_s"] > 0
     assert "![discrepancy.png](discrepancy.png)" in (tmp_path / "report.md").read_text()
     # resume: delete one finished design, run again, only that one is computed
     kept = tmp_path / "designs" / f"{ids[0]}.json"

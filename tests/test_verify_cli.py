@@ -15,8 +15,10 @@ def test_verify_writes_the_report_with_the_required_keys(tmp_path):
                        "--method", "paper", "--sobol-n", "16", "--particles", "48", "--iterations", "12", "--out", str(out), "-q"])
     assert status == 0
     report = json.loads((out / "report.json").read_text())
-    for key in ("parameters", "fit_rms_urad", "n_evaluations", "wall_s", "paper_comparison"):
+    for key in ("parameters", "fit_rms_urad", "n_evaluations", "paper_comparison"):
         assert key in report, key
+    timings = json.loads((out / "timings.json").read_text())  # wall-clock times apart from the results
+    assert "wall_s" not in report and timings["wall_s"] > 0 and set(timings["timings_s"]) == {"sobol", "pso"}
     row = {r["name"]: r for r in report["parameters"]}["D3.x0"]
     assert set(row) >= {"name", "unit", "preset", "identified", "abs_error", "rel_error"}
     # even this tiny swarm + polish must land near the preset D3 initial position (0.40 mm):
@@ -51,7 +53,8 @@ def test_full_table1_run_on_the_fem_prototype(tmp_path):
     rows = {r["name"]: r for r in report["parameters"]}
     assert rows["D3.CL"]["abs_error"] < 0.004  # [mm]
     assert report["fit_rms_urad"] < 6.0  # the closed-form model left 5.1 urad (session 1)
-    assert report["wall_s"] < 120  # goal 60 s warm on an idle machine; 2x for a loaded CI runner
+    wall_s = json.loads((out / "timings.json").read_text())["wall_s"]
+    assert wall_s < 120  # goal 60 s warm on an idle machine; 2x for a loaded CI runner
 
 
 def _analytic_verify(tmp_path, *extra):

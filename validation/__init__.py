@@ -55,6 +55,7 @@ _EXPORTS = {
     "DEFAULT_BREAKAWAY_FORCE": "prototype.transmission",
     "staged_output": "output",
     "write_json": "output",
+    "write_report": "output",
     "to_jsonable": "output",
     "plot_misalignment_curves": "reports.plots",
     "CLASS_COLOURS": "reports.plots",

@@ -8,7 +8,13 @@ run (``resume=True``: ``sweep``, ``diagnose-benchmark``).
 ``staged_output(out_dir)`` yields a temporary staging folder (hidden, ``.NAME.*``)
 beside a new ``out_dir``, or inside an existing one, so it is always on the target's own
 file system (a mount point as ``--out`` works; a move that still crosses file systems is
-copied to a temporary name and renamed). When the ``with`` block finishes without error
+copied to a temporary name and renamed). The folder's name records its owner (a hash of
+the host name, the process id and, on Linux, the process's start time:
+``.NAME.flexcal-HOST-PID-START.XXXXXXXX``), so a run killed where it cannot clean up
+(SIGKILL, the OOM killer, a power cut) leaves a folder the next run can recognise:
+``staged_output`` first removes every such folder in the place it stages in whose owner,
+on this host, is gone (``remove_stale_staging``); a live process's folder, another host's
+and folders of other names are never touched. When the ``with`` block finishes without error
 its files are moved into ``out_dir``; with ``replace`` whatever ``out_dir`` held before is
 removed at that moment (a failed run keeps the old results). On any error,
 ``KeyboardInterrupt`` (Ctrl-C) and ``signals.Terminated`` (SIGTERM) included, the staging
@@ -19,17 +25,26 @@ or new), with Ctrl-C and SIGTERM held back until the moves are done.
 ``atomic_path(path)`` yields a temporary name beside ``path`` for any writer (matplotlib,
 numpy, csv); on success it is renamed onto ``path``, on error deleted. ``write_json`` and
 ``write_text`` use it.
+
+``write_report(folder, report)`` is how every command writes its report: ``report.json``
+holds the results only, the same bytes for the same input; the wall-clock and CPU seconds
+(the ``TIMING_KEYS`` anywhere in the report) go to ``timings.json``, the one file of a run
+folder that differs from run to run (docs/cli.md, "Byte-identical reports").
 """
 
 from __future__ import annotations
 
 import contextlib
 import errno
+import hashlib
 import json
+import logging
 import math
 import os
+import re
 import shutil
 import signal
+import socket
 import tempfile
 import threading
 import uuid
@@ -39,7 +54,11 @@ from typing import Any, Iterator
 import numpy as np
 
 __all__ = ["out_folder", "staged_output", "atomic_path", "write_json", "write_text", "to_jsonable", "dumps_strict",
-           "interrupts_deferred"]
+           "interrupts_deferred", "TIMING_KEYS", "split_timings", "write_report", "remove_stale_staging"]
+
+# Report keys that hold wall-clock or CPU times [s]: they differ between two runs of the
+# same input, so ``write_report`` moves them from report.json to timings.json.
+TIMING_KEYS = frozenset({"wall_s", "timings_s", "elapsed_s"})
 
 _UMASK = os.umask(0o022)  # read the process umask (only settable, not readable) ...
 os.umask(_UMASK)  # ... and put it back: folders made by mkdtemp get the usual permissions
@@ -170,6 +189,77 @@ def _remove(path: Path) -> None:
         path.unlink()
 
 
+_STAGING_TAG = "flexcal"
+# .NAME.flexcal-HOST-PID-START.XXXXXXXX (mkdtemp's 8 random characters)
+_STAGING_NAME = re.compile(r"^\..*\.flexcal-([0-9a-f]{8})-(\d+)-(\d+)\.[A-Za-z0-9_]{8}$")
+
+
+def _host_hash() -> str:
+    """8 hex digits naming this host in staging folder names (a shared file system may
+    hold other hosts' folders, whose process ids mean nothing here)."""
+    return hashlib.sha256(socket.gethostname().encode()).hexdigest()[:8]
+
+
+def _process_state(pid: int) -> tuple[str, int] | None:
+    """(state letter, start time in clock ticks after boot) of a process from
+    /proc/PID/stat; None where there is no /proc (not Linux) or no such process."""
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return None
+    fields = stat[stat.rindex(")") + 2:].split()  # after "pid (command) ": state is field 3, starttime 22
+    return fields[0], int(fields[19])
+
+
+def _staging_prefix(name: str) -> str:
+    state = _process_state(os.getpid())
+    return f".{name}.{_STAGING_TAG}-{_host_hash()}-{os.getpid()}-{state[1] if state else 0}."
+
+
+def _owner_alive(pid: int, start: int) -> bool:
+    """Whether the process that made a staging folder (this host's ``pid``, started at
+    ``start``; 0 = unknown) still runs. In doubt, alive."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        pass  # another user's live process
+    state = _process_state(pid)
+    if state is None:
+        return True  # no /proc: the pid exists, so assume it is the owner
+    letter, started = state
+    if letter in ("Z", "X"):  # killed, not yet reaped by its parent
+        return False
+    return start == 0 or started == start  # a different start: the pid was reused
+
+
+def remove_stale_staging(folder: str | os.PathLike) -> list[str]:
+    """Remove the staging folders in ``folder`` left by runs of this host whose process is
+    gone (killed by SIGKILL, out of memory, ...); returns their names. Folders of live
+    processes, of other hosts and of any other name stay; errors are ignored (a folder
+    that cannot be removed stays as it was)."""
+    removed = []
+    try:
+        entries = list(os.scandir(folder))
+    except OSError:
+        return removed
+    host = _host_hash()
+    for entry in entries:
+        match = _STAGING_NAME.match(entry.name)
+        if not match or match.group(1) != host or not entry.is_dir(follow_symlinks=False):
+            continue
+        pid, start = int(match.group(2)), int(match.group(3))
+        if pid == os.getpid() or _owner_alive(pid, start):
+            continue
+        shutil.rmtree(entry.path, ignore_errors=True)
+        if not os.path.lexists(entry.path):
+            removed.append(entry.name)
+    if removed:
+        logging.getLogger("flexcal.output").info("removed staging folders of killed runs: %s", ", ".join(removed))
+    return removed
+
+
 @contextlib.contextmanager
 def staged_output(out_dir: str | os.PathLike, *, replace: bool = False, resume: bool = False) -> Iterator[Path]:
     """A staging folder for the outputs of a run, moved into ``out_dir`` when the block
@@ -183,7 +273,8 @@ def staged_output(out_dir: str | os.PathLike, *, replace: bool = False, resume: 
     else:
         where = out.absolute().parent
         where.mkdir(parents=True, exist_ok=True)
-    staging = Path(tempfile.mkdtemp(prefix=f".{out.name or 'out'}.", dir=where))
+    remove_stale_staging(where)
+    staging = Path(tempfile.mkdtemp(prefix=_staging_prefix(out.name or "out"), dir=where))
     os.chmod(staging, 0o777 & ~_UMASK)
     try:
         yield staging
@@ -279,3 +370,40 @@ def write_json(path: str | os.PathLike, data: Any, *, fsync: bool = False) -> No
     """Write ``data`` as indented strict JSON (non-finite numbers as null with a note;
     atomically: temporary file, then rename)."""
     write_text(path, dumps_strict(data, indent=2) + "\n", fsync=fsync)
+
+
+def split_timings(value: Any) -> tuple[Any, Any]:
+    """(``value`` without its ``TIMING_KEYS`` entries, those entries in the same nesting),
+    recursively through dicts and lists. The second is None where ``value`` holds no
+    timing; a list with timings in some entries keeps one entry per item (``{}`` for an
+    item without), so ``rows[k]``'s time is ``timings["rows"][k]``."""
+    if isinstance(value, dict):
+        results: dict[str, Any] = {}
+        timings: dict[str, Any] = {}
+        for key, item in value.items():
+            if key in TIMING_KEYS:
+                timings[key] = item
+                continue
+            results[key], inner = split_timings(item)
+            if inner is not None:
+                timings[key] = inner
+        return results, (timings or None)
+    if isinstance(value, (list, tuple)):
+        pairs = [split_timings(item) for item in value]
+        results_list = [r for r, _ in pairs]
+        if all(t is None for _, t in pairs):
+            return results_list, None
+        return results_list, [{} if t is None else t for _, t in pairs]
+    return value, None
+
+
+def write_report(folder: str | os.PathLike, report: dict[str, Any]) -> dict[str, Any]:
+    """``folder/report.json``: ``report`` without its timing keys (strict JSON, atomic);
+    ``folder/timings.json``: those keys [s] in the same nesting, when it has any. Returns
+    what report.json holds."""
+    folder = Path(folder)
+    results, timings = split_timings(report)
+    write_json(folder / "report.json", results)
+    if timings is not None:
+        write_json(folder / "timings.json", timings)
+    return results

@@ -2,7 +2,8 @@
 
 Writes DIR/report.json (``stiffness_fem``, ``stiffness_analytic`` 12 x 12 between the end
 faces A and B; ``compliance_fem``, ``compliance_analytic`` 6 x 6 at B with A clamped and
-their per-entry % difference; mesh, timings), DIR/report.md, DIR/chain.vtu, DIR/chain.png.
+their per-entry % difference; mesh), DIR/timings.json (wall/CPU seconds per stage),
+DIR/report.md, DIR/chain.vtu, DIR/chain.png, DIR/chain-mesh.png.
 """
 
 from __future__ import annotations
@@ -35,7 +36,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--elements-through", type=float,
                         help="quadratic tets through the thinnest leaf (default %(default)s: ~1 %% of converged, "
                              "a 150 mm chain then has ~50k nodes)")
-    add_out(parser, what="report.json, report.md, chain.png, chain.vtu")
+    add_out(parser, what="report.json, timings.json, report.md, chain.png, chain-mesh.png, chain.vtu")
 
 
 _FIELDS = {"length_mm": "length", "hinge_length_mm": "hinge_length", "width_mm": "width", "fillet_mm": "fillet",
@@ -75,5 +76,6 @@ def run(args: argparse.Namespace) -> int:
                                   cache=True, replace=args.force)
     print(f"flexcal chain: largest diagonal compliance difference FEM vs Eq. 1 "
           f"{data['max_abs_percent_difference_diagonal']:.1f} %; {data['mesh']['n_dof']} DOF, "
-          f"{sum(result.timings.values()):.1f} s; wrote {args.out}/report.json, report.md, chain.vtu, chain.png")
+          f"{sum(result.timings.values()):.1f} s; wrote {args.out}/report.json, timings.json, report.md, "
+          f"chain.vtu, chain.png, chain-mesh.png")
     return 0

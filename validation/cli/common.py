@@ -27,11 +27,7 @@ import sys
 from pathlib import Path
 from typing import Any, Iterable
 
-__all__ = ["install_common_options", "apply_config", "print_config", "summary_of", "show_progress", "error_line", "is_user_error", "configure_logging", "TIMING_KEYS", "without_timings", "examples_epilog"]
-
-# report.json keys that hold wall-clock times: they differ between two runs with the same
-# seed, everything else must be byte-identical (tests/test_cli_common.py)
-TIMING_KEYS = frozenset({"wall_s", "timings_s", "elapsed_s"})
+__all__ = ["install_common_options", "apply_config", "print_config", "summary_of", "show_progress", "error_line", "is_user_error", "configure_logging", "without_timings", "examples_epilog"]
 
 # Exceptions that mean "the input cannot be used" (one line, exit 2), beside ValueError
 # and OSError; matched by class name so the check imports no solver module.
@@ -162,30 +158,35 @@ def print_config(parser: argparse.ArgumentParser, module, argv: list[str], merge
     print(format_config(effective_config(parser, args, merged), header=header), end="")
 
 
+def _scalars(table: dict[str, Any]) -> dict[str, Any]:
+    return {k: v for k, v in table.items() if isinstance(v, (str, int, float, bool)) or v is None}
+
+
 def summary_of(out_dir: str | Path) -> dict[str, Any]:
     """The JSON summary of a run folder: report.json's ``summary`` table if it has one,
-    else its top-level numbers, strings and booleans; plus ``out`` and ``files``."""
+    else its top-level numbers, strings and booleans, with the matching times of
+    timings.json (``wall_s``); plus ``out`` and ``files``."""
     out = Path(out_dir)
-    report_path = out / "report.json"
+    report_path, timings_path = out / "report.json", out / "timings.json"
     summary: dict[str, Any] = {}
     if report_path.is_file():
         report = json.loads(report_path.read_text())
+        timings = json.loads(timings_path.read_text()) if timings_path.is_file() else {}
         if isinstance(report.get("summary"), dict):
-            summary = dict(report["summary"])
+            summary = {**report["summary"], **_scalars(timings.get("summary") or {})}
         else:
-            summary = {k: v for k, v in report.items() if isinstance(v, (str, int, float, bool)) or v is None}
+            summary = {**_scalars(report), **_scalars(timings)}
     summary["out"] = str(out)
     summary["files"] = sorted(p.name for p in out.iterdir() if not p.name.startswith("."))
     return summary
 
 
 def without_timings(value: Any) -> Any:
-    """A report with every ``TIMING_KEYS`` entry removed, recursively."""
-    if isinstance(value, dict):
-        return {k: without_timings(v) for k, v in value.items() if k not in TIMING_KEYS}
-    if isinstance(value, list):
-        return [without_timings(v) for v in value]
-    return value
+    """A report with every ``TIMING_KEYS`` entry removed, recursively (what
+    ``output.write_report`` puts in report.json; the keys: ``output.TIMING_KEYS``)."""
+    from ..output import split_timings
+
+    return split_timings(value)[0]
 
 
 def show_progress(args: argparse.Namespace) -> bool:

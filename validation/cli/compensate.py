@@ -117,7 +117,7 @@ def run(args: argparse.Namespace) -> int:
     from ..reports.compensation import build_report, plot_fit, plot_first_round, plot_iterated, report_markdown
     from ..measurements import read_measurement
     from ..runs.model_correction import model_space
-    from ..output import staged_output, write_json
+    from ..output import staged_output, write_report
     from ..runs.targets import default_targets, read_targets, write_targets
 
     quiet = getattr(args, "quiet", False)
@@ -143,7 +143,7 @@ def run(args: argparse.Namespace) -> int:
                           "second_order": args.second_order}
     ideal = ideal_angles(measurement.inputs, space)
     with staged_output(args.out, replace=args.force) as staging:
-        write_json(staging / "report.json", report)
+        write_report(staging, report)
         (staging / "report.md").write_text(report_markdown(report))
         write_targets(staging / "targets.csv", targets)
         _write_inputs(staging / "inputs.csv", targets, result.first_inputs,

@@ -127,7 +127,7 @@ def run(args: argparse.Namespace) -> int:
 
     from .common import show_progress
     from ..runs.model_correction import model_space
-    from ..output import staged_output, write_json
+    from ..output import staged_output, write_report
     from ..prototype.scenario import load_scenario
 
     _check(args)
@@ -156,7 +156,7 @@ def run(args: argparse.Namespace) -> int:
     report = _report(design, space, args, wall)
     with staged_output(args.out) as staging:
         _write_trajectory(staging / "trajectory.csv", design)
-        write_json(staging / "report.json", report)
+        write_report(staging, report)
         (staging / "report.md").write_text(_markdown(report))
         _plot(staging / "design.png", design, space.names)
     q, r = design.quality, design.reference_quality
@@ -196,7 +196,7 @@ def _markdown(report: dict) -> str:
     lines = ["# Designed calibration trajectory", "",
              f"{report['n_points']} postures chosen from {report['n_candidates']} candidates, noise "
              f"{report['noise_urad']:g} urad, prior scale {report['prior_scale']:g}, model inadequacy: "
-             f"{report['inadequacy']}; {report['wall_s']:.1f} s.", "",
+             f"{report['inadequacy']} (wall-clock time: timings.json).", "",
              "| figure | designed | standard trajectory (77) |", "|---|---:|---:|",
              f"| log det M (D-criterion) | {d['log_det_information']:.2f} | {s['log_det_information']:.2f} |",
              f"| det(M)^(1/45) | {d['d_efficiency']:.4g} | {s['d_efficiency']:.4g} |",

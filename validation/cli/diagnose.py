@@ -121,7 +121,7 @@ def run(args: argparse.Namespace) -> int:
     from ..diagnosis.plots import plot_heldout, plot_residual, plot_strata
     from ..measurements import read_measurement
     from ..runs.model_correction import model_space
-    from ..output import staged_output, write_json
+    from ..output import staged_output, write_report
 
     if args.particles < 2 or args.iterations < 1:
         raise ValueError("--particles must be >= 2 and --iterations >= 1")
@@ -145,7 +145,7 @@ def run(args: argparse.Namespace) -> int:
             f"trajectory?): the held-out scores extrapolate the baseline and may name a wrong effect; measure the "
             f"trajectory twice (docs/diagnosis.md, Designed trajectory)")
     with staged_output(args.out, replace=args.force) as staging:
-        write_json(staging / "report.json", report)
+        write_report(staging, report)
         (staging / "report.md").write_text(markdown(report))
         plot_residual(staging / "residual.png", diagnosis, measurement.leg)
         plot_strata(staging / "strata.png", report["where"]["strata"], np.asarray(report["noise_floor_per_angle_urad"]))

@@ -276,7 +276,7 @@ def run(args: argparse.Namespace) -> int:
     from ..diagnosis.plots import plot_benchmark
     from ..effects.library import EFFECT_IDS, LIBRARY, NONE, OUT_OF_LIBRARY_IDS
     from ..runs.model_correction import model_space
-    from ..output import out_folder, staged_output, write_json
+    from ..output import out_folder, staged_output, write_json, write_report
     from ..sweep.run import DesignStore
 
     if args.noise_urad <= 0:
@@ -314,7 +314,7 @@ def run(args: argparse.Namespace) -> int:
               "note": "answers.json holds what was injected; the diagnosis only received the measurement"}
     with staged_output(args.out, resume=True) as staging:
         write_json(staging / "answers.json", answers)
-        write_json(staging / "report.json", report)
+        write_report(staging, report)
         (staging / "report.md").write_text(_markdown(report))
         plot_benchmark(staging, rows, summary)
     if progress:

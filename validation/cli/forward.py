@@ -107,7 +107,7 @@ def write_point(out: str, report: dict, title: str, extra_lines: tuple[str, ...]
     import contextlib
     import io
 
-    from ..output import staged_output, write_json
+    from ..output import staged_output, write_report
 
     text = io.StringIO()
     with contextlib.redirect_stdout(text):
@@ -115,7 +115,7 @@ def write_point(out: str, report: dict, title: str, extra_lines: tuple[str, ...]
         for line in extra_lines:
             print(line)
     with staged_output(out, replace=replace) as staging:
-        write_json(staging / "report.json", report)
+        write_report(staging, report)
         plot_point(report, staging / "point.png", title)
         (staging / "report.md").write_text(f"# {title}\n\n```\n{text.getvalue()}```\n\n![the point](point.png)\n")
 

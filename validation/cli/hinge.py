@@ -1,7 +1,8 @@
 """``flexcal hinge``: FEM vs closed-form 6 x 6 compliance of one flexure hinge.
 
 Writes DIR/report.json (``compliance_fem``, ``compliance_analytic``, per-entry %
-difference, mesh size and quality, timings), DIR/report.md, DIR/hinge.vtu and DIR/hinge.png.
+difference, mesh size and quality), DIR/timings.json (wall/CPU seconds per stage),
+DIR/report.md, DIR/hinge.vtu, DIR/hinge.png and DIR/hinge-mesh.png.
 """
 
 from __future__ import annotations
@@ -38,7 +39,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="mapped: a structured mesh mapped onto the hinge's profile, the same mesh and numbers "
                              "on every run; tetwild: fTetWild, a different random mesh per solve (default "
                              "%(default)s). Either way the result goes to the FEM cache")
-    add_out(parser, what="report.json, report.md, hinge.png, hinge.vtu")
+    add_out(parser, what="report.json, timings.json, report.md, hinge.png, hinge-mesh.png, hinge.vtu")
 
 
 def build_hinge(args: argparse.Namespace):
@@ -95,5 +96,6 @@ def run(args: argparse.Namespace) -> int:
     print(f"flexcal hinge: C_rz,Mz FEM {c_fem:.6g} rad/(N m), closed form {c_ana:.6g} "
           f"({100 * (c_fem - c_ana) / c_ana:+.2f} %); largest diagonal difference "
           f"{data['max_abs_percent_difference_diagonal']:.1f} %; {data['mesh']['n_dof']} DOF, "
-          f"{sum(result.timings.values()):.1f} s; wrote {args.out}/report.json, report.md, hinge.vtu, hinge.png, hinge-mesh.png")
+          f"{sum(result.timings.values()):.1f} s; wrote {args.out}/report.json, timings.json, report.md, "
+          f"hinge.vtu, hinge.png, hinge-mesh.png")
     return 0

@@ -66,7 +66,7 @@ def run(args: argparse.Namespace) -> int:
     from flexcal.model.forward import ideal_angles
     from flexcal.model.parameters import parameter_space
 
-    from ..output import staged_output, write_json
+    from ..output import staged_output, write_report
     from ..prototype.scenario import mechanism_from_metadata
     from ..reports.plots import plot_misalignment_curves
     from ..runs.model_correction import model_space
@@ -134,7 +134,7 @@ def run(args: argparse.Namespace) -> int:
         lines.append("| " + " | ".join(cells + ["yes" if r["identifiable"] else "no"]) + " |")
     ideal = ideal_angles(measurement.inputs, space)
     with staged_output(args.out, replace=args.force) as staging:
-        write_json(staging / "report.json", report)
+        write_report(staging, report)
         (staging / "report.md").write_text("\n".join(lines) + "\n")
         classes = measurement.metadata.get("prototype", {}).get("point_class") or ["S3"] * measurement.n_points
         plot_misalignment_curves(staging / "fit.png", angles - ideal, classes, leg=measurement.leg,

@@ -57,7 +57,7 @@ def run(args: argparse.Namespace) -> int:
 
     from .common import show_progress
     from ..runs.model_correction import model_space
-    from ..output import staged_output, write_json
+    from ..output import staged_output, write_report
     from flexcal.model.parameters import DRIVE_SOURCE_NAMES
 
     check_sobol_options(args)
@@ -88,7 +88,7 @@ def run(args: argparse.Namespace) -> int:
                 "![Normalized total Sobol indices (Fig. 5)](sensitivity.png)", "",
                 "## Ranked by the overall total index", "", format_ranked_table(sobol, 0)]
     with staged_output(args.out, replace=args.force) as staging:
-        write_json(staging / "report.json", report)
+        write_report(staging, report)
         (staging / "report.md").write_text("\n".join(markdown))
         plot_sensitivity(sobol, staging / "sensitivity.png")
     top = ", ".join(f"{r['name']} {r['ST']:.3f}" for r in ranked_table(sobol, 0)[:5])

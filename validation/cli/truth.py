@@ -46,7 +46,7 @@ def run(args: argparse.Namespace) -> int:
     from flexcal.model.forward import ideal_angles
 
     from ..measurements import write_measurement
-    from ..output import staged_output, write_json
+    from ..output import staged_output, write_report
     from ..reports.plots import plot_misalignment_curves
     from .options import load_scenario_with_trajectory
     from ..prototype.truth import make_truth
@@ -76,7 +76,7 @@ def run(args: argparse.Namespace) -> int:
     }
     with staged_output(args.out, replace=args.force) as staging:
         write_measurement(staging / "curves.csv", measurement)
-        write_json(staging / "report.json", report)
+        write_report(staging, report)
         (staging / "report.md").write_text(
             f"# Virtual prototype: scenario {scenario.name} (seed {scenario.seed})\n\n"
             f"{measurement.n_points} points; classes " + ", ".join(f"{c} {n}" for c, n in zip(classes, counts))

@@ -145,8 +145,8 @@ def _markdown(report) -> str:
     lines = ["# Section 3.3 regression run", "",
              f"Fit: Eq. 13 fitness {report['fitness_eq13_urad']:.4g} urad, RMS {report['fit_rms_urad']:.4g} urad, "
              f"max ||Δθ|| {report['fit_max_urad']:.4g} urad over {report['n_points']} postures; "
-             f"{report['n_evaluations']} model evaluations ({report['n_model_postures']} postures), "
-             f"{report['wall_s']:.1f} s.", ""]
+             f"{report['n_evaluations']} model evaluations ({report['n_model_postures']} postures) "
+             f"(wall-clock times: timings.json).", ""]
     if report.get("fit_rms_over_noise_floor") is not None:
         lines += [f"Fit RMS / sensor noise floor: {report['fit_rms_over_noise_floor']:.3g}.", ""]
     if report.get("z_rms_identifiable") is not None:
@@ -198,7 +198,7 @@ def run(args: argparse.Namespace) -> int:
 
     from .options import check_sobol_options, load_source
     from ..measurements import write_measurement
-    from ..output import staged_output, write_json
+    from ..output import staged_output, write_report
     from ..runs.model_correction import model_space
     from ..runs.verify import VerifySettings, run_verify
     from .options import executor_options
@@ -223,7 +223,7 @@ def run(args: argparse.Namespace) -> int:
                                         "(docs/model.md 7)" if space.compliance_factors else "closed-form (paper Eq. 1)")
     result.report["model_second_order"] = bool(space.second_order)
     with staged_output(args.out, replace=args.force) as staging:
-        write_json(staging / "report.json", result.report)
+        write_report(staging, result.report)
         (staging / "report.md").write_text(_markdown(result.report))
         write_measurement(staging / "curves.csv", measurement)
         _plots(result, measurement, staging)

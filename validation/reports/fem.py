@@ -216,7 +216,7 @@ def report_data(result: ComparisonResult, params_mm: dict[str, float]) -> dict[s
 
     diff = percent_difference(result.compliance_fem, result.compliance_analytic)
     mesh_report = asdict(result.mesh_report)
-    mesh_timings = mesh_report.pop("timings")  # wall/CPU seconds: under timings_s, apart from the figures
+    mesh_timings = mesh_report.pop("timings")  # wall/CPU seconds: under timings_s, to timings.json
     data: dict[str, Any] = {
         "kind": result.kind,
         "parameters_mm": params_mm,
@@ -243,13 +243,14 @@ def report_data(result: ComparisonResult, params_mm: dict[str, float]) -> dict[s
 
 
 def write_comparison(result: ComparisonResult, directory: Path, params_mm: dict[str, float]) -> dict[str, Any]:
-    """Write report.json, report.md, <kind>.vtu and <kind>.png into ``directory``."""
+    """Write report.json (results), timings.json (wall/CPU seconds), report.md, <kind>.vtu,
+    <kind>.png and <kind>-mesh.png into ``directory``."""
     from flexcal.fem.results import render_deformed_png, render_mesh_png, write_vtu
 
-    from ..output import write_json
+    from ..output import write_report
 
     data = report_data(result, params_mm)
-    write_json(directory / "report.json", data)
+    write_report(directory, data)
     diff = percent_difference(result.compliance_fem, result.compliance_analytic)
     title = "Flexure hinge" if result.kind == "hinge" else "Flexure chain"
     lines = [f"# {title}: FEM against closed form", "",
@@ -261,7 +262,8 @@ def write_comparison(result: ComparisonResult, directory: Path, params_mm: dict[
              f"Mesh: {data['mesh']['n_nodes']} nodes, {data['mesh']['n_tets']} quadratic tets, "
              f"radius ratio min {result.mesh_report.radius_ratio_min:.3f} / median "
              f"{result.mesh_report.radius_ratio_median:.3f}, volume error {result.mesh_report.volume_error:+.2e}.", "",
-             "Timings: report.json, `timings_s` (kept out of this page so that a rerun writes the same bytes).", "",
+             "Timings: timings.json (kept out of this page and of report.json so that a rerun writes the same "
+             "bytes).", "",
              f"Deformed shape ({result.load_case}), coloured by von Mises stress:", "",
              f"![deformed shape]({result.kind}.png)", "", "Mesh:", "", f"![mesh]({result.kind}-mesh.png)", "",
              f"Fields (displacement, stress, von Mises) in {result.kind}.vtu for ParaView."]

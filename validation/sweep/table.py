@@ -3,9 +3,10 @@
 sweep.csv: one row per design of the config (failed designs: empty result cells), columns
 ``id``, the dimensions [mm], ``n_nodes``, the FEM and closed-form diagonal compliances
 (SI), their discrepancy [%], the peak stress per unit rotation [MPa/mrad] (FEM and
-nominal) and their ratio, identification accuracy when computed, ``wall_s``.
-discrepancy.png and stress.png: those against each swept dimension. report.json: a
-summary, the effective config, the ids computed in this run and the failures.
+nominal) and their ratio, identification accuracy when computed. discrepancy.png and
+stress.png: those against each swept dimension. report.json: a summary, the effective
+config, the ids computed in this run and the failures; timings.json: the wall-clock
+seconds of the run and of each design (``output.write_report``).
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from ..output import atomic_path, write_json, write_text
+from ..output import atomic_path, write_report, write_text
 from .job import DIAGONAL
 from .space import DEFAULT_CONFIG, resolve_config, varied_names
 
@@ -48,7 +49,6 @@ def table_rows(records: list[dict[str, Any] | None], designs_ids: list[str], kin
         if "identification" in record:
             row.update({f"identification_{k}": v for k, v in record["identification"].items()
                         if isinstance(v, (int, float))})
-        row["wall_s"] = record["wall_s"]
         rows.append(row)
     return rows
 
@@ -94,7 +94,7 @@ def _plot_against(done: list[dict[str, Any]], names: list[str], series: list[tup
 
 
 def write_tables(result, config: dict[str, Any], out: Path) -> None:
-    """OUT/sweep.csv, OUT/sweep.json and the plots, each written atomically."""
+    """OUT/sweep.csv, OUT/report.json, OUT/timings.json, OUT/report.md and the plots, each written atomically."""
     kind = resolve_config(config)["sweep"]["kind"]
     rows = table_rows(result.records, list(result.ids), kind)
     columns: list[str] = []
@@ -108,7 +108,7 @@ def write_tables(result, config: dict[str, Any], out: Path) -> None:
             writer.writerows(rows)
     figures = plot_sweep(rows, varied_names(config), out)
     done = [r for r in result.records if r is not None]
-    write_json(out / "report.json", {
+    write_report(out, {
         "summary": {"kind": kind, "n_designs": len(rows), "n_finished": len(done),
                     "n_computed_this_run": len(result.computed), "n_failed": len(result.failures),
                     "max_abs_discrepancy_rz_Mz_percent": max((abs(r["discrepancy_percent"]["rz_Mz"]) for r in done),
@@ -120,7 +120,9 @@ def write_tables(result, config: dict[str, Any], out: Path) -> None:
         "computed_this_run": list(result.computed),
         "failures": result.failures,
         "wall_s": result.wall_s,
-        "files": ["sweep.csv", "report.md", *figures, "designs/<id>.json"],
+        "timings_s": {"designs": {identifier: record["wall_s"] for identifier, record in zip(result.ids, result.records)
+                                  if record is not None}},
+        "files": ["sweep.csv", "report.md", "timings.json", *figures, "designs/<id>.json"],
         "columns": columns,
     })
     write_text(out / "report.md", sweep_markdown(rows, kind, figures, len(done), len(result.failures)))
