@@ -171,12 +171,13 @@ def mechanism_matrices(values, space: ParameterSpace, *, candidate_offset: int =
     _validate(values, space, candidate_offset)
     mech = space.mechanism
     n_c = values.shape[0]
-    w, a, l, t1, t2 = np.moveaxis(values[:, space.chain_indices("w", "a", "l", "t1", "t2")], -1, 0)  # (n_c, 6) each
+    # (n_c, chains, symbols) -> one (n_c, chains) array per symbol
+    w, a, l, t1, t2 = values[:, space.chain_indices("w", "a", "l", "t1", "t2")].transpose(2, 0, 1)
     fixed = _mechanism_constants(mech)
     point_a0, point_b, roll, nominal_rotation = fixed["point_a"], fixed["point_b"], fixed["roll"], fixed["rotation"]
     section, connector, end_block, actuator = fixed["section"], fixed["connector"], fixed["end_block"], fixed["actuator"]
     offset = np.zeros((n_c, N_CHAINS, 3))
-    d, phi = np.moveaxis(values[:, space.chain_indices("d", "phi")], -1, 0)  # (n_c, 3): the load chains
+    d, phi = values[:, space.chain_indices("d", "phi")].transpose(2, 0, 1)  # (n_c, 3): the load chains
     offset[:, LOAD] = d[..., None] * (np.cos(phi)[..., None] * nominal_rotation[LOAD, :, 1]
                                        + np.sin(phi)[..., None] * nominal_rotation[LOAD, :, 2])
     point_a = point_a0 + offset
@@ -244,7 +245,7 @@ def mechanism_matrices(values, space: ParameterSpace, *, candidate_offset: int =
         raise ValueError(f"candidate {cand + candidate_offset}: driving chain {CHAIN_NAMES[DRIVING][chain]} has no "
                          f"stiffness of its own (s = {nut[cand, chain]:.3g} N/m); the mechanism is singular for these "
                          f"parameters")
-    mu, clearance, initial_position = np.moveaxis(values[:, space.chain_indices("mu", "CL", "x0")], -1, 0)  # drives
+    mu, clearance, initial_position = values[:, space.chain_indices("mu", "CL", "x0")].transpose(2, 0, 1)  # drives
     return MechanismMatrices(
         chain_stiffness=stiffness, frame_transform=transform, rotation=rotation, point_a=point_a,
         frame_stiffness=frame_stiffness, axial_gain=axial_gain, input_gain=input_gain, gravity_pose=gravity_pose,
