@@ -63,6 +63,25 @@ def test_prepare_gets_exactly_the_slices_the_prototype_asks_for():
     assert announced[0] == chain_slices(p.chain for p in mechanism.chains)
 
 
+def test_segments_are_handed_out_longest_first(tmp_path, monkeypatch):
+    """The leaf segments (thinnest leaves first: most tets) go to the workers before the
+    strut segments, which then fill the gaps at the end; the sort is stable."""
+    import flexcal.validation.executor as executor
+    from flexcal.validation.prototype.fem_provider import segment_build_cost
+
+    submitted = []
+    monkeypatch.setattr(executor, "run_jobs", lambda items, job, on_done, **kw: submitted.extend(items) or {})
+    mechanism = reference_mechanism()
+    build_segments(chain_slices(p.chain for p in mechanism.chains), cache_directory=tmp_path, workers=2,
+                   progress=False)
+    costs = [segment_build_cost(segment) for segment in submitted]
+    assert len(submitted) == 9 and costs == sorted(costs, reverse=True)  # 9 distinct segments of the mount
+    struts = [segment for segment in submitted if not any(k.startswith("leaf") for k, _, _ in segment.segments())]
+    assert len(struts) == 3 and submitted[-3:] == struts and costs[-1] == 0.0
+    thinnest = min(min(s.chain.thickness_1, s.chain.thickness_2) for s in submitted)
+    assert min(submitted[0].chain.thickness_1, submitted[0].chain.thickness_2) == thinnest
+
+
 def _small_slices():
     """The first two slices of the 150 mm driving chain (leaf 1, leaf 2): cheap at 1 element through."""
     chain = reference_mechanism().chains[3].chain

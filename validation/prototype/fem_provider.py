@@ -13,7 +13,9 @@ Parallel builds: ``fem_provider(workers=..., scheduler=...)`` gives the provider
 every slice they are about to ask for; the segments missing from the cache are then
 built at once on the shared executor (``flexcal.validation.executor``: local worker
 processes or a Dask cluster), each under the same cache key as a sequential build, and
-the provider's calls that follow are all cache hits (``build_segments``).
+the provider's calls that follow are all cache hits (``build_segments``). They are handed
+out longest first (``segment_build_cost``: leaf segments, thinnest leaves first, then the
+cheap strut segments), and a worker meshes on one thread (``WORKER_MESHER_THREADS``).
 """
 
 from __future__ import annotations
@@ -27,7 +29,7 @@ import numpy as np
 from flexcal.geometry.params import STEEL, ChainSegment, FlexureChain, Material
 
 __all__ = ["fem_provider", "segment_stiffness_fem", "mirror_segment_stiffness", "DEFAULT_ELEMENTS_THROUGH",
-           "canonical_segment", "segment_cache_key", "build_segments", "build_segment_job"]
+           "canonical_segment", "segment_cache_key", "build_segments", "build_segment_job", "segment_build_cost"]
 
 # 3 quadratic tets through the thinnest leaf section: within ~0.3 % of the converged
 # bending compliance on the reference notch hinge after snapping (docs/meshing.md), at a
@@ -69,9 +71,11 @@ def canonical_segment(chain: FlexureChain, x_start: float, x_end: float) -> tupl
 
 def segment_stiffness_fem(segment: ChainSegment, material: Material = STEEL, *,
                           elements_through_thickness: float = DEFAULT_ELEMENTS_THROUGH,
-                          cache_directory=None) -> np.ndarray:
+                          cache_directory=None, mesher_threads: int = 0) -> np.ndarray:
     """Condensed 12 x 12 stiffness [SI] of one chain segment between its end-face centres
-    (node A at x_start, node B at x_end; DOF order ux, uy, uz, rx, ry, rz), cached."""
+    (node A at x_start, node B at x_end; DOF order ux, uy, uz, rx, ry, rz), cached.
+    mesher_threads: fTetWild's threads (0: all cores; not part of the cache key, as
+    fTetWild gives another mesh on every call anyway)."""
     from flexcal.fem.cache import cached
 
     def compute() -> dict[str, np.ndarray]:
@@ -80,7 +84,8 @@ def segment_stiffness_fem(segment: ChainSegment, material: Material = STEEL, *,
         from flexcal.geometry.solids import segment_solid
 
         part = segment_solid(segment)
-        mesh, _report = mesh_part(part, elements_through_thickness=elements_through_thickness)
+        mesh, _report = mesh_part(part, elements_through_thickness=elements_through_thickness,
+                                  num_threads=mesher_threads)
         (plane_a, plane_b) = (part.end_planes["A"], part.end_planes["B"])
         stiffness = chain_stiffness(mesh, material, plane_a, part.reference_points["A"], plane_b,
                                     part.reference_points["B"])
@@ -90,13 +95,35 @@ def segment_stiffness_fem(segment: ChainSegment, material: Material = STEEL, *,
                   cache_directory)["stiffness"]
 
 
+def segment_build_cost(segment: ChainSegment) -> float:
+    """Relative cost of building ``segment`` (dimensionless), to hand the longest builds out
+    first: a leaf meshed with a fixed number of quadratic tets through its thickness t has
+    about (length x width) / t^2 of them, and the leaves' tets dominate meshing and solve;
+    blocks, connectors and strut, meshed coarsely, count 0."""
+    chain = segment.chain
+    cost = 0.0
+    for kind, a, b in segment.segments():
+        if kind.startswith("leaf"):
+            thickness = chain.thickness_1 if kind == "leaf1" else chain.thickness_2
+            cost += (b - a) * chain.width / thickness ** 2
+    return cost
+
+
+# fTetWild's threads on a worker: a worker owns one core (Dask also sets OMP/MKL_NUM_THREADS=1).
+# Measured on the 2-core machine, one leaf segment of the mount meshed 4 times each way, alone:
+# all cores median 6.1 s wall for 7.8 s CPU, one thread 6.4 s wall for 6.6 s CPU; the second
+# thread bought 5 % of wall time for 17 % more CPU, which a busy second worker needs itself.
+WORKER_MESHER_THREADS = 1
+
+
 def build_segment_job(segment: ChainSegment, *, material: Material, elements_through_thickness: float,
                       cache_directory=None) -> dict[str, Any]:
     """One segment build on a worker: {"key": its cache key there, "stiffness": (12, 12),
-    "wall_s": [s]}; the worker's cache gets the entry too (``segment_stiffness_fem``)."""
+    "wall_s": [s]}; the worker's cache gets the entry too (``segment_stiffness_fem``);
+    fTetWild on one thread (``WORKER_MESHER_THREADS``)."""
     start = time.perf_counter()
     stiffness = segment_stiffness_fem(segment, material, elements_through_thickness=elements_through_thickness,
-                                      cache_directory=cache_directory)
+                                      cache_directory=cache_directory, mesher_threads=WORKER_MESHER_THREADS)
     return {"key": segment_cache_key(segment, material, elements_through_thickness=elements_through_thickness),
             "stiffness": stiffness, "wall_s": time.perf_counter() - start}
 
@@ -146,7 +173,10 @@ def build_segments(slices: Iterable[tuple[FlexureChain, float, float]], material
     # the workers write into the same folder when it is shared (LocalCluster: always)
     options = {"material": material, "elements_through_thickness": float(elements_through_thickness),
                "cache_directory": None if cache_directory is None else str(cache_directory)}
-    failures = run_jobs(list(missing.values()), build_segment_job, on_done, key=lambda seg: keys[id(seg)][:16],
+    # longest first (stable): the cheap strut segments fill the gaps at the end instead of a
+    # leaf segment started last keeping one worker busy while the others idle
+    ordered = sorted(missing.values(), key=segment_build_cost, reverse=True)
+    failures = run_jobs(ordered, build_segment_job, on_done, key=lambda seg: keys[id(seg)][:16],
                         workers=n_workers, scheduler=scheduler, job_options=options, task_prefix="fem-segment")
     if failures:
         key, text = next(iter(failures.items()))
