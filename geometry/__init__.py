@@ -17,7 +17,7 @@ _EXPORTS = {
     "ChainPlacement": "params",
     "MechanismParams": "params",
     "reference_mechanism": "params",
-    "chain_rotation": "params",
+    "chain_rotation": "frames",
     "BoxPiece": "exact",
     "LeafPiece": "exact",
     "NotchPiece": "exact",

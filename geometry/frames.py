@@ -1,5 +1,6 @@
 """Rigid-body algebra, once for fem, model and validation: skew matrices, 6x6 twist
-transforms (the SE(3) adjoint), SE(3)/SO(3) exp, log, inverse and Jacobians.
+transforms (the SE(3) adjoint), SE(3)/SO(3) exp, log, inverse and Jacobians, and the
+chain axes (a chain's local frame from its end points).
 
 Twists are ``[d; theta]`` (..., 6): translation [m] first, rotation [rad] second, ordered
 x, y, z (``ux, uy, uz, rx, ry, rz``); wrenches ``[F; M]`` ([N], [N m]). A twist ``t_p`` of
@@ -39,6 +40,7 @@ __all__ = [
     "twist_transform",
     "frame_to_point_transform",
     "rotation_about_x",
+    "chain_rotation",
     "so3_exp",
     "so3_log",
     "so3_left_jacobian",
@@ -136,6 +138,27 @@ def rotation_about_x(angle: float) -> np.ndarray:
     """(3, 3) rotation by ``angle`` [rad] about x (columns = rotated axes)."""
     c, s = np.cos(angle), np.sin(angle)
     return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
+
+
+def chain_rotation(point_a: np.ndarray, point_b: np.ndarray, roll_reference: np.ndarray) -> np.ndarray:
+    """A chain's local axes (..., 3, 3): columns x, y, z in the global frame, batched.
+
+    x points from A to B ([m] inputs), y is ``roll_reference`` made orthogonal to x,
+    z = x cross y. The model's chain frames (Eq. 2-3) and ``ChainPlacement.rotation``.
+    Raises ``ValueError`` if A = B or the reference is parallel to the axis.
+    """
+    axis = np.asarray(point_b, dtype=float) - np.asarray(point_a, dtype=float)
+    length = np.linalg.norm(axis, axis=-1, keepdims=True)
+    if np.any(length <= 0):
+        raise ValueError("chain end points A and B coincide; a chain needs a length > 0")
+    x = axis / length
+    ref = np.broadcast_to(np.asarray(roll_reference, dtype=float), x.shape)
+    y = ref - np.sum(ref * x, axis=-1, keepdims=True) * x
+    norm = np.linalg.norm(y, axis=-1, keepdims=True)
+    if np.any(norm < 1e-9):
+        raise ValueError("roll_reference is parallel to the chain axis; choose another")
+    y = y / norm
+    return np.stack([x, y, cross(x, y)], axis=-1)
 
 
 # --- SO(3) ----------------------------------------------------------------------------------

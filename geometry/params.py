@@ -26,6 +26,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .frames import chain_rotation
+
 __all__ = [
     "Material",
     "STEEL",
@@ -36,7 +38,6 @@ __all__ = [
     "ChainPlacement",
     "MechanismParams",
     "reference_mechanism",
-    "chain_rotation",
 ]
 
 
@@ -287,22 +288,6 @@ class ChainSegment:
             if b - a > 1e-12:
                 out.append((kind, a, b))
         return tuple(out)
-
-
-def chain_rotation(point_a: np.ndarray, point_b: np.ndarray, roll_reference: np.ndarray) -> np.ndarray:
-    """Rotation matrix (3, 3) whose columns are the chain's local x, y, z in the global frame.
-
-    x points from A to B; local y is ``roll_reference`` made orthogonal to x; z = x * y.
-    """
-    x = np.asarray(point_b, float) - np.asarray(point_a, float)
-    x = x / np.linalg.norm(x)
-    ref = np.asarray(roll_reference, float)
-    y = ref - ref.dot(x) * x
-    norm = np.linalg.norm(y)
-    if norm < 1e-9:
-        raise ValueError("roll_reference is parallel to the chain axis; choose another")
-    y = y / norm
-    return np.column_stack([x, y, np.cross(x, y)])
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -68,7 +68,6 @@ _EXPORTS = {
     "N_CHAINS": "parameters",
     "LOAD": "parameters",
     "DRIVING": "parameters",
-    "axis_rotation": "frames",
     "read_parameter_file": "param_file",
 }
 

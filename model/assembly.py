@@ -28,13 +28,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from flexcal.geometry.frames import frame_to_point_transform
+from flexcal.geometry.frames import chain_rotation, frame_to_point_transform
 from flexcal.geometry.params import MechanismParams
 
 from . import kernel
 from .chain import chain_compliance_entries, stiffness_from_entries
 from .second_order import preload_geometric_stiffness
-from .frames import axis_rotation
 from .parameters import CHAIN_NAMES, DRIVING, LOAD, N_CHAINS, ParameterSpace
 
 __all__ = ["MechanismMatrices", "mechanism_matrices", "payload_wrench"]
@@ -181,7 +180,7 @@ def mechanism_matrices(values, space: ParameterSpace, *, candidate_offset: int =
     offset[:, LOAD] = d[..., None] * (np.cos(phi)[..., None] * nominal_rotation[LOAD, :, 1]
                                        + np.sin(phi)[..., None] * nominal_rotation[LOAD, :, 2])
     point_a = point_a0 + offset
-    rotation = axis_rotation(point_a, point_b, roll)
+    rotation = chain_rotation(point_a, point_b, roll)
     length = np.linalg.norm(point_b - point_a, axis=-1)
     strut = length - 2.0 * end_block - 4.0 * l - 2.0 * connector
     if np.any(strut <= 0):

@@ -200,6 +200,28 @@ def test_batched_equals_looped():
     assert np.array_equal(fr.skew(point), np.array([[fr.skew(p) for p in row] for row in point]))
 
 
+def test_chain_rotation_is_the_chain_frame_batched_or_not():
+    """x along B - A, y = the roll reference made orthogonal to x (same half-plane), z = x
+    cross y; one chain at a time equals all at once (the model's batched call and
+    ``ChainPlacement.rotation``'s single one share this function)."""
+    rng = np.random.default_rng(7)
+    point_a, point_b, reference = rng.normal(size=(3, 5, 3))
+    axes = fr.chain_rotation(point_a, point_b, reference)
+    axial = (point_b - point_a) / np.linalg.norm(point_b - point_a, axis=1, keepdims=True)
+    assert np.allclose(axes[..., 0], axial, rtol=0, atol=4 * ULP)  # normalisation round-off
+    assert np.allclose(np.swapaxes(axes, -1, -2) @ axes, np.eye(3), rtol=0, atol=8 * ULP)  # orthonormal to round-off
+    assert np.allclose(np.linalg.det(axes), 1.0, rtol=0, atol=8 * ULP)  # right-handed, to round-off
+    # y lies in the plane of x and the reference, on the reference's side
+    assert np.allclose(np.einsum("ni,ni->n", axes[..., 2], reference), 0.0, rtol=0, atol=16 * ULP)  # as above
+    assert np.all(np.einsum("ni,ni->n", axes[..., 1], reference) > 0)
+    looped = np.array([fr.chain_rotation(a, b, r) for a, b, r in zip(point_a, point_b, reference)])
+    assert np.array_equal(axes, looped)
+    with pytest.raises(ValueError, match="coincide"):
+        fr.chain_rotation(point_a[0], point_a[0], reference[0])
+    with pytest.raises(ValueError, match="parallel"):
+        fr.chain_rotation(point_a[0], point_b[0], point_b[0] - point_a[0])
+
+
 def test_log_near_pi_is_refused():
     with pytest.raises(ValueError, match="pi"):
         fr.so3_log(fr.so3_exp(np.array([0.0, 0.0, np.pi - 1e-9])))

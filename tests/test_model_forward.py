@@ -8,7 +8,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from flexcal.geometry.params import FlexureChain, chain_rotation, reference_mechanism
+from flexcal.geometry.frames import chain_rotation
+from flexcal.geometry.params import FlexureChain, reference_mechanism
 from flexcal.model import kernel
 from flexcal.model.assembly import mechanism_matrices, payload_wrench
 from flexcal.model.chain import chain_stiffness_matrix
