@@ -256,7 +256,7 @@ FEM_FULL_GRID_DETECTION, FEM_FULL_GRID_N_AT_3X = 59 / 66, 66
 
 @pytest.mark.slow
 def test_full_benchmark_grid_on_the_fem_prototype(tmp_path):
-    """The full grid on the FEM prototype (1 h 23 min on 2 cores, session 4): the goals of
+    """The full grid on the FEM prototype (42 min on 2 workers with a cold FEM cache, session 7): the goals of
     issue #7 that are met (false alarms on none, closure) and the detection figure the grid
     reached, each asserted. Runs its cases on both cores (--workers 2): run it alone."""
     import math
