@@ -115,10 +115,13 @@ def test_parallel_segment_build_equals_sequential(tmp_path, monkeypatch):
         assert np.array_equal(provider(chain, x0, x1), stored_parallel)
         c_parallel = np.diag(np.linalg.inv(stored_parallel[6:, 6:]))
         c_sequential = np.diag(np.linalg.inv(stored_sequential[6:, 6:]))
-        # fTetWild is not deterministic (issue #14; two runs of the first segment here gave
-        # C_rz,Mz 0.10 % apart, single-threaded 0.035 %): 1 % is 10x that scatter, while a
-        # wrong segment (other cut, other chain, mirrored) differs by tens of percent
-        np.testing.assert_allclose(c_parallel, c_sequential, rtol=0.01)
+        # fTetWild is not deterministic (issue #14). Measured at this 1 element through the
+        # thickness, 10 builds of each slice, one fTetWild thread and all cores alike: the
+        # end compliances spread (max - min) up to 1.2 % (C_rx,Mx of the first slice; a 1.03 %
+        # pair made the earlier 1 % bound flaky), the medians of the two thread settings
+        # within 0.05 %. 3 % is 2.5x the largest spread, while a wrong segment (other cut,
+        # other chain, mirrored) differs by tens of percent
+        np.testing.assert_allclose(c_parallel, c_sequential, rtol=0.03)
     assert len(list(parallel.glob("*.npz"))) == 2  # the provider's calls built nothing more
 
 
