@@ -15,7 +15,8 @@ built at once on the shared executor (``flexcal.validation.executor``: local wor
 processes or a Dask cluster), each under the same cache key as a sequential build, and
 the provider's calls that follow are all cache hits (``build_segments``). They are handed
 out longest first (``segment_build_cost``: leaf segments, thinnest leaves first, then the
-cheap strut segments), and a worker meshes on one thread (``WORKER_MESHER_THREADS``).
+cheap strut segments), and a local worker process meshes on one thread
+(``WORKER_MESHER_THREADS``).
 """
 
 from __future__ import annotations
@@ -109,7 +110,9 @@ def segment_build_cost(segment: ChainSegment) -> float:
     return cost
 
 
-# fTetWild's threads on a worker: a worker owns one core (Dask also sets OMP/MKL_NUM_THREADS=1).
+# fTetWild's threads on a local worker process: each owns one core (threads_per_worker=1;
+# Dask also sets OMP/MKL_NUM_THREADS=1). In this process (--workers 0) and on a cluster given
+# by address, whose workers may own many cores, fTetWild keeps all cores (0).
 # Measured on the 2-core machine, one leaf segment of the mount meshed 4 times each way, alone:
 # all cores median 6.1 s wall for 7.8 s CPU, one thread 6.4 s wall for 6.6 s CPU; the second
 # thread bought 5 % of wall time for 17 % more CPU, which a busy second worker needs itself.
@@ -117,13 +120,13 @@ WORKER_MESHER_THREADS = 1
 
 
 def build_segment_job(segment: ChainSegment, *, material: Material, elements_through_thickness: float,
-                      cache_directory=None) -> dict[str, Any]:
+                      cache_directory=None, mesher_threads: int = 0) -> dict[str, Any]:
     """One segment build on a worker: {"key": its cache key there, "stiffness": (12, 12),
     "wall_s": [s]}; the worker's cache gets the entry too (``segment_stiffness_fem``);
-    fTetWild on one thread (``WORKER_MESHER_THREADS``)."""
+    fTetWild on ``mesher_threads`` threads (0: all cores)."""
     start = time.perf_counter()
     stiffness = segment_stiffness_fem(segment, material, elements_through_thickness=elements_through_thickness,
-                                      cache_directory=cache_directory, mesher_threads=WORKER_MESHER_THREADS)
+                                      cache_directory=cache_directory, mesher_threads=mesher_threads)
     return {"key": segment_cache_key(segment, material, elements_through_thickness=elements_through_thickness),
             "stiffness": stiffness, "wall_s": time.perf_counter() - start}
 
@@ -172,7 +175,8 @@ def build_segments(slices: Iterable[tuple[FlexureChain, float, float]], material
 
     # the workers write into the same folder when it is shared (LocalCluster: always)
     options = {"material": material, "elements_through_thickness": float(elements_through_thickness),
-               "cache_directory": None if cache_directory is None else str(cache_directory)}
+               "cache_directory": None if cache_directory is None else str(cache_directory),
+               "mesher_threads": WORKER_MESHER_THREADS if scheduler is None and n_workers > 0 else 0}
     # longest first (stable): the cheap strut segments fill the gaps at the end instead of a
     # leaf segment started last keeping one worker busy while the others idle
     ordered = sorted(missing.values(), key=segment_build_cost, reverse=True)
