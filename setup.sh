@@ -6,11 +6,14 @@ cd "$(dirname "$0")"
 
 # CadQuery's OCP loads libGL.so.1 and libX11.so.6; VTK renders off-screen through EGL or
 # OSMesa. Install what is missing (Debian/Ubuntu, as root). Elsewhere: install the
-# equivalents of libgl1 libx11-6 libegl1 libosmesa6 with your package manager.
+# equivalents of libgl1 libx11-6 libegl1 libosmesa6 (and a C compiler) with your package manager.
 missing=()
 for pkg in libgl1 libx11-6 libegl1 libosmesa6 libxrender1; do
   dpkg -s "$pkg" >/dev/null 2>&1 || missing+=("$pkg")
 done
+# a C compiler builds flexcal.fem._entropy (fem/_entropy.c), which makes fTetWild's meshes
+# repeat; without one flexcal still installs, but its fTetWild meshes vary from run to run
+command -v cc >/dev/null 2>&1 || missing+=(gcc libc6-dev)
 if [ ${#missing[@]} -gt 0 ]; then
   if command -v apt-get >/dev/null 2>&1 && [ "$(id -u)" = 0 ]; then
     echo "setup: installing system libraries: ${missing[*]}"

@@ -84,15 +84,21 @@ def cache_dir(path: str | os.PathLike | None = None) -> Path:
 
 def code_version() -> str:
     """Package version + SHA-256 (first 16 hex) of the sources that determine results:
-    ``flexcal.fem`` (all but ``__init__``, ``cache``, ``results``) and ``flexcal.geometry``."""
+    ``flexcal.fem`` (all but ``__init__``, ``cache``, ``results``; its C source too) and
+    ``flexcal.geometry``, and whether fTetWild runs seeded (``flexcal.fem._entropy`` built)."""
     try:
         from importlib.metadata import version
 
         package = version("flexcal")
     except Exception:  # not installed (running from a source tree)
         package = "unknown"
+    from .tetwild_process import mesher_is_seeded
+
     digest = hashlib.sha256()
-    sources = [p for p in Path(__file__).parent.glob("*.py") if p.name not in _NOT_NUMERICS]
+    # unseeded fTetWild meshes (no _entropy build) must not be served as seeded ones
+    digest.update(b"seeded mesher" if mesher_is_seeded() else b"unseeded mesher")
+    folder = Path(__file__).parent
+    sources = [p for p in [*folder.glob("*.py"), *folder.glob("*.c")] if p.name not in _NOT_NUMERICS]
     spec = importlib.util.find_spec("flexcal.geometry")  # the solids the mesher meshes
     for folder in (spec.submodule_search_locations or []) if spec else []:
         sources += [p for p in Path(folder).glob("*.py") if p.name != "__init__.py"]

@@ -129,11 +129,38 @@ def _surface_triangles(part: "Part", tolerance: float, angular_tolerance: float)
     merge = 1e-9 * float(np.linalg.norm(np.ptp(v, axis=0)))
     pairs = cKDTree(v).query_pairs(merge, output_type="ndarray")
     graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(v), len(v)))
-    _, label = connected_components(graph, directed=False)
-    _, first = np.unique(label, return_index=True)
+    n_merged, label = connected_components(graph, directed=False)
+    merged = np.full((n_merged, 3), np.inf)
+    np.minimum.at(merged, label, v)  # the faces' copies differ by round-off; the least, whatever their order
     f = label[f]
     f = f[(f[:, 0] != f[:, 1]) & (f[:, 1] != f[:, 2]) & (f[:, 0] != f[:, 2])]
-    return v[first], f.astype(np.int32)
+    return _canonical_order(merged, f)
+
+
+_GRID = 2.0**40  # 1 / the rounding step of the surface vertices [1/m]
+
+
+def _canonical_order(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The same triangulation in an order fixed by its coordinates alone: vertices sorted
+    by (x, y, z), each triangle turned (orientation kept) to start at its lowest vertex,
+    triangles sorted. OCCT lists the faces of a fused solid in an order that changes from
+    process to process (the same vertices, shuffled, measured on chain D1; the copies of a
+    shared vertex differ by up to 1e-17 m), and fTetWild's mesh depends on the order of its
+    input; sorted, the same solid gives the same input. The coordinates are first rounded
+    to multiples of 2**-40 m (0.9 pm, exact in binary): OCCT's vertex coordinates vary by
+    an ulp with that order too (up to 5e-18 m, on 4 of 712 vertices of chain D1); rounded,
+    they agree unless such a pair straddles a half step (odds ~1e-5 per varying
+    coordinate). The rounding moves a vertex by <= 0.5 pm, against fTetWild's envelope of
+    microns."""
+    vertices = np.round(vertices * _GRID) / _GRID
+    order = np.lexsort(vertices.T[::-1])
+    rank = np.empty_like(order)
+    rank[order] = np.arange(len(order))
+    f = rank[faces]
+    turn = np.argmin(f, axis=1)[:, None]
+    f = np.take_along_axis(f, (turn + np.arange(3)) % 3, axis=1)
+    f = f[np.lexsort(f.T[::-1])]
+    return vertices[order], f.astype(np.int32)
 
 
 def _tetrahedralize(vertices: np.ndarray, faces: np.ndarray, *, edge_length: float, epsilon: float,

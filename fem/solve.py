@@ -51,6 +51,21 @@ def _point_pypardiso_at_mkl() -> None:
         os.environ["PYPARDISO_MKL_RT"] = found[0]
 
 
+def _ask_mkl_for_reproducible_results() -> None:
+    """MKL's conditional numerical reproducibility (``MKL_CBWR=AUTO``), unless the user
+    chose a mode: PARDISO's threaded factorization otherwise sums in an order that
+    changes from call to call. Measured on the 216k-DOF Laplacian of
+    tests/test_fem_solve.py and on chain D1 at 2 elements through (~145k DOF, 2 threads):
+    4 solves, 4 different last bits (1e-11 relative on the chain's compliance diagonal)
+    before; bit-identical after, at the same speed (3.2-3.8 s vs 3.3-3.5 s a chain solve).
+    MKL reads it once, when it starts in the process, so this runs before pypardiso
+    loads it. The promise is MKL's: the same bits for the same thread count and
+    instruction set; another thread count gives other last bits (measured: 1 thread
+    differs from 2 at ~1e-11). ``MKL_CBWR=COMPATIBLE`` would hold across machines too,
+    at 1.45x the time (measured 4.96-4.99 s vs 3.3-3.5 s on chain D1); not chosen."""
+    os.environ.setdefault("MKL_CBWR", "AUTO")
+
+
 @functools.lru_cache(maxsize=1)
 def _pardiso_solver():
     """One PARDISO handle per process in SPD mode (mtype 2), its factors freed after every
@@ -62,6 +77,7 @@ def _pardiso_solver():
     variable-size blocks (the 3x3 node blocks of elasticity): 25 % less CPU time on a
     54k-DOF hinge, 5 % on 136k, same result to 1e-11."""
     _point_pypardiso_at_mkl()
+    _ask_mkl_for_reproducible_results()
     import pypardiso
 
     solver = pypardiso.PyPardisoSolver(mtype=2)

@@ -9,6 +9,16 @@ handlers untouched and lets the parent stop at once: on ``KeyboardInterrupt`` (o
 other exception) while it waits, it kills the child and re-raises. The child also runs in
 a fresh temporary folder, where fTetWild writes its ``__tracked_surface.stl``.
 
+The child also makes the mesh repeat. fTetWild seeds its generator from
+``std::random_device`` and pytetwild exposes no seed, so the same input gave a different
+mesh on every call. The child loads ``flexcal.fem._entropy`` (``fem/_entropy.c``) into
+the global symbol scope before it imports pytetwild; that module serves fTetWild's
+``random_device`` draws from a generator restarted at ``seed`` (default
+``MESHER_SEED``). The same surface, sizing field and options then give the same mesh, with
+any number of threads. If the module was not built (no C compiler at install) or
+fTetWild drew nothing through it, the mesh comes out unseeded and a ``RuntimeWarning``
+says so.
+
 The price is one interpreter start and the pytetwild import per mesh (0.5-0.6 s on the
 idle development machine, a few seconds when it is heavily loaded), small against the
 seconds to minutes a mesh and its solve take.
@@ -25,26 +35,41 @@ import os
 import subprocess
 import sys
 import tempfile
+import warnings
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-__all__ = ["tetrahedralize_in_child"]
+__all__ = ["tetrahedralize_in_child", "MESHER_SEED", "mesher_is_seeded"]
+
+MESHER_SEED = 20240523  # any fixed value serves; changing it changes every fTetWild mesh
 
 _ARRAY_ARGUMENTS = ("vertices", "faces", "bg_vertices", "bg_tets", "bg_values")
 
 
-def tetrahedralize_in_child(vertices: np.ndarray, faces: np.ndarray, **kwargs: Any) -> tuple[np.ndarray, np.ndarray]:
-    """``pytetwild.tetrahedralize(vertices, faces, **kwargs)`` run in a child process.
+def mesher_is_seeded() -> bool:
+    """True if the fixed entropy source ``flexcal.fem._entropy`` is built and importable."""
+    import importlib.util
+
+    return importlib.util.find_spec("flexcal.fem._entropy") is not None
+
+
+def tetrahedralize_in_child(vertices: np.ndarray, faces: np.ndarray, *, seed: int = MESHER_SEED,
+                            **kwargs: Any) -> tuple[np.ndarray, np.ndarray]:
+    """``pytetwild.tetrahedralize(vertices, faces, **kwargs)`` run in a child process,
+    fTetWild's ``random_device`` restarted at ``seed`` (a non-negative integer).
 
     Array keyword arguments (``bg_vertices``, ``bg_tets``, ``bg_values``) may be arrays or
     None; the others must be JSON values. Returns (nodes, tets) as numpy arrays. Raises
     RuntimeError with the child's last error line if fTetWild fails; KeyboardInterrupt
-    and every other exception raised while waiting stop the child first.
+    and every other exception raised while waiting stop the child first. Warns
+    (RuntimeWarning) if the mesh could not be seeded.
     """
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not 0 <= seed < 2**64:
+        raise ValueError(f"seed={seed!r} must be an integer in [0, 2**64)")
     arrays = {"vertices": np.asarray(vertices), "faces": np.asarray(faces)}
-    options = {}
+    options = {"__seed__": int(seed)}
     for name, value in kwargs.items():
         if name in _ARRAY_ARGUMENTS:
             if value is not None:
@@ -68,19 +93,46 @@ def tetrahedralize_in_child(vertices: np.ndarray, faces: np.ndarray, **kwargs: A
             raise RuntimeError(f"fTetWild failed ({reason}); try other mesh settings (elements through "
                                f"the thickness, epsilon)")
         with np.load(outputs, allow_pickle=False) as data:
-            return np.array(data["nodes"]), np.array(data["tets"])
+            nodes, tets, draws = np.array(data["nodes"]), np.array(data["tets"]), int(data["draws"])
+    if draws <= 0:
+        reason = ("flexcal.fem._entropy is not built (no C compiler when flexcal was installed; "
+                  "install gcc and reinstall)" if draws < 0 else
+                  "fTetWild drew nothing through flexcal.fem._entropy (another pytetwild build?)")
+        warnings.warn(f"fTetWild ran unseeded: {reason}; its meshes differ from run to run",
+                      RuntimeWarning, stacklevel=2)
+    return nodes, tets
+
+
+def _load_entropy_globally() -> Any:
+    """Import ``flexcal.fem._entropy`` into the global symbol scope (RTLD_GLOBAL), where
+    the dynamic linker finds its ``random_device`` before pytetwild's libstdc++ one.
+    Must run before pytetwild is imported. None if the module is not built."""
+    flags = sys.getdlopenflags()
+    sys.setdlopenflags(flags | os.RTLD_GLOBAL)
+    try:
+        from flexcal.fem import _entropy
+    except ImportError:
+        return None
+    finally:
+        sys.setdlopenflags(flags)
+    return _entropy
 
 
 def _main(argv: list[str]) -> int:
+    entropy = _load_entropy_globally()
     import pytetwild
 
     inputs, outputs = argv
     with np.load(inputs, allow_pickle=False) as data:
         arrays = {name: np.array(data[name]) for name in data.files}
     options = json.loads(str(arrays.pop("__options__")))
+    seed = options.pop("__seed__")
+    if entropy is not None:
+        entropy.seed(seed)
     nodes, tets = pytetwild.tetrahedralize(arrays.pop("vertices"), arrays.pop("faces"), **arrays, **options)
+    draws = entropy.draws() if entropy is not None else -1
     partial = Path(outputs).with_name("out.partial.npz")
-    np.savez(partial, nodes=np.asarray(nodes), tets=np.asarray(tets))
+    np.savez(partial, nodes=np.asarray(nodes), tets=np.asarray(tets), draws=np.int64(draws))
     os.replace(partial, outputs)
     return 0
 

@@ -17,6 +17,22 @@ def _laplacian_3d(n: int) -> sp.csr_matrix:
     return (L + 1e-3 * sp.identity(n**3)).tocsr()
 
 
+def test_pardiso_gives_the_same_bits_twice():
+    """PARDISO's threaded factorization summed in a changing order: at this size (216k
+    unknowns, 2 threads) every one of 4 solves in a process gave other last bits. With
+    MKL's reproducibility mode (fem/solve.py) the same system solves to the same bits.
+    ~5 s a solve here."""
+    if not pardiso_available():
+        pytest.skip("pypardiso / MKL not available")
+    import os
+
+    assert os.environ["MKL_CBWR"]  # set before MKL started (unless the user chose a mode)
+    K = _laplacian_3d(60)
+    rhs = np.random.default_rng(0).standard_normal((K.shape[0], 6))
+    first = solve_spd(K, rhs, method="pardiso")
+    assert np.array_equal(first, solve_spd(K, rhs, method="pardiso"))
+
+
 @pytest.mark.parametrize("method", ["auto", "pardiso", "splu", "spsolve", "amg"])
 def test_methods_solve_several_right_hand_sides(method):
     if method == "pardiso" and not pardiso_available():

@@ -256,6 +256,67 @@ def test_snap_without_projection_keeps_the_nodes():
 # pytetwild
 
 
+def _box_surface(size=(0.02, 0.01, 0.005)):
+    """A closed, outward-oriented triangulation of a box: 8 vertices, 12 triangles."""
+    corners = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], float) * size
+    faces = np.array([[0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5], [0, 4, 5], [0, 5, 1],
+                      [2, 3, 7], [2, 7, 6], [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3]], np.int32)
+    return corners, faces
+
+
+def test_fTetWild_mesh_repeats_for_a_seed_and_thread_count():
+    """fTetWild draws from std::random_device; the meshing child serves those draws from
+    flexcal.fem._entropy. The same input and seed give the same mesh, with 1 thread or 2;
+    another seed gives another mesh (so the equality is the seed's doing: unseeded, three
+    calls gave three meshes, docs/reliability.md). No "ran unseeded" warning."""
+    import warnings
+
+    from flexcal.fem.tetwild_process import MESHER_SEED, mesher_is_seeded, tetrahedralize_in_child
+
+    assert mesher_is_seeded()  # built by setup.sh's pip install (needs a C compiler)
+    vertices, faces = _box_surface()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        runs = [tetrahedralize_in_child(vertices, faces, edge_length_fac=0.1, quiet=True, num_threads=threads)
+                for threads in (1, 2)]
+        other = tetrahedralize_in_child(vertices, faces, edge_length_fac=0.1, quiet=True, num_threads=1,
+                                        seed=MESHER_SEED + 1)
+    (nodes, tets), (nodes_2, tets_2) = runs
+    assert np.array_equal(nodes, nodes_2) and np.array_equal(tets, tets_2)
+    assert not (nodes.shape == other[0].shape and np.array_equal(nodes, other[0]))
+    for bad in (-1, 1.5, True, 2**64):
+        with pytest.raises(ValueError, match="seed"):
+            tetrahedralize_in_child(vertices, faces, seed=bad)
+
+
+def test_surface_triangles_come_in_one_order_whatever_the_cad_order():
+    """fTetWild's mesh depends on the order of its input, and OCCT lists a fused solid's
+    faces in an order that changes between processes, with 1-ulp differences in shared
+    vertices. _canonical_order gives one triangulation for any vertex order, triangle
+    order, triangle rotation and 1-ulp perturbation of the vertices."""
+    from flexcal.fem.mesh import _canonical_order
+
+    rng = np.random.default_rng(7)
+    vertices = rng.uniform(-0.05, 0.05, (60, 3))
+    faces = np.array([rng.choice(60, 3, replace=False) for _ in range(100)])
+    reference = _canonical_order(vertices, faces)
+    for _ in range(5):
+        order = rng.permutation(60)
+        shuffled = np.empty_like(vertices)
+        shuffled[order] = np.nextafter(vertices, rng.choice([-1.0, 1.0], vertices.shape))
+        rotated = np.roll(order[faces], rng.integers(3), axis=1)[rng.permutation(100)]
+        result = _canonical_order(shuffled, rotated)
+        assert np.array_equal(result[0], reference[0]) and np.array_equal(result[1], reference[1])
+    # the same triangles: each keeps its orientation (a cyclic turn, not a reflection)
+    v, f = reference
+    order = np.lexsort(v.T[::-1])
+    assert np.array_equal(order, np.arange(60))  # sorted by (x, y, z)
+    rank = np.argsort(np.lexsort(np.round(vertices * 2.0**40).T[::-1]))  # old index -> new
+    assert {tuple(t) for t in f} == {tuple(np.roll(t, -np.argmin(t))) for t in rank[faces]}
+    # moved by at most half the 2**-40 m rounding step
+    assert np.abs(v - vertices[np.argsort(rank)]).max() <= 2.0**-41
+
+
 @pytest.fixture(scope="module")
 def coarse_notch(tmp_path_factory):
     pytest.importorskip("pytetwild")
