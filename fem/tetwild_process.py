@@ -41,7 +41,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["tetrahedralize_in_child", "MESHER_SEED", "mesher_is_seeded"]
+__all__ = ["MESHER_SEED", "mesher_is_seeded", "tetrahedralize_in_child"]
 
 MESHER_SEED = 20240523  # any fixed value serves; changing it changes every fTetWild mesh
 

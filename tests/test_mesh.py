@@ -10,15 +10,14 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-from flexcal.geometry.exact import exact_volume, thin_sections
-from flexcal.geometry.surfaces import CylinderPatch, boundary_patches
-from flexcal.geometry.params import CircularNotchHinge, FlexureChain, LeafHinge
 from flexcal.fem.mesh_projection import boundary_faces, project_onto, tangent_pairs
 from flexcal.fem.mesh_quality import EDGES, corner_volumes, p2_volumes, radius_ratio
 from flexcal.fem.mesh_sizing import kuhn_tets, sizing_grid, target_size
 from flexcal.fem.mesh_snap import boundary_node_sets, snap_to_part
 from flexcal.fem.mesh_tets import TetMesh, linear_to_quadratic
+from flexcal.geometry.exact import exact_volume, thin_sections
+from flexcal.geometry.params import CircularNotchHinge, FlexureChain, LeafHinge
+from flexcal.geometry.surfaces import CylinderPatch, boundary_patches
 
 NOTCH = CircularNotchHinge(radius=5e-3, thickness=1e-3, width=10e-3, block_length=5e-3)
 LEAF = LeafHinge(length=20e-3, thickness=4e-3, width=40e-3, fillet=6e-3, block_length=10e-3)
@@ -271,7 +270,11 @@ def test_fTetWild_mesh_repeats_for_a_seed_and_thread_count():
     calls gave three meshes, docs/reliability.md). No "ran unseeded" warning."""
     import warnings
 
-    from flexcal.fem.tetwild_process import MESHER_SEED, mesher_is_seeded, tetrahedralize_in_child
+    from flexcal.fem.tetwild_process import (
+        MESHER_SEED,
+        mesher_is_seeded,
+        tetrahedralize_in_child,
+    )
 
     assert mesher_is_seeded()  # built by setup.sh's pip install (needs a C compiler)
     vertices, faces = _box_surface()
