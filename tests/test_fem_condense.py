@@ -239,7 +239,7 @@ def test_mesher_and_structured_meshes_agree():
     """The pytetwild mesher's curved P2 mesh (3 elements through the neck) and the mapped
     structured mesh (4 cells across) discretise the same notch: their rotational
     compliances were measured -0.27 to -0.29 % and -0.29 % from the extrapolated limit
-    0.0151816 rad/(N m) (docs/fem.md); 0.5 % leaves room for fTetWild's run-to-run
+    0.0151816 rad/(N m) (docs/fem.md); 0.5 % leaves room for fTetWild's mesh-to-mesh (seed-to-seed)
     variation and still fails for a wrong coupling, face or geometry."""
     from flexcal.fem.mesh import mesh_part
     from flexcal.geometry.solids import hinge_solid

@@ -44,7 +44,7 @@ def test_full_table1_run_on_the_fem_prototype(tmp_path):
     # the README's main job (MAP of all 45 sources with a cross-validated prior, FEM-informed
     # second-order model) on the standard trajectory. Measured 2026-11-23: see
     # docs/verification-table1.md; the bounds are the paper's figures where the mount can show
-    # them, and 2x headroom on the fit for fTetWild's run-to-run mesh differences
+    # them, and 2x headroom on the fit for fTetWild's mesh-to-mesh scatter (the seed fixes one draw)
     out = tmp_path / "table1"
     assert cli.main(["verify", "--scenario", "table1", "--out", str(out), "-q"]) == 0
     report = json.loads((out / "report.json").read_text())

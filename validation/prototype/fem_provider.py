@@ -75,8 +75,8 @@ def segment_stiffness_fem(segment: ChainSegment, material: Material = STEEL, *,
                           cache_directory=None, mesher_threads: int = 0) -> np.ndarray:
     """Condensed 12 x 12 stiffness [SI] of one chain segment between its end-face centres
     (node A at x_start, node B at x_end; DOF order ux, uy, uz, rx, ry, rz), cached.
-    mesher_threads: fTetWild's threads (0: all cores; not part of the cache key, as
-    fTetWild gives another mesh on every call anyway)."""
+    mesher_threads: fTetWild's threads (0: all cores; not part of the cache key: the
+    seeded fTetWild gives the same mesh on any number of threads, docs/meshing.md)."""
     from flexcal.fem.cache import cached
 
     def compute() -> dict[str, np.ndarray]:
