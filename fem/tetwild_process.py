@@ -41,9 +41,11 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["MESHER_SEED", "mesher_is_seeded", "tetrahedralize_in_child"]
+__all__ = ["MESHER_SEED", "RUNAWAY_FACTOR", "SEED_TRIES", "expected_vertices", "mesher_is_seeded", "runs_away", "tetrahedralize_in_child"]
 
 MESHER_SEED = 20240523  # any fixed value serves; changing it changes every fTetWild mesh
+SEED_TRIES = 3  # seeds tried in turn when a run runs away (runs_away)
+RUNAWAY_FACTOR = 25.0  # vertex count / the sizing field's expected count that stops a run (runs_away)
 
 _ARRAY_ARGUMENTS = ("vertices", "faces", "bg_vertices", "bg_tets", "bg_values")
 
@@ -58,42 +60,34 @@ def mesher_is_seeded() -> bool:
 def tetrahedralize_in_child(vertices: np.ndarray, faces: np.ndarray, *, seed: int = MESHER_SEED,
                             **kwargs: Any) -> tuple[np.ndarray, np.ndarray]:
     """``pytetwild.tetrahedralize(vertices, faces, **kwargs)`` run in a child process,
-    fTetWild's ``random_device`` restarted at ``seed`` (a non-negative integer).
+    fTetWild's ``random_device`` restarted at ``seed`` (a non-negative integer); if that
+    run runs away (``runs_away``; watched when a sizing field ``bg_*`` is given), again at
+    seed + 1, then seed + 2.
 
     Array keyword arguments (``bg_vertices``, ``bg_tets``, ``bg_values``) may be arrays or
-    None; the others must be JSON values. Returns (nodes, tets) as numpy arrays. Raises
-    RuntimeError with the child's last error line if fTetWild fails; KeyboardInterrupt
-    and every other exception raised while waiting stop the child first. Warns
-    (RuntimeWarning) if the mesh could not be seeded.
+    None; the others must be JSON values (``quiet`` and ``loglevel`` are the child's: it
+    reports its passes to this process). Returns (nodes, tets) as numpy arrays. Raises
+    RuntimeError with the child's last error line if fTetWild fails, or if every seed ran
+    away; KeyboardInterrupt and every other exception raised while waiting stop the child
+    first. Warns (RuntimeWarning) if the mesh could not be seeded.
     """
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not 0 <= seed < 2**64:
-        raise ValueError(f"seed={seed!r} must be an integer in [0, 2**64)")
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not 0 <= seed < 2**64 - SEED_TRIES:
+        raise ValueError(f"seed={seed!r} must be an integer in [0, 2**64 - {SEED_TRIES})")
     arrays = {"vertices": np.asarray(vertices), "faces": np.asarray(faces)}
-    options = {"__seed__": int(seed)}
-    for name, value in kwargs.items():
-        if name in _ARRAY_ARGUMENTS:
-            if value is not None:
-                arrays[name] = np.asarray(value)
-        else:
-            options[name] = value
-    with tempfile.TemporaryDirectory(prefix="flexcal-tetwild-") as folder:
-        inputs, outputs = Path(folder) / "in.npz", Path(folder) / "out.npz"
-        np.savez(inputs, __options__=np.array(json.dumps(options)), **arrays)
-        child = subprocess.Popen([sys.executable, "-m", __name__, str(inputs), str(outputs)], cwd=folder,
-                                 stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-        try:
-            _, stderr = child.communicate()
-        except BaseException:
-            child.kill()
-            child.wait()
-            raise
-        if child.returncode != 0 or not outputs.is_file():
-            lines = [line for line in stderr.decode(errors="replace").splitlines() if line.strip()]
-            reason = lines[-1].strip() if lines else f"exit status {child.returncode}"
-            raise RuntimeError(f"fTetWild failed ({reason}); try other mesh settings (elements through "
-                               f"the thickness, epsilon)")
-        with np.load(outputs, allow_pickle=False) as data:
-            nodes, tets, draws = np.array(data["nodes"]), np.array(data["tets"]), int(data["draws"])
+    options = {name: value for name, value in kwargs.items()
+               if name not in _ARRAY_ARGUMENTS and name not in ("quiet", "loglevel")}
+    arrays.update({name: np.asarray(value) for name, value in kwargs.items()
+                   if name in _ARRAY_ARGUMENTS and value is not None})
+    has_field = all(name in arrays for name in ("bg_vertices", "bg_tets", "bg_values"))
+    expected = expected_vertices(arrays["bg_vertices"], arrays["bg_tets"], arrays["bg_values"]) if has_field else None
+    for attempt in range(SEED_TRIES):
+        result = _mesh_in_child(arrays, {**options, "__seed__": int(seed) + attempt}, expected)
+        if result is not None:
+            break
+    else:
+        raise RuntimeError(f"fTetWild's mesh kept growing with seeds {seed} to {int(seed) + SEED_TRIES - 1} "
+                           "(runs_away); try other mesh settings (elements through the thickness, epsilon)")
+    nodes, tets, draws = result
     if draws <= 0:
         reason = ("flexcal.fem._entropy is not built (no C compiler when flexcal was installed; "
                   "install gcc and reinstall)" if draws < 0 else
@@ -101,6 +95,62 @@ def tetrahedralize_in_child(vertices: np.ndarray, faces: np.ndarray, *, seed: in
         warnings.warn(f"fTetWild ran unseeded: {reason}; its meshes differ from run to run",
                       RuntimeWarning, stacklevel=2)
     return nodes, tets
+
+
+def expected_vertices(bg_vertices: np.ndarray, bg_tets: np.ndarray, bg_values: np.ndarray) -> float:
+    """The sizing field's own vertex count: sum over its tets of volume / h^3 (h the mean
+    target edge length at the tet's corners). fTetWild's vertex counts on the mount's
+    segments (its largest, printed after each operation) were 5.4-8.9x this."""
+    a, b, c, d = (bg_vertices[bg_tets[:, k]] for k in range(4))
+    volume = np.abs(np.einsum("ij,ij->i", np.cross(b - a, c - a), d - a)) / 6.0
+    return float(np.sum(volume / np.mean(bg_values[bg_tets], axis=1) ** 3))
+
+
+def runs_away(vertex_count: int, expected: float) -> bool:
+    """True once fTetWild's vertex count (printed after each operation of its optimization
+    passes) exceeds ``RUNAWAY_FACTOR`` x the sizing field's ``expected_vertices``.
+
+    fTetWild refines its sizing field where it cannot bring the worst element under its
+    stop energy; in rare runs that never succeeds and the mesh grows pass after pass up to
+    its 80 passes. Measured on a 36 mm block segment of the mount (expected 2 858): with
+    MESHER_SEED ~6k vertices at pass 20, 19.5k at pass 28, 52k a few passes later, still
+    meshing after 17 min; seeds 1, 2, 3 finished in 18 / 6.6 / 8.0 s. Normal runs on the
+    mount's leaf, block and strut segments peaked at 5.4-8.9x expected; 25x leaves 2.8x
+    room above that and stops a runaway after a few more doublings. It counts vertices,
+    not seconds, so the outcome does not depend on the machine's speed."""
+    return vertex_count > RUNAWAY_FACTOR * expected
+
+
+def _mesh_in_child(arrays: dict[str, np.ndarray], options: dict[str, Any], expected: float | None) -> tuple | None:
+    """One child run: (nodes, tets, draws), or None if it ran away (child stopped; watched
+    only when ``expected``, the sizing field's vertex count, is given)."""
+    with tempfile.TemporaryDirectory(prefix="flexcal-tetwild-") as folder:
+        inputs, outputs, errors = Path(folder) / "in.npz", Path(folder) / "out.npz", Path(folder) / "stderr.txt"
+        np.savez(inputs, __options__=np.array(json.dumps(options)), **arrays)
+        with open(errors, "wb") as stderr:
+            child = subprocess.Popen([sys.executable, "-m", __name__, str(inputs), str(outputs)], cwd=folder,
+                                     stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=stderr)
+            try:
+                for line in child.stdout:
+                    if expected is not None and line.startswith(b"#v = "):
+                        if runs_away(int(line[5:]), expected):
+                            child.kill()
+                            child.wait()
+                            return None
+                child.wait()
+            except BaseException:
+                child.kill()
+                child.wait()
+                raise
+            finally:
+                child.stdout.close()
+        if child.returncode != 0 or not outputs.is_file():
+            lines = [line for line in errors.read_text(errors="replace").splitlines() if line.strip()]
+            reason = lines[-1].strip() if lines else f"exit status {child.returncode}"
+            raise RuntimeError(f"fTetWild failed ({reason}); try other mesh settings (elements through "
+                               f"the thickness, epsilon)")
+        with np.load(outputs, allow_pickle=False) as data:
+            return np.array(data["nodes"]), np.array(data["tets"]), int(data["draws"])
 
 
 def _load_entropy_globally() -> Any:
@@ -118,6 +168,15 @@ def _load_entropy_globally() -> Any:
     return _entropy
 
 
+def _line_buffered_c_stdout() -> None:
+    """C stdio's stdout line by line (fTetWild writes through it; on a pipe it would
+    otherwise come in 4 KB blocks, passes late)."""
+    import ctypes
+
+    libc = ctypes.CDLL(None)
+    libc.setvbuf(ctypes.c_void_p.in_dll(libc, "stdout"), None, 1, 0)  # 1: _IOLBF
+
+
 def _main(argv: list[str]) -> int:
     entropy = _load_entropy_globally()
     import pytetwild
@@ -129,7 +188,9 @@ def _main(argv: list[str]) -> int:
     seed = options.pop("__seed__")
     if entropy is not None:
         entropy.seed(seed)
-    nodes, tets = pytetwild.tetrahedralize(arrays.pop("vertices"), arrays.pop("faces"), **arrays, **options)
+    _line_buffered_c_stdout()  # the parent reads fTetWild's "#v = N" lines as they come
+    nodes, tets = pytetwild.tetrahedralize(arrays.pop("vertices"), arrays.pop("faces"), **arrays, **options,
+                                           quiet=False, loglevel=3)
     draws = entropy.draws() if entropy is not None else -1
     partial = Path(outputs).with_name("out.partial.npz")
     np.savez(partial, nodes=np.asarray(nodes), tets=np.asarray(tets), draws=np.int64(draws))

@@ -123,45 +123,40 @@ def _same_bytes_but_timings(folders):
             assert all(c == contents[0] for c in contents), f"{name} differs between runs"
 
 
+def _three_runs_on_fresh_caches(tmp_path, arguments):
+    """``flexcal *arguments`` three times, each a new process with an empty
+    FLEXCAL_CACHE_DIR and a new --out; returns the three output folders."""
+    import os
+    import subprocess
+    import sys
+
+    folders = []
+    for k in range(3):
+        out = tmp_path / f"run{k}"
+        env = {**os.environ, "FLEXCAL_CACHE_DIR": str(tmp_path / f"cache{k}")}
+        subprocess.run([sys.executable, "-m", "flexcal.validation.cli", *arguments, "--out", str(out), "-q"],
+                       env=env, check=True, stdin=subprocess.DEVNULL, timeout=600)
+        folders.append(out)
+    return folders
+
+
 def test_three_hinge_runs_on_fresh_caches_write_the_same_bytes(tmp_path):
     """Issue 14's goal, as a user runs it: three ``flexcal hinge`` processes with the default
     options, each with an empty FLEXCAL_CACHE_DIR and a new --out, write the same bytes in
     every file (report.json, report.md, hinge.vtu, both PNGs); only timings.json differs.
     ~5 s a run on the 2-core machine."""
-    import os
-    import subprocess
-    import sys
-
-    folders = []
-    for k in range(3):
-        out = tmp_path / f"run{k}"
-        env = {**os.environ, "FLEXCAL_CACHE_DIR": str(tmp_path / f"cache{k}")}
-        subprocess.run([sys.executable, "-m", "flexcal.validation.cli", "hinge", "--type", "circular",
-                        "--radius-mm", "5", "--thickness-mm", "1", "--width-mm", "10", "--out", str(out), "-q"],
-                       env=env, check=True, stdin=subprocess.DEVNULL, timeout=600)
-        folders.append(out)
-    _same_bytes_but_timings(folders)
+    _same_bytes_but_timings(_three_runs_on_fresh_caches(
+        tmp_path, ["hinge", "--type", "circular", "--radius-mm", "5", "--thickness-mm", "1", "--width-mm", "10"]))
 
 
 def test_three_chain_runs_on_fresh_caches_write_the_same_bytes(tmp_path):
     """A chain is meshed by fTetWild, seeded (fem/_entropy.c) and fed its surface in one
-    order (fem/mesh.py, _canonical_order): three ``flexcal chain`` processes, each with an
-    empty FLEXCAL_CACHE_DIR, write the same bytes. Unseeded, three runs gave 149,115 /
-    141,807 / 141,810 DOF (docs/reliability.md). At 1 element through the thickness,
-    ~10 s a run on the 2-core machine."""
-    import os
-    import subprocess
-    import sys
-
-    folders = []
-    for k in range(3):
-        out = tmp_path / f"run{k}"
-        env = {**os.environ, "FLEXCAL_CACHE_DIR": str(tmp_path / f"cache{k}")}
-        subprocess.run([sys.executable, "-m", "flexcal.validation.cli", "chain", "--reference", "D1",
-                        "--elements-through", "1", "--out", str(out), "-q"],
-                       env=env, check=True, stdin=subprocess.DEVNULL, timeout=600)
-        folders.append(out)
-    _same_bytes_but_timings(folders)
+    order (fem/mesh.py, _canonical_order), and solved in MKL's reproducible mode: three
+    ``flexcal chain`` processes, each with an empty FLEXCAL_CACHE_DIR, write the same
+    bytes. Unseeded, three runs gave 149,115 / 141,807 / 141,810 DOF (docs/reliability.md).
+    At 1 element through the thickness, ~10 s a run on the 2-core machine."""
+    _same_bytes_but_timings(_three_runs_on_fresh_caches(
+        tmp_path, ["chain", "--reference", "D1", "--elements-through", "1"]))
 
 
 def test_hinge_uses_the_cache_and_recomputes_edited_entries(tmp_path, monkeypatch):

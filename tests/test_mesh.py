@@ -292,6 +292,45 @@ def test_fTetWild_mesh_repeats_for_a_seed_and_thread_count():
             tetrahedralize_in_child(vertices, faces, seed=bad)
 
 
+def test_runs_away_past_25_times_the_sizing_fields_vertex_count():
+    from flexcal.fem.tetwild_process import expected_vertices, runs_away
+
+    # a unit cube, h = 0.1 everywhere (6 Kuhn tets): 1 / 0.1^3 = 1000 expected vertices
+    nodes, tets = grid_mesh(np.array([0.0, 1.0]), np.array([0.0, 1.0]), np.array([0.0, 1.0]))
+    assert expected_vertices(nodes, tets, np.full(len(nodes), 0.1)) == pytest.approx(1000.0, rel=1e-12)
+    assert not runs_away(8_900, 1000.0)  # the largest normal run measured: 8.9x
+    assert not runs_away(25_000, 1000.0) and runs_away(25_001, 1000.0)
+
+
+def test_a_seed_whose_run_runs_away_is_left_for_the_next(monkeypatch):
+    """tests/data/tetwild_runaway.npz: the fTetWild input (surface, sizing field, options)
+    of a 36 mm block segment of the mount on which MESHER_SEED's run grows without end
+    (still meshing after 17 min in the FEM grid run, 2026-11-24). The child is stopped
+    past 25x the sizing field's vertex count (~20 s here) and seed + 1 gives the mesh (~6 s)."""
+    import json
+
+    from flexcal.fem import tetwild_process
+
+    with np.load(Path(__file__).parent / "data" / "tetwild_runaway.npz") as data:
+        arrays = {name: np.array(data[name]) for name in data.files}
+    options = json.loads(str(arrays.pop("__options__")))
+    seed = options.pop("__seed__")
+    assert seed == tetwild_process.MESHER_SEED
+    outcomes = []
+    run = tetwild_process._mesh_in_child
+
+    def recorded(arrays, options, expected):
+        outcomes.append((options["__seed__"], run(arrays, options, expected)))
+        return outcomes[-1][1]
+
+    monkeypatch.setattr(tetwild_process, "_mesh_in_child", recorded)
+    nodes, tets = tetwild_process.tetrahedralize_in_child(arrays.pop("vertices"), arrays.pop("faces"),
+                                                          **arrays, **options)
+    assert [s for s, _ in outcomes] == [seed, seed + 1]
+    assert outcomes[0][1] is None and np.array_equal(outcomes[1][1][0], nodes)
+    assert 1000 < len(nodes) < 10000  # measured 3 754 nodes; the runaway passed 30 000
+
+
 def test_surface_triangles_come_in_one_order_whatever_the_cad_order():
     """fTetWild's mesh depends on the order of its input, and OCCT lists a fused solid's
     faces in an order that changes between processes, with 1-ulp differences in shared
