@@ -132,11 +132,10 @@ def _mesh_in_child(arrays: dict[str, np.ndarray], options: dict[str, Any], expec
                                      stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=stderr)
             try:
                 for line in child.stdout:
-                    if expected is not None and line.startswith(b"#v = "):
-                        if runs_away(int(line[5:]), expected):
-                            child.kill()
-                            child.wait()
-                            return None
+                    if expected is not None and line.startswith(b"#v = ") and runs_away(int(line[5:]), expected):
+                        child.kill()
+                        child.wait()
+                        return None
                 child.wait()
             except BaseException:
                 child.kill()
