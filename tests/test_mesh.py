@@ -297,6 +297,7 @@ def test_runs_away_past_25_times_the_sizing_fields_vertex_count():
 
     # a unit cube, h = 0.1 everywhere (6 Kuhn tets): 1 / 0.1^3 = 1000 expected vertices
     nodes, tets = grid_mesh(np.array([0.0, 1.0]), np.array([0.0, 1.0]), np.array([0.0, 1.0]))
+    # six tet volumes and a cube of h: exact but for round-off
     assert expected_vertices(nodes, tets, np.full(len(nodes), 0.1)) == pytest.approx(1000.0, rel=1e-12)
     assert not runs_away(8_900, 1000.0)  # the largest normal run measured: 8.9x
     assert not runs_away(25_000, 1000.0) and runs_away(25_001, 1000.0)
