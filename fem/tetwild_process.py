@@ -9,6 +9,16 @@ handlers untouched and lets the parent stop at once: on ``KeyboardInterrupt`` (o
 other exception) while it waits, it kills the child and re-raises. The child also runs in
 a fresh temporary folder, where fTetWild writes its ``__tracked_surface.stl``.
 
+A child must not outlive the process that started it. A Dask worker ended by its nanny
+(Ctrl-C or SIGTERM of a parallel ``flexcal truth``) dies without running its ``finally``
+blocks: its child went on meshing for seconds to minutes after the command had stopped,
+and its temporary folder stayed in the temporary directory. So, on Linux, the child asks
+the kernel to kill it when its parent dies (``prctl(PR_SET_PDEATHSIG, SIGKILL)``; the
+"parent" is the thread that started it, which here is the thread that waits for it), and
+each temporary folder's name records its owner (``owners.owner_tag``): every later mesh,
+and the parallel segment builds when they end, remove the folders whose owner is gone
+(``remove_stale_mesher_folders``).
+
 The child also makes the mesh repeat. fTetWild seeds its generator from
 ``std::random_device`` and pytetwild exposes no seed, so the same input gave a different
 mesh on every call. The child loads ``flexcal.fem._entropy`` (``fem/_entropy.c``) into
@@ -19,11 +29,11 @@ any number of threads. If the module was not built (no C compiler at install) or
 fTetWild drew nothing through it, the mesh comes out unseeded and a ``RuntimeWarning``
 says so.
 
-The price is one interpreter start and the pytetwild import per mesh (0.5-0.6 s on the
-idle development machine, a few seconds when it is heavily loaded), small against the
-seconds to minutes a mesh and its solve take.
+The price is one interpreter start and the pytetwild import per mesh (0.28-0.31 s wall,
+0.35-0.40 s CPU on the idle 2-core development machine, five runs; a few seconds when it
+is heavily loaded), small against the seconds to minutes a mesh and its solve take.
 
-``python -m flexcal.fem.tetwild_process IN.npz OUT.npz`` is the child's side: it reads
+``python -m flexcal.fem.tetwild_process IN.npz OUT.npz [PARENT_PID]`` is the child's side: it reads
 the arrays and keyword arguments of ``pytetwild.tetrahedralize`` from IN.npz and writes
 ``nodes`` and ``tets`` to OUT.npz (whole: temporary name, then rename).
 """
@@ -32,6 +42,8 @@ from __future__ import annotations
 
 import json
 import os
+import re
+import signal
 import subprocess
 import sys
 import tempfile
@@ -41,13 +53,27 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["MESHER_SEED", "RUNAWAY_FACTOR", "SEED_TRIES", "expected_vertices", "mesher_is_seeded", "runs_away", "tetrahedralize_in_child"]
+from .owners import OWNER_TAG, owner_tag, remove_folders_of_gone_owners
+
+__all__ = ["MESHER_SEED", "RUNAWAY_FACTOR", "SEED_TRIES", "expected_vertices", "mesher_is_seeded",
+           "remove_stale_mesher_folders", "runs_away", "tetrahedralize_in_child"]
 
 MESHER_SEED = 20240523  # any fixed value serves; changing it changes every fTetWild mesh
 SEED_TRIES = 3  # seeds tried in turn when a run runs away (runs_away)
 RUNAWAY_FACTOR = 25.0  # vertex count / the sizing field's expected count that stops a run (runs_away)
 
 _ARRAY_ARGUMENTS = ("vertices", "faces", "bg_vertices", "bg_tets", "bg_values")
+# a child's temporary folder: flexcal-tetwild-HOST-PID-START-XXXXXXXX (the owner's tag, then
+# tempfile's 8 random characters)
+_FOLDER_PREFIX = "flexcal-tetwild-"
+_FOLDER_NAME = re.compile(rf"^{_FOLDER_PREFIX}{OWNER_TAG}-[a-z0-9_]{{8}}$")
+_PR_SET_PDEATHSIG = 1  # linux/prctl.h
+
+
+def remove_stale_mesher_folders(folder: str | os.PathLike | None = None) -> list[str]:
+    """Remove the children's temporary folders in ``folder`` (default: the temporary
+    directory) whose owner process is gone; returns their names (``owners``)."""
+    return remove_folders_of_gone_owners(tempfile.gettempdir() if folder is None else folder, _FOLDER_NAME)
 
 
 def mesher_is_seeded() -> bool:
@@ -124,12 +150,14 @@ def runs_away(vertex_count: int, expected: float) -> bool:
 def _mesh_in_child(arrays: dict[str, np.ndarray], options: dict[str, Any], expected: float | None) -> tuple | None:
     """One child run: (nodes, tets, draws), or None if it ran away (child stopped; watched
     only when ``expected``, the sizing field's vertex count, is given)."""
-    with tempfile.TemporaryDirectory(prefix="flexcal-tetwild-") as folder:
+    remove_stale_mesher_folders()
+    with tempfile.TemporaryDirectory(prefix=f"{_FOLDER_PREFIX}{owner_tag()}-") as folder:
         inputs, outputs, errors = Path(folder) / "in.npz", Path(folder) / "out.npz", Path(folder) / "stderr.txt"
         np.savez(inputs, __options__=np.array(json.dumps(options)), **arrays)
         with open(errors, "wb") as stderr:
-            child = subprocess.Popen([sys.executable, "-m", __name__, str(inputs), str(outputs)], cwd=folder,
-                                     stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=stderr)
+            # Popen and the waiting below must stay in one thread: the child dies with it (_die_with_parent)
+            child = subprocess.Popen([sys.executable, "-m", __name__, str(inputs), str(outputs), str(os.getpid())],
+                                     cwd=folder, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=stderr)
             try:
                 for line in child.stdout:
                     if expected is not None and line.startswith(b"#v = ") and runs_away(int(line[5:]), expected):
@@ -176,11 +204,24 @@ def _line_buffered_c_stdout() -> None:
     libc.setvbuf(ctypes.c_void_p.in_dll(libc, "stdout"), None, 1, 0)  # 1: _IOLBF
 
 
+def _die_with_parent(parent: int) -> None:
+    """Linux: have the kernel kill this process (SIGKILL) when the thread that started it
+    ends; exit at once if the parent ``parent`` (its process id) is already gone."""
+    if sys.platform.startswith("linux"):
+        import ctypes
+
+        ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
+    if os.getppid() != parent:  # it died before the prctl: this process now belongs to init
+        os._exit(1)
+
+
 def _main(argv: list[str]) -> int:
+    inputs, outputs, *parent = argv
+    if parent:
+        _die_with_parent(int(parent[0]))
     entropy = _load_entropy_globally()
     import pytetwild
 
-    inputs, outputs = argv
     with np.load(inputs, allow_pickle=False) as data:
         arrays = {name: np.array(data[name]) for name in data.files}
     options = json.loads(str(arrays.pop("__options__")))

@@ -235,7 +235,8 @@ def test_staging_folder_of_a_killed_run_is_removed_by_the_next_run(tmp_path, exi
 
 
 def test_only_the_staging_folders_of_gone_processes_are_removed(tmp_path):
-    from flexcal.validation.output import _host_hash, _process_state, remove_stale_staging
+    from flexcal.fem.owners import host_hash as _host_hash, process_state as _process_state
+    from flexcal.validation.output import remove_stale_staging
 
     def folder(name: str) -> Path:
         path = tmp_path / name
@@ -437,6 +438,47 @@ def _no_litter():
     before = set(os.listdir("."))
     yield
     assert "__tracked_surface.stl" not in set(os.listdir(".")) - before
+
+
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_parallel_fem_build_stopped_while_meshing_stops_at_once_and_leaves_no_mesher(tmp_path, signum):
+    """A cold FEM truth on 2 local worker processes, stopped while both workers' fTetWild
+    children mesh. Before: 4-5 Dask warning lines after the signal, 4 s of the nanny's
+    graceful wait, and the children went on meshing after the command had ended, their
+    temporary folders left behind. Now: one line, the children stopped with the jobs,
+    nothing left in the temporary directory (TMPDIR of the run)."""
+    import psutil
+
+    temporary = tmp_path / "tmp"
+    temporary.mkdir()
+    env = {"FLEXCAL_CACHE_DIR": str(tmp_path / "cache"), "TMPDIR": str(temporary)}
+    place = tmp_path / "place"  # holds only the working directory and --out
+    work = place / "work"
+    work.mkdir(parents=True)
+    run = Run(["truth", "--scenario", "table1", "--seed", "3", "--workers", "2", "--out", str(place / "out")],
+              work, env)
+    assert run.wait_for("FEM segments: 18 to build on 2 local worker process(es)"), run.lines
+
+    def meshers() -> list:
+        return [p for p in psutil.Process(run.process.pid).children(recursive=True)
+                if "flexcal.fem.tetwild_process" in " ".join(p.cmdline())]
+
+    deadline = time.monotonic() + WAIT_S
+    while len(meshers()) < 2 and time.monotonic() < deadline:
+        time.sleep(0.05)
+    children = meshers()
+    assert len(children) == 2, run.lines
+    time.sleep(1.0)  # past their imports (0.3 s idle), inside fTetWild (~8 s a leaf segment)
+    n_lines = len(run.lines)
+    start = time.monotonic()
+    run.process.send_signal(signum)
+    status = run.finish()
+    # the nanny's graceful wait alone would be 4 s (measured with the children stopped: 0.8 s)
+    assert time.monotonic() - start < 4.0
+    _assert_stopped_cleanly(status, run.lines, place, work, signum)
+    assert len(run.lines) == n_lines + 1, run.lines[n_lines:]  # the one line, no Dask warnings
+    assert psutil.wait_procs(children, timeout=5)[1] == []  # 5 s: reaping on a loaded machine
+    assert [p.name for p in temporary.iterdir() if p.name.startswith("flexcal-")] == []
 
 
 @pytest.mark.slow

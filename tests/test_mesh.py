@@ -6,6 +6,9 @@ notch hinge is checked end to end. Heavier meshes are marked slow.
 """
 
 import os
+import subprocess
+import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -479,3 +482,56 @@ def test_reference_parts_mesh_exactly(params, n, tmp_path, monkeypatch):
         assert abs(neck.thickness_error) < 1e-5
         assert 0.75 * n <= neck.elements_across <= 1.34 * n  # fTetWild's 4/5 .. 4/3 band
     assert p2_volumes(mesh.nodes, mesh.tets).min() > 0
+
+
+_PARENT_MESHING_THE_RUNAWAY = """
+import json, sys
+import numpy as np
+from flexcal.fem import tetwild_process
+with np.load(sys.argv[1]) as data:
+    arrays = {name: np.array(data[name]) for name in data.files}
+options = json.loads(str(arrays.pop("__options__")))
+options.pop("__seed__")
+tetwild_process.tetrahedralize_in_child(arrays.pop("vertices"), arrays.pop("faces"), **arrays, **options)
+"""
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="PR_SET_PDEATHSIG is Linux's")
+def test_a_mesher_child_dies_with_its_parent_and_its_folder_is_removed_later(tmp_path):
+    """A Dask worker ended by its nanny runs no ``finally``: its fTetWild child went on
+    meshing after the command had stopped, and its temporary folder stayed. The child now
+    dies with its parent (PR_SET_PDEATHSIG) and the folder, named by its owner, is removed
+    by the next call (``remove_stale_mesher_folders``). The parent here meshes the runaway
+    input (tests/data/tetwild_runaway.npz: ~20 s in fTetWild) and is killed with SIGKILL."""
+    import psutil
+
+    from flexcal.fem import tetwild_process
+
+    parent = subprocess.Popen([sys.executable, "-c", _PARENT_MESHING_THE_RUNAWAY,
+                               str(Path(__file__).parent / "data" / "tetwild_runaway.npz")],
+                              env={**os.environ, "TMPDIR": str(tmp_path)}, stdin=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 60  # the parent's imports on a loaded 2-core machine
+        children = []
+        while not children and time.monotonic() < deadline and parent.poll() is None:
+            children = psutil.Process(parent.pid).children()
+            time.sleep(0.05)
+        assert len(children) == 1 and "flexcal.fem.tetwild_process" in " ".join(children[0].cmdline())
+        child = children[0]
+        time.sleep(2.0)  # past its imports (0.3 s idle), inside fTetWild, which runs ~20 s on this input
+        assert child.is_running() and child.status() != psutil.STATUS_ZOMBIE
+        parent.kill()
+        parent.wait()
+        # the kernel kills the child as its parent dies; 5 s is room for a loaded machine to
+        # reap it (measured: gone within the first 0.1 s poll)
+        gone, alive = psutil.wait_procs([child], timeout=5)
+        assert alive == [] and gone == [child]
+    finally:
+        parent.kill()
+        parent.wait()
+    folders = [p.name for p in tmp_path.iterdir() if p.name.startswith("flexcal-tetwild-")]
+    assert len(folders) == 1 and (tmp_path / folders[0] / "in.npz").is_file()  # left by the killed parent
+    live = tmp_path / f"flexcal-tetwild-{tetwild_process.owner_tag()}-abcd1234"  # this process's: kept
+    live.mkdir()
+    assert tetwild_process.remove_stale_mesher_folders(tmp_path) == folders
+    assert sorted(p.name for p in tmp_path.iterdir()) == [live.name]

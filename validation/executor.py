@@ -20,6 +20,7 @@ Used by ``flexcal sweep`` (designs), the virtual prototype's FEM segment builds
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import os
 from typing import Any, Callable, Hashable, Sequence
@@ -57,6 +58,24 @@ def where(workers: int, scheduler: str | None) -> str:
     return f"{workers} local worker process(es)" if workers else "this process"
 
 
+def _stop_the_jobs_children(cluster) -> None:
+    """Kill the processes that the jobs on a LocalCluster's workers started (fTetWild's
+    meshing children): the jobs are abandoned (Ctrl-C, SIGTERM, an error), and a worker
+    blocked waiting for its child cannot stop until the child ends; Dask's nanny then
+    waits 4 s before it kills the worker. With the child gone, the job fails at once and
+    the worker stops."""
+    import psutil
+
+    for nanny in list(cluster.workers.values()):
+        try:
+            children = psutil.Process(nanny.pid).children(recursive=True)
+        except (psutil.Error, TypeError, ValueError):  # gone already, or not started (pid None)
+            continue
+        for child in children:
+            with contextlib.suppress(psutil.Error):
+                child.kill()
+
+
 def run_jobs(items: Sequence[Any], job: Callable[..., Any], on_done: Callable[[Any, Any], None], *,
              key: Callable[[Any], Hashable], workers: int, scheduler: str | None = None,
              job_options: dict[str, Any] | None = None, task_prefix: str = "item") -> JobFailures:
@@ -83,10 +102,13 @@ def run_jobs(items: Sequence[Any], job: Callable[..., Any], on_done: Callable[[A
         return failures
     from dask.distributed import Client, LocalCluster, as_completed
 
-    quiet = logging.getLogger().getEffectiveLevel() > logging.INFO  # Dask's INFO lines only with -v
+    # Dask's own log lines only with -v, apart from errors: its warnings are about its
+    # internals (a stop with tasks running: "... ended with CancelledError", "Worker process
+    # still alive after 4.0 seconds, killing"), and flexcal reports failed items itself
+    quiet = logging.getLogger().getEffectiveLevel() > logging.INFO
     previous_level = logging.getLogger("distributed").level
     if quiet:
-        logging.getLogger("distributed").setLevel(logging.WARNING)
+        logging.getLogger("distributed").setLevel(logging.ERROR)
     cluster = None
     try:
         if scheduler is not None:
@@ -97,7 +119,7 @@ def run_jobs(items: Sequence[Any], job: Callable[..., Any], on_done: Callable[[A
             # no fixed dashboard port: other jobs may run on the same machine
             with dask.config.set(LOCAL_WORKER_CONFIG):
                 cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                       dashboard_address=":0", silence_logs=logging.WARNING if quiet else logging.INFO)
+                                       dashboard_address=":0", silence_logs=logging.ERROR if quiet else logging.INFO)
             client = Client(cluster)
         try:
             futures = {client.submit(job, item, **job_options, key=f"{task_prefix}-{key(item)}", pure=False): item
@@ -112,6 +134,10 @@ def run_jobs(items: Sequence[Any], job: Callable[..., Any], on_done: Callable[[A
                 on_done(item, result)
         finally:
             client.close()
+    except BaseException:
+        if cluster is not None:
+            _stop_the_jobs_children(cluster)
+        raise
     finally:
         if cluster is not None:
             cluster.close()

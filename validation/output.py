@@ -36,7 +36,6 @@ from __future__ import annotations
 
 import contextlib
 import errno
-import hashlib
 import json
 import logging
 import math
@@ -44,7 +43,6 @@ import os
 import re
 import shutil
 import signal
-import socket
 import tempfile
 import threading
 import uuid
@@ -52,6 +50,8 @@ from pathlib import Path
 from typing import Any, Iterator
 
 import numpy as np
+
+from flexcal.fem.owners import OWNER_TAG, owner_tag, remove_folders_of_gone_owners
 
 __all__ = ["out_folder", "staged_output", "atomic_path", "write_json", "write_text", "to_jsonable", "dumps_strict",
            "interrupts_deferred", "TIMING_KEYS", "split_timings", "write_report", "remove_stale_staging"]
@@ -189,49 +189,8 @@ def _remove(path: Path) -> None:
         path.unlink()
 
 
-_STAGING_TAG = "flexcal"
-# .NAME.flexcal-HOST-PID-START.XXXXXXXX (mkdtemp's 8 random characters)
-_STAGING_NAME = re.compile(r"^\..*\.flexcal-([0-9a-f]{8})-(\d+)-(\d+)\.[A-Za-z0-9_]{8}$")
-
-
-def _host_hash() -> str:
-    """8 hex digits naming this host in staging folder names (a shared file system may
-    hold other hosts' folders, whose process ids mean nothing here)."""
-    return hashlib.sha256(socket.gethostname().encode()).hexdigest()[:8]
-
-
-def _process_state(pid: int) -> tuple[str, int] | None:
-    """(state letter, start time in clock ticks after boot) of a process from
-    /proc/PID/stat; None where there is no /proc (not Linux) or no such process."""
-    try:
-        stat = Path(f"/proc/{pid}/stat").read_text()
-    except OSError:
-        return None
-    fields = stat[stat.rindex(")") + 2:].split()  # after "pid (command) ": state is field 3, starttime 22
-    return fields[0], int(fields[19])
-
-
-def _staging_prefix(name: str) -> str:
-    state = _process_state(os.getpid())
-    return f".{name}.{_STAGING_TAG}-{_host_hash()}-{os.getpid()}-{state[1] if state else 0}."
-
-
-def _owner_alive(pid: int, start: int) -> bool:
-    """Whether the process that made a staging folder (this host's ``pid``, started at
-    ``start``; 0 = unknown) still runs. In doubt, alive."""
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        pass  # another user's live process
-    state = _process_state(pid)
-    if state is None:
-        return True  # no /proc: the pid exists, so assume it is the owner
-    letter, started = state
-    if letter in ("Z", "X"):  # killed, not yet reaped by its parent
-        return False
-    return start == 0 or started == start  # a different start: the pid was reused
+# .NAME.flexcal-HOST-PID-START.XXXXXXXX (mkdtemp's 8 random characters; owners.owner_tag)
+_STAGING_NAME = re.compile(rf"^\..*\.flexcal-{OWNER_TAG}\.[A-Za-z0-9_]{{8}}$")
 
 
 def remove_stale_staging(folder: str | os.PathLike) -> list[str]:
@@ -239,22 +198,7 @@ def remove_stale_staging(folder: str | os.PathLike) -> list[str]:
     gone (killed by SIGKILL, out of memory, ...); returns their names. Folders of live
     processes, of other hosts and of any other name stay; errors are ignored (a folder
     that cannot be removed stays as it was)."""
-    removed = []
-    try:
-        entries = list(os.scandir(folder))
-    except OSError:
-        return removed
-    host = _host_hash()
-    for entry in entries:
-        match = _STAGING_NAME.match(entry.name)
-        if not match or match.group(1) != host or not entry.is_dir(follow_symlinks=False):
-            continue
-        pid, start = int(match.group(2)), int(match.group(3))
-        if pid == os.getpid() or _owner_alive(pid, start):
-            continue
-        shutil.rmtree(entry.path, ignore_errors=True)
-        if not os.path.lexists(entry.path):
-            removed.append(entry.name)
+    removed = remove_folders_of_gone_owners(folder, _STAGING_NAME)
     if removed:
         logging.getLogger("flexcal.output").info("removed staging folders of killed runs: %s", ", ".join(removed))
     return removed
@@ -274,7 +218,7 @@ def staged_output(out_dir: str | os.PathLike, *, replace: bool = False, resume: 
         where = out.absolute().parent
         where.mkdir(parents=True, exist_ok=True)
     remove_stale_staging(where)
-    staging = Path(tempfile.mkdtemp(prefix=_staging_prefix(out.name or "out"), dir=where))
+    staging = Path(tempfile.mkdtemp(prefix=f".{out.name or 'out'}.flexcal-{owner_tag()}.", dir=where))
     os.chmod(staging, 0o777 & ~_UMASK)
     try:
         yield staging

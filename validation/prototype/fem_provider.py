@@ -144,6 +144,7 @@ def build_segments(slices: Iterable[tuple[FlexureChain, float, float]], material
     code differs (other cache key) is an error: its matrix is not this version's.
     """
     from flexcal.fem.cache import load_cached, store_cached
+    from flexcal.fem.tetwild_process import remove_stale_mesher_folders
 
     from ..executor import resolve_workers, run_jobs, where
 
@@ -180,8 +181,12 @@ def build_segments(slices: Iterable[tuple[FlexureChain, float, float]], material
     # longest first (stable): the cheap strut segments fill the gaps at the end instead of a
     # leaf segment started last keeping one worker busy while the others idle
     ordered = sorted(missing.values(), key=segment_build_cost, reverse=True)
-    failures = run_jobs(ordered, build_segment_job, on_done, key=lambda seg: keys[id(seg)][:16],
-                        workers=n_workers, scheduler=scheduler, job_options=options, task_prefix="fem-segment")
+    try:
+        failures = run_jobs(ordered, build_segment_job, on_done, key=lambda seg: keys[id(seg)][:16],
+                            workers=n_workers, scheduler=scheduler, job_options=options, task_prefix="fem-segment")
+    finally:
+        # a local worker stopped mid-mesh (Ctrl-C, SIGTERM) leaves its mesher's temporary folder
+        remove_stale_mesher_folders()
     if failures:
         key, text = next(iter(failures.items()))
         raise RuntimeError(f"{len(failures)} FEM segment build(s) failed, e.g. {text}; the {len(built)} finished "
