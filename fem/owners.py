@@ -20,7 +20,7 @@ import shutil
 import socket
 from pathlib import Path
 
-__all__ = ["OWNER_TAG", "owner_tag", "host_hash", "process_state", "owner_alive", "remove_folders_of_gone_owners"]
+__all__ = ["OWNER_TAG", "host_hash", "owner_alive", "owner_tag", "process_state", "remove_folders_of_gone_owners"]
 
 # the regular expression of owner_tag(): groups host hash, process id, start time
 OWNER_TAG = r"([0-9a-f]{8})-(\d+)-(\d+)"

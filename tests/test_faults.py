@@ -235,7 +235,7 @@ def test_staging_folder_of_a_killed_run_is_removed_by_the_next_run(tmp_path, exi
 
 
 def test_only_the_staging_folders_of_gone_processes_are_removed(tmp_path):
-    from flexcal.fem.owners import host_hash as _host_hash, process_state as _process_state
+    from flexcal.fem.owners import host_hash, process_state
     from flexcal.validation.output import remove_stale_staging
 
     def folder(name: str) -> Path:
@@ -244,7 +244,7 @@ def test_only_the_staging_folders_of_gone_processes_are_removed(tmp_path):
         (path / "report.json").write_text("{}")
         return path
 
-    def staging_name(pid: int, start: int, host: str = _host_hash()) -> str:
+    def staging_name(pid: int, start: int, host: str = host_hash()) -> str:
         return f".out.flexcal-{host}-{pid}-{start}.abcd_123"
 
     alive = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
@@ -253,9 +253,9 @@ def test_only_the_staging_folders_of_gone_processes_are_removed(tmp_path):
     gone.wait()
     try:
         zombie.kill()  # killed but not reaped: a zombie, which counts as gone
-        while _process_state(zombie.pid)[0] != "Z":
+        while process_state(zombie.pid)[0] != "Z":
             time.sleep(0.01)
-        start = _process_state(alive.pid)[1]
+        start = process_state(alive.pid)[1]
         keep = [folder(staging_name(alive.pid, start)),                # a live process
                 folder(staging_name(os.getpid(), 0)),                  # this one (start unknown)
                 folder(staging_name(gone.pid, 0, host="0badc0de")),    # another host's: its pids mean nothing here
