@@ -19,24 +19,26 @@ Methods (measured on hinge-size problems, see docs/fem.md):
 
 from __future__ import annotations
 
-import functools
+import contextlib
+import ctypes
 import glob
 import os
 import sys
 import threading
+from collections.abc import Iterator
 
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-__all__ = ["SOLVERS", "solve_spd", "pardiso_available"]
+__all__ = ["SOLVERS", "pardiso_available", "solve_spd", "solver_threads"]
 
 SOLVERS = ("auto", "pardiso", "splu", "spsolve", "amg")
 RESIDUAL_LIMIT = 1e-6
 """Largest accepted ||K x - b|| / ||b|| per column (AMG stops at rtol <= 1e-10 anyway)."""
 
 
-_PARDISO_LOCK = threading.Lock()
+_PER_THREAD = threading.local()  # a PARDISO handle and MKL thread count of each thread
 PARDISO_OUT_OF_MEMORY = -2  # MKL PARDISO error code "not enough memory" (-4 is a zero pivot)
 
 
@@ -66,9 +68,37 @@ def _ask_mkl_for_reproducible_results() -> None:
     os.environ.setdefault("MKL_CBWR", "AUTO")
 
 
-@functools.lru_cache(maxsize=1)
+@contextlib.contextmanager
+def solver_threads(n_threads: int) -> Iterator[None]:
+    """PARDISO solves of the calling thread, inside the block, on ``n_threads`` MKL
+    threads (``MKL_Set_Num_Threads_Local``: this thread only; MKL's own count elsewhere).
+    For jobs run side by side in threads of one process, each owning one core
+    (``flexcal.validation.executor``, the FEM segment builds)."""
+    if isinstance(n_threads, bool) or not isinstance(n_threads, int) or n_threads < 1:
+        raise ValueError(f"n_threads={n_threads!r} must be an integer >= 1")
+    previous = getattr(_PER_THREAD, "mkl_threads", 0)
+    _PER_THREAD.mkl_threads = n_threads
+    try:
+        yield
+    finally:
+        _PER_THREAD.mkl_threads = previous
+
+
 def _pardiso_solver():
-    """One PARDISO handle per process in SPD mode (mtype 2), its factors freed after every
+    """This thread's PARDISO handle (MKL's PARDISO is thread-safe for distinct handles;
+    ``_new_pardiso_solver``), with MKL set to this thread's ``solver_threads`` count (0,
+    outside such a block: the process's count)."""
+    solver = getattr(_PER_THREAD, "pardiso", None)
+    if solver is None:
+        solver = _PER_THREAD.pardiso = _new_pardiso_solver()
+    set_local = solver.libmkl.MKL_Set_Num_Threads_Local  # the C entry (by value); the lower-case one is Fortran's
+    set_local.argtypes, set_local.restype = [ctypes.c_int], ctypes.c_int
+    set_local(getattr(_PER_THREAD, "mkl_threads", 0))
+    return solver
+
+
+def _new_pardiso_solver():
+    """A PARDISO handle in SPD mode (mtype 2), its factors freed after every
     solve. Parameters (0-based iparm): [1] = 2 nested-dissection ordering (METIS);
     [7] = 0 iterative-refinement steps: MKL's default of 2 made the condensed 6x6 less
     accurate here (4.6e-11 vs 5.7e-12 relative to SuperLU on a 13k-DOF hinge) and the
@@ -105,23 +135,22 @@ def _solve_pardiso(K: sp.csr_matrix, rhs: np.ndarray) -> np.ndarray:
 
     upper = sp.triu(K, format="csr")  # mtype 2 reads the upper triangle only
     upper.sort_indices()
-    with _PARDISO_LOCK:
-        solver = _pardiso_solver()
-        try:
-            solver.factorize(upper)
-            x = solver.solve(upper, np.asfortranarray(rhs))
-        except pypardiso.pardiso_wrapper.PyPardisoError as error:
-            if getattr(error, "value", None) == PARDISO_OUT_OF_MEMORY:
-                raise RuntimeError(
-                    f"PARDISO failed ({error}): not enough memory for the factorization of "
-                    f"{K.shape[0]} DOF (a coarser mesh or a machine with more memory)"
-                ) from error
-            raise ValueError(
-                f"PARDISO failed ({error}); K is probably not positive definite: a body part is not "
-                "held (check the clamps and couplings)"
+    solver = _pardiso_solver()
+    try:
+        solver.factorize(upper)
+        x = solver.solve(upper, np.asfortranarray(rhs))
+    except pypardiso.pardiso_wrapper.PyPardisoError as error:
+        if getattr(error, "value", None) == PARDISO_OUT_OF_MEMORY:
+            raise RuntimeError(
+                f"PARDISO failed ({error}): not enough memory for the factorization of "
+                f"{K.shape[0]} DOF (a coarser mesh or a machine with more memory)"
             ) from error
-        finally:
-            solver.free_memory(everything=True)
+        raise ValueError(
+            f"PARDISO failed ({error}); K is probably not positive definite: a body part is not "
+            "held (check the clamps and couplings)"
+        ) from error
+    finally:
+        solver.free_memory(everything=True)
     return x
 
 

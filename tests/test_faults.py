@@ -457,7 +457,7 @@ def test_parallel_fem_build_stopped_while_meshing_stops_at_once_and_leaves_no_me
     work.mkdir(parents=True)
     run = Run(["truth", "--scenario", "table1", "--seed", "3", "--workers", "2", "--out", str(place / "out")],
               work, env)
-    assert run.wait_for("FEM segments: 18 to build on 2 local worker process(es)"), run.lines
+    assert run.wait_for("FEM segments: 18 to build on 2 threads of this process"), run.lines
 
     def meshers() -> list:
         return [p for p in psutil.Process(run.process.pid).children(recursive=True)

@@ -33,6 +33,43 @@ def test_pardiso_gives_the_same_bits_twice():
     assert np.array_equal(first, solve_spd(K, rhs, method="pardiso"))
 
 
+def test_solves_in_two_threads_at_once_match_one_at_a_time():
+    """Each thread has its own PARDISO handle (no lock since session 9: the FEM segment
+    builds run in threads of one process) and, inside ``solver_threads(1)``, one MKL
+    thread of its own while other threads keep MKL's count. Two threads solving at once
+    give the bits of the same solves one after the other on one MKL thread."""
+    if not pardiso_available():
+        pytest.skip("pypardiso / MKL not available")
+    import threading
+
+    from flexcal.fem import solve
+    from flexcal.fem.solve import solver_threads
+
+    K = _laplacian_3d(30)  # 27k unknowns: ~0.3 s a solve, long enough to overlap
+    rhs = [np.random.default_rng(seed).standard_normal((K.shape[0], 6)) for seed in (1, 2)]
+    with solver_threads(1):
+        alone = [solve_spd(K, b, method="pardiso") for b in rhs]
+        assert solve._pardiso_solver().libmkl.MKL_Get_Max_Threads() == 1
+    outside = solve._pardiso_solver().libmkl.MKL_Get_Max_Threads()
+    results, counts = [None, None], [None, None]
+
+    def work(i: int) -> None:
+        with solver_threads(1):
+            results[i] = solve_spd(K, rhs[i], method="pardiso")
+            counts[i] = solve._pardiso_solver().libmkl.MKL_Get_Max_Threads()
+
+    threads = [threading.Thread(target=work, args=(i,)) for i in (0, 1)]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join()
+    assert counts == [1, 1] and solve._pardiso_solver().libmkl.MKL_Get_Max_Threads() == outside
+    assert all(np.array_equal(r, a) for r, a in zip(results, alone))
+    with pytest.raises(ValueError, match="must be an integer >= 1"):
+        with solver_threads(0):
+            pass
+
+
 @pytest.mark.parametrize("method", ["auto", "pardiso", "splu", "spsolve", "amg"])
 def test_methods_solve_several_right_hand_sides(method):
     if method == "pardiso" and not pardiso_available():

@@ -8,7 +8,11 @@ FEM cache entries); an item that raises is returned in the failures, never sinks
 others.
 
 - ``workers=0``: one after the other in this process (debugging, tiny jobs);
-- ``workers=N``: a ``LocalCluster`` of N single-threaded worker processes;
+- ``workers=N``: a ``LocalCluster`` of N single-threaded worker processes, or, with
+  ``in_threads=True``, N threads of this process: for jobs whose heavy work runs outside
+  the interpreter lock (the FEM segment builds: fTetWild meshes in a child process,
+  PARDISO and numpy release the lock), where N processes would each import the whole
+  FEM stack again and run Dask beside it (docs/scale.md, "Session 9");
 - ``scheduler="tcp://host:8786"``: an existing cluster (``workers`` is then ignored).
   Workers need flexcal installed; for a shared FEM cache, the same cache folder
   (``$FLEXCAL_CACHE_DIR`` on shared storage).
@@ -51,11 +55,13 @@ def resolve_workers(workers: int | None, n_items: int) -> int:
     return int(workers)
 
 
-def where(workers: int, scheduler: str | None) -> str:
+def where(workers: int, scheduler: str | None, in_threads: bool = False) -> str:
     """Where the items run, in words (for progress lines)."""
     if scheduler is not None:
         return f"the Dask cluster at {scheduler}"
-    return f"{workers} local worker process(es)" if workers else "this process"
+    if not workers:
+        return "this process"
+    return f"{workers} threads of this process" if in_threads else f"{workers} local worker process(es)"
 
 
 def _stop_the_jobs_children(cluster) -> None:
@@ -76,14 +82,56 @@ def _stop_the_jobs_children(cluster) -> None:
                 child.kill()
 
 
+def _kill_new_children(before: set[int]) -> None:
+    """Kill this process's child processes (and theirs) but those in ``before`` (pids)."""
+    import psutil
+
+    for child in psutil.Process().children(recursive=True):
+        if child.pid not in before:
+            with contextlib.suppress(psutil.Error):
+                child.kill()
+
+
+def _run_in_threads(items: Sequence[Any], job: Callable[..., Any], on_done: Callable[[Any, Any], None],
+                    key: Callable[[Any], Hashable], workers: int, job_options: dict[str, Any]) -> JobFailures:
+    """``run_jobs`` on ``workers`` threads of this process. On an interrupt the jobs not
+    started are dropped and the child processes the running ones started are killed, so
+    those fail at once instead of finishing their mesh."""
+    from concurrent.futures import ThreadPoolExecutor, as_completed
+
+    import psutil
+
+    failures: JobFailures = {}
+    before = {child.pid for child in psutil.Process().children(recursive=True)}
+    pool = ThreadPoolExecutor(workers, thread_name_prefix="flexcal-job")
+    try:
+        futures = {pool.submit(job, item, **job_options): item for item in items}
+        for future in as_completed(futures):
+            item = futures[future]
+            try:
+                result = future.result()
+            except Exception as error:  # one bad item must not sink the others
+                failures[key(item)] = f"{type(error).__name__}: {error}"
+                continue
+            on_done(item, result)
+    except BaseException:
+        pool.shutdown(wait=False, cancel_futures=True)
+        _kill_new_children(before)
+        raise
+    pool.shutdown()
+    return failures
+
+
 def run_jobs(items: Sequence[Any], job: Callable[..., Any], on_done: Callable[[Any, Any], None], *,
              key: Callable[[Any], Hashable], workers: int, scheduler: str | None = None,
-             job_options: dict[str, Any] | None = None, task_prefix: str = "item") -> JobFailures:
+             job_options: dict[str, Any] | None = None, task_prefix: str = "item",
+             in_threads: bool = False) -> JobFailures:
     """Run ``job(item, **job_options)`` for every item; ``on_done(item, result)`` as each
     finishes (in this process); returns {key(item): error text} of the items that raised.
 
     key: a unique, stable name of an item (also the Dask task key); workers: 0 runs in
-    this process, N > 0 on a LocalCluster of N processes (ignored with ``scheduler``).
+    this process, N > 0 on a LocalCluster of N processes (ignored with ``scheduler``), or
+    on N threads of this process with ``in_threads`` (module doc).
     KeyboardInterrupt propagates after the cluster is shut down; finished items have
     already been handed to ``on_done``.
     """
@@ -91,6 +139,8 @@ def run_jobs(items: Sequence[Any], job: Callable[..., Any], on_done: Callable[[A
     failures: JobFailures = {}
     if not items:
         return failures
+    if scheduler is None and workers > 0 and in_threads:
+        return _run_in_threads(items, job, on_done, key, workers, job_options)
     if scheduler is None and workers == 0:
         for item in items:
             try:

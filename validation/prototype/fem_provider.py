@@ -110,23 +110,38 @@ def segment_build_cost(segment: ChainSegment) -> float:
     return cost
 
 
-# fTetWild's threads on a local worker process: each owns one core (threads_per_worker=1;
-# Dask also sets OMP/MKL_NUM_THREADS=1). In this process (--workers 0) and on a cluster given
-# by address, whose workers may own many cores, fTetWild keeps all cores (0).
+# LOCAL_BUILDS_IN_THREADS: local parallel builds (--workers N, no --scheduler) run on N
+# threads of this process, not on a LocalCluster of N processes: a segment's heavy work
+# runs outside the interpreter lock (fTetWild in its child process, ~77 %; PARDISO, numpy),
+# and N processes each imported CadQuery and the FEM stack again (2.0 s a process) and ran
+# Dask beside the jobs. Measured, a cold table1 truth on 2 workers alone on the 2-core
+# machine (docs/scale.md, "Session 9"): processes 62.9-64.6 s wall for 123-126 s CPU,
+# threads 61.4 s for 114 s CPU. A cluster given by address keeps its processes.
+#
+# Each local job thread owns one core: fTetWild on one thread and PARDISO on one MKL thread
+# (``flexcal.fem.solve.solver_threads``, that thread only). In this process (--workers 0)
+# and on a cluster given by address, whose workers may own many cores, both keep all cores (0).
 # Measured on the 2-core machine, one leaf segment of the mount meshed 4 times each way, alone:
 # all cores median 6.1 s wall for 7.8 s CPU, one thread 6.4 s wall for 6.6 s CPU; the second
 # thread bought 5 % of wall time for 17 % more CPU, which a busy second worker needs itself.
 WORKER_MESHER_THREADS = 1
+WORKER_SOLVER_THREADS = 1
 
 
 def build_segment_job(segment: ChainSegment, *, material: Material, elements_through_thickness: float,
-                      cache_directory=None, mesher_threads: int = 0) -> dict[str, Any]:
+                      cache_directory=None, mesher_threads: int = 0, solver_threads: int = 0) -> dict[str, Any]:
     """One segment build on a worker: {"key": its cache key there, "stiffness": (12, 12),
     "wall_s": [s]}; the worker's cache gets the entry too (``segment_stiffness_fem``);
-    fTetWild on ``mesher_threads`` threads (0: all cores)."""
+    fTetWild on ``mesher_threads`` threads and PARDISO on ``solver_threads`` MKL threads
+    of the calling thread (0: all cores; ``flexcal.fem.solve.solver_threads``)."""
+    import contextlib
+
+    from flexcal.fem.solve import solver_threads as mkl_threads
+
     start = time.perf_counter()
-    stiffness = segment_stiffness_fem(segment, material, elements_through_thickness=elements_through_thickness,
-                                      cache_directory=cache_directory, mesher_threads=mesher_threads)
+    with mkl_threads(solver_threads) if solver_threads else contextlib.nullcontext():
+        stiffness = segment_stiffness_fem(segment, material, elements_through_thickness=elements_through_thickness,
+                                          cache_directory=cache_directory, mesher_threads=mesher_threads)
     return {"key": segment_cache_key(segment, material, elements_through_thickness=elements_through_thickness),
             "stiffness": stiffness, "wall_s": time.perf_counter() - start}
 
@@ -157,8 +172,9 @@ def build_segments(slices: Iterable[tuple[FlexureChain, float, float]], material
     if not missing:
         return 0
     n_workers = resolve_workers(workers, len(missing))
+    in_threads = scheduler is None and n_workers > 0  # LOCAL_BUILDS_IN_THREADS
     log = (lambda text: print(text, file=sys.stderr, flush=True)) if progress else (lambda text: None)
-    log(f"  FEM segments: {len(missing)} to build on {where(n_workers, scheduler)}")
+    log(f"  FEM segments: {len(missing)} to build on {where(n_workers, scheduler, in_threads)}")
     start, built = time.perf_counter(), []
     keys = {id(segment): key for key, segment in missing.items()}
 
@@ -177,13 +193,15 @@ def build_segments(slices: Iterable[tuple[FlexureChain, float, float]], material
     # the workers write into the same folder when it is shared (LocalCluster: always)
     options = {"material": material, "elements_through_thickness": float(elements_through_thickness),
                "cache_directory": None if cache_directory is None else str(cache_directory),
-               "mesher_threads": WORKER_MESHER_THREADS if scheduler is None and n_workers > 0 else 0}
+               "mesher_threads": WORKER_MESHER_THREADS if in_threads else 0,
+               "solver_threads": WORKER_SOLVER_THREADS if in_threads else 0}
     # longest first (stable): the cheap strut segments fill the gaps at the end instead of a
     # leaf segment started last keeping one worker busy while the others idle
     ordered = sorted(missing.values(), key=segment_build_cost, reverse=True)
     try:
         failures = run_jobs(ordered, build_segment_job, on_done, key=lambda seg: keys[id(seg)][:16],
-                            workers=n_workers, scheduler=scheduler, job_options=options, task_prefix="fem-segment")
+                            workers=n_workers, scheduler=scheduler, job_options=options, task_prefix="fem-segment",
+                            in_threads=in_threads)
     finally:
         # a local worker stopped mid-mesh (Ctrl-C, SIGTERM) leaves its mesher's temporary folder
         remove_stale_mesher_folders()
