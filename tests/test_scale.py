@@ -45,6 +45,46 @@ def test_run_jobs_in_process_hands_each_result_over_and_lists_failures():
         resolve_workers(-1, 3)
 
 
+def test_run_jobs_in_threads_runs_side_by_side_and_lists_failures():
+    done = {}
+    failures = run_jobs([1, 2, 3, 4], _fail_on_three, lambda item, result: done.update({item: result}), key=str,
+                        workers=2, in_threads=True)
+    assert done == {1: 1, 2: 4, 4: 16} and failures == {"3": "ValueError: three is bad"}
+    # side by side: two jobs that each wait for the other to start finish only together
+    import threading
+
+    barrier = threading.Barrier(2, timeout=10)
+    assert run_jobs(["a", "b"], lambda item: barrier.wait(), lambda item, result: None, key=str, workers=2,
+                    in_threads=True) == {}
+
+
+def _wait_on_a_child(item):
+    if item == "quick":
+        return None
+    child = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    _wait_on_a_child.children.append(child)
+    child.wait()
+    raise RuntimeError(f"child ended with {child.returncode}")
+
+
+def test_run_jobs_in_threads_stopped_kills_the_running_jobs_children():
+    """Ctrl-C (here: raised by the first result's hand-over) while another job waits on its
+    child process: the child is killed at once and the job fails."""
+    _wait_on_a_child.children = []
+
+    def on_done(item, result):
+        while not _wait_on_a_child.children:  # the other job's child is running
+            time.sleep(0.01)
+        raise KeyboardInterrupt
+
+    start = time.monotonic()
+    with pytest.raises(KeyboardInterrupt):
+        run_jobs(["slow", "quick"], _wait_on_a_child, on_done, key=str, workers=2, in_threads=True)
+    (child,) = _wait_on_a_child.children
+    assert child.wait(timeout=10) == -9  # SIGKILL, long before its 60 s
+    assert time.monotonic() - start < 10
+
+
 def test_prepare_gets_exactly_the_slices_the_prototype_asks_for():
     """``build_prototype`` announces its slices before asking: the parallel build then
     covers every call (none left for the sequential path) and builds nothing unused."""
@@ -104,8 +144,8 @@ def _small_slices():
 
 @pytest.mark.slow
 def test_parallel_segment_build_equals_sequential(tmp_path, monkeypatch):
-    """Two segments built on a LocalCluster of 2 worker processes and one after the other
-    in this process: the same cache keys, and the same matrices up to the solver's
+    """Two segments built side by side on 2 threads of this process (the local parallel
+    build since session 9) and one after the other: the same cache keys, and the same matrices up to the solver's
     round-off. The provider then serves every slice from the cache (no new
     file) and returns the stored matrix bit for bit."""
     monkeypatch.chdir(tmp_path)  # pytetwild's __tracked_surface.stl (the mesher also moves into a temp folder)
@@ -130,7 +170,7 @@ def test_parallel_segment_build_equals_sequential(tmp_path, monkeypatch):
         c_sequential = np.diag(np.linalg.inv(stored_sequential[6:, 6:]))
         # the same mesh both ways (seeded fTetWild, surface in one order: docs/meshing.md;
         # unseeded, 10 builds spread up to 1.2 %); what differs is PARDISO's thread count,
-        # 1 in a worker, all cores here, which changes the last bits: ~1e-11 relative on
+        # 1 in a job thread, all cores here, which changes the last bits: ~1e-11 relative on
         # chain D1's compliance diagonal (fem/solve.py). 1e-9 leaves 100x for that and
         # fails on any change of mesh
         np.testing.assert_allclose(c_parallel, c_sequential, rtol=1e-9)
