@@ -15,9 +15,8 @@ blocks: its child went on meshing for seconds to minutes after the command had s
 and its temporary folder stayed in the temporary directory. So, on Linux, the child asks
 the kernel to kill it when its parent dies (``prctl(PR_SET_PDEATHSIG, SIGKILL)``; the
 "parent" is the thread that started it, which here is the thread that waits for it), and
-each temporary folder's name records its owner (``owners.owner_tag``): every later mesh,
-and the parallel segment builds when they end, remove the folders whose owner is gone
-(``remove_stale_mesher_folders``).
+each temporary folder's name records its owner (``owners.owner_tag``): every later mesh
+removes the folders whose owner is gone (``remove_stale_mesher_folders``).
 
 The child also makes the mesh repeat. fTetWild seeds its generator from
 ``std::random_device`` and pytetwild exposes no seed, so the same input gave a different

@@ -60,8 +60,9 @@ def add_executor_options(parser: argparse.ArgumentParser, *, what: str) -> None:
     # default 0 (this process): on the 2-core reference machine two local workers were not
     # faster under load (docs/scale.md); a user opts in with --workers N or --scheduler
     parser.add_argument("--workers", type=int, metavar="N", default=0,
-                        help=f"local worker processes for {what} (default 0: run in this process; "
-                             "N > 0: N local worker processes)")
+                        help=f"local workers for {what} (default 0: one after the other in this process; "
+                             "N > 0: N at once; FEM segments on N threads of this process, each meshing in "
+                             "its own child process, other jobs on N local worker processes)")
     parser.add_argument("--scheduler", metavar="ADDRESS", default=None,
                         help=f"address of a Dask scheduler (tcp://host:8786) to run {what} on; "
                              "default: see --workers)")

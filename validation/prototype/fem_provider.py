@@ -115,8 +115,9 @@ def segment_build_cost(segment: ChainSegment) -> float:
 # runs outside the interpreter lock (fTetWild in its child process, ~77 %; PARDISO, numpy),
 # and N processes each imported CadQuery and the FEM stack again (2.0 s a process) and ran
 # Dask beside the jobs. Measured, a cold table1 truth on 2 workers alone on the 2-core
-# machine (docs/scale.md, "Session 9"): processes 62.9-64.6 s wall for 123-126 s CPU,
-# threads 61.4 s for 114 s CPU. A cluster given by address keeps its processes.
+# machine, 3 runs each (docs/scale.md, "Session 9"): processes 62.9-64.6 s wall for
+# 123-126 s CPU, threads 59.0-61.1 s for 114-118 s CPU. A cluster given by address keeps
+# its processes.
 #
 # Each local job thread owns one core: fTetWild on one thread and PARDISO on one MKL thread
 # (``flexcal.fem.solve.solver_threads``, that thread only). In this process (--workers 0)
@@ -159,7 +160,6 @@ def build_segments(slices: Iterable[tuple[FlexureChain, float, float]], material
     code differs (other cache key) is an error: its matrix is not this version's.
     """
     from flexcal.fem.cache import load_cached, store_cached
-    from flexcal.fem.tetwild_process import remove_stale_mesher_folders
 
     from ..executor import resolve_workers, run_jobs, where
 
@@ -198,13 +198,9 @@ def build_segments(slices: Iterable[tuple[FlexureChain, float, float]], material
     # longest first (stable): the cheap strut segments fill the gaps at the end instead of a
     # leaf segment started last keeping one worker busy while the others idle
     ordered = sorted(missing.values(), key=segment_build_cost, reverse=True)
-    try:
-        failures = run_jobs(ordered, build_segment_job, on_done, key=lambda seg: keys[id(seg)][:16],
-                            workers=n_workers, scheduler=scheduler, job_options=options, task_prefix="fem-segment",
-                            in_threads=in_threads)
-    finally:
-        # a local worker stopped mid-mesh (Ctrl-C, SIGTERM) leaves its mesher's temporary folder
-        remove_stale_mesher_folders()
+    failures = run_jobs(ordered, build_segment_job, on_done, key=lambda seg: keys[id(seg)][:16],
+                        workers=n_workers, scheduler=scheduler, job_options=options, task_prefix="fem-segment",
+                        in_threads=in_threads)
     if failures:
         key, text = next(iter(failures.items()))
         raise RuntimeError(f"{len(failures)} FEM segment build(s) failed, e.g. {text}; the {len(built)} finished "
