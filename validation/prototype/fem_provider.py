@@ -116,8 +116,8 @@ def segment_build_cost(segment: ChainSegment) -> float:
 # and N processes each imported CadQuery and the FEM stack again (2.0 s a process) and ran
 # Dask beside the jobs. Measured, a cold table1 truth on 2 workers alone on the 2-core
 # machine, 3 runs each (docs/scale.md, "Session 9"): processes 62.9-64.6 s wall for
-# 123-126 s CPU, threads 59.0-61.1 s for 114-118 s CPU. A cluster given by address keeps
-# its processes.
+# 123-126 s CPU, threads 59.0-62.6 s for 114-121 s CPU (two batches). A cluster given by
+# address keeps its processes.
 #
 # Each local job thread owns one core: fTetWild on one thread and PARDISO on one MKL thread
 # (``flexcal.fem.solve.solver_threads``, that thread only). In this process (--workers 0)
