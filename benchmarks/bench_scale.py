@@ -11,8 +11,9 @@ processes: how many cores it kept busy) and the load average. Not a test.
 A third mode (``--bound``, Linux) runs the sequential command held to one core
 (``sched_setaffinity``): its wall time W1 is the job's work on one core, every thread
 of fTetWild and MKL sharing it. N workers that added no overhead of their own and
-never idled would take W1 / N, so (W1 / N) / sequential is the lowest ratio this
-machine allows for the job as it is: the yardstick for the parallel ratio.
+never idled would take W1 / N, so (W1 / N) / sequential is the yardstick for the
+parallel ratio (not a hard floor: work done on two cores at once can cost more or less
+CPU than on one).
 
     .venv/bin/python benchmarks/bench_scale.py                  # 1 repeat, 2 workers
     .venv/bin/python benchmarks/bench_scale.py --repeats 3 --workers 2 --bound
@@ -47,7 +48,7 @@ def timed_truth(workers: int, root: Path, label: str, cores: set[int] | None = N
     subprocess.run(command, env=env, cwd=root, check=True, preexec_fn=pin)
     wall = time.perf_counter() - start
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
-    # CPU of the command and its reaped children (the LocalCluster's worker processes)
+    # CPU of the command and its reaped children (meshing children, worker processes)
     cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
     n_entries = len(list(cache.glob("*.npz")))
     print(f"{label:>14}: {wall:7.1f} s wall, {cpu:7.1f} s CPU (cores busy on average {cpu / wall:.2f}); "
@@ -60,9 +61,9 @@ def timed_truth(workers: int, root: Path, label: str, cores: set[int] | None = N
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=1, help="runs of each mode (default 1)")
-    parser.add_argument("--workers", type=int, default=2, help="local worker processes of the parallel mode (2)")
+    parser.add_argument("--workers", type=int, default=2, help="local workers of the parallel mode (2)")
     parser.add_argument("--bound", action="store_true",
-                        help="also the sequential run on one core: the lowest ratio the machine allows")
+                        help="also the sequential run on one core: the yardstick W1 / workers / sequential")
     args = parser.parse_args()
     print(f"load average before: {' '.join(f'{v:.2f}' for v in os.getloadavg())}; {os.cpu_count()} cores", flush=True)
     sequential, parallel, one_core = [], [], []
@@ -80,8 +81,8 @@ def main() -> None:
     if one_core:
         w1 = statistics.median(one_core)
         print(f"median on one core W1 {w1:.1f} s: {args.workers} workers without overhead or idling would take "
-              f"W1 / {args.workers} = {w1 / args.workers:.1f} s, ratio {w1 / args.workers / seq:.2f} (the lowest "
-              f"this machine allows); the parallel run took {par / (w1 / args.workers):.2f} x that")
+              f"W1 / {args.workers} = {w1 / args.workers:.1f} s, ratio {w1 / args.workers / seq:.2f} (the "
+              f"yardstick); the parallel run took {par / (w1 / args.workers):.2f} x that")
 
 
 if __name__ == "__main__":

@@ -91,9 +91,7 @@ def _pardiso_solver():
     solver = getattr(_PER_THREAD, "pardiso", None)
     if solver is None:
         solver = _PER_THREAD.pardiso = _new_pardiso_solver()
-    set_local = solver.libmkl.MKL_Set_Num_Threads_Local  # the C entry (by value); the lower-case one is Fortran's
-    set_local.argtypes, set_local.restype = [ctypes.c_int], ctypes.c_int
-    set_local(getattr(_PER_THREAD, "mkl_threads", 0))
+    solver.libmkl.MKL_Set_Num_Threads_Local(getattr(_PER_THREAD, "mkl_threads", 0))
     return solver
 
 
@@ -111,6 +109,8 @@ def _new_pardiso_solver():
     import pypardiso
 
     solver = pypardiso.PyPardisoSolver(mtype=2)
+    set_local = solver.libmkl.MKL_Set_Num_Threads_Local  # the C entry (by value); the lower-case one is Fortran's
+    set_local.argtypes, set_local.restype = [ctypes.c_int], ctypes.c_int
     solver.iparm[:] = 0
     solver.iparm[0] = 1  # use the values below, defaults for the rest
     solver.iparm[1] = 2

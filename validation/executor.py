@@ -74,22 +74,25 @@ def _stop_the_jobs_children(cluster) -> None:
 
     for nanny in list(cluster.workers.values()):
         try:
-            children = psutil.Process(nanny.pid).children(recursive=True)
+            _kill(psutil.Process(nanny.pid).children(recursive=True))
         except (psutil.Error, TypeError, ValueError):  # gone already, or not started (pid None)
             continue
-        for child in children:
-            with contextlib.suppress(psutil.Error):
-                child.kill()
 
 
 def _kill_new_children(before: set[int]) -> None:
     """Kill this process's child processes (and theirs) but those in ``before`` (pids)."""
     import psutil
 
-    for child in psutil.Process().children(recursive=True):
-        if child.pid not in before:
-            with contextlib.suppress(psutil.Error):
-                child.kill()
+    _kill([child for child in psutil.Process().children(recursive=True) if child.pid not in before])
+
+
+def _kill(processes) -> None:
+    """SIGKILL each of ``processes`` (psutil.Process) that is still there."""
+    import psutil
+
+    for process in processes:
+        with contextlib.suppress(psutil.Error):
+            process.kill()
 
 
 def _run_in_threads(items: Sequence[Any], job: Callable[..., Any], on_done: Callable[[Any, Any], None],
