@@ -40,7 +40,7 @@ def test_run_jobs_in_process_hands_each_result_over_and_lists_failures():
     assert done == {1: 1, 2: 4, 4: 16}
     assert failures == {"3": "ValueError: three is bad"}
     assert resolve_workers(None, 0) == 0 and resolve_workers(None, 1) == 1 and resolve_workers(0, 9) == 0
-    assert resolve_workers(None, 100) == (os.cpu_count() or 1)
+    assert resolve_workers(None, 100) == len(os.sched_getaffinity(0))  # the cores this process may use
     with pytest.raises(ValueError, match="--workers=-1 must be >= 0"):
         resolve_workers(-1, 3)
 
@@ -83,6 +83,58 @@ def test_run_jobs_in_threads_stopped_kills_the_running_jobs_children():
     (child,) = _wait_on_a_child.children
     assert child.wait(timeout=10) == -9  # SIGKILL, long before its 60 s
     assert time.monotonic() - start < 10
+
+
+def _start_a_child_later(item):
+    if item == "quick":
+        return None
+    _start_a_child_later.interrupted.wait(10)  # busy elsewhere (Python, PARDISO) when the interrupt came
+    child = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    _start_a_child_later.children.append(child)
+    child.wait()
+    raise RuntimeError(f"child ended with {child.returncode}")
+
+
+def test_a_child_started_after_the_interrupt_is_killed_too():
+    """A job that was not waiting on a child when the run was abandoned starts its next one
+    afterwards: before, that child ran to its end (a whole mesh) and the command's exit
+    waited for it; now it is killed and the interrupt comes through once the job ends."""
+    import threading
+
+    _start_a_child_later.children = []
+    _start_a_child_later.interrupted = threading.Event()
+
+    def on_done(item, result):
+        _start_a_child_later.interrupted.set()
+        raise KeyboardInterrupt
+
+    start = time.monotonic()
+    with pytest.raises(KeyboardInterrupt):
+        run_jobs(["slow", "quick"], _start_a_child_later, on_done, key=str, workers=2, in_threads=True)
+    (child,) = _start_a_child_later.children  # run_jobs returned only after the job had ended
+    assert child.returncode == -9  # SIGKILL, long before its 60 s
+    assert time.monotonic() - start < 10
+
+
+def test_local_builds_default_to_one_thread_per_core_within_memory():
+    from flexcal.validation.prototype.fem_provider import BUILD_MEMORY_BYTES, plan_local_builds
+
+    plenty = 100 * BUILD_MEMORY_BYTES
+    # the default: one thread per core, no more threads than segments, no fewer than one
+    assert plan_local_builds(None, 18, cores=2, available_bytes=plenty) == (2, 1)
+    assert plan_local_builds(None, 18, cores=8, available_bytes=plenty) == (8, 1)
+    assert plan_local_builds(None, 3, cores=8, available_bytes=plenty) == (3, 2)  # each owns 8 // 3 cores
+    assert plan_local_builds(None, 1, cores=2, available_bytes=plenty) == (1, 2)
+    assert plan_local_builds(None, 0, cores=2, available_bytes=plenty) == (0, 0)
+    # free memory for 3 builds on 8 cores: 3 threads; for none: still one (built in turn)
+    assert plan_local_builds(None, 18, cores=8, available_bytes=3.5 * BUILD_MEMORY_BYTES) == (3, 2)
+    assert plan_local_builds(None, 18, cores=8, available_bytes=0.2 * BUILD_MEMORY_BYTES) == (1, 8)
+    # asked for: as asked, whatever the memory; 0 is this process on all cores
+    assert plan_local_builds(2, 18, cores=2, available_bytes=0.0) == (2, 1)
+    assert plan_local_builds(4, 18, cores=2, available_bytes=plenty) == (4, 1)
+    assert plan_local_builds(0, 18, cores=2, available_bytes=plenty) == (0, 0)
+    with pytest.raises(ValueError, match="--workers=-1 must be >= 0"):
+        plan_local_builds(-1, 18, cores=2, available_bytes=plenty)
 
 
 def test_prepare_gets_exactly_the_slices_the_prototype_asks_for():

@@ -29,7 +29,7 @@ import logging
 import os
 from typing import Any, Callable, Hashable, Sequence
 
-__all__ = ["run_jobs", "resolve_workers", "where", "JobFailures"]
+__all__ = ["run_jobs", "resolve_workers", "usable_cores", "where", "JobFailures"]
 
 JobFailures = dict  # {item key: "ErrorType: message"}
 
@@ -45,11 +45,19 @@ LOCAL_WORKER_CONFIG = {"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOL
                        "distributed.worker.profile.enabled": False}
 
 
+def usable_cores() -> int:
+    """The cores this process may run on (its CPU affinity where the system has one: a
+    container or ``taskset`` may allow fewer than the machine has)."""
+    if hasattr(os, "sched_getaffinity"):
+        return max(1, len(os.sched_getaffinity(0)))
+    return os.cpu_count() or 1
+
+
 def resolve_workers(workers: int | None, n_items: int) -> int:
-    """Local worker processes to start: ``workers`` as given (0: this process), or by
-    default min(cores, items to compute) (at least 1 when there is an item)."""
+    """Local workers to start: ``workers`` as given (0: this process), or by default
+    min(usable cores, items to compute) (at least 1 when there is an item)."""
     if workers is None:
-        return max(1, min(os.cpu_count() or 1, n_items)) if n_items else 0
+        return max(1, min(usable_cores(), n_items)) if n_items else 0
     if workers < 0:
         raise ValueError(f"--workers={workers} must be >= 0 (0: run in this process)")
     return int(workers)
@@ -61,7 +69,9 @@ def where(workers: int, scheduler: str | None, in_threads: bool = False) -> str:
         return f"the Dask cluster at {scheduler}"
     if not workers:
         return "this process"
-    return f"{workers} threads of this process" if in_threads else f"{workers} local worker process(es)"
+    if in_threads:
+        return "1 thread of this process" if workers == 1 else f"{workers} threads of this process"
+    return f"{workers} local worker process(es)"
 
 
 def _stop_the_jobs_children(cluster) -> None:
@@ -95,18 +105,26 @@ def _kill(processes) -> None:
             process.kill()
 
 
+# How often an abandoned threaded run looks for new child processes of its running jobs
+# (killing them) until those jobs end: a child lives at most this long (plus its kill).
+ABANDON_POLL_S = 0.05
+
+
 def _run_in_threads(items: Sequence[Any], job: Callable[..., Any], on_done: Callable[[Any, Any], None],
                     key: Callable[[Any], Hashable], workers: int, job_options: dict[str, Any]) -> JobFailures:
     """``run_jobs`` on ``workers`` threads of this process. On an interrupt the jobs not
-    started are dropped and the child processes the running ones started are killed, so
-    those fail at once instead of finishing their mesh."""
-    from concurrent.futures import ThreadPoolExecutor, as_completed
+    started are dropped and the child processes the running ones start are killed until
+    those jobs end, so they fail at once instead of finishing their mesh (a thread cannot
+    be stopped from outside: one that was in Python or in PARDISO when the interrupt came
+    goes on to its next child process, which is killed in turn; ``ABANDON_POLL_S``)."""
+    from concurrent.futures import ThreadPoolExecutor, as_completed, wait
 
     import psutil
 
     failures: JobFailures = {}
     before = {child.pid for child in psutil.Process().children(recursive=True)}
     pool = ThreadPoolExecutor(workers, thread_name_prefix="flexcal-job")
+    futures: dict = {}
     try:
         futures = {pool.submit(job, item, **job_options): item for item in items}
         for future in as_completed(futures):
@@ -119,7 +137,10 @@ def _run_in_threads(items: Sequence[Any], job: Callable[..., Any], on_done: Call
             on_done(item, result)
     except BaseException:
         pool.shutdown(wait=False, cancel_futures=True)
-        _kill_new_children(before)
+        running = [future for future in futures if not future.done()]
+        while running:
+            _kill_new_children(before)
+            running = list(wait(running, timeout=ABANDON_POLL_S).not_done)
         raise
     pool.shutdown()
     return failures

@@ -10,10 +10,10 @@ Each finished case is written at once to DIR/cases/<id>.json (row and answer; th
 hashes the case and the settings, not the code version: use a new DIR after a code
 change). A case already there is not run again, so an interrupted or partly failed grid
 resumes where it stopped; a case that raises is listed in the report and the command
-exits 1 after writing the figures of the others. The cases run in parallel on the shared
-executor (local worker processes by default, ``--workers N``, ``--scheduler ADDRESS``;
-docs/scale.md); with ``--provider fem`` the as-built mounts' segments are built first, on
-the same executor. With ``--trajectory FILE`` (``flexcal design``'s trajectory.csv) every
+exits 1 after writing the figures of the others. The cases run one after the other in
+this process by default, in parallel on the shared executor with ``--workers N`` (local
+worker processes) or ``--scheduler ADDRESS`` (docs/scale.md); with ``--provider fem`` the
+as-built mounts' segments are built first, by default on one thread per core. With ``--trajectory FILE`` (``flexcal design``'s trajectory.csv) every
 case is measured along that trajectory, ``--cycles`` times, instead of the standard one; the
 report names it (file and content hash), and the case ids include its hash.
 
@@ -160,8 +160,8 @@ def run_benchmark(ids, grid, *, noise_urad, cycles, seed, progress, scenario_see
     finished cases (each saved as it finishes; a case already in it is not run again);
     failures: {case label: error text} of the cases that raised (one bad case must not
     sink a two-hour grid). workers / scheduler: the shared executor
-    (``flexcal.validation.executor``; 0 without a scheduler: one case after the other
-    here). With the FEM provider the as-built mounts' missing segments are built first,
+    (``flexcal.validation.executor``; 0 or None without a scheduler: one case after the
+    other here; None builds the FEM segments on one thread per core, ``build_segments``). With the FEM provider the as-built mounts' missing segments are built first,
     all at once on the same executor, then the cases run on cached segments."""
     from ..progress import progress_bar
     from ..diagnosis.benchmark import trajectory_digest
@@ -178,7 +178,9 @@ def run_benchmark(ids, grid, *, noise_urad, cycles, seed, progress, scenario_see
         labels[design_id(spec)] = f"{effect_id} {magnitude:g}x seed {case_seed}"
     records = {} if store is None else {i: r for i in labels if (r := store.load(i)) is not None}
     pending = list({design_id(s): s for s in specs if design_id(s) not in records}.values())
-    n_workers = resolve_workers(workers, len(pending))
+    # the cases run in this process unless workers are asked for: worker processes import the
+    # FEM stack again; the default (None) builds the FEM segments on threads (plan_local_builds)
+    n_workers = resolve_workers(0 if workers is None else workers, len(pending))
     if pending:
         log(f"diagnose-benchmark: {len(labels)} cases, {len(labels) - len(pending)} already done, {len(pending)} to "
             f"run on {where(n_workers, scheduler)}")

@@ -57,11 +57,16 @@ def load_scenario_with_trajectory(args: argparse.Namespace):
 
 def add_executor_options(parser: argparse.ArgumentParser, *, what: str) -> None:
     """``--workers N`` and ``--scheduler ADDRESS`` with the same meaning on every command."""
-    # default 0 (this process): on the 2-core reference machine two local workers were not
-    # faster under load (docs/scale.md); a user opts in with --workers N or --scheduler
-    parser.add_argument("--workers", type=int, metavar="N", default=0,
-                        help=f"local workers for {what} (default 0: one after the other in this process; "
-                             "N > 0: N at once; FEM segments on N threads of this process, each meshing in "
+    # default None: FEM segment builds on one thread per usable core (plan_local_builds). Since
+    # they run on threads of this process (session 9) there is no start-up to pay: a cold
+    # table1 truth on the 2-core machine took 0.62x the in-process time when the machine was
+    # idle and 0.85x under two busy-looping processes (docs/scale.md, "Session 10"); worker
+    # processes (the cases of diagnose-benchmark) stay opt-in, they import the FEM stack again
+    parser.add_argument("--workers", type=int, metavar="N", default=None,
+                        help=f"local workers for {what} (default: FEM segments on one thread of this process per "
+                             "core, at most one per missing segment and per 1.5 GB of free memory, anything else "
+                             "one after the other in this process; 0: everything one after the other in this "
+                             "process; N: N at once, FEM segments on N threads of this process, each meshing in "
                              "its own child process, other jobs on N local worker processes)")
     parser.add_argument("--scheduler", metavar="ADDRESS", default=None,
                         help=f"address of a Dask scheduler (tcp://host:8786) to run {what} on; "
@@ -69,8 +74,9 @@ def add_executor_options(parser: argparse.ArgumentParser, *, what: str) -> None:
 
 
 def executor_options(args: argparse.Namespace) -> dict[str, Any]:
-    """{"workers": ..., "scheduler": ...} of a parsed command line; a command without
-    ``add_executor_options`` runs in its own process (workers 0)."""
+    """{"workers": ..., "scheduler": ...} of a parsed command line (workers None: the
+    default, ``add_executor_options``); a command without ``add_executor_options`` runs in
+    its own process (workers 0)."""
     return {"workers": getattr(args, "workers", 0), "scheduler": getattr(args, "scheduler", None)}
 
 

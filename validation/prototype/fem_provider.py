@@ -11,12 +11,12 @@ swapped, so only the first half of a chain (and the strut) is ever meshed.
 Parallel builds: ``fem_provider(workers=..., scheduler=...)`` gives the provider a
 ``prepare(slices)`` hook that ``build_prototype`` and ``compliance_factors`` call with
 every slice they are about to ask for; the segments missing from the cache are then
-built at once on the shared executor (``flexcal.validation.executor``: local worker
-processes or a Dask cluster), each under the same cache key as a sequential build, and
+built at once on the shared executor (``flexcal.validation.executor``: threads of this
+process or a Dask cluster), each under the same cache key as a sequential build, and
 the provider's calls that follow are all cache hits (``build_segments``). They are handed
 out longest first (``segment_build_cost``: leaf segments, thinnest leaves first, then the
-cheap strut segments), and a local worker process meshes on one thread
-(``WORKER_MESHER_THREADS``).
+cheap strut segments), and a local job thread meshes and solves on its share of the cores
+(``plan_local_builds``).
 """
 
 from __future__ import annotations
@@ -30,7 +30,8 @@ import numpy as np
 from flexcal.geometry.params import STEEL, ChainSegment, FlexureChain, Material
 
 __all__ = ["fem_provider", "segment_stiffness_fem", "mirror_segment_stiffness", "DEFAULT_ELEMENTS_THROUGH",
-           "canonical_segment", "segment_cache_key", "build_segments", "build_segment_job", "segment_build_cost"]
+           "canonical_segment", "segment_cache_key", "build_segments", "build_segment_job", "segment_build_cost",
+           "plan_local_builds", "BUILD_MEMORY_BYTES"]
 
 # 3 quadratic tets through the thinnest leaf section: within ~0.3 % of the converged
 # bending compliance on the reference notch hinge after snapping (docs/meshing.md), at a
@@ -119,14 +120,37 @@ def segment_build_cost(segment: ChainSegment) -> float:
 # 123-126 s CPU, threads 59.0-62.6 s for 114-121 s CPU (two batches). A cluster given by
 # address keeps its processes.
 #
-# Each local job thread owns one core: fTetWild on one thread and PARDISO on one MKL thread
-# (``flexcal.fem.solve.solver_threads``, that thread only). In this process (--workers 0)
-# and on a cluster given by address, whose workers may own many cores, both keep all cores (0).
-# Measured on the 2-core machine, one leaf segment of the mount meshed 4 times each way, alone:
-# all cores median 6.1 s wall for 7.8 s CPU, one thread 6.4 s wall for 6.6 s CPU; the second
-# thread bought 5 % of wall time for 17 % more CPU, which a busy second worker needs itself.
-WORKER_MESHER_THREADS = 1
-WORKER_SOLVER_THREADS = 1
+# Each local job thread owns its share of the cores, usable cores // threads (at least 1):
+# fTetWild on that many threads and PARDISO on that many MKL threads
+# (``flexcal.fem.solve.solver_threads``, that thread only), so N threads on N cores each
+# mesh and solve on one. In this process (--workers 0) and on a cluster given by address,
+# whose workers may own many cores, both keep all cores (0). Measured on the 2-core
+# machine, one leaf segment of the mount meshed 4 times each way, alone: all cores median
+# 6.1 s wall for 7.8 s CPU, one thread 6.4 s wall for 6.6 s CPU; the second thread bought
+# 5 % of wall time for 17 % more CPU, which a busy second worker needs itself.
+#
+# BUILD_MEMORY_BYTES: what one segment build may hold at once, to cap the default number
+# of threads by the free memory (an out-of-memory kill ends a run without a word). Measured
+# on the mount's largest leaf segment (150 mm chain, 3 elements through): this process
+# grew by 0.81 GB (maxrss 0.48 -> 1.29 GB), fTetWild's child peaked at 0.51 GB; 1.5 GB
+# leaves ~15 % above that.
+BUILD_MEMORY_BYTES = 1.5e9
+
+
+def plan_local_builds(workers: int | None, n_missing: int, *, cores: int, available_bytes: float) -> tuple[int, int]:
+    """(job threads, cores each) for ``n_missing`` segment builds on this machine.
+
+    workers: None (the command line's default): one thread per usable core, at most one
+    per missing segment and per ``BUILD_MEMORY_BYTES`` of free memory (at least 1);
+    0: none (built one after the other in this process, all cores each); N > 0: N threads
+    as asked. Each thread owns cores // threads of the cores (at least 1)."""
+    if workers is None:
+        threads = max(1, min(cores, n_missing, int(available_bytes // BUILD_MEMORY_BYTES))) if n_missing else 0
+    elif workers < 0:
+        raise ValueError(f"--workers={workers} must be >= 0 (0: run in this process)")
+    else:
+        threads = int(workers)
+    return threads, max(1, cores // threads) if threads else 0
 
 
 def build_segment_job(segment: ChainSegment, *, material: Material, elements_through_thickness: float,
@@ -153,7 +177,8 @@ def build_segments(slices: Iterable[tuple[FlexureChain, float, float]], material
     """Build the FEM segments of ``slices`` [(chain, x_start [m], x_end [m])] that the cache
     lacks, in parallel on the shared executor, into the cache; returns how many were built.
 
-    workers: local worker processes (default min(cores, missing segments); 0: this
+    workers: local job threads (``plan_local_builds``; None: one per usable core, at most
+    one per missing segment and per ``BUILD_MEMORY_BYTES`` of free memory; 0: this
     process); scheduler: a Dask scheduler address. Each result is stored under the key a
     sequential build uses (the worker's own cache write makes that a no-op on shared
     storage; a remote worker without it hands the matrix back). A worker whose flexcal
@@ -161,7 +186,7 @@ def build_segments(slices: Iterable[tuple[FlexureChain, float, float]], material
     """
     from flexcal.fem.cache import load_cached, store_cached
 
-    from ..executor import resolve_workers, run_jobs, where
+    from ..executor import run_jobs, usable_cores, where
 
     missing: dict[str, ChainSegment] = {}
     for chain, x_start, x_end in slices:
@@ -171,8 +196,14 @@ def build_segments(slices: Iterable[tuple[FlexureChain, float, float]], material
             missing[key] = segment
     if not missing:
         return 0
-    n_workers = resolve_workers(workers, len(missing))
-    in_threads = scheduler is None and n_workers > 0  # LOCAL_BUILDS_IN_THREADS
+    if scheduler is None:
+        import psutil
+
+        n_workers, cores_each = plan_local_builds(workers, len(missing), cores=usable_cores(),
+                                                  available_bytes=psutil.virtual_memory().available)
+    else:
+        n_workers, cores_each = 0, 0  # the cluster's workers keep their cores
+    in_threads = n_workers > 0  # LOCAL_BUILDS_IN_THREADS
     log = (lambda text: print(text, file=sys.stderr, flush=True)) if progress else (lambda text: None)
     log(f"  FEM segments: {len(missing)} to build on {where(n_workers, scheduler, in_threads)}")
     start, built = time.perf_counter(), []
@@ -190,11 +221,10 @@ def build_segments(slices: Iterable[tuple[FlexureChain, float, float]], material
             f"{segment.chain.length * 1e3:.1f} mm chain: {result['wall_s']:.1f} s ({len(built)}/{len(missing)}, "
             f"{time.perf_counter() - start:.0f} s elapsed)")
 
-    # the workers write into the same folder when it is shared (LocalCluster: always)
+    # the jobs write into the same folder when it is shared (threads of this process: always)
     options = {"material": material, "elements_through_thickness": float(elements_through_thickness),
                "cache_directory": None if cache_directory is None else str(cache_directory),
-               "mesher_threads": WORKER_MESHER_THREADS if in_threads else 0,
-               "solver_threads": WORKER_SOLVER_THREADS if in_threads else 0}
+               "mesher_threads": cores_each, "solver_threads": cores_each}
     # longest first (stable): the cheap strut segments fill the gaps at the end instead of a
     # leaf segment started last keeping one worker busy while the others idle
     ordered = sorted(missing.values(), key=segment_build_cost, reverse=True)
@@ -217,7 +247,8 @@ def fem_provider(material: Material = STEEL, *, elements_through_thickness: floa
     workers / scheduler: where ``provider.prepare(slices)`` builds the missing segments
     (``build_segments``); the default ``workers=0`` without a scheduler builds them one
     after the other in this process as the provider is called (the command line's
-    default is local worker processes: ``--workers``).
+    default, ``--workers`` not given, is None: one thread per usable core,
+    ``plan_local_builds``).
     """
 
     def provider(chain: FlexureChain, x_start: float, x_end: float) -> np.ndarray:
