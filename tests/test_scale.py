@@ -157,28 +157,31 @@ def test_prepare_gets_exactly_the_slices_the_prototype_asks_for():
 
 def test_segments_are_handed_out_longest_first(tmp_path, monkeypatch):
     """The leaf segments (thinnest leaves first: most tets) go to the workers before the
-    strut segments, which then fill the gaps at the end; the sort is stable. fTetWild gets
-    one thread on local worker processes only."""
+    strut segments, which then fill the gaps at the end; the sort is stable. By default
+    they are built on one thread per core (here 2 cores), each meshing and solving on its
+    share of the cores; with --workers 0 and on a cluster given by address fTetWild and
+    PARDISO keep all cores (0)."""
     import flexcal.validation.executor as executor
     from flexcal.validation.prototype.fem_provider import segment_build_cost
 
-    submitted, threads = [], []
+    submitted, plans = [], []
 
     def record(items, job, on_done, **kw):
         submitted.extend(items)
-        threads.append(kw["job_options"]["mesher_threads"])
+        options = kw["job_options"]
+        plans.append((kw["workers"], kw["in_threads"], options["mesher_threads"], options["solver_threads"]))
         return {}
 
     monkeypatch.setattr(executor, "run_jobs", record)
+    monkeypatch.setattr(executor, "usable_cores", lambda: 2)
     mechanism = reference_mechanism()
     slices = chain_slices(p.chain for p in mechanism.chains)
-    build_segments(slices, cache_directory=tmp_path, workers=2, progress=False)
-    # fTetWild on one thread only on local worker processes (one core each): in this process
-    # and on a cluster given by address it keeps all cores
+    build_segments(slices, cache_directory=tmp_path, progress=False)  # the default: workers None
+    build_segments(slices, cache_directory=tmp_path, workers=1, progress=False)
     build_segments(slices, cache_directory=tmp_path, workers=0, progress=False)
     build_segments(slices, cache_directory=tmp_path, scheduler="tcp://127.0.0.1:1", progress=False)
-    assert threads == [1, 0, 0]
-    submitted = submitted[:len(submitted) // 3]
+    assert plans == [(2, True, 1, 1), (1, True, 2, 2), (0, False, 0, 0), (0, False, 0, 0)]
+    submitted = submitted[:len(submitted) // 4]
     costs = [segment_build_cost(segment) for segment in submitted]
     assert len(submitted) == 9 and costs == sorted(costs, reverse=True)  # 9 distinct segments of the mount
     struts = [segment for segment in submitted if not any(k.startswith("leaf") for k, _, _ in segment.segments())]

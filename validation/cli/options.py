@@ -60,7 +60,7 @@ def add_executor_options(parser: argparse.ArgumentParser, *, what: str) -> None:
     # default None: FEM segment builds on one thread per usable core (plan_local_builds). Since
     # they run on threads of this process (session 9) there is no start-up to pay: a cold
     # table1 truth on the 2-core machine took 0.62x the in-process time when the machine was
-    # idle and 0.85x under two busy-looping processes (docs/scale.md, "Session 10"); worker
+    # idle and 0.84x under two busy-looping processes (docs/scale.md, "Session 10"); worker
     # processes (the cases of diagnose-benchmark) stay opt-in, they import the FEM stack again
     parser.add_argument("--workers", type=int, metavar="N", default=None,
                         help=f"local workers for {what} (default: FEM segments on one thread of this process per "
