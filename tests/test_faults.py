@@ -483,12 +483,13 @@ def test_parallel_fem_build_stopped_while_meshing_stops_at_once_and_leaves_no_me
 
 @pytest.mark.slow
 def test_finished_fem_segments_stay_cached_after_an_interrupt(tmp_path):
-    # cold cache: the FEM truth builds its chain segments one by one; stop it after the
-    # first one is reported, then every cache file must be whole and readable
+    # cold cache: the FEM truth builds its chain segments (by default on one thread per
+    # core); stop it once the first one is reported, the others mid-build, then every cache
+    # file must be whole and readable
     from flexcal.fem.cache import load_cached
 
     cache = tmp_path / "cache"
-    status, lines, work = _interrupt_at(["truth", "--scenario", "table1", "--seed", "3"], tmp_path, "FEM segment",
+    status, lines, work = _interrupt_at(["truth", "--scenario", "table1", "--seed", "3"], tmp_path, "FEM segment [",
                                         signal.SIGINT, env={"FLEXCAL_CACHE_DIR": str(cache)})
     assert status == 130 and "interrupted" in lines[-1], lines
     assert sorted(p.name for p in tmp_path.iterdir()) == ["cache", "work"]  # no out, no staging folder
