@@ -53,11 +53,12 @@ def usable_cores() -> int:
     return os.cpu_count() or 1
 
 
-def resolve_workers(workers: int | None, n_items: int) -> int:
+def resolve_workers(workers: int | None, n_items: int, *, cores: int | None = None) -> int:
     """Local workers to start: ``workers`` as given (0: this process), or by default
-    min(usable cores, items to compute) (at least 1 when there is an item)."""
+    min(cores, items to compute) (at least 1 when there is an item); cores: default
+    ``usable_cores()``."""
     if workers is None:
-        return max(1, min(usable_cores(), n_items)) if n_items else 0
+        return max(1, min(cores or usable_cores(), n_items)) if n_items else 0
     if workers < 0:
         raise ValueError(f"--workers={workers} must be >= 0 (0: run in this process)")
     return int(workers)

@@ -13,9 +13,10 @@ resumes where it stopped; a case that raises is listed in the report and the com
 exits 1 after writing the figures of the others. The cases run one after the other in
 this process by default, in parallel on the shared executor with ``--workers N`` (local
 worker processes) or ``--scheduler ADDRESS`` (docs/scale.md); with ``--provider fem`` the
-as-built mounts' segments are built first, by default on one thread per core. With ``--trajectory FILE`` (``flexcal design``'s trajectory.csv) every
-case is measured along that trajectory, ``--cycles`` times, instead of the standard one; the
-report names it (file and content hash), and the case ids include its hash.
+as-built mounts' segments are built first, by default on one thread per core. With
+``--trajectory FILE`` (``flexcal design``'s trajectory.csv) every case is measured along
+that trajectory, ``--cycles`` times, instead of the standard one; the report names it
+(file and content hash), and the case ids include its hash.
 
     flexcal diagnose-benchmark --out runs/bench                 # small grid, analytic prototype
     flexcal diagnose-benchmark --grid full --provider fem --out runs/bench-full
@@ -161,8 +162,9 @@ def run_benchmark(ids, grid, *, noise_urad, cycles, seed, progress, scenario_see
     failures: {case label: error text} of the cases that raised (one bad case must not
     sink a two-hour grid). workers / scheduler: the shared executor
     (``flexcal.validation.executor``; 0 or None without a scheduler: one case after the
-    other here; None builds the FEM segments on one thread per core, ``build_segments``). With the FEM provider the as-built mounts' missing segments are built first,
-    all at once on the same executor, then the cases run on cached segments."""
+    other here; None builds the FEM segments on one thread per core, ``build_segments``).
+    With the FEM provider the as-built mounts' missing segments are built first, all at
+    once on the same executor, then the cases run on cached segments."""
     from ..progress import progress_bar
     from ..diagnosis.benchmark import trajectory_digest
     from ..executor import resolve_workers, run_jobs, where

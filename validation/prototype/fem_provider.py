@@ -144,12 +144,11 @@ def plan_local_builds(workers: int | None, n_missing: int, *, cores: int, availa
     per missing segment and per ``BUILD_MEMORY_BYTES`` of free memory (at least 1);
     0: none (built one after the other in this process, all cores each); N > 0: N threads
     as asked. Each thread owns cores // threads of the cores (at least 1)."""
-    if workers is None:
-        threads = max(1, min(cores, n_missing, int(available_bytes // BUILD_MEMORY_BYTES))) if n_missing else 0
-    elif workers < 0:
-        raise ValueError(f"--workers={workers} must be >= 0 (0: run in this process)")
-    else:
-        threads = int(workers)
+    from ..executor import resolve_workers
+
+    threads = resolve_workers(workers, n_missing, cores=cores)
+    if workers is None and threads:
+        threads = max(1, min(threads, int(available_bytes // BUILD_MEMORY_BYTES)))
     return threads, max(1, cores // threads) if threads else 0
 
 
