@@ -52,6 +52,8 @@ def _fmt(values) -> str:
 
 def markdown(report) -> str:
     """report.md of a diagnosis report."""
+    from ..reports.safe_markdown import md_text
+
     lines = ["# Sim-to-real gap diagnosis", "",
              f"**Top effect: `{report['top_effect']}`** (confidence {report['confidence']}"
              + (f"; indistinguishable group: {', '.join(report['top_group'])}" if len(report["top_group"]) > 1 else "")
@@ -76,7 +78,8 @@ def markdown(report) -> str:
     concentrated = report["where"]["concentrated"]
     if concentrated:
         lines += ["Concentrated in:", ""] + [
-            f"- {c['by']} {c['stratum']}, {c['angle']}: {c['rms_urad']:.3g} urad ({c['ratio_to_overall']:.2f}x overall)"
+            f"- {md_text(c['by'])} {md_text(c['stratum'])}, {c['angle']}: {c['rms_urad']:.3g} urad "
+            f"({c['ratio_to_overall']:.2f}x overall)"
             for c in concentrated[:12]]
     else:
         lines.append("No stratum stands out (no RMS above 1.5x overall and 2 noise floors).")

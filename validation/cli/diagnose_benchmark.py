@@ -215,11 +215,15 @@ def _number(value, digits: int = 1) -> str:
 def _trajectory_text(trajectory: dict) -> str:
     if trajectory["kind"] == "standard":
         return "standard trajectory"
-    return (f"trajectory `{trajectory['file']}` ({trajectory['n_points']} points, {trajectory['n_legs']} legs, "
+    from ..reports.safe_markdown import md_text
+
+    return (f"trajectory {md_text(trajectory['file'])} ({trajectory['n_points']} points, {trajectory['n_legs']} legs, "
             f"sha256 {trajectory['sha256']})")
 
 
 def _markdown(report) -> str:
+    from ..reports.safe_markdown import md_text
+
     s = report["summary"]
     lines = ["# Blind benchmark of the gap diagnosis", "",
              f"Grid `{report['grid']}`, prototype provider `{report['provider']}` (diagnosis baseline: second-order model, "
@@ -244,7 +248,7 @@ def _markdown(report) -> str:
     lines += [f"- {m}x: {v:.2f}" for m, v in s["detection_by_magnitude"].items()]
     if report["failures"]:
         lines += ["", f"## Failed cases ({len(report['failures'])}; not in the figures)", ""]
-        lines += [f"- {label}: {text}" for label, text in report["failures"].items()]
+        lines += [f"- {md_text(label)}: {md_text(text)}" for label, text in report["failures"].items()]
     lines += ["", "## Cases", "", "| effect | x noise | seed | predicted | group | confidence | correct | "
               "true-term closure | absorbed by baseline | achieved x noise |", "|---|---:|---:|---|---|---|---|---:|---:|---:|"]
     for r in report["rows"]:

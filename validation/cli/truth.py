@@ -48,6 +48,7 @@ def run(args: argparse.Namespace) -> int:
     from ..measurements import write_measurement
     from ..output import staged_output, write_report
     from ..reports.plots import plot_misalignment_curves
+    from ..reports.safe_markdown import md_text
     from .options import load_scenario_with_trajectory
     from ..prototype.truth import make_truth
 
@@ -78,9 +79,9 @@ def run(args: argparse.Namespace) -> int:
         write_measurement(staging / "curves.csv", measurement)
         write_report(staging, report)
         (staging / "report.md").write_text(
-            f"# Virtual prototype: scenario {scenario.name} (seed {scenario.seed})\n\n"
+            f"# Virtual prototype: scenario {md_text(scenario.name)} (seed {scenario.seed})\n\n"
             f"{measurement.n_points} points; classes " + ", ".join(f"{c} {n}" for c, n in zip(classes, counts))
-            + (f"; injected effects: {', '.join(injected)}" if injected else "; no injected effects")
+            + (f"; injected effects: {', '.join(map(md_text, injected))}" if injected else "; no injected effects")
             + ".\n\nMax |measured − ideal model| [urad]: "
             + ", ".join(f"{a} {v:.2f}" for a, v in zip(("θx", "θy", "θz"), max_misalignment))
             + ".\n\n![curves](curves.png)\n\nData: `curves.csv` with its sidecar `curves.json` "

@@ -9,10 +9,17 @@ them, long vectors folded), and the list of the other files (VTU for ParaView, C
 data). No scripts, no external resources, no time stamp: the same folder gives the same
 bytes.
 
-Every string from the folder is escaped: raw HTML in report.md is shown as text (a
-scenario named ``<img src=x onerror=alert(1)>`` stays text), links and images whose
-address has a scheme other than http(s)/mailto lose it. Tables wider than the page
-scroll sideways.
+Safe to share: the page addresses nothing outside itself. Every string from the folder is
+escaped (raw HTML in report.md is shown as text: a scenario named
+``<img src=x onerror=alert(1)>`` stays text); report.md's links keep their text and lose
+their address, and its images are kept only as the folder's own PNGs held in the page
+(``safe_markdown.markdown_html``); the only ``src`` in the page is
+``data:image/png;base64``, the only ``href`` the ``./NAME`` of a listed file beside it.
+Only the folder's own regular files are read: a symbolic link is never followed (a
+``x.png`` linked to ``/etc/passwd`` is listed, not read; a linked report.md or
+report.json is an error), a PNG is embedded only when its first 8 bytes are the PNG
+signature, and a report.json nested deeper than ``MAX_JSON_DEPTH`` is refused before it
+is parsed. Tables wider than the page scroll sideways.
 """
 
 from __future__ import annotations
@@ -27,7 +34,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-__all__ = ["render_run_folder", "json_section", "RunFolderError"]
+__all__ = ["render_run_folder", "json_section", "json_depth", "RunFolderError", "MAX_JSON_DEPTH", "PNG_SIGNATURE"]
 
 MAX_TABLE_ROWS = 60      # longer lists of records / matrices are folded (<details>)
 MAX_INLINE_VECTOR = 12   # numeric vectors up to this length are shown inline
@@ -67,7 +74,8 @@ _PAGE = """<!DOCTYPE html>
 {{ json_html | safe }}{% endif %}
 {% if files %}<h2>Other files</h2>
 <table><tr><th>file</th><th>size [kB]</th></tr>
-{% for f in files %}<tr><td><a href="./{{ f.href }}">{{ f.name }}</a></td><td>{{ f.size }}</td></tr>
+{% for f in files %}<tr><td>{% if f.href %}<a href="./{{ f.href }}">{{ f.name }}</a>{% else %}{{ f.name }}{% endif %}\
+{% if f.note %} ({{ f.note }}){% endif %}</td><td>{{ f.size }}</td></tr>
 {% endfor %}</table>{% endif %}
 </body>
 </html>
@@ -87,8 +95,9 @@ class _Image:
 @dataclass(frozen=True)
 class _File:
     name: str
-    href: str  # percent-encoded relative address (a file named "javascript:..." stays a file)
+    href: str  # percent-encoded relative address (a file named "javascript:..." stays a file); "": no link
     size: str
+    note: str = ""
 
 
 def _number(value: float) -> str:
@@ -201,84 +210,129 @@ def json_section(data: dict[str, Any], level: int = 3, path: str = "") -> str:
     return "\n".join(parts)
 
 
-_SAFE_SCHEMES = ("http", "https", "mailto")
+PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"  # the first 8 bytes of every PNG file (PNG spec, section 5.2)
+# report.json nested deeper than this is refused before parsing: the run folders on the
+# development machine nest at most 7 levels, and a few thousand levels exhaust the
+# recursion of json.loads and of the tables below (exit 1, before this check)
+MAX_JSON_DEPTH = 64
 
 
-def _markdown_html(text: str) -> str:
-    """report.md as HTML with raw HTML escaped (shown as text, never interpreted) and
-    link/image addresses with a scheme other than http(s)/mailto removed."""
-    import markdown
-    from markdown.treeprocessors import Treeprocessor
+def _own_file_bytes(path: Path) -> bytes | None:
+    """The bytes of ``path`` if it is a regular file of its folder (not a symbolic link,
+    FIFO or device; its resolved path inside the folder), else None."""
+    import os
+    import stat
 
-    class SafeAddresses(Treeprocessor):
-        def run(self, root):
-            for element in root.iter():
-                for attribute in ("href", "src"):
-                    address = element.get(attribute)
-                    if address is None:
-                        continue
-                    scheme = urllib.parse.urlsplit(address.strip()).scheme.lower()
-                    if scheme and scheme not in _SAFE_SCHEMES:
-                        element.set(attribute, "")
-
-    md = markdown.Markdown(extensions=["tables", "fenced_code"])
-    md.preprocessors.deregister("html_block")  # the documented way to escape raw HTML (Python-Markdown 3)
-    md.inlinePatterns.deregister("html")
-    md.treeprocessors.register(SafeAddresses(md), "flexcal_safe_addresses", 0)
-    return md.convert(text)
+    if path.resolve().parent != path.parent.resolve():
+        return None
+    try:  # O_NOFOLLOW: a link swapped in after the check is refused too; O_NONBLOCK: a FIFO never blocks
+        handle = os.open(path, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK)
+    except OSError:
+        return None
+    with os.fdopen(handle, "rb") as stream:
+        if not stat.S_ISREG(os.fstat(stream.fileno()).st_mode):
+            return None
+        return stream.read()
 
 
-def _embed_markdown_images(page: str, images: dict[str, str]) -> tuple[str, set[str]]:
-    """<img src="x.png"> of the folder's PNGs -> data URIs; also the names embedded."""
-    used: set[str] = set()
+def _report_text(path: Path) -> str | None:
+    """report.md / report.json of the folder as text, None if absent; ``ValueError`` if it
+    is a symbolic link or not a regular file (its target is never read)."""
+    if not path.is_symlink() and not path.exists():
+        return None
+    data = _own_file_bytes(path)
+    if data is None:
+        raise ValueError(f"{path} is a symbolic link or not a regular file; flexcal report reads only the run "
+                         "folder's own files (copy the file in)")
+    return data.decode("utf-8")
 
-    def replace(match: re.Match) -> str:
-        src = html.unescape(match.group(2))
-        if src in images:
-            used.add(src)
-            return f'{match.group(1)}data:image/png;base64,{images[src]}{match.group(3)}'
-        return match.group(0)
 
-    return re.sub(r'(<img[^>]*?src=")([^"]+)(")', replace, page), used
+def json_depth(text: str) -> int:
+    """How deeply arrays and objects nest in the JSON ``text`` (0 for a scalar), counted
+    without parsing or recursion (brackets inside strings do not count)."""
+    from itertools import accumulate
+
+    outside_strings = re.sub(r'"(?:[^"\\]|\\.)*"', '""', text)
+    steps = (1 if bracket in "[{" else -1 for bracket in re.findall(r"[\[\]{}]", outside_strings))
+    return max(accumulate(steps), default=0)
+
+
+def _read_report_json(path: Path) -> Any:
+    """report.json parsed, None if absent; ``ValueError`` (one line) if it cannot be read
+    as JSON nested at most ``MAX_JSON_DEPTH`` deep."""
+    try:
+        text = _report_text(path)
+    except UnicodeDecodeError as error:
+        raise ValueError(f"{path}: not valid JSON ({error})") from None
+    if text is None:
+        return None
+    depth = json_depth(text)
+    if depth > MAX_JSON_DEPTH:
+        raise ValueError(f"{path}: nested {depth} levels deep; flexcal report reads at most {MAX_JSON_DEPTH}: "
+                         "not a flexcal report.json")
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as error:
+        raise ValueError(f"{path}: not valid JSON ({error})") from None
+
+
+def _folder_files(folder: Path) -> tuple[dict[str, str], list[_File]]:
+    """(name -> base64 of each PNG to embed, the other files to list). Embedded: regular
+    files named *.png that start with the PNG signature; symbolic links are listed without
+    a link or a size and never read."""
+    pictures, files = {}, []
+    for path in sorted(p for p in folder.iterdir() if not p.name.startswith(".")):
+        if path.name in ("report.md", "report.json", "report.html") or (path.is_dir() and not path.is_symlink()):
+            continue
+        if path.is_symlink():
+            files.append(_File(path.name, "", "—", "symbolic link, not read"))
+            continue
+        is_png = path.suffix.lower() == ".png"
+        data = _own_file_bytes(path) if is_png else None
+        if is_png and data is not None and data.startswith(PNG_SIGNATURE):
+            pictures[path.name] = base64.b64encode(data).decode("ascii")
+        elif path.is_file():
+            note = "not a PNG image, not embedded" if is_png else ""
+            files.append(_File(path.name, urllib.parse.quote(path.name), f"{path.stat().st_size / 1e3:.1f}", note))
+    return pictures, files
+
+
+def _heading_text(page_html: str) -> str | None:
+    """The plain text of the first <h1> of rendered HTML, or None."""
+    match = re.search(r"<h1>(.*?)</h1>", page_html, flags=re.DOTALL)
+    return html.unescape(re.sub(r"<[^>]+>", "", match.group(1))).strip() if match else None
 
 
 def render_run_folder(folder: str | Path) -> str:
     """The HTML page of a run folder (str). ``FileNotFoundError`` if it does not exist,
     ``RunFolderError`` if it holds no report.json, report.md or PNG, ``ValueError`` for a
-    report.json that is not valid JSON."""
+    report.json that is not valid JSON or nests deeper than ``MAX_JSON_DEPTH``, and for a
+    report.md / report.json that is a symbolic link."""
     import jinja2
+
+    from .safe_markdown import markdown_html
 
     folder = Path(folder)
     if not folder.is_dir():
         raise FileNotFoundError(f"run folder {folder} does not exist (give the --out folder of a flexcal run)")
-    entries = sorted(p for p in folder.iterdir() if p.is_file() and not p.name.startswith("."))
     md_path, json_path = folder / "report.md", folder / "report.json"
-    pngs = [p for p in entries if p.suffix.lower() == ".png"]
-    if not md_path.is_file() and not json_path.is_file() and not pngs:
+    named_png = any(p.suffix.lower() == ".png" and not p.name.startswith(".") for p in folder.iterdir())
+    if not any(p.is_symlink() or p.exists() for p in (md_path, json_path)) and not named_png:
         raise RunFolderError(f"{folder} holds no report.json, report.md or PNG: not a flexcal run folder")
-    data = None
-    if json_path.is_file():
-        try:
-            data = json.loads(json_path.read_text())
-        except (json.JSONDecodeError, UnicodeDecodeError) as error:
-            raise ValueError(f"{json_path}: not valid JSON ({error})") from None
-    encoded = {p.name: base64.b64encode(p.read_bytes()).decode("ascii") for p in pngs}
+    data = _read_report_json(json_path)
+    md_text = _report_text(md_path)
+    pictures, files = _folder_files(folder)
     md_html, title, shown = "", folder.resolve().name, set()
-    if md_path.is_file():
-        text = md_path.read_text()
-        heading = re.search(r"^#\s+(.+)$", text, flags=re.MULTILINE)
-        title = heading.group(1).strip() if heading else title
-        md_html, shown = _embed_markdown_images(_markdown_html(text), encoded)
+    if md_text is not None:
+        md_html, shown = markdown_html(md_text, pictures)
+        title = _heading_text(md_html) or title
     if isinstance(data, dict):
         json_html = json_section(data)
     elif data is not None:
         json_html = json_section({"report": data})
     else:
         json_html = ""
-    skip = {"report.md", "report.json", "report.html"} | set(encoded)
-    files = [_File(p.name, urllib.parse.quote(p.name), f"{p.stat().st_size / 1e3:.1f}")
-             for p in entries if p.name not in skip]
     template = jinja2.Environment(autoescape=True, undefined=jinja2.StrictUndefined).from_string(_PAGE)
     return template.render(title=title, css=_CSS, folder=folder.name, markdown=md_html,
-                           images=[_Image(n, d) for n, d in encoded.items() if n not in shown], json_html=json_html,
+                           images=[_Image(n, d) for n, d in pictures.items() if n not in shown], json_html=json_html,
                            files=files)

@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from ..output import atomic_path, write_report, write_text
+from ..reports.safe_markdown import md_text
 from .job import DIAGONAL
 from .space import DEFAULT_CONFIG, resolve_config, varied_names
 
@@ -130,13 +131,13 @@ def write_tables(result, config: dict[str, Any], out: Path) -> None:
 
 def sweep_markdown(rows: list[dict[str, Any]], kind: str, figures: list[str], n_finished: int, n_failed: int) -> str:
     """report.md: the table of the designs (the CSV's leading columns) and the plots."""
-    lines = [f"# Sweep of {kind} designs", "",
+    lines = [f"# Sweep of {md_text(kind)} designs", "",
              f"{len(rows)} designs, {n_finished} finished, {n_failed} failed. Full table: `sweep.csv`.", ""]
     if rows:
         shown = [c for c in rows[0] if not c.startswith("C_")][:12]
-        lines += ["| " + " | ".join(shown) + " |", "|" + "---|" * len(shown)]
+        lines += ["| " + " | ".join(map(md_text, shown)) + " |", "|" + "---|" * len(shown)]
         for row in rows:
-            cells = [f"{row.get(c, ''):.4g}" if isinstance(row.get(c), float) else str(row.get(c, "")) for c in shown]
+            cells = [f"{row.get(c, ''):.4g}" if isinstance(row.get(c), float) else md_text(row.get(c, "")) for c in shown]
             lines.append("| " + " | ".join(cells) + " |")
         lines.append("")
     lines += [f"![{name}]({name})" for name in figures]
