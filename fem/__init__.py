@@ -65,6 +65,8 @@ _EXPORTS = {
     "load_cached": "cache",
     "store_cached": "cache",
     "cached": "cache",
+    "keep_cached": "cache",
+    "cache_is_writable": "cache",
     "nodal_stress": "results",
     "von_mises": "results",
     "to_pyvista": "results",

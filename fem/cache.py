@@ -9,7 +9,15 @@ a stale matrix).
 A repeated run finds the file and costs one ``np.load``.
 
 Location: ``$FLEXCAL_CACHE_DIR`` if set, else ``~/.cache/flexcal``. Files are written
-whole or not at all (temporary file in the same folder, then ``os.replace``). Each file
+whole or not at all (temporary file in the same folder, then ``os.replace``).
+
+A folder that cannot be written (below a file, a read-only mount, no permission) never
+costs a result: ``cached`` checks it before it computes anything (``cache_is_writable``:
+the folder is created and a file made and removed in it, once per folder and process),
+and a folder that fails, then or at a later write, gets one warning line (logger
+``flexcal.fem.cache``) and the run goes on: results are kept in this process's memory
+(``MEMORY_LIMIT_BYTES``, oldest dropped first) and served from there, and computed again
+by the next run. Reading works from a read-only folder. Each file
 also stores its own key and a SHA-256 of its arrays (entries ``__key__``, ``__digest__``);
 a file that cannot be read whole (truncated, garbage), holds a different key (copied or
 renamed by hand, written for other inputs) or whose bytes no longer match the digest
@@ -30,12 +38,15 @@ import dataclasses
 import hashlib
 import importlib.util
 import json
+import logging
 import math
 import os
 import struct
 import tempfile
+import threading
 import zipfile
 import zlib
+from collections import OrderedDict
 from pathlib import Path
 from typing import Any, Callable, Mapping
 
@@ -51,6 +62,9 @@ __all__ = [
     "store_cached",
     "cached",
     "arrays_digest",
+    "cache_is_writable",
+    "keep_cached",
+    "MEMORY_LIMIT_BYTES",
 ]
 
 CACHE_ENV = "FLEXCAL_CACHE_DIR"
@@ -61,6 +75,14 @@ CACHE_ENV = "FLEXCAL_CACHE_DIR"
 _NOT_NUMERICS = frozenset({"__init__.py", "cache.py", "results.py"})
 _KEY_ENTRY = "__key__"  # the key stored inside each file, checked on every load
 _DIGEST_ENTRY = "__digest__"  # SHA-256 of the arrays (names, dtypes, shapes, bytes)
+
+# results of folders that cannot be written, kept for this process only: a chain's segment
+# stiffness is 1 kB, a hinge's mesh and results a few MB; this holds a run's worth of them
+MEMORY_LIMIT_BYTES = 512e6
+_LOG = logging.getLogger("flexcal.fem.cache")
+_LOCK = threading.Lock()  # the FEM segment builds run on threads of this process
+_WRITABLE: dict[str, bool] = {}  # folder -> can a file be written there (checked once per process)
+_MEMORY: OrderedDict[tuple[str, str], dict[str, np.ndarray]] = OrderedDict()  # (folder, key) -> arrays
 
 
 def arrays_digest(arrays: Mapping[str, np.ndarray]) -> str:
@@ -144,11 +166,61 @@ def _path(key: str, directory: Path) -> Path:
     return directory / f"{key}.npz"
 
 
+def _mark_unwritable(folder: Path, error: OSError) -> None:
+    """Remember that ``folder`` cannot be written; one warning line the first time."""
+    with _LOCK:
+        first = _WRITABLE.get(str(folder)) is not False
+        _WRITABLE[str(folder)] = False
+    if first:
+        reason = f"{error.strerror}: {error.filename}" if error.strerror and error.filename else str(error)
+        _LOG.warning(f"the FEM cache folder {folder} cannot be written ({reason}); this run goes on without it "
+                     f"(results kept in memory, computed again next run): set {CACHE_ENV} to a writable folder")
+
+
+def cache_is_writable(directory: str | os.PathLike | None = None) -> bool:
+    """Whether a file can be written in the cache folder (``cache_dir(directory)``),
+    checked by creating the folder and a file in it (mode bits say nothing for root or a
+    read-only mount), once per folder and process; False also warns once."""
+    folder = cache_dir(directory)
+    with _LOCK:
+        known = _WRITABLE.get(str(folder))
+    if known is not None:
+        return known
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        handle, probe = tempfile.mkstemp(prefix=".writable.", suffix=".tmp", dir=folder)
+        os.close(handle)
+        os.unlink(probe)
+    except OSError as error:
+        _mark_unwritable(folder, error)
+        return False
+    with _LOCK:
+        _WRITABLE.setdefault(str(folder), True)
+    return True
+
+
+def _remember(folder: Path, key: str, arrays: Mapping[str, np.ndarray]) -> None:
+    """Keep ``arrays`` in memory under (folder, key), dropping the oldest entries beyond
+    ``MEMORY_LIMIT_BYTES``."""
+    kept = {name: np.array(value) for name, value in arrays.items()}
+    with _LOCK:
+        _MEMORY[(str(folder), key)] = kept
+        _MEMORY.move_to_end((str(folder), key))
+        while sum(a.nbytes for entry in _MEMORY.values() for a in entry.values()) > MEMORY_LIMIT_BYTES:
+            _MEMORY.popitem(last=False)
+
+
 def load_cached(key: str, directory: str | os.PathLike | None = None) -> dict[str, np.ndarray] | None:
     """The arrays stored under ``key``, or ``None``: missing file, unreadable or truncated
     file, a file without a stored key or digest (older format), a file holding another
-    key, or arrays whose digest does not match."""
-    path = _path(key, cache_dir(directory))
+    key, or arrays whose digest does not match. Arrays kept in memory because the folder
+    could not be written (``keep_cached``) are served first, as copies."""
+    folder = cache_dir(directory)
+    with _LOCK:
+        kept = _MEMORY.get((str(folder), key))
+    if kept is not None:
+        return {name: value.copy() for name, value in kept.items()}
+    path = _path(key, folder)
     try:
         with np.load(path, allow_pickle=False) as data:
             arrays = {name: data[name] for name in data.files}
@@ -182,17 +254,34 @@ def store_cached(key: str, arrays: Mapping[str, np.ndarray], directory: str | os
     return path
 
 
+def keep_cached(key: str, arrays: Mapping[str, np.ndarray], directory: str | os.PathLike | None = None) -> Path | None:
+    """``store_cached``, except that a folder that cannot be written costs one warning
+    line instead of the result: the arrays are then kept in memory for this process
+    (``load_cached`` serves them) and None is returned instead of the file path."""
+    folder = cache_dir(directory)
+    if cache_is_writable(folder):
+        try:
+            return store_cached(key, arrays, folder)
+        except OSError as error:  # full disk, a mount turned read-only, permissions changed
+            _mark_unwritable(folder, error)
+    _remember(folder, key, arrays)
+    return None
+
+
 def cached(
     parts: Mapping[str, Any],
     compute: Callable[[], Mapping[str, np.ndarray]],
     directory: str | os.PathLike | None = None,
 ) -> dict[str, np.ndarray]:
     """Arrays for ``parts`` from the cache, or ``compute()`` them and store them (also
-    when the stored file is damaged or stale, see ``load_cached``)."""
+    when the stored file is damaged or stale, see ``load_cached``). The folder is checked
+    before ``compute`` runs: one that cannot be written is warned about then, and the
+    result is returned all the same (``keep_cached``)."""
     key = cache_key(parts)
+    cache_is_writable(directory)  # up front: the warning comes before the FEM work, not after it
     found = load_cached(key, directory)
     if found is not None:
         return found
     arrays = {name: np.asarray(a) for name, a in compute().items()}
-    store_cached(key, arrays, directory)
+    keep_cached(key, arrays, directory)
     return arrays

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import dataclasses
+import logging
+import os
 
 import numpy as np
 import pytest
@@ -155,3 +157,116 @@ def test_stored_files_hold_key_and_digest_but_loads_do_not(tmp_path):
     with pytest.raises(ValueError, match="reserved"):
         cache.store_cached(cache.cache_key(PARTS), {"__key__": np.ones(1)}, tmp_path)
     assert [p.name for p in tmp_path.iterdir()] == [path.name]
+
+
+# --- a cache folder that cannot be written (issue 23) -------------------------------------
+# Tests run as root, so mode bits cannot make a folder unwritable: the folder is put below
+# a regular file (ENOTDIR, as a mistyped FLEXCAL_CACHE_DIR would) or the write is made to
+# fail the way a read-only mount or a full disk fails it.
+
+def _below_a_file(tmp_path):
+    (tmp_path / "a-file").write_text("not a folder")
+    return tmp_path / "a-file" / "cache"
+
+
+def _cache_warnings(caplog):
+    return [r for r in caplog.records if r.name == "flexcal.fem.cache" and r.levelno == logging.WARNING]
+
+
+def test_unwritable_folder_warns_once_before_computing_and_keeps_the_results(tmp_path, caplog):
+    caplog.set_level(logging.WARNING, logger="flexcal.fem.cache")
+    folder = _below_a_file(tmp_path)
+    warned_before_compute = []
+
+    def compute():
+        warned_before_compute.append(len(_cache_warnings(caplog)))
+        return {"compliance": np.arange(36.0).reshape(6, 6)}
+
+    first = cache.cached(PARTS, compute, folder)
+    np.testing.assert_array_equal(first["compliance"], np.arange(36.0).reshape(6, 6))
+    assert warned_before_compute == [1]                        # the warning came before the work
+    other = dict(PARTS, mesh={"n_thickness": 4, "curved": True})
+    cache.cached(other, lambda: {"compliance": np.ones((6, 6))}, folder)
+    again = cache.cached(PARTS, compute, folder)               # served from this process's memory
+    assert warned_before_compute == [1] and len(_cache_warnings(caplog)) == 1  # once per folder
+    np.testing.assert_array_equal(again["compliance"], first["compliance"])
+    again["compliance"][0, 0] = -1.0                            # a copy: the kept result stays intact
+    assert cache.load_cached(cache.cache_key(PARTS), folder)["compliance"][0, 0] == 0.0
+    message = _cache_warnings(caplog)[0].getMessage()
+    assert str(folder) in message and "Not a directory" in message and cache.CACHE_ENV in message
+    assert not cache.cache_is_writable(folder)
+
+
+def test_write_failing_after_the_compute_keeps_the_result(tmp_path, caplog, monkeypatch):
+    """The folder passes the check, then the final rename fails (a mount turned read-only)."""
+    caplog.set_level(logging.WARNING, logger="flexcal.fem.cache")
+    assert cache.cache_is_writable(tmp_path)
+
+    def refuse(source, target):
+        raise PermissionError(13, "Permission denied", str(target))
+
+    monkeypatch.setattr(cache.os, "replace", refuse)
+    compute, calls = _counting(4.0)
+    assert cache.cached(PARTS, compute, tmp_path)["compliance"][0, 0] == 4.0
+    assert cache.cached(PARTS, compute, tmp_path)["compliance"][0, 0] == 4.0 and calls == [1]
+    assert len(_cache_warnings(caplog)) == 1 and "Permission denied" in _cache_warnings(caplog)[0].getMessage()
+    assert list(tmp_path.iterdir()) == []                       # no temporary left behind
+
+
+def test_read_only_folder_still_serves_its_entries(tmp_path, caplog, monkeypatch):
+    caplog.set_level(logging.WARNING, logger="flexcal.fem.cache")
+    cache.cached(PARTS, lambda: {"compliance": np.full((6, 6), 5.0)}, tmp_path)
+    readonly = tmp_path.parent / f"{tmp_path.name}-ro"
+    tmp_path.rename(readonly)
+
+    def read_only(*args, **kwargs):
+        raise OSError(30, "Read-only file system", str(readonly))
+
+    monkeypatch.setattr(cache.tempfile, "mkstemp", read_only)
+    compute, calls = _counting(6.0)
+    assert cache.cached(PARTS, compute, readonly)["compliance"][0, 0] == 5.0 and calls == []
+    assert len(_cache_warnings(caplog)) == 1
+
+
+@pytest.mark.parametrize("how", ["folder-below-a-file", "rename-fails"])
+def test_fem_hinge_completes_without_a_writable_cache(tmp_path, monkeypatch, how):
+    """A real (coarse, mapped-mesh) FEM hinge: same numbers as with a working cache, one
+    warning, and that warning before the FEM work when the folder is unusable up front."""
+    from flexcal.validation.reports.fem import compare_hinge
+
+    def solve(folder):
+        monkeypatch.setenv(cache.CACHE_ENV, str(folder))
+        events = []
+        handler = logging.Handler()
+        handler.emit = lambda record: events.append(f"warning: {record.getMessage()}")
+        logger = logging.getLogger("flexcal.fem.cache")
+        logger.addHandler(handler)
+        try:
+            result = compare_hinge(HINGE, elements_through_thickness=1, mesher="mapped", cache=True,
+                                   stage=events.append)
+        finally:
+            logger.removeHandler(handler)
+        return result, events
+
+    reference, events = solve(tmp_path / "working")
+    assert not [e for e in events if e.startswith("warning")] and list((tmp_path / "working").glob("*.npz"))
+    if how == "folder-below-a-file":
+        result, events = solve(_below_a_file(tmp_path))
+    else:
+        real_replace = os.replace
+
+        def refuse(source, target):
+            if str(target).startswith(str(tmp_path / "failing")):
+                raise PermissionError(13, "Permission denied", str(target))
+            return real_replace(source, target)
+
+        monkeypatch.setattr(os, "replace", refuse)
+        result, events = solve(tmp_path / "failing")
+    warnings = [i for i, e in enumerate(events) if e.startswith("warning")]
+    assert len(warnings) == 1
+    if how == "folder-below-a-file":
+        assert warnings[0] < events.index("CadQuery solid")      # warned before any FEM work
+    # the mapped mesher is deterministic: the same mesh and the same numbers to the bit
+    np.testing.assert_array_equal(result.compliance_fem, reference.compliance_fem)
+    np.testing.assert_array_equal(result.displacement, reference.displacement)
+    assert result.timings.keys() == {"geometry", "mesh", "fem_solve"}  # computed here, not served

@@ -180,13 +180,16 @@ def build_segments(slices: Iterable[tuple[FlexureChain, float, float]], material
     one per missing segment and per ``BUILD_MEMORY_BYTES`` of free memory; 0: this
     process); scheduler: a Dask scheduler address. Each result is stored under the key a
     sequential build uses (the worker's own cache write makes that a no-op on shared
-    storage; a remote worker without it hands the matrix back). A worker whose flexcal
+    storage; a remote worker without it hands the matrix back); a cache folder that cannot
+    be written is found before the builds start, warned about once, and the matrices are
+    kept in this process's memory instead (``flexcal.fem.cache.keep_cached``). A worker whose flexcal
     code differs (other cache key) is an error: its matrix is not this version's.
     """
-    from flexcal.fem.cache import load_cached, store_cached
+    from flexcal.fem.cache import cache_is_writable, keep_cached, load_cached
 
     from ..executor import run_jobs, usable_cores, where
 
+    cache_is_writable(cache_directory)  # up front: an unwritable cache warns once, before any FEM work
     missing: dict[str, ChainSegment] = {}
     for chain, x_start, x_end in slices:
         segment, _ = canonical_segment(chain, float(x_start), float(x_end))
@@ -213,8 +216,8 @@ def build_segments(slices: Iterable[tuple[FlexureChain, float, float]], material
         if result["key"] != key:
             raise RuntimeError("a Dask worker runs another flexcal version (its FEM cache key differs); install the "
                                "same flexcal on the workers as on this machine")
-        if load_cached(key, cache_directory) is None:
-            store_cached(key, {"stiffness": result["stiffness"]}, cache_directory)
+        if load_cached(key, cache_directory) is None:  # an unwritable cache keeps it in memory (warned once)
+            keep_cached(key, {"stiffness": result["stiffness"]}, cache_directory)
         built.append(key)
         log(f"  FEM segment [{segment.x_start * 1e3:.1f}, {segment.x_end * 1e3:.1f}] mm of a "
             f"{segment.chain.length * 1e3:.1f} mm chain: {result['wall_s']:.1f} s ({len(built)}/{len(missing)}, "
