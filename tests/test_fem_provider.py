@@ -54,3 +54,47 @@ def test_fem_provider_caches_and_mirrors(tmp_path):
     # 5 %: beam theory vs 3-D FEM +1.3 %, coarse mesh ~1 % (docstring)
     assert fem_c[5, 5] == pytest.approx(ana_c[5, 5], rel=0.05)
     assert fem_c[1, 1] == pytest.approx(ana_c[1, 1], rel=0.05)  # as above
+
+
+def test_parallel_builds_into_an_unwritable_cache_keep_their_matrices(tmp_path, monkeypatch, caplog):
+    """``build_segments`` with FLEXCAL's cache folder below a regular file (ENOTDIR; tests
+    run as root, so mode bits would not do): one warning before the builds, every built
+    matrix kept in this process, and the provider's calls that follow served from it with
+    no FEM (the closed form stands in for the segment builds, which are not under test)."""
+    import logging
+
+    import flexcal.fem.mesh
+    import flexcal.validation.prototype.fem_provider as fp
+    from flexcal.geometry.params import STEEL
+
+    caplog.set_level(logging.WARNING, logger="flexcal.fem.cache")
+    (tmp_path / "a-file").write_text("not a folder")
+    folder = tmp_path / "a-file" / "cache"
+    analytic = analytic_provider()
+    built = []
+
+    def warnings():
+        return [r.getMessage() for r in caplog.records if r.name == "flexcal.fem.cache"]
+
+    def job(segment, *, material, elements_through_thickness, **_):
+        assert len(warnings()) == 1  # warned before the first build
+        built.append(segment)
+        return {"key": fp.segment_cache_key(segment, material, elements_through_thickness=elements_through_thickness),
+                "stiffness": analytic(segment.chain, segment.x_start, segment.x_end), "wall_s": 0.0}
+
+    monkeypatch.setattr(fp, "build_segment_job", job)
+    chain = reference_mechanism().chains[3].chain
+    xs = section_nodes(chain)
+    slices = [(chain, float(a), float(b)) for a, b in zip(xs[:-1], xs[1:])]
+    n_built = fp.build_segments(slices, STEEL, cache_directory=folder, workers=1, progress=False)
+    assert n_built == len(built) > 0
+
+    def no_fem(*args, **kwargs):
+        raise AssertionError("a kept segment was meshed again")
+
+    monkeypatch.setattr(flexcal.fem.mesh, "mesh_part", no_fem)
+    provider = fem_provider(cache_directory=folder, progress=False)
+    for chain_, a, b in slices:  # mirrored halves included: the same kept matrices, turned
+        np.testing.assert_allclose(provider(chain_, a, b), analytic(chain_, a, b), rtol=0,
+                                   atol=1e-9 * np.abs(analytic(chain_, a, b)).max())  # round-off of the mirror
+    assert len(warnings()) == 1 and "cannot be written" in warnings()[0]
