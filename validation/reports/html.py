@@ -244,7 +244,10 @@ def _report_text(path: Path) -> str | None:
     if data is None:
         raise ValueError(f"{path} is a symbolic link or not a regular file; flexcal report reads only the run "
                          "folder's own files (copy the file in)")
-    return data.decode("utf-8")
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as error:
+        raise ValueError(f"{path}: not UTF-8 text ({error})") from None
 
 
 def json_depth(text: str) -> int:
@@ -260,10 +263,7 @@ def json_depth(text: str) -> int:
 def _read_report_json(path: Path) -> Any:
     """report.json parsed, None if absent; ``ValueError`` (one line) if it cannot be read
     as JSON nested at most ``MAX_JSON_DEPTH`` deep."""
-    try:
-        text = _report_text(path)
-    except UnicodeDecodeError as error:
-        raise ValueError(f"{path}: not valid JSON ({error})") from None
+    text = _report_text(path)
     if text is None:
         return None
     depth = json_depth(text)
