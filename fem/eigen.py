@@ -8,9 +8,10 @@ Both use ARPACK's Lanczos (``scipy.sparse.linalg.eigsh``) on the operator K^-1 (
   non-singular (the structure held) unless ``shift`` is set below zero.
 * ``buckling_modes``: K phi = -lambda K_G phi for a prestress whose geometric stiffness
   is K_G (``flexcal.fem.geometric``). Written as -K_G phi = mu K phi with mu = 1/lambda
-  and solved for the largest mu with K^-1 as the inverse of the "mass" K (ARPACK's mode
-  2): the smallest positive load factors lambda are the largest mu, the ones Lanczos
-  finds first. A sign slip in K_G would turn every factor negative: the function
+  and solved for the mu of largest magnitude with K^-1 as the inverse of the "mass" K
+  (ARPACK's mode 2): the smallest positive load factors lambda are the largest positive
+  mu, the ones Lanczos finds first (a field with tension and compression also has
+  negative mu: the load reversed; ask for enough modes to see the positive ones). A sign slip in K_G would turn every factor negative: the function
   reports only positive factors and raises if there are none.
 
 Modes are M-normalized (phi^T M phi = 1) and K-normalized (phi^T K phi = 1) respectively.
@@ -92,8 +93,8 @@ def natural_modes(K: sp.spmatrix, M: sp.spmatrix, n_modes: int, *, shift: float 
 def buckling_modes(K: sp.spmatrix, K_G: sp.spmatrix, n_modes: int = 1, *, tol: float = 0.0) -> BucklingResult:
     """Smallest positive load factors lambda of (K + lambda K_G) phi = 0 (K [N/m]
     symmetric positive definite: the structure held; K_G [N/m] the geometric stiffness of
-    the reference prestress). ``n_modes`` eigenpairs are computed; the positive ones are
-    returned. Raises ``ValueError`` if none is positive (the prestress cannot buckle the
+    the reference prestress). The ``n_modes`` eigenpairs of largest |1/lambda| are
+    computed; the positive ones are returned. Raises ``ValueError`` if none is positive (the prestress cannot buckle the
     structure: a tension field, or a sign slip in K_G)."""
     n = _check_square("K", K)
     _check_square("K_G", K_G, n)
@@ -101,8 +102,10 @@ def buckling_modes(K: sp.spmatrix, K_G: sp.spmatrix, n_modes: int = 1, *, tol: f
         raise ValueError(f"n_modes={n_modes} must be in [1, {n - 1}]")
     K = sp.csr_matrix(K)
     Kinv = _factorized(K, "K")
-    mu, vectors = spla.eigsh(-sp.csr_matrix(K_G), k=n_modes, M=K, Minv=Kinv, which="LA", tol=tol)
-    positive = mu > 0
+    mu, vectors = spla.eigsh(-sp.csr_matrix(K_G), k=n_modes, M=K, Minv=Kinv, which="LM", tol=tol)
+    # mu of a rank-deficient K_G cluster at zero; "positive" means above round-off of the
+    # largest |mu| (a factor beyond 1e10 x the smallest is not a buckling load)
+    positive = mu > 1e-10 * np.max(np.abs(mu))
     if not positive.any():
         raise ValueError("no positive buckling factor: the prestress does not compress the structure anywhere it "
                          "can buckle (check the load's sign and the sign convention of K_G: tension positive)")
