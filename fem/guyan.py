@@ -32,7 +32,7 @@ from .coupling import DEFAULT_PLANE_TOLERANCE
 from .condense import ChainSolution, solve_chain
 from .mass import assemble_mass
 
-__all__ = ["GuyanPart", "guyan_reduce_part", "reduced_mass"]
+__all__ = ["GuyanPart", "guyan_reduce_part", "reduced_mass", "beam_consistent_mass"]
 
 Plane = tuple[np.ndarray, np.ndarray]
 
@@ -78,3 +78,22 @@ def guyan_reduce_part(
     M_c = reduced_mass(M, solution.unit_motion_fields)  # fields already in frame axes
     return GuyanPart(stiffness=solution.stiffness, mass=0.5 * (M_c + M_c.T), solution=solution,
                      total_mass=float(M.sum() / 3.0))
+
+
+def beam_consistent_mass(length: float, area: float, polar: float, density: float) -> np.ndarray:
+    """Consistent mass (12, 12) [kg, kg m, kg m^2] of a uniform Euler-Bernoulli beam along
+    x: Hermite cubics in bending, linear shapes in tension and torsion, rotary inertia
+    left out. length [m], area [m^2], polar second moment of the section [m^4], density
+    [kg/m^3]; DOFs ux..rz at the start then at the end. What Guyan's reduction of a
+    slender bar gives (tests/test_fem_guyan.py)."""
+    m, l = density * area * length, length
+    M = np.zeros((12, 12))
+    two_node = np.array([[2.0, 1.0], [1.0, 2.0]]) / 6.0
+    M[np.ix_([0, 6], [0, 6])] = m * two_node
+    M[np.ix_([3, 9], [3, 9])] = density * polar * l * two_node
+    bend = m / 420 * np.array([[156, 22 * l, 54, -13 * l], [22 * l, 4 * l * l, 13 * l, -3 * l * l],
+                               [54, 13 * l, 156, -22 * l], [-13 * l, -3 * l * l, -22 * l, 4 * l * l]])
+    M[np.ix_([1, 5, 7, 11], [1, 5, 7, 11])] = bend
+    flip = np.diag([1.0, -1.0, 1.0, -1.0])  # uz, ry: ry = -duz/dx flips the coupling terms
+    M[np.ix_([2, 4, 8, 10], [2, 4, 8, 10])] = flip @ bend @ flip
+    return M
