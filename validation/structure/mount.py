@@ -63,17 +63,25 @@ class NominalState:
     weight_factor: float
 
 
-def nominal_state(prototype: Prototype, weight_factor: float = 1.0) -> NominalState:
-    """Equilibrium at the design commands (nuts at their transmissions' initial positions)
-    with the payload's weight times ``weight_factor``: Newton from the design pose."""
+def nominal_state(prototype: Prototype, weight_factor: float = 1.0, *, commands: np.ndarray | None = None,
+                  start: np.ndarray | None = None, extra_forces: tuple = ()) -> NominalState:
+    """Equilibrium with the payload's weight times ``weight_factor`` at actuator
+    ``commands`` (3,) [m] (default 0: the design commands; nuts at their transmissions'
+    initial positions plus the command, no clearance or hysteresis), by Newton from
+    ``start`` poses (default the design pose). ``extra_forces``: more dead loads
+    ``(body, force (3,) [N] world, point (3,) [m] body frame)``."""
     mech = prototype.mechanism
+    commands = np.zeros(3) if commands is None else np.asarray(commands, float)
     weight = weight_factor * mech.payload_mass * np.asarray(mech.gravity, float)
     springs = tuple((NUT_BODIES[i], float(mech.actuator_stiffness), placement.rotation[:, 0],
-                     np.asarray(placement.point_a, float), float(prototype.transmissions[i].initial_position))
+                     np.asarray(placement.point_a, float),
+                     float(prototype.transmissions[i].initial_position + commands[i]))
                     for i, placement in enumerate(mech.driving_chains))
-    loads = Loads(point_forces=((FRAME_BODY, weight, np.asarray(mech.centre_of_gravity, float)),), springs=springs)
-    poses, info = solve_equilibrium(prototype.assembly, prototype.initial_poses, prototype.segment_stiffness.reshape(-1, 6, 6),
-                                    loads, prototype.settings, where=f"at the nominal state (weight x {weight_factor:g})")
+    loads = Loads(point_forces=((FRAME_BODY, weight, np.asarray(mech.centre_of_gravity, float)),) + tuple(extra_forces),
+                  springs=springs)
+    poses, info = solve_equilibrium(prototype.assembly, prototype.initial_poses if start is None else start,
+                                    prototype.segment_stiffness.reshape(-1, 6, 6), loads, prototype.settings,
+                                    where=f"at commands {commands * 1e3} mm, weight x {weight_factor:g}")
     tension = -info.segment_gradient.reshape(N_CHAINS, N_SEGMENTS, 12)[:, 0, 0]
     return NominalState(poses=poses, tangent=info.tangent, segment_gradient=info.segment_gradient, tension=tension,
                         weight_factor=float(weight_factor))
