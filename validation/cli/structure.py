@@ -30,7 +30,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="FEM segments: quadratic tets through the thinnest leaf (default 2)")
     parser.add_argument("--modes", type=int, default=12, help="number of mount modes (default %(default)s)")
     parser.add_argument("--trajectory-points", type=int, default=77,
-                        help="points of the standard trajectory the stresses are taken over (0: nominal only; "
+                        help="points of the standard trajectory the stresses are taken over (1 + a multiple of 4, >= 13; 0: nominal only; "
                              "default %(default)s)")
     add_out(parser, what="report.json, timings.json, report.md")
 

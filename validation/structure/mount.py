@@ -16,9 +16,9 @@ DOFs this module adds:
 * ``mount_buckling_factor``: the factor on the payload's weight at which the mount's
   tangent turns singular, from K_T(s) = K_0 + s (K_T(1) - K_0), s the weight factor
   (linearized buckling; K_0 the unloaded tangent);
-* ``chain_buckling_factors``: each chain alone, its five segments and the string
-  stiffness of its nominal axial load (``flexcal.fem.geometric.axial_link_geometric_stiffness``),
-  end A clamped, end B either held (translations fixed, turning free) or free to sway
+* ``chain_buckling_factors``: each chain alone on its five segments, linearized the same
+  way (the segments' co-rotational tangent at the state minus the unloaded one), end A
+  clamped, end B either held (translations fixed, turning free) or free to sway
   laterally (turning held, as the payload frame holds it).
 
 Body-frame DOFs as in ``flexcal.validation.prototype.equilibrium``: translations then
@@ -34,12 +34,13 @@ import numpy as np
 import scipy.sparse as sp
 
 from flexcal.fem.eigen import buckling_modes, effective_modal_mass, natural_modes
-from flexcal.fem.geometric import axial_link_geometric_stiffness
 from flexcal.fem.mass import box_inertia, rigid_body_mass
 from flexcal.geometry.params import MechanismParams
 
 from ..prototype.equilibrium import Loads, solve_equilibrium
+from ..prototype.kinematics import se3_inverse
 from ..prototype.mechanism import FRAME_BODY, N_CHAINS, N_SEGMENTS, NUT_BODIES, Prototype
+from ..prototype.superelement import relative_pose
 
 __all__ = ["PAYLOAD_BOX", "NominalState", "nominal_state", "payload_mass_matrix", "assemble_segment_matrices",
            "mount_mass", "rigid_influence", "support_stiffness", "mount_modes", "MountModes",
@@ -192,33 +193,48 @@ def mount_buckling_factor(unloaded: NominalState, loaded: NominalState) -> float
     return float(buckling_modes(sp.csr_matrix(K0), sp.csr_matrix(dK / scale), 6).factors[0]) + unloaded.weight_factor
 
 
-def _chain_matrices(prototype: Prototype, chain: int, axial_force: float) -> tuple[np.ndarray, np.ndarray]:
-    """(K, K_G) (36, 36) of chain ``chain`` alone on its six section nodes (chain axes)."""
-    K = np.zeros((36, 36))
-    K_G = np.zeros((36, 36))
-    xs = prototype.section_x[chain]
+def _chain_matrices(prototype: Prototype, state: NominalState, chain: int) -> tuple[np.ndarray, np.ndarray]:
+    """(K_0, dK) (36, 36) of chain ``chain`` alone on its six section nodes (node axes):
+    the segments' unloaded tangent and the change of their tangent at ``state``."""
+    from ..prototype.equilibrium import node_poses
+    from ..prototype.superelement import segment_tangent
+
+    a = prototype.assembly
+    seg = np.arange(chain * N_SEGMENTS, (chain + 1) * N_SEGMENTS)
+    nodes = node_poses(a, state.poses)
+    rel = relative_pose(nodes[a.segment_nodes[seg, 0]], nodes[a.segment_nodes[seg, 1]])
+    D = a.segment_reference_inverse[seg]
+    K_jj = prototype.segment_stiffness[chain]
+    loaded = segment_tangent(rel, D, K_jj, prototype.settings.step)
+    unloaded = segment_tangent(se3_inverse(D), D, K_jj, prototype.settings.step)
+    K0 = np.zeros((36, 36))
+    dK = np.zeros((36, 36))
     for s in range(N_SEGMENTS):
         dofs = np.arange(6 * s, 6 * s + 12)
-        K[np.ix_(dofs, dofs)] += prototype.segment_stiffness_12[chain, s]
-        K_G[np.ix_(dofs, dofs)] += axial_link_geometric_stiffness(xs[s + 1] - xs[s], axial_force)
-    return K, K_G
+        K0[np.ix_(dofs, dofs)] += unloaded[s]
+        dK[np.ix_(dofs, dofs)] += loaded[s] - unloaded[s]
+    return K0, dK
 
 
-def chain_buckling_factors(prototype: Prototype, tension: np.ndarray) -> dict[str, np.ndarray]:
-    """Per chain (6,) buckling factors on its nominal axial load ``tension`` (6,) [N]
-    (tension positive; a chain in tension has no factor: inf), for end B "held"
-    (translations fixed) and "sway" (lateral translations free, turning fixed); end A
-    clamped, B free along the chain in both (module docstring)."""
+def chain_buckling_factors(prototype: Prototype, state: NominalState) -> dict[str, np.ndarray]:
+    """Per chain (6,) factors on the loads it carries at ``state`` that make it buckle
+    alone, for end B "held" (translations fixed, turning free) and "sway" (lateral
+    translations free, turning fixed); end A clamped, B free along the chain in both.
+    Linearized like the mount's: K_0 + s (K_T - K_0) singular, K_T the segments' tangent
+    at the state (their geometric terms included). A chain in tension gets inf."""
     out = {"held": np.full(N_CHAINS, np.inf), "sway": np.full(N_CHAINS, np.inf)}
     interior = np.arange(6, 30)
     b = 30 + np.arange(6)
     free_b = {"held": b[[0, 3, 4, 5]], "sway": b[:3]}
     for c in range(N_CHAINS):
-        if not tension[c] < 0:
+        if not state.tension[c] < 0:
             continue
-        K, K_G = _chain_matrices(prototype, c, float(tension[c]))
+        K0, dK = _chain_matrices(prototype, state, c)
         for case, extra in free_b.items():
             free = np.r_[interior, extra]
-            result = buckling_modes(sp.csr_matrix(K[np.ix_(free, free)]), sp.csr_matrix(K_G[np.ix_(free, free)]), 4)
+            try:
+                result = buckling_modes(sp.csr_matrix(K0[np.ix_(free, free)]), sp.csr_matrix(dK[np.ix_(free, free)]), 4)
+            except ValueError:  # no positive factor among the four largest: does not buckle this way
+                continue
             out[case][c] = result.factors[0]
     return out
