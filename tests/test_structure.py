@@ -153,7 +153,7 @@ def test_structure_command_writes_its_report(tmp_path, capsys):
     from flexcal.validation import cli
 
     out = tmp_path / "run"
-    assert cli.main(["structure", "--trajectory-points", "13", "--modes", "8", "--out", str(out), "-q"]) == 0
+    assert cli.main(["structure", "--trajectory-points", "13", "--modes", "8", "--out", str(out)]) == 0
     report = json.loads((out / "report.json").read_text())
     assert len(report["modes"]["frequencies_Hz"]) == 8
     assert report["modes"]["frequencies_Hz"][0] > 0
