@@ -66,6 +66,7 @@ def test_euler_strut_buckling(held, expected, n_section):
     after one refinement of the section (2 x 2): discretisation 0.03 %; the rest is the
     shear flexibility Euler leaves out, P/(kappa G A) = 0.32 % clamped-clamped."""
     factors = _strut_buckling(40, n_section, held)
+    # 1 %: Euler leaves out shear (0.32 %); discretisation 0.03 % (docstring)
     np.testing.assert_allclose(factors[:2], expected, rtol=0.01)
 
 
@@ -113,6 +114,7 @@ def test_quadrature_stress_is_the_beam_bending_stress():
     x, y = points[middle, 0], points[middle, 1]
     beam = -force * (length - x) * y / (h**4 / 12)
     peak = force * (2 * length / 3) * (h / 2) / (h**4 / 12)
+    # 1 % of the peak: measured 0.47 % pointwise on this mesh, rate 2 (docstring)
     assert np.max(np.abs(stress[middle, 0] - beam)) < 0.01 * peak
 
 
@@ -138,6 +140,7 @@ def test_leaf_parallelogram_lateral_stiffness(n_thickness):
     C = hinge_compliance(mesh, NO_POISSON, ((0.0, 0.0, 0.0), (0.0, 0.0, 1.0)), ((0.0, 0.0, length), (0.0, 0.0, 1.0)),
                          (0.0, 0.0, length))
     expected = 24 * NO_POISSON.youngs_modulus * (b * t**3 / 12) / length**3
+    # 1 %: measured -0.08 %, discretisation 0.004 % (docstring)
     assert 1.0 / C[1, 1] == pytest.approx(expected, rel=0.01)
 
 
@@ -172,4 +175,5 @@ def test_rigid_strut_between_two_pivots_sways_at_2k_over_L():
     K_G[np.ix_(dofs, dofs)] += axial_link_geometric_stiffness(length, -1.0)  # 1 N compression
     free = np.r_[6:18, 18 + 1]  # strut nodes free; the frame only sways in y
     factors = buckling_modes(sp.csr_matrix(K[np.ix_(free, free)]), sp.csr_matrix(K_G[np.ix_(free, free)]), 3).factors
+    # 1e-5: the 1e6 x stiffer strut and 1e12 pivots move it by < 1e-5 (docstring)
     assert factors[0] == pytest.approx(2 * k / length, rel=1e-5)

@@ -48,6 +48,7 @@ def test_massless_chains_give_the_rigid_payload_on_its_support_stiffness(mount):
     modes = mount_modes(prototype, state, M, 6)
     K_s = support_stiffness(prototype, state.tangent, nuts_held=False)
     dense = np.sqrt(scipy.linalg.eigh(K_s, payload, eigvals_only=True)) / (2 * np.pi)
+    # 1e-6: chain density 1e-9 of steel leaves ~1e-9 (docstring)
     np.testing.assert_allclose(modes.frequencies, dense, rtol=1e-6)
     # r^T M r: the payload's mass and its inertia about O_C (parallel axes); the frame has
     # turned by ~6e-6 rad under its weight, so its axes (in which r is taken) differ from
@@ -72,6 +73,7 @@ def test_support_stiffness_is_the_prototype_response_to_a_small_wrench(mount):
         moved = nominal_state(prototype, extra_forces=extra, start=state.poses)
         twist = se3_log(se3_inverse(state.poses[FRAME_BODY]) @ moved.poses[FRAME_BODY])
         expected = np.linalg.solve(K_s, wrench)
+        # nonlinearity ~1e-4 of the answer at these loads (docstring)
         np.testing.assert_allclose(twist, expected, atol=1e-3 * np.abs(expected).max(), err_msg=f"case {k}")
 
 
@@ -130,6 +132,7 @@ def test_chain_sway_buckling_is_2k_over_L_for_ideal_pivots():
     factors = chain_buckling_factors(prototype, state)
     placement = mechanism.chains[chain].chain
     pivots = placement.length - 2 * placement.end_block_length - placement.hinge_length
+    # 1e-5: rigid-piece compliance and central differences ~1e-6 (docstring)
     assert factors["sway"][chain] * axial == pytest.approx(2 * k / pivots, rel=1e-5)
 
 

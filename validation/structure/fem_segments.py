@@ -18,6 +18,7 @@ mirrored one. Von Mises is invariant under the mirror's rotation.
 
 from __future__ import annotations
 
+import dataclasses
 import time
 
 import numpy as np
@@ -69,6 +70,9 @@ def segment_structure(chain: FlexureChain, x_start: float, x_end: float, materia
     of the canonical segment (module docstring); built or read from the cache."""
     from flexcal.fem.cache import cached
 
+    # the chain's length to 1 pm, like the cuts: L1-L3 are the same chain but their lengths,
+    # |B - A| of rotated points, differ in the last bits, which would give three cache keys
+    chain = dataclasses.replace(chain, length=round(chain.length, 12))
     segment, mirrored = canonical_segment(chain, x_start, x_end)
     parts = {"kind": "structure_segment", "segment": segment, "material": material,
              "mesh": {"elements_through_thickness": float(elements_through)}}
