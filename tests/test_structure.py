@@ -14,9 +14,9 @@ from flexcal.geometry.frames import se3_inverse, se3_log, twist_transform
 from flexcal.geometry.params import Material, reference_mechanism
 from flexcal.validation.prototype.equilibrium import SolverSettings
 from flexcal.validation.prototype.mechanism import FRAME_BODY, build_prototype
-from flexcal.validation.prototype.segments import analytic_provider, expand_end_stiffness
+from flexcal.validation.prototype.segments import analytic_provider, expand_end_stiffness, rigid_transfer
 from flexcal.validation.prototype.transmission import ActuatorTransmission
-from flexcal.validation.structure.mount import (NominalState, chain_buckling_factors, mount_mass, mount_modes, nominal_state,
+from flexcal.validation.structure.mount import (NominalState, chain_buckling_factors, chain_end_reduction, mount_mass, mount_modes, nominal_state,
                                                 payload_mass_matrix, support_stiffness)
 from flexcal.validation.structure.segment_mass import analytic_segment_mass
 from flexcal.validation.structure.stress import leaf_von_mises
@@ -166,3 +166,23 @@ def test_structure_command_writes_its_report(tmp_path, capsys):
     assert "total_s" in json.loads((out / "timings.json").read_text())["timings_s"]
     assert "first mode" in capsys.readouterr().out
     assert cli.main(["structure", "--modes", "0", "--out", str(tmp_path / "bad")]) == 2
+
+
+def test_chain_reduced_to_its_ends_keeps_its_rigid_body_mass(mount):
+    """Guyan onto A and B: the rigid projection of M_c equals that of the six-node chain
+    (Psi reproduces rigid motions; round-off), and K_c vanishes on rigid motions."""
+    prototype, _ = mount
+    masses = _segment_masses(prototype, prototype.mechanism.material)
+    for c in (0, 3):
+        K_c, M_c = chain_end_reduction(prototype, masses, c)
+        x = prototype.section_x[c]
+        full = np.zeros((36, 36))
+        for s in range(5):
+            full[6 * s:6 * s + 12, 6 * s:6 * s + 12] += masses[c, s]
+        R = np.concatenate(list(rigid_transfer(x)))  # node k's motion for a rigid twist at A
+        R_ends = np.concatenate([R[:6], R[30:]])
+        expected = R.T @ full @ R
+        # round-off of a 36-DOF static condensation
+        np.testing.assert_allclose(R_ends.T @ M_c @ R_ends, expected, atol=1e-9 * np.abs(expected).max())
+        # K_c on rigid motions: round-off of stiffnesses up to ~1e10
+        assert np.abs(K_c @ R_ends).max() < 1e-6 * np.abs(K_c).max()

@@ -16,6 +16,8 @@ DOFs this module adds:
 * ``mount_buckling_factor``: the factor on the payload's weight at which the mount's
   tangent turns singular, from K_T(s) = K_0 + s (K_T(1) - K_0), s the weight factor
   (linearized buckling; K_0 the unloaded tangent);
+* ``chain_end_reduction``: each chain Guyan-reduced onto its end nodes A and B (its
+  four interior nodes condensed out of the segments' stiffness and mass);
 * ``chain_buckling_factors``: each chain alone on its five segments, linearized the same
   way (the segments' co-rotational tangent at the state minus the unloaded one), end A
   clamped, end B either held (translations fixed, turning free) or free to sway
@@ -44,7 +46,7 @@ from ..prototype.superelement import relative_pose
 
 __all__ = ["PAYLOAD_BOX", "NominalState", "nominal_state", "payload_mass_matrix", "assemble_segment_matrices",
            "mount_mass", "rigid_influence", "support_stiffness", "mount_modes", "MountModes",
-           "mount_buckling_factor", "chain_buckling_factors"]
+           "mount_buckling_factor", "chain_buckling_factors", "chain_end_reduction"]
 
 PAYLOAD_BOX = (0.200, 1.400, 0.420)
 """Sides [m] of the box the 300 kg payload fills (x along the grating normal, y along the
@@ -238,3 +240,24 @@ def chain_buckling_factors(prototype: Prototype, state: NominalState) -> dict[st
                 continue
             out[case][c] = result.factors[0]
     return out
+
+
+def chain_end_reduction(prototype: Prototype, segment_mass: np.ndarray, chain: int) -> tuple[np.ndarray, np.ndarray]:
+    """(K_c, M_c) (12, 12) of chain ``chain`` Guyan-reduced onto its end nodes A and B
+    (DOFs ux..rz at A then B, chain axes, SI): the six section nodes joined by the
+    segments' linear 12 x 12 stiffness and ``segment_mass`` (6, 5, 12, 12); the interior
+    nodes follow statically, Psi = [I; -K_ii^-1 K_ie; I]. Exact at zero frequency: M_c
+    keeps the chain's rigid-body mass."""
+    K = np.zeros((36, 36))
+    M = np.zeros((36, 36))
+    for s in range(N_SEGMENTS):
+        dofs = np.arange(6 * s, 6 * s + 12)
+        K[np.ix_(dofs, dofs)] += prototype.segment_stiffness_12[chain, s]
+        M[np.ix_(dofs, dofs)] += segment_mass[chain, s]
+    ends = np.r_[0:6, 30:36]
+    interior = np.arange(6, 30)
+    psi = np.zeros((36, 12))
+    psi[ends, np.arange(12)] = 1.0
+    psi[interior] = -np.linalg.solve(K[np.ix_(interior, interior)], K[np.ix_(interior, ends)])
+    K_c, M_c = psi.T @ K @ psi, psi.T @ M @ psi
+    return 0.5 * (K_c + K_c.T), 0.5 * (M_c + M_c.T)

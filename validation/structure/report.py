@@ -69,7 +69,7 @@ def structure_report(mechanism: MechanismParams, *, segments: str = "analytic", 
     from ..prototype.segments import analytic_provider
     from ..prototype.transmission import ActuatorTransmission
     from .fem_segments import DEFAULT_ELEMENTS_THROUGH, FemSegments, chain_peak_stress_fem
-    from .mount import (chain_buckling_factors, mount_buckling_factor, mount_mass, mount_modes, nominal_state,
+    from .mount import (chain_buckling_factors, chain_end_reduction, mount_buckling_factor, mount_mass, mount_modes, nominal_state,
                         payload_mass_matrix, support_stiffness)
     from .segment_mass import chain_mass
     from .stress import chain_peak_stress_beam
@@ -136,6 +136,11 @@ def structure_report(mechanism: MechanismParams, *, segments: str = "analytic", 
         "payload": {"mass_kg": mechanism.payload_mass, "box_mm": [1e3 * s for s in _payload_box()],
                     "centre_of_gravity_mm": [1e3 * v for v in mechanism.centre_of_gravity]},
         "chain_mass_kg": {c.name: chain_mass(c.chain, mechanism.material) for c in mechanism.chains},
+        "chain_guyan_ends": {
+            "what": "each chain Guyan-reduced onto its end nodes A, B: 12 x 12 stiffness and mass, chain axes, "
+                    "DOFs ux..rz at A then B (SI)",
+            **{c.name: dict(zip(("stiffness", "mass"), (m.tolist() for m in chain_end_reduction(prototype, seg_mass, i))))
+               for i, c in enumerate(mechanism.chains)}},
         "axial_load_N": per_chain(loaded.tension),
         "modes": {
             "frequencies_Hz": modes.frequencies.tolist(),
