@@ -89,8 +89,15 @@ class FemSegments:
         self.material, self.elements_through = material, float(elements_through)
         self.cache_directory, self.progress = cache_directory, progress
         self.description = f"FEM segments (Guyan K and M), {self.elements_through:g} elements through the leaves"
+        self._memo: dict = {}  # slice -> (arrays, mirrored): the stresses ask for each slice at every state
 
     def _get(self, chain: FlexureChain, x_start: float, x_end: float):
+        key = (chain, float(x_start), float(x_end))
+        if key not in self._memo:
+            self._memo[key] = self._load(chain, x_start, x_end)
+        return self._memo[key]
+
+    def _load(self, chain: FlexureChain, x_start: float, x_end: float):
         start = time.perf_counter()
         arrays, mirrored = segment_structure(chain, x_start, x_end, self.material,
                                              elements_through=self.elements_through,
