@@ -202,8 +202,11 @@ def markdown(report: dict[str, Any]) -> str:
         lines.append(f"| {a} | " + " | ".join(f"{v:.3g}" for v in row) + " |")
     lines += ["", "Units: N/m, N/rad, N m/rad (rows: displacement DOF, columns: load).", "",
               "## Stress and buckling per chain", "",
-              f"Yield strength {report['stress']['yield_strength_MPa']:g} MPa "
-              f"(material {report['material']}).", "",
+              f"Yield strength {report['stress']['yield_strength_MPa']:g} MPa (`Material.yield_strength`; default: "
+              "S355J2, EN 10025-2, R_eH for 40-63 mm products). Stresses: beam-theory bound at the leaves' thin "
+              "ends and, with FEM segments, the largest nodal von Mises stress; nominal = design commands, "
+              f"trajectory = the largest over the standard trajectory's {report['stress'].get('trajectory_points', 0)} "
+              "points. Buckling factors multiply the loads each chain carries at the nominal state.", "",
               "| chain | axial load [N] | nominal beam [MPa] | nominal FEM [MPa] | trajectory beam [MPa] | "
               "trajectory FEM [MPa] | safety vs yield | buckling held | buckling sway |",
               "|---|---|---|---|---|---|---|---|---|"]
