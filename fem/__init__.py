@@ -77,6 +77,22 @@ _EXPORTS = {
     "box_tet_mesh": "structured",
     "notch_hinge_tet_mesh": "structured",
     "notch_height": "structured",
+    "assemble_mass": "mass",
+    "element_mass_scalar": "mass",
+    "rigid_body_mass": "mass",
+    "box_inertia": "mass",
+    "quadrature_stress": "geometric",
+    "assemble_geometric_stiffness": "geometric",
+    "axial_link_geometric_stiffness": "geometric",
+    "natural_modes": "eigen",
+    "buckling_modes": "eigen",
+    "effective_modal_mass": "eigen",
+    "ModalResult": "eigen",
+    "BucklingResult": "eigen",
+    "GuyanPart": "guyan",
+    "guyan_reduce_part": "guyan",
+    "reduced_mass": "guyan",
+    "beam_consistent_mass": "guyan",
 }
 
 __getattr__, __dir__, __all__ = lazy_exports(__name__, _EXPORTS)

@@ -57,12 +57,18 @@ def _finite(name: str, value: float) -> None:
 class Material:
     """Linear-elastic isotropic material.
 
-    youngs_modulus [Pa], poisson_ratio [-], density [kg/m^3].
+    youngs_modulus [Pa], poisson_ratio [-], density [kg/m^3], yield_strength [Pa]
+    (used only to judge stresses: ``flexcal structure``). Default yield: structural
+    steel S355J2 (EN 10025-2), minimum upper yield strength R_eH = 335 MPa for products
+    40-63 mm thick (the chains are cut from a 50 mm section; 355 MPa holds only up to
+    16 mm). A flexure steel of higher strength (e.g. quenched and tempered 42CrMo4) is
+    the usual choice; set its value here.
     """
 
     youngs_modulus: float = 206e9
     poisson_ratio: float = 0.29
     density: float = 7850.0
+    yield_strength: float = 335e6
 
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):
@@ -70,6 +76,7 @@ class Material:
         _require(self.youngs_modulus > 0, "youngs_modulus", self.youngs_modulus, "> 0 Pa", unit="Pa")
         _require(-1.0 < self.poisson_ratio < 0.5, "poisson_ratio", self.poisson_ratio, "in (-1, 0.5)", unit="")
         _require(self.density > 0, "density", self.density, "> 0 kg/m^3", unit="kg/m^3")
+        _require(self.yield_strength > 0, "yield_strength", self.yield_strength, "> 0 Pa", unit="Pa")
 
     @property
     def shear_modulus(self) -> float:

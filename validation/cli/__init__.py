@@ -46,6 +46,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "diagnose-benchmark": ("diagnose_benchmark", "blind benchmark of the gap diagnosis"),
     "sweep": ("sweep", "FEM vs closed form over a grid or Latin hypercube of hinge/chain dimensions, locally or on Dask"),
     "report": ("report", "turn a run folder into one self-contained HTML page"),
+    "structure": ("structure", "the mount as a structure: modes, support stiffness, stress vs yield, buckling"),
 }
 
 
