@@ -13,8 +13,8 @@ a number are refused), and a key the schema does not name is refused. A refusal 
 ``ValueError`` of one line naming the file, the key path, what was expected and the
 value given::
 
-    scenario.toml: seed = 1.7: must be an integer, not a decimal number
-    scenario.toml: mechanism.colour = "red": unknown key; allowed here: centre_of_gravity_mm, payload_mass_kg
+    scenario.toml: seed = 1.7 must be an integer, not a decimal number
+    scenario.toml: unknown key 'mechanism.colour' (= "red"); allowed in mechanism: centre_of_gravity_mm, payload_mass_kg
 
 Sizes are bounded before reading: ``read_text`` looks at the file's size first.
 """
@@ -120,7 +120,8 @@ def load_json(path: str | os.PathLike, schema: type[T], *, max_bytes: int = MAX_
 
 def convert(raw: Any, schema: type[T], *, source: str, table_word: str = "a table") -> T:
     """``raw`` (decoded TOML/JSON) as ``schema``, strictly; a ValueError of one line
-    ``"<source>: <key path> = <value>: <what was expected>"`` otherwise."""
+    ``"<source>: <key path> = <value> must be <what was expected>, not <what it is>"``
+    (or ``"<source>: unknown key '<key path>' (= <value>); allowed ...: <keys>"``) otherwise."""
     try:
         return msgspec.convert(raw, schema, strict=True)
     except msgspec.ValidationError as error:
@@ -159,24 +160,24 @@ def _explain(message: str, raw: Any, schema: Any, table_word: str) -> str:
         allowed = ", ".join(_fields(tp)) or "(none)"
         key = (path + "." if path else "") + _key(field, first=True)
         shown = value.get(field) if isinstance(value, dict) else None
-        return f"{key} = {_show(shown)}: unknown key; allowed {'in ' + path if path else 'here'}: {allowed}"
+        return f"unknown key {key!r} (= {_show(shown)}); allowed {'in ' + path if path else 'here'}: {allowed}"
     missing = re.match(r"Object missing required field `(.*)`$", text)
     if missing:
         return f"{path or 'the file'} lacks the required key {missing.group(1)!r}"
     enum = re.match(r"Invalid enum value (.*)$", text)
     if enum:
         choices = ", ".join(repr(c) for c in _literal_choices(tp))
-        return f"{path} = {_show(value)}: must be one of {choices}"
+        return f"{path} = {_show(value)} must be one of {choices}"
     mismatch = re.match(r"Expected `(.*?)`, got `(.*?)`$", text)
     if mismatch:
         wanted = " or ".join(kinds.get(k.strip(), k.strip()) for k in mismatch.group(1).split("|"))
-        return f"{path or 'the file'} = {_show(value)}: must be {wanted}, not {type_name(value)}"
+        return f"{path or 'the file'} = {_show(value)} must be {wanted}, not {type_name(value)}"
     bound = re.match(r"Expected `(.*?)` (.*)$", text)
     if bound:
         kind, condition = bound.group(1), bound.group(2)
         if isinstance(value, float) and not math.isfinite(value):
-            return f"{path} = {_show(value)}: must be a finite number"
-        return f"{path} = {_show(value)}: must be {kinds.get(kind, kind)} {condition}"
+            return f"{path} = {_show(value)} must be a finite number"
+        return f"{path} = {_show(value)} must be {kinds.get(kind, kind)} {condition}"
     return f"{path or 'the file'} = {_show(value)}: {text}"
 
 
@@ -216,7 +217,8 @@ def _options(tp: Any) -> list[Any]:
 def _member(tp: Any, field: str) -> Any:
     for option in _options(tp):
         if isinstance(option, type) and issubclass(option, msgspec.Struct):
-            return typing.get_type_hints(option, include_extras=True)[field]
+            names = dict(zip(option.__struct_encode_fields__, option.__struct_fields__))
+            return typing.get_type_hints(option, include_extras=True)[names[field]]
         if typing.get_origin(option) is dict:
             return typing.get_args(option)[1]
     return Any
@@ -247,7 +249,7 @@ def _failing_entry(mapping: dict, tp: Any) -> tuple[Any, Any, Any]:
 def _fields(tp: Any) -> list[str]:
     for option in _options(tp):
         if isinstance(option, type) and issubclass(option, msgspec.Struct):
-            return list(option.__struct_fields__)
+            return list(option.__struct_encode_fields__)
     return []
 
 
