@@ -86,32 +86,32 @@ def read_text(path: str | os.PathLike, *, max_bytes: int, what: str = "file") ->
                          f"); save it as UTF-8 (Latin-1 and other encodings are not read)") from None
 
 
-def read_toml(path: str | os.PathLike, *, max_bytes: int = MAX_SETTINGS_BYTES, what: str = "TOML file") -> dict:
+def read_toml(path: str | os.PathLike, *, max_bytes: int | None = None, what: str = "TOML file") -> dict:
     """The decoded TOML table of ``path`` (bounded, UTF-8), or a ValueError naming the file."""
-    text = read_text(path, max_bytes=max_bytes, what=what)
+    text = read_text(path, max_bytes=MAX_SETTINGS_BYTES if max_bytes is None else max_bytes, what=what)
     try:
         return tomllib.loads(text)
     except (ValueError, RecursionError) as error:  # TOMLDecodeError is a ValueError, as is a 5000-digit int
         raise ValueError(f"{path}: not valid TOML ({_one_line(error)})") from None
 
 
-def read_json(path: str | os.PathLike, *, max_bytes: int = MAX_SETTINGS_BYTES, what: str = "JSON file") -> Any:
+def read_json(path: str | os.PathLike, *, max_bytes: int | None = None, what: str = "JSON file") -> Any:
     """The decoded JSON value of ``path`` (bounded, UTF-8), or a ValueError naming the file."""
-    text = read_text(path, max_bytes=max_bytes, what=what)
+    text = read_text(path, max_bytes=MAX_SETTINGS_BYTES if max_bytes is None else max_bytes, what=what)
     try:
         return json.loads(text)
     except (ValueError, RecursionError) as error:
         raise ValueError(f"{path}: not valid JSON ({_one_line(error)})") from None
 
 
-def load_toml(path: str | os.PathLike, schema: type[T], *, max_bytes: int = MAX_SETTINGS_BYTES,
+def load_toml(path: str | os.PathLike, schema: type[T], *, max_bytes: int | None = None,
               what: str = "TOML file") -> tuple[dict, T]:
     """(the decoded table, the same checked against ``schema``) of a TOML file."""
     raw = read_toml(path, max_bytes=max_bytes, what=what)
     return raw, convert(raw, schema, source=str(path))
 
 
-def load_json(path: str | os.PathLike, schema: type[T], *, max_bytes: int = MAX_SETTINGS_BYTES,
+def load_json(path: str | os.PathLike, schema: type[T], *, max_bytes: int | None = None,
               what: str = "JSON file") -> tuple[Any, T]:
     """(the decoded value, the same checked against ``schema``) of a JSON file."""
     raw = read_json(path, max_bytes=max_bytes, what=what)
@@ -170,7 +170,9 @@ def _explain(message: str, raw: Any, schema: Any, table_word: str) -> str:
         return f"{path} = {_show(value)} must be one of {choices}"
     mismatch = re.match(r"Expected `(.*?)`, got `(.*?)`$", text)
     if mismatch:
-        wanted = " or ".join(kinds.get(k.strip(), k.strip()) for k in mismatch.group(1).split("|"))
+        options = [k.strip() for k in mismatch.group(1).split("|")]
+        options = [k for k in options if k != "null"] or options  # optional keys: leave the key out instead
+        wanted = " or ".join(kinds.get(k, k) for k in options)
         return f"{path or 'the file'} = {_show(value)} must be {wanted}, not {type_name(value)}"
     bound = re.match(r"Expected `(.*?)` (.*)$", text)
     if bound:

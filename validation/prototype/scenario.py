@@ -150,8 +150,8 @@ def mechanism_from_metadata(metadata: dict[str, Any]):
     if (mechanism.centre_of_gravity, mechanism.payload_mass) != (reference.centre_of_gravity,
                                                                  reference.payload_mass):
         logging.getLogger("flexcal.scenario").warning(
-            "the data's sidecar sets the mount: %s; the model uses that mount, not the reference one (%s)",
-            _mount_words(mechanism), _mount_words(reference))
+            "the data's mount differs from the reference one: %s (reference: %s); the model uses the data's mount "
+            "(the sidecar's 'mechanism')", _mount_words(mechanism), _mount_words(reference))
     return mechanism
 
 
@@ -291,7 +291,7 @@ def load_scenario(name_or_path: str, *, seed: int | None = None, noise_urad: flo
     table = read_toml(path, what="scenario file")
     try:
         return _from_table(table, base=path.parent, seed=seed, noise_urad=noise_urad, space=space, source=str(path))
-    except ValueError as error:  # the checks after the schema name the key, not always the file
+    except (ValueError, FileNotFoundError) as error:  # checks after the schema name the key, not always the file
         if str(path) in str(error):
             raise
         raise ValueError(f"{path}: {error}") from None
