@@ -125,7 +125,8 @@ def convert(raw: Any, schema: type[T], *, source: str, table_word: str = "a tabl
     try:
         return msgspec.convert(raw, schema, strict=True)
     except msgspec.ValidationError as error:
-        raise ValueError(f"{source}: {_explain(str(error), raw, schema, table_word)}") from None
+        explained = _explain(str(error), raw, schema, table_word).replace("\n", "\\n")  # one line, always
+        raise ValueError(f"{source}: {explained}") from None
 
 
 # --- turning msgspec's message into one line that names the key and the value ----------
@@ -134,8 +135,8 @@ _PATH_TOKEN = re.compile(r"\.([^.\[]+)|\[(\d+)\]|\[(\.\.\.)\]")
 
 
 def _explain(message: str, raw: Any, schema: Any, table_word: str) -> str:
-    text, _, where = message.partition(" - at `")
-    tokens = [(m.group(1), m.group(2), m.group(3)) for m in _PATH_TOKEN.finditer(where.rstrip("`").removeprefix("$"))]
+    text, _, where = message.rpartition(" - at `$") if " - at `$" in message else (message, "", "")
+    tokens = [(m.group(1), m.group(2), m.group(3)) for m in _PATH_TOKEN.finditer(where.removesuffix("`"))]
     names: list[str] = []
     value, tp = raw, schema
     for field, index, any_key in tokens:
@@ -154,17 +155,17 @@ def _explain(message: str, raw: Any, schema: Any, table_word: str) -> str:
     path = "".join(names)
     kinds = {**_KINDS, "object": table_word}
 
-    unknown = re.match(r"Object contains unknown field `(.*)`$", text)
+    unknown = re.match(r"Object contains unknown field `(.*)`$", text, re.S)
     if unknown:
         field = unknown.group(1)
         allowed = ", ".join(_fields(tp)) or "(none)"
         key = (path + "." if path else "") + _key(field, first=True)
         shown = value.get(field) if isinstance(value, dict) else None
         return f"unknown key {key!r} (= {_show(shown)}); allowed {'in ' + path if path else 'here'}: {allowed}"
-    missing = re.match(r"Object missing required field `(.*)`$", text)
+    missing = re.match(r"Object missing required field `(.*)`$", text, re.S)
     if missing:
         return f"{path or 'the file'} lacks the required key {missing.group(1)!r}"
-    enum = re.match(r"Invalid enum value (.*)$", text)
+    enum = re.match(r"Invalid enum value (.*)$", text, re.S)
     if enum:
         choices = ", ".join(repr(c) for c in _literal_choices(tp))
         return f"{path} = {_show(value)} must be one of {choices}"

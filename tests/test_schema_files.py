@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 from flexcal.validation import cli
-from flexcal.validation.measurements import Measurement, read_measurement, read_trajectory, write_measurement
-from flexcal.validation.prototype.scenario import load_scenario, mechanism_from_metadata
+from flexcal.validation.measurements import Measurement, read_measurement, write_measurement
+from flexcal.validation.prototype.scenario import load_scenario, mechanism_from_metadata, read_trajectory
 
 
 def refusal(call, *args) -> str:
