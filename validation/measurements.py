@@ -6,7 +6,8 @@ One row per sampled posture. Required columns, in the field's units:
 
 Optional columns are numeric and carry their unit in the name (``temperature_c``, …).
 The sidecar ``<name>.json`` holds provenance (generator, seed, preset errors, injected
-effects). The same reader loads synthetic and real measurements; it rejects a bad file
+effects), checked against ``validation/sidecar.py``'s schema; its ``n_points`` must equal
+the CSV's data rows. Files are bounded before reading (``MAX_TABLE_BYTES``, ``MAX_POINTS``). The same reader loads synthetic and real measurements; it rejects a bad file
 with a ``ValueError`` naming the row (1-based, header = row 1) and the column.
 
 Inside, everything is SI: inputs [m], angles [rad], time [s].

@@ -28,6 +28,11 @@ A scenario file::
     magnitude_urad = 8.0       # or: a drawn injector of that size (effects.library.make_injector)
     seed = 3
 
+Every key is typed (``ScenarioFile`` and its tables, frozen ``msgspec.Struct`` types):
+a value of another type (``seed = 1.7``, ``draw_unset = "no"``) or a key not listed above
+is refused with one line naming the file, the key, the expected type and the value
+(``flexcal.geometry.schema``); ``n_points`` is at most ``measurements.MAX_POINTS``.
+
 The built-in scenario ``table1`` uses the paper's Table 1 presets (initial positions
 −0.20, 0.32, 0.40 mm; CL 0.42, 0.25, 0.10 mm; μ 0.83, 0.87, 0.93) and draws every other
 source within its range from the seed. Like the paper's simulation it is noise-free
