@@ -31,7 +31,7 @@ def test_merge_config_checks_keys_and_types():
     assert isinstance(merged["x"], float) and defaults["table"] == {"w": 0.9}  # defaults untouched
     for bad, words in [({"m": 1}, "unknown key 'm'"), ({"n": 1.5}, "n = 1.5 must be an integer"),
                        ({"flag": 0}, "boolean"), ({"table": 3}, "must be a table"),
-                       ({"table": {"v": 1}}, "unknown key 'table.v'"), ({"grid": ["a"]}, "every entry")]:
+                       ({"table": {"v": 1}}, "unknown key 'table.v'"), ({"grid": ["a"]}, r"grid\[0\] = \"a\" must be a number")]:
         with pytest.raises(ValueError, match=words):
             merge_config(defaults, bad, source="f.toml")
 

@@ -6,7 +6,8 @@ One row per sampled posture. Required columns, in the field's units:
 
 Optional columns are numeric and carry their unit in the name (``temperature_c``, …).
 The sidecar ``<name>.json`` holds provenance (generator, seed, preset errors, injected
-effects). The same reader loads synthetic and real measurements; it rejects a bad file
+effects), checked against ``validation/sidecar.py``'s schema; its ``n_points`` must equal
+the CSV's data rows. Files are bounded before reading (``MAX_TABLE_BYTES``, ``MAX_POINTS``). The same reader loads synthetic and real measurements; it rejects a bad file
 with a ``ValueError`` naming the row (1-based, header = row 1) and the column.
 
 Inside, everything is SI: inputs [m], angles [rad], time [s].
@@ -16,7 +17,6 @@ from __future__ import annotations
 
 import csv
 import io
-import json
 import math
 import os
 from dataclasses import dataclass, field
@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 
 __all__ = ["Measurement", "REQUIRED_COLUMNS", "read_measurement", "write_measurement",
-           "sidecar_path"]
+           "sidecar_path", "read_trajectory", "MAX_POINTS", "MAX_TABLE_BYTES"]
 
 REQUIRED_COLUMNS = ("point", "time_s", "leg", "xa1_mm", "xa2_mm", "xa3_mm",
                     "theta_x_urad", "theta_y_urad", "theta_z_urad")
@@ -39,6 +39,14 @@ MAX_ABS_INPUT_MM = 100.0
 MAX_ABS_ANGLE_URAD = 1e5
 # point and leg are counters: beyond 2^53 a float no longer holds every integer exactly
 MAX_INDEX = 2.0**53
+# Points of a curve or a trajectory (the scenario's n_points, a trajectory file's and a
+# measurement's rows): the paper's curve has 77. The analytic truth takes ~30 ms a point
+# here (77 points in 2.4 s), so 1e5 points are about an hour of prototype, and every model
+# evaluation of an identification walks them all: more is a mistake, not a measurement.
+MAX_POINTS = 100_000
+# Bytes of a measurement or trajectory CSV, checked before reading: write_measurement's
+# rows are ~120 bytes with one optional column; 400 a row leaves room for a dozen more.
+MAX_TABLE_BYTES = 400 * MAX_POINTS
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -91,6 +99,17 @@ def _parse_number(text: str, row: int, column: str, integer: bool = False) -> fl
     return value
 
 
+def _csv_text(path: Path, what: str) -> str:
+    """The text of a CSV file, its size bounded before reading (MAX_TABLE_BYTES), UTF-8
+    (a byte-order mark, spreadsheet programs' "CSV UTF-8", is dropped), without NUL."""
+    from flexcal.geometry.schema import read_text
+
+    text = read_text(path, max_bytes=MAX_TABLE_BYTES, what=what)
+    if "\0" in text:
+        raise ValueError(f"{path}: holds NUL bytes, so it is not a CSV text file; export it as CSV")
+    return text
+
+
 def _csv_rows(reader, path: Path):
     """(row number, cells) from row 2 on; a CSV syntax error is a ValueError naming the row."""
     row_number = 1
@@ -112,16 +131,7 @@ def read_measurement(path: str | os.PathLike) -> Measurement:
     column of the first bad value.
     """
     path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"measurement file {path} does not exist")
-    try:
-        # utf-8-sig: a byte-order mark (spreadsheet programs' "CSV UTF-8") is not part of 'point'
-        text = path.read_bytes().decode("utf-8-sig")
-    except UnicodeDecodeError as error:
-        raise ValueError(f"{path}: not UTF-8 text (byte {error.start}); save it as CSV in UTF-8 or ASCII") from None
-    if "\0" in text:
-        raise ValueError(f"{path}: holds NUL bytes, so it is not a CSV text file; export the measurement as CSV")
-    reader = csv.reader(io.StringIO(text))
+    reader = csv.reader(io.StringIO(_csv_text(path, "measurement file")))
     try:
         header = [h.strip() for h in next(reader)]
     except StopIteration:
@@ -145,6 +155,8 @@ def read_measurement(path: str | os.PathLike) -> Measurement:
             continue
         if len(raw) != len(header):
             raise ValueError(f"{path}: row {row_number} has {len(raw)} values, the header has {len(header)}")
+        if len(rows) == MAX_POINTS:
+            raise ValueError(f"{path}: more than {MAX_POINTS} data rows (points); split the measurement")
         values = {}
         try:
             for column, cell in zip(header, raw):
@@ -174,15 +186,10 @@ def read_measurement(path: str | os.PathLike) -> Measurement:
     def column(name: str) -> np.ndarray:
         return np.array([values[name] for _, values in rows])
 
-    metadata: dict[str, Any] = {}
+    from .sidecar import read_sidecar
+
     side = sidecar_path(path)
-    if side.is_file():
-        try:
-            metadata = json.loads(side.read_bytes().decode("utf-8-sig"))
-        except (json.JSONDecodeError, UnicodeDecodeError, RecursionError) as error:
-            raise ValueError(f"{side}: not valid JSON ({error})") from None
-        if not isinstance(metadata, dict):
-            raise ValueError(f"{side}: the sidecar must hold a JSON object ({{...}}), not a {type(metadata).__name__}")
+    metadata: dict[str, Any] = read_sidecar(side, n_rows=len(rows)) if side.is_file() else {}
     return Measurement(
         point=column("point").astype(int),
         time=column("time_s"),
@@ -192,6 +199,47 @@ def read_measurement(path: str | os.PathLike) -> Measurement:
         extras={name: column(name) for name in extras_names},
         metadata=metadata,
     )
+
+
+TRAJECTORY_COLUMNS = INPUT_COLUMNS
+
+
+def read_trajectory(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
+    """(inputs (n, 3) [m], leg (n,) int) of a trajectory CSV: columns xa1_mm, xa2_mm, xa3_mm
+    [mm] and optionally leg (an integer >= 0; a blank cell or no column: 1), e.g. ``flexcal
+    design``'s trajectory.csv; other columns are ignored. ``ValueError`` naming the file
+    and the row (header = row 1) for a short row, a cell that is not a number, a leg that
+    is not an integer, more than MAX_POINTS rows or more than MAX_TABLE_BYTES bytes."""
+    path = Path(path)
+    reader = csv.reader(io.StringIO(_csv_text(path, "trajectory file")))
+    try:
+        header = [h.strip() for h in next(reader)]
+    except (StopIteration, csv.Error):
+        raise ValueError(f"{path}: no header row (expected {','.join(TRAJECTORY_COLUMNS)}[,leg])") from None
+    for column in TRAJECTORY_COLUMNS:
+        if column not in header:
+            raise ValueError(f"{path}: row 1 (header) lacks column {column!r}")
+    at = {name: header.index(name) for name in (*TRAJECTORY_COLUMNS, "leg") if name in header}
+    inputs, legs = [], []
+    for row_number, raw in _csv_rows(reader, path):
+        if not raw or all(not cell.strip() for cell in raw):
+            continue
+        if len(raw) != len(header):
+            raise ValueError(f"{path}: row {row_number} has {len(raw)} values, the header has {len(header)}")
+        if len(inputs) == MAX_POINTS:
+            raise ValueError(f"{path}: more than {MAX_POINTS} rows (points); split the trajectory")
+        try:
+            inputs.append([_parse_number(raw[at[c]].strip(), row_number, c) * 1e-3 for c in TRAJECTORY_COLUMNS])
+            cell = raw[at["leg"]].strip() if "leg" in at else ""
+            leg = _parse_number(cell, row_number, "leg", integer=True) if cell else 1
+        except ValueError as error:
+            raise ValueError(f"{path}: {error}") from None
+        if leg < 0:
+            raise ValueError(f"{path}: row {row_number}, column 'leg': {cell} must be >= 0")
+        legs.append(int(leg))
+    if not inputs:
+        raise ValueError(f"{path}: no rows")
+    return np.array(inputs), np.array(legs)
 
 
 def write_measurement(path: str | os.PathLike, measurement: Measurement) -> None:

@@ -128,7 +128,10 @@ def apply_config(parser: argparse.ArgumentParser, module, argv: list[str]) -> di
     from ..config import read_config_file
 
     merged = read_config_file(path, defaults)
-    _set_option_defaults(parser, merged)
+    try:
+        _set_option_defaults(parser, merged)
+    except ValueError as error:  # a value of the right type that is not one of the option's choices
+        raise ValueError(f"--config {path}: {error}") from None
     parser.set_defaults(config=merged)
     return merged
 

@@ -28,6 +28,11 @@ A scenario file::
     magnitude_urad = 8.0       # or: a drawn injector of that size (effects.library.make_injector)
     seed = 3
 
+Every key is typed (``ScenarioFile`` and its tables, frozen ``msgspec.Struct`` types):
+a value of another type (``seed = 1.7``, ``draw_unset = "no"``) or a key not listed above
+is refused with one line naming the file, the key, the expected type and the value
+(``flexcal.geometry.schema``); ``n_points`` is at most ``measurements.MAX_POINTS``.
+
 The built-in scenario ``table1`` uses the paper's Table 1 presets (initial positions
 −0.20, 0.32, 0.40 mm; CL 0.42, 0.25, 0.10 mm; μ 0.83, 0.87, 0.93) and draws every other
 source within its range from the seed. Like the paper's simulation it is noise-free
@@ -44,17 +49,21 @@ of a scenario travels in the measurement's sidecar (``provenance()["mechanism"]`
 
 from __future__ import annotations
 
-import csv
-import math
-import tomllib
+import logging
+import sys
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any, Literal
 
+import msgspec
 import numpy as np
 
+from flexcal.geometry.schema import FINITE, convert, read_toml
 from flexcal.model.parameters import ParameterSpace, parameter_space
 from flexcal.model.trajectory import standard_trajectory
+
+from ..measurements import MAX_POINTS
+from ..sidecar import MechanismOverrides
 
 __all__ = ["Scenario", "load_scenario", "BUILTIN_SCENARIOS", "scenario_trajectory", "read_trajectory",
            "mechanism_from_metadata", "mechanism_overrides"]
@@ -70,38 +79,90 @@ BUILTIN_SCENARIOS: dict[str, dict[str, Any]] = {
     "paper": {"name": "paper", "seed": 1, "draw_unset": True, "errors": TABLE1_PRESETS,
               "mechanism": {"centre_of_gravity_mm": [0.0, 0.0, 0.0]}},
 }
-_TOP_KEYS = {"name", "seed", "draw_unset", "errors", "sensors", "transmission", "trajectory", "effects", "mechanism"}
-_MECHANISM_KEYS = {"centre_of_gravity_mm", "payload_mass_kg"}
+_STRICT = {"frozen": True, "forbid_unknown_fields": True, "kw_only": True}
+NONNEGATIVE = Annotated[float, msgspec.Meta(ge=0.0, le=sys.float_info.max)]
 
 
-def mechanism_overrides(table: dict[str, Any]) -> dict[str, Any]:
-    """MechanismParams fields (SI) from a ``[mechanism]`` table (display units), checked."""
-    unknown = set(table) - _MECHANISM_KEYS
-    if unknown:
-        raise ValueError(f"[mechanism] has unknown key(s) {sorted(unknown)}; allowed: {sorted(_MECHANISM_KEYS)}")
+class SensorsTable(msgspec.Struct, **_STRICT):
+    """``[sensors]``: noise (standard deviation) and offset [urad], one value or (x, y, z);
+    finite and (noise) >= 0 are checked by ``_per_channel`` (msgspec 0.22 crashes in the
+    garbage collector on a union of a constrained float and a tuple, so no Meta here)."""
+
+    noise_urad: float | tuple[float, float, float] = 0.0
+    offset_urad: float | tuple[float, float, float] = 0.0
+
+
+class TransmissionTable(msgspec.Struct, **_STRICT):
+    """``[transmission]``: breakaway_force_n [N] of the drives' friction."""
+
+    breakaway_force_n: NONNEGATIVE = 2.0
+
+
+class TrajectoryTable(msgspec.Struct, **_STRICT):
+    """``[trajectory]``: the standard one of n_points points, or a CSV file; dwell_s [s]."""
+
+    kind: Literal["standard", "file"] = "standard"
+    file: str | None = None
+    n_points: Annotated[int, msgspec.Meta(ge=1, le=MAX_POINTS)] = 77
+    dwell_s: Annotated[float, msgspec.Meta(gt=0.0, le=sys.float_info.max)] = 2.0
+
+
+class EffectEntry(msgspec.Struct, frozen=True, kw_only=True):
+    """One ``[[effects]]`` table: the keys every effect shares; its injector's own fields
+    (any other key) are checked by ``effects.library.effects_from_scenario``."""
+
+    name: str
+    magnitude_urad: FINITE | None = None
+    seed: Annotated[int, msgspec.Meta(ge=0)] | None = None
+
+
+class ScenarioFile(msgspec.Struct, **_STRICT):
+    """The keys of a scenario file (module docstring), typed; any other key is refused."""
+
+    name: str = "scenario"
+    seed: Annotated[int, msgspec.Meta(ge=0)] = 0
+    draw_unset: bool = True
+    errors: dict[str, FINITE] = {}
+    sensors: SensorsTable = SensorsTable()
+    transmission: TransmissionTable = TransmissionTable()
+    mechanism: MechanismOverrides = MechanismOverrides()
+    trajectory: TrajectoryTable = TrajectoryTable()
+    effects: list[EffectEntry] = []
+
+
+def mechanism_overrides(table: dict[str, Any], *, source: str = "[mechanism]") -> dict[str, Any]:
+    """MechanismParams fields (SI) from a ``[mechanism]`` table (display units), checked
+    (``MechanismOverrides``; a ValueError naming ``source`` and the key otherwise)."""
+    overrides = convert(table, MechanismOverrides, source=source)
     out: dict[str, Any] = {}
-    if "centre_of_gravity_mm" in table:
-        cog = np.asarray(table["centre_of_gravity_mm"], dtype=float)
-        if cog.shape != (3,) or not np.all(np.isfinite(cog)) or np.any(np.abs(cog) > 2000.0):
-            raise ValueError(f"[mechanism] centre_of_gravity_mm={table['centre_of_gravity_mm']!r} must be three "
-                             f"finite numbers within +-2000 mm of O_C")
-        out["centre_of_gravity"] = tuple(float(v) * 1e-3 for v in cog)
-    if "payload_mass_kg" in table:
-        mass = float(table["payload_mass_kg"])
-        if not (math.isfinite(mass) and 0.0 <= mass <= 1e5):
-            raise ValueError(f"[mechanism] payload_mass_kg={mass} must be in [0, 1e5] kg")
-        out["payload_mass"] = mass
+    if overrides.centre_of_gravity_mm is not None:
+        out["centre_of_gravity"] = tuple(float(v) * 1e-3 for v in overrides.centre_of_gravity_mm)
+    if overrides.payload_mass_kg is not None:
+        out["payload_mass"] = float(overrides.payload_mass_kg)
     return out
 
 
 def mechanism_from_metadata(metadata: dict[str, Any]):
-    """The reference mechanism with a measurement sidecar's ``mechanism`` overrides (if any)."""
+    """The reference mechanism with a measurement sidecar's ``mechanism`` overrides (if
+    any); where they change the mount, one warning says which mount models the data."""
     import dataclasses
 
     from flexcal.geometry.params import reference_mechanism
 
+    reference = reference_mechanism()
     table = dict(metadata.get("mechanism") or {})
-    return dataclasses.replace(reference_mechanism(), **mechanism_overrides(table))
+    mechanism = dataclasses.replace(reference, **mechanism_overrides(table, source="the sidecar's mechanism"))
+    if (mechanism.centre_of_gravity, mechanism.payload_mass) != (reference.centre_of_gravity,
+                                                                 reference.payload_mass):
+        logging.getLogger("flexcal.scenario").warning(
+            "the data's mount differs from the reference one: %s (reference: %s); the model uses the data's mount "
+            "(the sidecar's 'mechanism')", _mount_words(mechanism), _mount_words(reference))
+    return mechanism
+
+
+def _mount_words(mechanism) -> str:
+    cog = ", ".join(f"{v * 1e3:g}" for v in mechanism.centre_of_gravity)
+    return f"centre of gravity ({cog}) mm, payload {mechanism.payload_mass:g} kg"
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -165,49 +226,28 @@ def _per_channel(value: Any, what: str) -> np.ndarray:
 
 def read_trajectory(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
     """(inputs (n, 3) [m], leg (n,)) of a trajectory file: columns xa1_mm, xa2_mm, xa3_mm
-    [mm] and optionally leg (default 1), e.g. ``flexcal design``'s trajectory.csv."""
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"trajectory file {path} does not exist")
-    with path.open() as handle:
-        rows = list(csv.DictReader(handle))
-    if not rows:
-        raise ValueError(f"trajectory file {path}: no rows")
-    for column in ("xa1_mm", "xa2_mm", "xa3_mm"):
-        if column not in rows[0]:
-            raise ValueError(f"trajectory file {path}: row 1 lacks column {column!r}")
-    inputs, legs = [], []
-    for number, row in enumerate(rows, start=2):
-        try:
-            inputs.append([float(row[c]) * 1e-3 for c in ("xa1_mm", "xa2_mm", "xa3_mm")])
-            legs.append(int(float(row.get("leg", 1) or 1)))
-        except ValueError:
-            raise ValueError(f"trajectory file {path}: row {number} has a value that is not a number") from None
-    inputs = np.array(inputs)
-    if not np.all(np.isfinite(inputs)):
-        raise ValueError(f"trajectory file {path}: inputs must be finite")
-    return inputs, np.array(legs)
+    [mm] and optionally leg (default 1), e.g. ``flexcal design``'s trajectory.csv
+    (``flexcal.validation.measurements.read_trajectory``)."""
+    from ..measurements import read_trajectory as read_trajectory_csv
+
+    return read_trajectory_csv(path)
 
 
 def scenario_trajectory(spec: dict[str, Any], space: ParameterSpace, base: Path) -> tuple[np.ndarray, np.ndarray]:
-    """(inputs (n, 3) [m], leg (n,)) from a ``[trajectory]`` table."""
-    kind = spec.get("kind", "standard")
-    if kind == "standard":
-        trajectory = standard_trajectory(space.mechanism, n_points=int(spec.get("n_points", 77)))
+    """(inputs (n, 3) [m], leg (n,)) from a ``[trajectory]`` table (``TrajectoryTable``)."""
+    table = convert(spec, TrajectoryTable, source="[trajectory]")
+    if table.kind == "standard":
+        trajectory = standard_trajectory(space.mechanism, n_points=table.n_points)
         return trajectory.inputs, trajectory.leg
-    if kind == "file":
-        if "file" not in spec:
-            raise ValueError("[trajectory] kind = 'file' needs file = 'inputs.csv'")
-        return read_trajectory((base / spec["file"]).resolve())
-    raise ValueError(f"[trajectory] kind={kind!r} must be 'standard' or 'file'")
+    if table.file is None:
+        raise ValueError("[trajectory] kind = 'file' needs file = 'inputs.csv'")
+    return read_trajectory((base / table.file).resolve())
 
 
 def _from_table(table: dict[str, Any], *, base: Path, seed: int | None, noise_urad: float | None,
-                space: ParameterSpace) -> Scenario:
-    unknown = set(table) - _TOP_KEYS
-    if unknown:
-        raise ValueError(f"scenario has unknown key(s) {sorted(unknown)}; allowed: {sorted(_TOP_KEYS)}")
-    seed = int(table.get("seed", 0) if seed is None else seed)
+                space: ParameterSpace, source: str) -> Scenario:
+    typed = convert(table, ScenarioFile, source=source)
+    seed = typed.seed if seed is None else int(seed)
     mechanism_table = dict(table.get("mechanism", {}))
     if mechanism_table:
         import dataclasses
@@ -215,52 +255,48 @@ def _from_table(table: dict[str, Any], *, base: Path, seed: int | None, noise_ur
         space = parameter_space(dataclasses.replace(space.mechanism, **mechanism_overrides(mechanism_table)))
     if seed < 0:
         raise ValueError(f"seed={seed} must be >= 0")
-    errors = dict(table.get("errors", {}))
+    errors = dict(typed.errors)
     explicit = space.build_values(errors, display_units=True)  # checks names and ranges
     values = explicit.copy()
-    if table.get("draw_unset", True):
+    if typed.draw_unset:
         rng = np.random.default_rng([seed, 1])  # stream 1: error draws (stream 2: sensor noise)
         drawn = rng.uniform(np.array([p.lower for p in space.parameters]), np.array([p.upper for p in space.parameters]))
         unset = np.array([p.name not in errors for p in space.parameters])
         values[unset] = drawn[unset]
-    sensors = dict(table.get("sensors", {}))
-    noise = _per_channel(sensors.get("noise_urad", 0.0) if noise_urad is None else noise_urad, "noise_urad") * 1e-6
+    noise = _per_channel(typed.sensors.noise_urad if noise_urad is None else noise_urad, "noise_urad") * 1e-6
     if np.any(noise < 0):
         raise ValueError(f"noise_urad must be >= 0, got {noise * 1e6}")
-    offset = _per_channel(sensors.get("offset_urad", 0.0), "offset_urad") * 1e-6
-    breakaway = float(dict(table.get("transmission", {})).get("breakaway_force_n", 2.0))
-    if not (math.isfinite(breakaway) and breakaway >= 0):
-        raise ValueError(f"breakaway_force_n={breakaway} must be >= 0")
-    trajectory_spec = dict(table.get("trajectory", {}))
-    inputs, leg = scenario_trajectory(trajectory_spec, space, base)
-    dwell = float(trajectory_spec.get("dwell_s", 2.0))
-    if not dwell > 0:
-        raise ValueError(f"dwell_s={dwell} must be > 0")
+    offset = _per_channel(typed.sensors.offset_urad, "offset_urad") * 1e-6
+    inputs, leg = scenario_trajectory(dict(table.get("trajectory", {})), space, base)
     effects = tuple(dict(e) for e in table.get("effects", []))
-    for effect in effects:
-        if "name" not in effect:
-            raise ValueError("every [[effects]] entry needs a name")
-    return Scenario(name=str(table.get("name", "scenario")), seed=seed, values=values, preset_names=tuple(errors),
-                    noise=noise, offset=offset, breakaway_force=breakaway, inputs=inputs, leg=leg, dwell=dwell,
-                    effects=effects, space=space, mechanism=mechanism_table)
+    from ..effects.library import effects_from_scenario
+
+    effects_from_scenario(effects)  # the injectors' own fields: refused now, not after the first FEM build
+    return Scenario(name=typed.name, seed=seed, values=values, preset_names=tuple(errors),
+                    noise=noise, offset=offset, breakaway_force=typed.transmission.breakaway_force_n, inputs=inputs,
+                    leg=leg, dwell=typed.trajectory.dwell_s, effects=effects, space=space, mechanism=mechanism_table)
 
 
 def load_scenario(name_or_path: str, *, seed: int | None = None, noise_urad: float | None = None,
                   space: ParameterSpace | None = None) -> Scenario:
-    """A built-in scenario by name (``table1``, ``nominal``) or a TOML file.
+    """A built-in scenario by name (``table1``, ``nominal``, ``paper``) or a TOML file.
 
-    ``seed`` and ``noise_urad`` override the file's values (command-line options).
+    ``seed`` and ``noise_urad`` override the file's values (command-line options). A file
+    is checked against ``ScenarioFile`` (bounded size, UTF-8, known keys of the right
+    types); every refusal is a ValueError of one line naming the file.
     """
     space = space or parameter_space()
     if name_or_path in BUILTIN_SCENARIOS:
         return _from_table(BUILTIN_SCENARIOS[name_or_path], base=Path.cwd(), seed=seed, noise_urad=noise_urad,
-                           space=space)
+                           space=space, source=f"built-in scenario {name_or_path!r}")
     path = Path(name_or_path)
     if not path.is_file():
         raise FileNotFoundError(f"scenario {name_or_path!r} is neither a built-in ({', '.join(BUILTIN_SCENARIOS)}) "
                                 f"nor an existing TOML file")
+    table = read_toml(path, what="scenario file")
     try:
-        table = tomllib.loads(path.read_text())
-    except tomllib.TOMLDecodeError as error:
-        raise ValueError(f"{path}: not valid TOML ({error})") from None
-    return _from_table(table, base=path.parent, seed=seed, noise_urad=noise_urad, space=space)
+        return _from_table(table, base=path.parent, seed=seed, noise_urad=noise_urad, space=space, source=str(path))
+    except (ValueError, FileNotFoundError) as error:  # checks after the schema name the key, not always the file
+        if str(path) in str(error):
+            raise
+        raise ValueError(f"{path}: {error}") from None
