@@ -47,14 +47,15 @@ import tempfile
 import threading
 import uuid
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any, Iterable, Iterator
 
 import numpy as np
 
 from flexcal.fem.owners import OWNER_TAG, owner_tag, remove_folders_of_gone_owners
 
 __all__ = ["out_folder", "staged_output", "atomic_path", "write_json", "write_text", "to_jsonable", "dumps_strict",
-           "interrupts_deferred", "TIMING_KEYS", "split_timings", "write_report", "remove_stale_staging"]
+           "interrupts_deferred", "TIMING_KEYS", "split_timings", "write_report", "remove_stale_staging",
+           "written_folders"]
 
 # Report keys that hold wall-clock or CPU times [s]: they differ between two runs of the
 # same input, so ``write_report`` moves them from report.json to timings.json.
@@ -104,6 +105,11 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     try:
         yield tmp_path
         os.replace(tmp_path, path)
+    except OSError as error:
+        tmp_path.unlink(missing_ok=True)
+        if error.errno is None or error.filename is not None:
+            raise
+        raise type(error)(error.errno, error.strerror, str(path)) from error  # a writer's ENOSPC names no file
     except BaseException:
         tmp_path.unlink(missing_ok=True)
         raise
@@ -123,12 +129,21 @@ def _visible_entries(folder: Path) -> list[str]:
     return sorted(p.name for p in folder.iterdir() if not p.name.startswith("."))
 
 
-def out_folder(out_dir: str | os.PathLike, *, replace: bool = False, resume: bool = False) -> Path:
+def _shown(names: list[str]) -> str:
+    return ", ".join(names[:4]) + (f" and {len(names) - 4} more" if len(names) > 4 else "")
+
+
+def out_folder(out_dir: str | os.PathLike, *, replace: bool = False, resume: bool = False,
+               inputs: Iterable[tuple[str, Any]] = ()) -> Path:
     """``--out`` as a path, checked before any computation: not a file, writable (the
     folder itself if it exists, else its nearest existing parent), and, unless
     ``replace`` (``--force``) or ``resume`` (commands that continue an earlier run in
     the same folder), not already holding files (another run's report, stale PNGs).
+    ``replace`` empties only a run folder (``run_folder.is_run_folder``) that holds none
+    of ``inputs`` ((option, value) pairs of the command line: ``run_folder.inputs_inside``).
     ValueError with one line saying what to do."""
+    from .run_folder import MARKER_NAME, inputs_inside, is_run_folder
+
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise ValueError(f"--out {out} exists and is not a folder; give a folder name")
@@ -141,9 +156,17 @@ def out_folder(out_dir: str | os.PathLike, *, replace: bool = False, resume: boo
                              f"or a folder holding the working directory); give a folder of its own")
         held = _visible_entries(out)
         if held and not (replace or resume):
-            shown = ", ".join(held[:4]) + (f" and {len(held) - 4} more" if len(held) > 4 else "")
-            raise ValueError(f"--out {out} already holds files ({shown}); pass --force to replace them "
+            raise ValueError(f"--out {out} already holds files ({_shown(held)}); pass --force to replace them "
                              f"or choose another folder")
+        if held and replace:
+            inside = inputs_inside(out, inputs)
+            if inside:
+                raise ValueError(f"--out {out} holds an input of this command ({'; '.join(inside)}); --force would "
+                                 f"delete it: choose another --out")
+            if not is_run_folder(out):
+                raise ValueError(f"--out {out} is not a flexcal run folder (no {MARKER_NAME} marker, no report.json "
+                                 f"with timings.json) and holds {_shown(held)}; --force replaces only an earlier "
+                                 f"run's folder: choose a new or empty folder")
         return out
     ancestor = out.absolute().parent
     while not ancestor.exists():
@@ -204,41 +227,85 @@ def remove_stale_staging(folder: str | os.PathLike) -> list[str]:
     return removed
 
 
+_written: list[Path] = []  # the --out folders staged_output filled in this process (resolved)
+
+
+def written_folders() -> tuple[Path, ...]:
+    """The ``--out`` folders (resolved) whose results ``staged_output`` moved in during
+    this process, oldest first: a Ctrl-C after that point must not say nothing was written."""
+    return tuple(_written)
+
+
+def _naming_the_path(error: OSError, staging: Path, out: Path) -> OSError:
+    """``error`` naming where it happened as the user knows it: a path inside the staging
+    folder as the same path in ``out``; no path at all (a writer's ENOSPC, EFBIG, EIO) as
+    ``out``."""
+    if error.errno is None:
+        return error
+    name = error.filename
+    if name is None:
+        name = str(out)
+    elif Path(name).is_relative_to(staging):
+        name = str(out / Path(name).relative_to(staging))
+    else:
+        return error
+    return type(error)(error.errno, error.strerror, name)
+
+
 @contextlib.contextmanager
 def staged_output(out_dir: str | os.PathLike, *, replace: bool = False, resume: bool = False) -> Iterator[Path]:
     """A staging folder for the outputs of a run, moved into ``out_dir`` when the block
     succeeds, removed otherwise (see the module doc). ``replace`` (``--force``): what
     ``out_dir`` held before is removed when the new files move in (not before: a failed
     run keeps the old results); ``resume``: files of the folder not written now stay.
-    Checks ``out_dir`` first (``out_folder``)."""
+    Checks ``out_dir`` first (``out_folder``) and holds its reservation for the block
+    (``run_folder.reserved``: re-entrant, so inside the command line's own it adds
+    nothing); writes the marker ``.flexcal-run`` (the command's name) with the files."""
+    from .run_folder import MARKER_NAME, held_command, reserved
+
     out = out_folder(out_dir, replace=replace, resume=resume)
-    if out.is_dir():  # stage inside it: same file system (a mount point as --out), no EXDEV
-        where = out
-    else:
-        where = out.absolute().parent
-        where.mkdir(parents=True, exist_ok=True)
-    remove_stale_staging(where)
-    staging = Path(tempfile.mkdtemp(prefix=f".{out.name or 'out'}.flexcal-{owner_tag()}.", dir=where))
-    os.chmod(staging, 0o777 & ~_UMASK)
-    try:
-        yield staging
-        with interrupts_deferred():
-            if not out.is_dir():
-                try:
-                    os.rename(staging, out)  # a new folder: one atomic step
-                    return
-                except OSError:
-                    out.mkdir(parents=True, exist_ok=True)
-            if replace:
-                for name in _visible_entries(out):
-                    _remove(out / name)
-            for item in staging.iterdir():
-                target = out / item.name
-                if target.is_dir() and not target.is_symlink():
-                    shutil.rmtree(target)
-                _move(item, target)
-    finally:
-        shutil.rmtree(staging, ignore_errors=True)
+    command = held_command(out) or "python"
+    with reserved(out, command=command):
+        if out.is_dir():  # stage inside it: same file system (a mount point as --out), no EXDEV
+            where = out
+        else:
+            where = out.absolute().parent
+            where.mkdir(parents=True, exist_ok=True)
+        remove_stale_staging(where)
+        staging = Path(tempfile.mkdtemp(prefix=f".{out.name or 'out'}.flexcal-{owner_tag()}.", dir=where))
+        os.chmod(staging, 0o777 & ~_UMASK)
+        try:
+            yield staging
+            (staging / MARKER_NAME).write_text(f"{command}\n", encoding="utf-8")
+            with interrupts_deferred():
+                _move_in(staging, out, replace)
+                _written.append(out.resolve())
+        except OSError as error:
+            raised = _naming_the_path(error, staging, out)
+            if raised is error:
+                raise
+            raise raised from error
+        finally:
+            shutil.rmtree(staging, ignore_errors=True)
+
+
+def _move_in(staging: Path, out: Path, replace: bool) -> None:
+    """The staged files into ``out`` (see the module doc); ``replace`` first removes its
+    visible files (the hidden lock and marker stay)."""
+    if not out.is_dir():
+        try:
+            os.rename(staging, out)  # a new folder: one atomic step
+            return
+        except OSError:
+            out.mkdir(parents=True, exist_ok=True)
+    if replace:
+        for name in _visible_entries(out):
+            _remove(out / name)
+    for item in staging.iterdir():
+        target = out / item.name
+        if target.is_dir() and not target.is_symlink():
+            shutil.rmtree(target)
+        _move(item, target)
 
 
 # Strict JSON (RFC 8259 has no NaN or Infinity): a non-finite number is written as null,
