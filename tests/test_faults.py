@@ -194,7 +194,7 @@ def test_sigterm_during_the_final_moves_lets_them_finish(tmp_path, monkeypatch):
                 (staging / name).write_text("new")
             monkeypatch.setattr(os, "replace", replace_then_terminate)
     monkeypatch.undo()
-    assert sorted(p.name for p in tmp_path.rglob("*")) == ["a.txt", "b.txt", "out"]
+    assert sorted(p.name for p in tmp_path.rglob("*")) == [".flexcal-run", "a.txt", "b.txt", "out"]
 
 
 # the default mapped mesher: a hinge run of a few seconds whose staging step (VTU and pictures) lasts ~1 s
@@ -290,6 +290,7 @@ def test_out_holding_another_run_is_refused_and_force_replaces_it(tmp_path, caps
     out.mkdir()
     (out / "fit.png").write_bytes(b"stale picture of an earlier identify")
     (out / "report.json").write_text("{}")
+    (out / "timings.json").write_text("{}")  # report.json with timings.json: a run of before the marker
     start = time.monotonic()
     status = cli.main([*TRUTH, "--out", str(out), "-q"])
     _one_line(capsys, status, 2, "already holds files", "fit.png", "--force")
@@ -356,7 +357,7 @@ def test_moves_across_file_systems_are_copied(tmp_path, monkeypatch):
         monkeypatch.setattr(os, "replace", cross_device)  # for the final moves only
     monkeypatch.undo()
     assert sorted(str(p.relative_to(tmp_path)) for p in tmp_path.rglob("*")) == [
-        "out", "out/cases", "out/cases/c.json", "out/report.json"]
+        "out", "out/.flexcal-run", "out/cases", "out/cases/c.json", "out/report.json"]
 
 
 # ----------------------------------------------------------------------------------------
