@@ -146,11 +146,10 @@ def test_a_second_run_to_the_same_out_is_refused_while_the_first_runs(tmp_path):
     try:
         while "prototype: started" not in first.stderr.readline():  # the first run holds --out and computes
             assert first.poll() is None, "the first run ended early"
-        second = _flexcal([*TRUTH, "--seed", "4", "--out", "out", "-q"], tmp_path)
-        forced = _flexcal([*TRUTH, "--seed", "4", "--out", "out", "--force", "-q"], tmp_path)
-        assert first.poll() is None, "the first run must still be running, or this test proves nothing"
-        for done in (second, forced):
-            _one_error_line(done, "--out out is in use", f"flexcal truth, pid {first.pid}", "wait for it to end")
+        for force in ([], ["--force"]):
+            second = _flexcal([*TRUTH, "--seed", "4", "--out", "out", *force, "-q"], tmp_path)
+            _one_error_line(second, "--out out is in use", f"flexcal truth, pid {first.pid}", "wait for it to end")
+            assert first.poll() is None, "the first run must still be running, or this test proves nothing"
         first.stderr.read()
         assert first.wait(WAIT_S) == 0
     finally:
