@@ -26,7 +26,7 @@ import pytest
 
 from flexcal.validation import cli
 from flexcal.validation.output import dumps_strict, staged_output, write_json
-from flexcal.validation.run_folder import lock_paths, read_holder
+from flexcal.validation.out_lock import lock_paths, read_holder
 
 # a command line, runnable in a child process, that starts with SIGINT delivered as Python's
 # KeyboardInterrupt even when pytest itself was started in the background (SIGINT ignored)

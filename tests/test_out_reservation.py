@@ -18,7 +18,8 @@ import pytest
 from flexcal.fem.owners import host_hash, process_state
 from flexcal.validation import cli
 from flexcal.validation.output import atomic_path, staged_output
-from flexcal.validation.run_folder import LOCK_NAME, MARKER_NAME, inputs_inside, lock_paths, read_holder, reserved
+from flexcal.validation.out_lock import LOCK_NAME, lock_paths, read_holder, reserved
+from flexcal.validation.run_folder import MARKER_NAME, inputs_inside
 
 FLEXCAL = [sys.executable, "-c", "import sys; from flexcal.validation.cli import main; sys.exit(main())"]
 TRUTH = ["truth", "--scenario", "table1", "--provider", "analytic", "--seed", "3"]

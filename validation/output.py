@@ -1,9 +1,14 @@
 """Writing results whole or not at all.
 
-``out_folder(out_dir)`` checks ``--out`` before any computation (the command line calls
-it once, before the command runs): not a file, writable, and not holding the files of
-another run unless ``--force`` (``replace=True``) or the command resumes its own earlier
-run (``resume=True``: ``sweep``, ``diagnose-benchmark``).
+``out_folder(out_dir)`` checks ``--out`` before any computation: not a file, writable,
+and not holding the files of another run unless ``--force`` (``replace=True``) or the
+command resumes its own earlier run (``resume=True``: ``sweep``, ``diagnose-benchmark``).
+``--force`` replaces only a run folder (the hidden marker ``.flexcal-run``, or an earlier
+run's report.json with timings.json) that holds none of the command's inputs (``inputs``:
+``run_folder.inputs_inside``); anything else is refused in one line. The command line
+calls it through ``run_folder.reserved_out``, which first reserves ``--out`` for the run
+(an owner-tagged lock file: a second run to the same folder is refused; a killed run's
+lock is cleared; see ``flexcal.validation.run_folder``).
 
 ``staged_output(out_dir)`` yields a temporary staging folder (hidden, ``.NAME.*``)
 beside a new ``out_dir``, or inside an existing one, so it is always on the target's own
@@ -20,7 +25,13 @@ removed at that moment (a failed run keeps the old results). On any error,
 ``KeyboardInterrupt`` (Ctrl-C) and ``signals.Terminated`` (SIGTERM) included, the staging
 folder is removed and ``out_dir`` is untouched. A fresh ``out_dir`` appears in one
 rename; into an existing one each file moves by its own rename (each file is whole, old
-or new), with Ctrl-C and SIGTERM held back until the moves are done.
+or new), with Ctrl-C and SIGTERM held back until the moves are done. The staged files
+include the marker ``.flexcal-run`` (the command's name); ``replace`` removes only
+visible files, so the marker and the lock stay. ``staged_output`` holds ``out_dir``'s
+reservation for its block (re-entrant: inside the command line's own it adds nothing).
+An ``OSError`` of the block or the moves that names no file (a writer's ENOSPC or EFBIG)
+is raised again naming ``out_dir``, and one naming a file in the staging folder names the
+same file in ``out_dir``; ``atomic_path`` names its target likewise.
 
 ``atomic_path(path)`` yields a temporary name beside ``path`` for any writer (matplotlib,
 numpy, csv); on success it is renamed onto ``path``, on error deleted. ``write_json`` and
@@ -47,11 +58,13 @@ import tempfile
 import threading
 import uuid
 from pathlib import Path
-from typing import Any, Iterable, Iterator
+from typing import Any, Iterator
 
 import numpy as np
 
 from flexcal.fem.owners import OWNER_TAG, owner_tag, remove_folders_of_gone_owners
+
+from .run_folder import MARKER_NAME, out_folder, visible_entries
 
 __all__ = ["out_folder", "staged_output", "atomic_path", "write_json", "write_text", "to_jsonable", "dumps_strict",
            "interrupts_deferred", "TIMING_KEYS", "split_timings", "write_report", "remove_stale_staging",
@@ -113,68 +126,6 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     except BaseException:
         tmp_path.unlink(missing_ok=True)
         raise
-
-
-def _probe_writable(folder: Path, what: str) -> None:
-    """ValueError (one line) unless a file can be made in ``folder`` (tried, not guessed
-    from mode bits: root ignores those, read-only mounts do not show in them)."""
-    try:
-        os.rmdir(tempfile.mkdtemp(prefix=".flexcal-probe.", dir=folder))
-    except OSError as error:
-        raise ValueError(f"--out {what}: cannot write in {folder} ({error.strerror or error}); "
-                         f"choose a folder you can write to") from None
-
-
-def _visible_entries(folder: Path) -> list[str]:
-    return sorted(p.name for p in folder.iterdir() if not p.name.startswith("."))
-
-
-def _shown(names: list[str]) -> str:
-    return ", ".join(names[:4]) + (f" and {len(names) - 4} more" if len(names) > 4 else "")
-
-
-def out_folder(out_dir: str | os.PathLike, *, replace: bool = False, resume: bool = False,
-               inputs: Iterable[tuple[str, Any]] = ()) -> Path:
-    """``--out`` as a path, checked before any computation: not a file, writable (the
-    folder itself if it exists, else its nearest existing parent), and, unless
-    ``replace`` (``--force``) or ``resume`` (commands that continue an earlier run in
-    the same folder), not already holding files (another run's report, stale PNGs).
-    ``replace`` empties only a run folder (``run_folder.is_run_folder``) that holds none
-    of ``inputs`` ((option, value) pairs of the command line: ``run_folder.inputs_inside``).
-    ValueError with one line saying what to do."""
-    from .run_folder import MARKER_NAME, inputs_inside, is_run_folder
-
-    out = Path(out_dir)
-    if out.exists() and not out.is_dir():
-        raise ValueError(f"--out {out} exists and is not a folder; give a folder name")
-    if out.is_dir():
-        _probe_writable(out, str(out))
-        resolved = out.resolve()
-        if replace and (resolved == Path.home().resolve() or resolved == Path(resolved.anchor)
-                        or Path.cwd().resolve().is_relative_to(resolved)):
-            raise ValueError(f"--out {out} with --force would empty {resolved} (the home folder, the file-system root "
-                             f"or a folder holding the working directory); give a folder of its own")
-        held = _visible_entries(out)
-        if held and not (replace or resume):
-            raise ValueError(f"--out {out} already holds files ({_shown(held)}); pass --force to replace them "
-                             f"or choose another folder")
-        if held and replace:
-            inside = inputs_inside(out, inputs)
-            if inside:
-                raise ValueError(f"--out {out} holds an input of this command ({'; '.join(inside)}); --force would "
-                                 f"delete it: choose another --out")
-            if not is_run_folder(out):
-                raise ValueError(f"--out {out} is not a flexcal run folder (no {MARKER_NAME} marker, no report.json "
-                                 f"with timings.json) and holds {_shown(held)}; --force replaces only an earlier "
-                                 f"run's folder: choose a new or empty folder")
-        return out
-    ancestor = out.absolute().parent
-    while not ancestor.exists():
-        ancestor = ancestor.parent
-    if not ancestor.is_dir():
-        raise ValueError(f"--out {out}: {ancestor} is a file, not a folder; choose another --out")
-    _probe_writable(ancestor, str(out))
-    return out
 
 
 def _move(source: Path, target: Path) -> None:
@@ -261,7 +212,7 @@ def staged_output(out_dir: str | os.PathLike, *, replace: bool = False, resume: 
     Checks ``out_dir`` first (``out_folder``) and holds its reservation for the block
     (``run_folder.reserved``: re-entrant, so inside the command line's own it adds
     nothing); writes the marker ``.flexcal-run`` (the command's name) with the files."""
-    from .run_folder import MARKER_NAME, held_command, reserved
+    from .out_lock import held_command, reserved
 
     out = out_folder(out_dir, replace=replace, resume=resume)
     command = held_command(out) or "python"
@@ -299,7 +250,7 @@ def _move_in(staging: Path, out: Path, replace: bool) -> None:
         except OSError:
             out.mkdir(parents=True, exist_ok=True)
     if replace:
-        for name in _visible_entries(out):
+        for name in visible_entries(out):
             _remove(out / name)
     for item in staging.iterdir():
         target = out / item.name

@@ -14,7 +14,12 @@ a bad option) print one line on stderr and exit with status 2; Ctrl-C exits 130,
 143 (one line; staging folders removed: ``flexcal.validation.cli.signals``); a bug
 prints one line and exits 1; ``--debug`` adds the traceback. Commands write their outputs
 only after the work succeeded (``flexcal.validation.output``), so a failed or
-interrupted run leaves nothing partial.
+interrupted run leaves nothing partial. Before a command runs, ``--out`` is reserved for
+it until it ends (``flexcal.validation.out_lock``: a second run to the same folder is
+refused) and checked (``flexcal.validation.run_folder``: ``--force`` only on a run folder
+that holds none of the command's inputs), and an option that takes a file but was given
+a folder is refused. Once the command has returned, Ctrl-C and SIGTERM are held back
+until the process has ended (``_hold_back_late_signals``).
 """
 
 from __future__ import annotations
@@ -219,7 +224,7 @@ def _main(argv: list[str], command: str | None) -> int:
     central_json = "json" in args._central and args.json
     with contextlib.ExitStack() as stack:
         if getattr(args, "out", None):
-            from ..run_folder import reserved_out
+            from ..out_lock import reserved_out
 
             # before any computation: --out reserved for this run (a second run is refused), writable, not
             # another run's folder without --force, --force only on a run folder holding no input

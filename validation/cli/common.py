@@ -14,7 +14,8 @@
 - an epilog listing its ``EXAMPLES`` (tuple of command lines).
 
 A flag the module already defined is left to the module (``forward --json`` prints its
-own JSON). ``add_out``, ``add_seed`` and ``add_scenario`` give the shared options one
+own JSON). ``named_values`` lists every parsed value by option (what ``--force`` checks for
+the command's inputs), ``check_file_options`` refuses a folder given for a file. ``add_out``, ``add_seed`` and ``add_scenario`` give the shared options one
 name and one help text everywhere (``options.py``).
 """
 
