@@ -218,8 +218,10 @@ def error_line(command: str, error: BaseException) -> str:
     if isinstance(error, OSError) and not isinstance(error, FileNotFoundError) and error.filename:
         message = f"{error.strerror or message}: {error.filename}"
     if isinstance(error, OSError) and error.errno in _DISK_FULL:
-        where = "there" if error.filename else "in --out, the FEM cache or the temporary folder"
-        message += f" (free space {where}, or choose another --out)"
+        if not error.filename:  # no path known (a writer outside --out): say where flexcal writes
+            message = f"{error.strerror or message} (free space in --out, the FEM cache or the temporary folder)"
+        else:
+            message += " (free space there, or choose another --out)"
     return f"flexcal {command}: error: {message}"
 
 
