@@ -71,8 +71,8 @@ def test_force_never_replaces_the_folder_holding_the_commands_data(tmp_path, tru
     run1 = tmp_path / "run1"
     subprocess.run(["cp", "-a", str(truth_run), str(run1)], check=True)
     before = _snapshot(run1)
-    done = _flexcal([command, "--data", "run1/curves.csv", *FAST_CALIBRATION[command], "--force", "--out", "run1", "-q"],
-                    tmp_path)
+    argv = [command, "--data", "run1/curves.csv", *FAST_CALIBRATION[command], "--force", "--out", "run1", "-q"]
+    done = _flexcal(argv, tmp_path)
     _one_error_line(done, "holds an input", "--data run1/curves.csv", "choose another --out")
     assert _snapshot(run1) == before  # the measurement, its sidecar and the rest: untouched
 

@@ -31,7 +31,8 @@ import sys
 from pathlib import Path
 from typing import Any, Iterable
 
-__all__ = ["install_common_options", "apply_config", "print_config", "summary_of", "show_progress", "error_line", "is_user_error", "configure_logging", "without_timings", "examples_epilog", "named_values",
+__all__ = ["install_common_options", "apply_config", "print_config", "summary_of", "show_progress", "error_line",
+           "is_user_error", "configure_logging", "without_timings", "examples_epilog", "named_values",
            "check_file_options"]
 
 # Exceptions that mean "the input cannot be used" (one line, exit 2), beside ValueError

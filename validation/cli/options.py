@@ -14,7 +14,8 @@ from typing import Any
 from ..prototype.providers import PROVIDERS
 
 __all__ = ["add_out", "add_seed", "add_scenario", "add_trajectory", "load_scenario_with_trajectory",
-           "add_executor_options", "executor_options", "worker_count", "scheduler_address", "MODEL_DEFAULTS", "CALIBRATION_DEFAULTS", "add_model_options",
+           "add_executor_options", "executor_options", "worker_count", "scheduler_address", "MODEL_DEFAULTS",
+           "CALIBRATION_DEFAULTS", "add_model_options",
            "add_identification_options", "add_method_options", "prior_scale_option", "add_calibration_options",
            "add_source_options", "load_source", "check_sobol_options", "add_point_model_options"]
 
