@@ -8,7 +8,9 @@ removes the folders in one place whose name matches a pattern with those three g
 and whose owner, on this host, is gone; a live process's folder, another host's (a
 shared file system: its process ids mean nothing here) and folders of other names are
 never touched. Used by the command line's staging folders (``validation/output.py``)
-and fTetWild's scratch folders (``tetwild_process.py``).
+and fTetWild's scratch folders (``tetwild_process.py``); the lock that reserves ``--out``
+records ``owner_tag()`` in its text and tests it with ``owner_alive``
+(``validation/out_lock.py``).
 """
 
 from __future__ import annotations

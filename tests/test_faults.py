@@ -26,6 +26,7 @@ import pytest
 
 from flexcal.validation import cli
 from flexcal.validation.output import dumps_strict, staged_output, write_json
+from flexcal.validation.out_lock import lock_paths, read_holder
 
 # a command line, runnable in a child process, that starts with SIGINT delivered as Python's
 # KeyboardInterrupt even when pytest itself was started in the background (SIGINT ignored)
@@ -194,7 +195,7 @@ def test_sigterm_during_the_final_moves_lets_them_finish(tmp_path, monkeypatch):
                 (staging / name).write_text("new")
             monkeypatch.setattr(os, "replace", replace_then_terminate)
     monkeypatch.undo()
-    assert sorted(p.name for p in tmp_path.rglob("*")) == ["a.txt", "b.txt", "out"]
+    assert sorted(p.name for p in tmp_path.rglob("*")) == [".flexcal-run", "a.txt", "b.txt", "out"]
 
 
 # the default mapped mesher: a hinge run of a few seconds whose staging step (VTU and pictures) lasts ~1 s
@@ -215,6 +216,7 @@ def test_staging_folder_of_a_killed_run_is_removed_by_the_next_run(tmp_path, exi
     if existing_out:
         out.mkdir()
         (out / "old.txt").write_text("an earlier run")
+        (out / ".flexcal-run").write_text("hinge\n")  # the marker: --force replaces only a run folder
         extra = ["--force"]
     where = out if existing_out else tmp_path
     env = {"FLEXCAL_CACHE_DIR": str(tmp_path.parent / f"{tmp_path.name}-cache")}
@@ -228,10 +230,13 @@ def test_staging_folder_of_a_killed_run_is_removed_by_the_next_run(tmp_path, exi
     left = _staging_folders(where)
     assert len(left) == 1 and f"-{run.process.pid}-" in left[0].name, left  # the pid is in the name
     assert (out / "old.txt").is_file() if existing_out else not out.exists()  # --out untouched
+    lock = lock_paths(out)[0 if existing_out else 1]  # its reservation of --out is left too, naming it
+    assert read_holder(lock).pid == run.process.pid
 
     assert subprocess.run([*FLEXCAL, *MAPPED_HINGE, "--out", str(out), "--force", "-q"], cwd=tmp_path,
                           env={**os.environ, **env}, timeout=WAIT_S).returncode == 0
     assert _staging_folders(where) == [] and (out / "report.json").is_file()
+    assert not lock.exists()  # cleared (its owner is gone), then taken and released by the next run
 
 
 def test_only_the_staging_folders_of_gone_processes_are_removed(tmp_path):
@@ -290,6 +295,7 @@ def test_out_holding_another_run_is_refused_and_force_replaces_it(tmp_path, caps
     out.mkdir()
     (out / "fit.png").write_bytes(b"stale picture of an earlier identify")
     (out / "report.json").write_text("{}")
+    (out / "timings.json").write_text("{}")  # report.json with timings.json: a run of before the marker
     start = time.monotonic()
     status = cli.main([*TRUTH, "--out", str(out), "-q"])
     _one_line(capsys, status, 2, "already holds files", "fit.png", "--force")
@@ -308,6 +314,7 @@ def test_force_keeps_the_old_run_when_the_new_one_fails(tmp_path, capsys):
     status = cli.main([*TRUTH, "--noise-urad", "-1", "--out", str(out), "-q", "--force"])
     _one_line(capsys, status, 2, "--noise-urad")
     assert (out / "curves.csv").read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out"] and not (out / ".flexcal-lock").exists()  # released
 
 
 @pytest.fixture
@@ -356,7 +363,7 @@ def test_moves_across_file_systems_are_copied(tmp_path, monkeypatch):
         monkeypatch.setattr(os, "replace", cross_device)  # for the final moves only
     monkeypatch.undo()
     assert sorted(str(p.relative_to(tmp_path)) for p in tmp_path.rglob("*")) == [
-        "out", "out/cases", "out/cases/c.json", "out/report.json"]
+        "out", "out/.flexcal-run", "out/cases", "out/cases/c.json", "out/report.json"]
 
 
 # ----------------------------------------------------------------------------------------

@@ -38,7 +38,7 @@ def test_error_keeps_previous_results_whole(tmp_path, error):
             write_json(staging / "report.json", {"run": 2})
             raise error
     assert json.loads((out / "report.json").read_text()) == {"run": 1}
-    assert _everything(tmp_path) == ["out", "out/report.json"]
+    assert _everything(tmp_path) == ["out", "out/.flexcal-run", "out/report.json"]  # the marker of run 1
 
 
 def test_success_moves_files_and_replaces_old_ones(tmp_path):
@@ -52,7 +52,8 @@ def test_success_moves_files_and_replaces_old_ones(tmp_path):
         write_text(staging / "sub" / "t.md", "# hi\n")
     assert json.loads((out / "report.json").read_text()) == {"v": 2.5, "m": [[1.0, 0.0], [0.0, 1.0]]}
     assert (out / "keep.txt").read_text() == "old run, other file"
-    assert _everything(tmp_path) == ["out", "out/keep.txt", "out/report.json", "out/sub", "out/sub/t.md"]
+    assert _everything(tmp_path) == ["out", "out/.flexcal-run", "out/keep.txt", "out/report.json", "out/sub",
+                                     "out/sub/t.md"]
     assert os.stat(out / "report.json").st_mode & 0o044  # readable by others like any file the user writes
 
 
@@ -99,8 +100,8 @@ def ctrl_c_raises():
 
 def test_ctrl_c_during_the_moves_is_raised_after_them(tmp_path, monkeypatch, ctrl_c_raises):
     out = tmp_path / "out"
-    out.mkdir()
-    (out / "a.txt").write_text("old")
+    with staged_output(out) as staging:  # an earlier run: --force replaces only a run folder
+        (staging / "a.txt").write_text("old")
     original = os.replace
 
     def replace_then_interrupt(src, dst):  # Ctrl-C arrives after the first file moved
@@ -114,7 +115,7 @@ def test_ctrl_c_during_the_moves_is_raised_after_them(tmp_path, monkeypatch, ctr
             monkeypatch.setattr(os, "replace", replace_then_interrupt)
     monkeypatch.undo()
     assert (out / "a.txt").read_text() == "new" and (out / "b.txt").read_text() == "new"  # the moves completed
-    assert _everything(tmp_path) == ["out", "out/a.txt", "out/b.txt"]
+    assert _everything(tmp_path) == ["out", "out/.flexcal-run", "out/a.txt", "out/b.txt"]
 
 
 def test_interrupts_deferred_without_signal_is_transparent(ctrl_c_raises):

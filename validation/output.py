@@ -1,9 +1,14 @@
 """Writing results whole or not at all.
 
-``out_folder(out_dir)`` checks ``--out`` before any computation (the command line calls
-it once, before the command runs): not a file, writable, and not holding the files of
-another run unless ``--force`` (``replace=True``) or the command resumes its own earlier
-run (``resume=True``: ``sweep``, ``diagnose-benchmark``).
+``out_folder(out_dir)`` checks ``--out`` before any computation: not a file, writable,
+and not holding the files of another run unless ``--force`` (``replace=True``) or the
+command resumes its own earlier run (``resume=True``: ``sweep``, ``diagnose-benchmark``).
+``--force`` replaces only a run folder (the hidden marker ``.flexcal-run``, or an earlier
+run's report.json with timings.json) that holds none of the command's inputs (``inputs``:
+``run_folder.inputs_inside``); anything else is refused in one line. The command line
+calls it through ``run_folder.reserved_out``, which first reserves ``--out`` for the run
+(an owner-tagged lock file: a second run to the same folder is refused; a killed run's
+lock is cleared; see ``flexcal.validation.run_folder``).
 
 ``staged_output(out_dir)`` yields a temporary staging folder (hidden, ``.NAME.*``)
 beside a new ``out_dir``, or inside an existing one, so it is always on the target's own
@@ -20,7 +25,13 @@ removed at that moment (a failed run keeps the old results). On any error,
 ``KeyboardInterrupt`` (Ctrl-C) and ``signals.Terminated`` (SIGTERM) included, the staging
 folder is removed and ``out_dir`` is untouched. A fresh ``out_dir`` appears in one
 rename; into an existing one each file moves by its own rename (each file is whole, old
-or new), with Ctrl-C and SIGTERM held back until the moves are done.
+or new), with Ctrl-C and SIGTERM held back until the moves are done. The staged files
+include the marker ``.flexcal-run`` (the command's name); ``replace`` removes only
+visible files, so the marker and the lock stay. ``staged_output`` holds ``out_dir``'s
+reservation for its block (re-entrant: inside the command line's own it adds nothing).
+An ``OSError`` of the block or the moves that names no file (a writer's ENOSPC or EFBIG)
+is raised again naming ``out_dir``, and one naming a file in the staging folder names the
+same file in ``out_dir``; ``atomic_path`` names its target likewise.
 
 ``atomic_path(path)`` yields a temporary name beside ``path`` for any writer (matplotlib,
 numpy, csv); on success it is renamed onto ``path``, on error deleted. ``write_json`` and
@@ -53,8 +64,11 @@ import numpy as np
 
 from flexcal.fem.owners import OWNER_TAG, owner_tag, remove_folders_of_gone_owners
 
+from .run_folder import MARKER_NAME, out_folder, visible_entries
+
 __all__ = ["out_folder", "staged_output", "atomic_path", "write_json", "write_text", "to_jsonable", "dumps_strict",
-           "interrupts_deferred", "TIMING_KEYS", "split_timings", "write_report", "remove_stale_staging"]
+           "interrupts_deferred", "TIMING_KEYS", "split_timings", "write_report", "remove_stale_staging",
+           "written_folders"]
 
 # Report keys that hold wall-clock or CPU times [s]: they differ between two runs of the
 # same input, so ``write_report`` moves them from report.json to timings.json.
@@ -104,54 +118,14 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     try:
         yield tmp_path
         os.replace(tmp_path, path)
+    except OSError as error:
+        tmp_path.unlink(missing_ok=True)
+        if error.errno is None or error.filename is not None:
+            raise
+        raise type(error)(error.errno, error.strerror, str(path)) from error  # a writer's ENOSPC names no file
     except BaseException:
         tmp_path.unlink(missing_ok=True)
         raise
-
-
-def _probe_writable(folder: Path, what: str) -> None:
-    """ValueError (one line) unless a file can be made in ``folder`` (tried, not guessed
-    from mode bits: root ignores those, read-only mounts do not show in them)."""
-    try:
-        os.rmdir(tempfile.mkdtemp(prefix=".flexcal-probe.", dir=folder))
-    except OSError as error:
-        raise ValueError(f"--out {what}: cannot write in {folder} ({error.strerror or error}); "
-                         f"choose a folder you can write to") from None
-
-
-def _visible_entries(folder: Path) -> list[str]:
-    return sorted(p.name for p in folder.iterdir() if not p.name.startswith("."))
-
-
-def out_folder(out_dir: str | os.PathLike, *, replace: bool = False, resume: bool = False) -> Path:
-    """``--out`` as a path, checked before any computation: not a file, writable (the
-    folder itself if it exists, else its nearest existing parent), and, unless
-    ``replace`` (``--force``) or ``resume`` (commands that continue an earlier run in
-    the same folder), not already holding files (another run's report, stale PNGs).
-    ValueError with one line saying what to do."""
-    out = Path(out_dir)
-    if out.exists() and not out.is_dir():
-        raise ValueError(f"--out {out} exists and is not a folder; give a folder name")
-    if out.is_dir():
-        _probe_writable(out, str(out))
-        resolved = out.resolve()
-        if replace and (resolved == Path.home().resolve() or resolved == Path(resolved.anchor)
-                        or Path.cwd().resolve().is_relative_to(resolved)):
-            raise ValueError(f"--out {out} with --force would empty {resolved} (the home folder, the file-system root "
-                             f"or a folder holding the working directory); give a folder of its own")
-        held = _visible_entries(out)
-        if held and not (replace or resume):
-            shown = ", ".join(held[:4]) + (f" and {len(held) - 4} more" if len(held) > 4 else "")
-            raise ValueError(f"--out {out} already holds files ({shown}); pass --force to replace them "
-                             f"or choose another folder")
-        return out
-    ancestor = out.absolute().parent
-    while not ancestor.exists():
-        ancestor = ancestor.parent
-    if not ancestor.is_dir():
-        raise ValueError(f"--out {out}: {ancestor} is a file, not a folder; choose another --out")
-    _probe_writable(ancestor, str(out))
-    return out
 
 
 def _move(source: Path, target: Path) -> None:
@@ -204,41 +178,85 @@ def remove_stale_staging(folder: str | os.PathLike) -> list[str]:
     return removed
 
 
+_written: list[Path] = []  # the --out folders staged_output filled in this process (resolved)
+
+
+def written_folders() -> tuple[Path, ...]:
+    """The ``--out`` folders (resolved) whose results ``staged_output`` moved in during
+    this process, oldest first: a Ctrl-C after that point must not say nothing was written."""
+    return tuple(_written)
+
+
+def _naming_the_path(error: OSError, staging: Path, out: Path) -> OSError:
+    """``error`` naming where it happened as the user knows it: a path inside the staging
+    folder as the same path in ``out``; no path at all (a writer's ENOSPC, EFBIG, EIO) as
+    ``out``."""
+    if error.errno is None:
+        return error
+    name = error.filename
+    if name is None:
+        name = str(out)
+    elif Path(name).is_relative_to(staging):
+        name = str(out / Path(name).relative_to(staging))
+    else:
+        return error
+    return type(error)(error.errno, error.strerror, name)
+
+
 @contextlib.contextmanager
 def staged_output(out_dir: str | os.PathLike, *, replace: bool = False, resume: bool = False) -> Iterator[Path]:
     """A staging folder for the outputs of a run, moved into ``out_dir`` when the block
     succeeds, removed otherwise (see the module doc). ``replace`` (``--force``): what
     ``out_dir`` held before is removed when the new files move in (not before: a failed
     run keeps the old results); ``resume``: files of the folder not written now stay.
-    Checks ``out_dir`` first (``out_folder``)."""
+    Checks ``out_dir`` first (``out_folder``) and holds its reservation for the block
+    (``run_folder.reserved``: re-entrant, so inside the command line's own it adds
+    nothing); writes the marker ``.flexcal-run`` (the command's name) with the files."""
+    from .out_lock import held_command, reserved
+
     out = out_folder(out_dir, replace=replace, resume=resume)
-    if out.is_dir():  # stage inside it: same file system (a mount point as --out), no EXDEV
-        where = out
-    else:
-        where = out.absolute().parent
-        where.mkdir(parents=True, exist_ok=True)
-    remove_stale_staging(where)
-    staging = Path(tempfile.mkdtemp(prefix=f".{out.name or 'out'}.flexcal-{owner_tag()}.", dir=where))
-    os.chmod(staging, 0o777 & ~_UMASK)
-    try:
-        yield staging
-        with interrupts_deferred():
-            if not out.is_dir():
-                try:
-                    os.rename(staging, out)  # a new folder: one atomic step
-                    return
-                except OSError:
-                    out.mkdir(parents=True, exist_ok=True)
-            if replace:
-                for name in _visible_entries(out):
-                    _remove(out / name)
-            for item in staging.iterdir():
-                target = out / item.name
-                if target.is_dir() and not target.is_symlink():
-                    shutil.rmtree(target)
-                _move(item, target)
-    finally:
-        shutil.rmtree(staging, ignore_errors=True)
+    command = held_command(out) or "python"
+    with reserved(out, command=command):
+        if out.is_dir():  # stage inside it: same file system (a mount point as --out), no EXDEV
+            where = out
+        else:
+            where = out.absolute().parent
+            where.mkdir(parents=True, exist_ok=True)
+        remove_stale_staging(where)
+        staging = Path(tempfile.mkdtemp(prefix=f".{out.name or 'out'}.flexcal-{owner_tag()}.", dir=where))
+        os.chmod(staging, 0o777 & ~_UMASK)
+        try:
+            yield staging
+            (staging / MARKER_NAME).write_text(f"{command}\n", encoding="utf-8")
+            with interrupts_deferred():
+                _move_in(staging, out, replace)
+                _written.append(out.resolve())
+        except OSError as error:
+            raised = _naming_the_path(error, staging, out)
+            if raised is error:
+                raise
+            raise raised from error
+        finally:
+            shutil.rmtree(staging, ignore_errors=True)
+
+
+def _move_in(staging: Path, out: Path, replace: bool) -> None:
+    """The staged files into ``out`` (see the module doc); ``replace`` first removes its
+    visible files (the hidden lock and marker stay)."""
+    if not out.is_dir():
+        try:
+            os.rename(staging, out)  # a new folder: one atomic step
+            return
+        except OSError:
+            out.mkdir(parents=True, exist_ok=True)
+    if replace:
+        for name in visible_entries(out):
+            _remove(out / name)
+    for item in staging.iterdir():
+        target = out / item.name
+        if target.is_dir() and not target.is_symlink():
+            shutil.rmtree(target)
+        _move(item, target)
 
 
 # Strict JSON (RFC 8259 has no NaN or Infinity): a non-finite number is written as null,

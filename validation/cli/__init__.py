@@ -14,7 +14,12 @@ a bad option) print one line on stderr and exit with status 2; Ctrl-C exits 130,
 143 (one line; staging folders removed: ``flexcal.validation.cli.signals``); a bug
 prints one line and exits 1; ``--debug`` adds the traceback. Commands write their outputs
 only after the work succeeded (``flexcal.validation.output``), so a failed or
-interrupted run leaves nothing partial.
+interrupted run leaves nothing partial. Before a command runs, ``--out`` is reserved for
+it until it ends (``flexcal.validation.out_lock``: a second run to the same folder is
+refused) and checked (``flexcal.validation.run_folder``: ``--force`` only on a run folder
+that holds none of the command's inputs), and an option that takes a file but was given
+a folder is refused. Once the command has returned, Ctrl-C and SIGTERM are held back
+until the process has ended (``_hold_back_late_signals``).
 """
 
 from __future__ import annotations
@@ -115,17 +120,30 @@ def _command_of(argv: list[str]) -> str | None:
 
 
 def main(argv: list[str] | None = None) -> int:
+    from_sys_argv = argv is None
     argv = list(sys.argv[1:] if argv is None else argv)
     command = _command_of(argv)
     if command is not None and command not in COMMANDS:
         print(f"flexcal: error: unknown command {command!r}; 'flexcal --help' lists them", file=sys.stderr)
         return 2
-    debug = "--debug" in argv
+    status = _run(argv, command, hold_back=from_sys_argv)  # the process ends next (not a test's or a script's)
+    if from_sys_argv:
+        _hold_back_late_signals()  # again: leaving termination_raises put the handlers back
+    return status
+
+
+def _run(argv: list[str], command: str | None, *, hold_back: bool = False) -> int:
+    from ..output import written_folders
     from .signals import termination_raises
 
+    debug = "--debug" in argv
+    n_written_before = len(written_folders())
     try:
         with termination_raises():
-            return _main(argv, command)
+            status = _main(argv, command)
+            if hold_back:
+                _hold_back_late_signals()
+            return status
     except SystemExit as stop:  # argparse: --help (0) or a usage error (2)
         return stop.code if isinstance(stop.code, int) else 2
     except BrokenPipeError:  # stdout closed early ('flexcal ... | head'): the reader wanted no more
@@ -133,34 +151,59 @@ def main(argv: list[str] | None = None) -> int:
             os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error at exit
         return 0
     except KeyboardInterrupt as interrupt:  # Ctrl-C, or SIGTERM (signals.Terminated)
-        return _interrupted(command, interrupt, debug)
+        return _interrupted(command, interrupt, debug, written_folders()[n_written_before:])
     except Exception as error:  # noqa: BLE001 - the one place that turns errors into exit codes
         from .common import error_line, is_user_error
         from .signals import interrupt_behind
 
         interrupt = interrupt_behind(error)  # e.g. ImportError('initialization failed') from Ctrl-C
         if interrupt is not None:
-            return _interrupted(command, interrupt, debug)
+            return _interrupted(command, interrupt, debug, written_folders()[n_written_before:])
         if debug:
             traceback.print_exc()
         print(error_line(command or "", error), file=sys.stderr)
         return 2 if is_user_error(error) else 1
 
 
-def _interrupted(command: str | None, interrupt: KeyboardInterrupt, debug: bool) -> int:
-    """One line for Ctrl-C / SIGTERM; the exit status 130 / 143."""
+def _interrupted(command: str | None, interrupt: KeyboardInterrupt, debug: bool, written=()) -> int:
+    """One line for Ctrl-C / SIGTERM; the exit status 130 / 143. ``written``: the
+    ``--out`` folders this run had already filled (the interrupt came after)."""
     from .signals import Terminated, exit_status
 
     if debug:
         traceback.print_exc()
-    kept = "; finished designs are kept in --out and a rerun resumes" if command == "sweep" else "; nothing was written to --out"
+    if written:
+        kept = f" after the run wrote its results; the results in {written[-1]} are complete"
+    elif command == "sweep":
+        kept = "; finished designs are kept in --out and a rerun resumes"
+    else:
+        kept = "; nothing was written to --out"
     what = "terminated (SIGTERM)" if isinstance(interrupt, Terminated) else "interrupted"
     print(f"flexcal {command}: {what}{kept}", file=sys.stderr)
     return exit_status(interrupt)
 
 
+def _hold_back_late_signals() -> None:
+    """From here until the process has ended, Ctrl-C and SIGTERM are ignored: the run's
+    status is decided and its results (if any) are complete, and the rest is the
+    interpreter's shutdown (~0.5 s after a ``truth`` run, nearly all of it module teardown
+    after Python has put SIGINT back to the system default, where no handler can print a
+    line: a Ctrl-C there killed the process with no word). The process then ends with the
+    run's own status. An ignored signal stays ignored through that teardown."""
+    import signal
+    import threading
+
+    from .signals import HANDLED_SIGNALS
+
+    if threading.current_thread() is threading.main_thread():
+        for signum in HANDLED_SIGNALS:
+            if signal.getsignal(signum) is not None:  # None: set outside Python, leave it
+                signal.signal(signum, signal.SIG_IGN)
+
+
 def _main(argv: list[str], command: str | None) -> int:
-    from .common import apply_config, configure_logging, effective_config, print_config, summary_of
+    from .common import (apply_config, check_file_options, configure_logging, effective_config, named_values,
+                         print_config, summary_of)
     from ..output import dumps_strict
 
     parser = build_parser(only=command)
@@ -178,13 +221,17 @@ def _main(argv: list[str], command: str | None) -> int:
     if merged is not None:
         args.config = effective_config(command_parser, args, merged)
     configure_logging(args.verbose, args.quiet)
-    if getattr(args, "out", None):
-        from ..output import out_folder
-
-        # one check of --out before any computation (writable; not another run's folder without --force)
-        out_folder(args.out, replace=getattr(args, "force", False), resume=getattr(module, "RESUMES_OUT", False))
+    check_file_options(command_parser, args)  # a folder given where a file is expected: one line, now
     central_json = "json" in args._central and args.json
     with contextlib.ExitStack() as stack:
+        if getattr(args, "out", None):
+            from ..out_lock import reserved_out
+
+            # before any computation: --out reserved for this run (a second run is refused), writable, not
+            # another run's folder without --force, --force only on a run folder holding no input
+            stack.enter_context(reserved_out(args.out, command=command, replace=getattr(args, "force", False),
+                                             resume=getattr(module, "RESUMES_OUT", False),
+                                             inputs=named_values(command_parser, args)))
         if central_json or args.quiet:
             devnull = stack.enter_context(open(os.devnull, "w"))
             stack.enter_context(contextlib.redirect_stdout(devnull))

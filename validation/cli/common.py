@@ -14,20 +14,26 @@
 - an epilog listing its ``EXAMPLES`` (tuple of command lines).
 
 A flag the module already defined is left to the module (``forward --json`` prints its
-own JSON). ``add_out``, ``add_seed`` and ``add_scenario`` give the shared options one
+own JSON). ``named_values`` lists every parsed value by option (what ``--force`` checks for
+the command's inputs), ``check_file_options`` refuses a folder given for a file. ``add_out``, ``add_seed`` and ``add_scenario`` give the shared options one
 name and one help text everywhere (``options.py``).
 """
 
 from __future__ import annotations
 
 import argparse
+import errno
 import json
 import logging
+import os
+import re
 import sys
 from pathlib import Path
 from typing import Any, Iterable
 
-__all__ = ["install_common_options", "apply_config", "print_config", "summary_of", "show_progress", "error_line", "is_user_error", "configure_logging", "without_timings", "examples_epilog"]
+__all__ = ["install_common_options", "apply_config", "print_config", "summary_of", "show_progress", "error_line",
+           "is_user_error", "configure_logging", "without_timings", "examples_epilog", "named_values",
+           "check_file_options"]
 
 # Exceptions that mean "the input cannot be used" (one line, exit 2), beside ValueError
 # and OSError; matched by class name so the check imports no solver module.
@@ -215,7 +221,53 @@ def error_line(command: str, error: BaseException) -> str:
                 f"(rerun with --debug for the traceback and report it)")
     if isinstance(error, OSError) and not isinstance(error, FileNotFoundError) and error.filename:
         message = f"{error.strerror or message}: {error.filename}"
+    if isinstance(error, OSError) and error.errno in _DISK_FULL:
+        if not error.filename:  # no path known (a writer outside --out): say where flexcal writes
+            message = f"{error.strerror or message} (free space in --out, the FEM cache or the temporary folder)"
+        else:
+            message += " (free space there, or choose another --out)"
     return f"flexcal {command}: error: {message}"
+
+
+_DISK_FULL = frozenset({errno.ENOSPC, errno.EDQUOT})
+
+
+def named_values(parser: argparse.ArgumentParser, args: argparse.Namespace) -> list[tuple[str, Any]]:
+    """(option, value) of every argument of the command line but ``--out`` (the option's
+    longest flag, or a positional's name): what ``run_folder.inputs_inside`` looks through
+    for the command's inputs, so a new option naming a file is covered without a list."""
+    pairs = []
+    for action in parser._actions:
+        if action.dest in ("out", "help", argparse.SUPPRESS) or not hasattr(args, action.dest):
+            continue
+        label = max(action.option_strings, key=len) if action.option_strings else action.metavar or action.dest
+        pairs.append((str(label), getattr(args, action.dest)))
+    return pairs
+
+
+# the metavars of options that name an existing or a new file (one '|' alternative is enough)
+_FILE_METAVAR = re.compile(r"^(FILE|CSV|REPORT|TOML|JSON|.*\.(csv|json|toml))$")
+
+
+def check_file_options(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:
+    """ValueError (one line) if an option whose metavar names a file (``FILE``, ``CSV``,
+    ``REPORT``, ``DATA.csv``, ...) was given a folder. ``NAME|FILE`` values count only
+    when they look like a path (a built-in name wins over a folder of that name)."""
+    for action in parser._actions:
+        if not isinstance(action.metavar, str):
+            continue
+        parts = action.metavar.split("|")
+        if not any(_FILE_METAVAR.match(part) for part in parts):
+            continue
+        value = getattr(args, action.dest, None)
+        if not isinstance(value, (str, os.PathLike)) or not os.path.isdir(value):
+            continue
+        if len(parts) > 1 and os.sep not in str(value) and not str(value).startswith("."):
+            continue
+        label = max(action.option_strings, key=len) if action.option_strings else action.metavar
+        held = sorted(p.name for p in Path(value).iterdir() if p.is_file() and not p.name.startswith("."))[:3]
+        inside = f" (it holds {', '.join(held)})" if held else ""
+        raise ValueError(f"{label} {value} is a folder, not a file; give the path of a file{inside}")
 
 
 class _StderrHandler(logging.StreamHandler):

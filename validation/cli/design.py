@@ -129,13 +129,14 @@ def run(args: argparse.Namespace) -> int:
     from ..runs.model_correction import model_space
     from ..output import staged_output, write_report
     from ..prototype.scenario import load_scenario
+    from .options import executor_options
 
     _check(args)
     progress = show_progress(args)
     start = time.perf_counter()
     scenario = load_scenario(args.scenario)
     space = model_space(args.model_stiffness, args.second_order, progress=progress,
-                        mechanism=scenario.space.mechanism)
+                        mechanism=scenario.space.mechanism, **executor_options(args))
     prior = uniform_prior(space.n_params, args.prior_scale)
     x_design = design_point(args.at, space) if args.at else prior.mean
 
@@ -154,7 +155,7 @@ def run(args: argparse.Namespace) -> int:
                                else None)
     wall = time.perf_counter() - start
     report = _report(design, space, args, wall)
-    with staged_output(args.out) as staging:
+    with staged_output(args.out, replace=args.force) as staging:
         _write_trajectory(staging / "trajectory.csv", design)
         write_report(staging, report)
         (staging / "report.md").write_text(_markdown(report))

@@ -8,12 +8,14 @@ identifies (``--method``, ``--prior-scale``, Sobol and PSO sizes) and where heav
 from __future__ import annotations
 
 import argparse
+import re
 from typing import Any
 
 from ..prototype.providers import PROVIDERS
 
 __all__ = ["add_out", "add_seed", "add_scenario", "add_trajectory", "load_scenario_with_trajectory",
-           "add_executor_options", "executor_options", "MODEL_DEFAULTS", "CALIBRATION_DEFAULTS", "add_model_options",
+           "add_executor_options", "executor_options", "worker_count", "scheduler_address", "MODEL_DEFAULTS",
+           "CALIBRATION_DEFAULTS", "add_model_options",
            "add_identification_options", "add_method_options", "prior_scale_option", "add_calibration_options",
            "add_source_options", "load_source", "check_sobol_options", "add_point_model_options"]
 
@@ -62,15 +64,43 @@ def add_executor_options(parser: argparse.ArgumentParser, *, what: str) -> None:
     # table1 truth on the 2-core machine took 0.62x the in-process time when the machine was
     # idle and 0.84x under two busy-looping processes (docs/scale.md, "Session 10"); worker
     # processes (the cases of diagnose-benchmark) stay opt-in, they import the FEM stack again
-    parser.add_argument("--workers", type=int, metavar="N", default=None,
+    parser.add_argument("--workers", type=worker_count, metavar="N", default=None,
                         help=f"local workers for {what} (default: FEM segments on one thread of this process per "
                              "core, at most one per missing segment and per 1.5 GB of free memory, anything else "
                              "one after the other in this process; 0: everything one after the other in this "
                              "process; N: N at once, FEM segments on N threads of this process, each meshing in "
                              "its own child process, other jobs on N local worker processes)")
-    parser.add_argument("--scheduler", metavar="ADDRESS", default=None,
+    parser.add_argument("--scheduler", type=scheduler_address, metavar="ADDRESS", default=None,
                         help=f"address of a Dask scheduler (tcp://host:8786) to run {what} on; "
                              "default: see --workers)")
+
+
+def worker_count(text: str) -> int:
+    """``--workers`` as argparse's ``type``: a whole number >= 0, checked when the command
+    line is read (a run that builds no FEM segment used to accept -1 silently)."""
+    try:
+        count = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number (0: everything in this process)") from None
+    if count < 0:
+        raise argparse.ArgumentTypeError(f"{count} must be >= 0 (0: everything in this process)")
+    return count
+
+
+# Dask's protocols (distributed.comm.registry.backends); the scheme may be left out (tcp)
+_SCHEDULER = re.compile(r"^(?:(?:tcp|tls|ws|wss|ucx)://)?(?:\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9._-]+)(?::(\d{1,5}))?/?$"
+                        r"|^inproc://\S+$")
+
+
+def scheduler_address(text: str) -> str:
+    """``--scheduler`` as argparse's ``type``: the shape of a Dask scheduler address
+    (``tcp://HOST:PORT``), checked when the command line is read, not when (and if) the
+    cluster is first contacted."""
+    match = _SCHEDULER.match(text.strip())
+    if match is None or (match.group(1) is not None and not 0 < int(match.group(1)) < 65536):
+        raise argparse.ArgumentTypeError(f"{text!r} is not a Dask scheduler address; give tcp://HOST:PORT "
+                                         f"(e.g. tcp://10.0.0.5:8786)")
+    return text.strip()
 
 
 def executor_options(args: argparse.Namespace) -> dict[str, Any]:

@@ -32,9 +32,11 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", metavar="DIR", required=True,
                         help="output folder (designs/<id>.json as they finish, then sweep.csv, report.json, PNGs); "
                              "run again with the same DIR to resume")
-    parser.add_argument("--scheduler", metavar="ADDRESS", default=None,
+    from .options import scheduler_address, worker_count
+
+    parser.add_argument("--scheduler", type=scheduler_address, metavar="ADDRESS", default=None,
                         help="address of a Dask scheduler (tcp://host:8786); default: a local cluster")
-    parser.add_argument("--workers", type=int, metavar="N", default=None,
+    parser.add_argument("--workers", type=worker_count, metavar="N", default=None,
                         help="local worker processes (default: min(cores, designs); 0: run in this process)")
     parser.add_argument("--seed", type=int, metavar="N", default=None,
                         help="seed of the Latin-hypercube sample (overrides [sweep] seed)")
