@@ -95,6 +95,10 @@ def test_cli_compensate_virtual_prototype_and_real_data(tmp_path):
     assert {"report.md", "inputs.csv", "targets.csv", "fit.png", "first_round.png", "iterated.png"} <= \
         {p.name for p in out.iterdir()}
     assert "Table 3" in (out / "report.md").read_text()
+    # the model-form floor of the calibrated model: the sidecar holds the presets (its truth: the curve)
+    floor = report["model_form_floor"]
+    assert floor["available"] and floor["truth"].startswith("measured curve") and "fit" in floor
+    assert "## Model-form floor" in (out / "report.md").read_text()
 
     # the same curve without its sidecar is a user's real measurement: inputs only
     measurement = read_measurement(tmp_path / "t" / "curves.csv")
@@ -107,7 +111,9 @@ def test_cli_compensate_virtual_prototype_and_real_data(tmp_path):
                  "--out", str(tmp_path / "r"), "--quiet", *_fast_options()]) == 0
     files = {p.name for p in (tmp_path / "r").iterdir()}
     assert "inputs.csv" in files and "first_round.png" not in files
-    assert json.loads((tmp_path / "r" / "report.json").read_text())["summary"]["driven"] is False
+    real_report = json.loads((tmp_path / "r" / "report.json").read_text())
+    assert real_report["summary"]["driven"] is False
+    assert real_report["model_form_floor"]["reason"].startswith("not available: no true values")
     lines = (tmp_path / "r" / "inputs.csv").read_text().splitlines()
     assert len(lines) == 7 and lines[0].startswith("point,theta_x_urad")
 

@@ -133,7 +133,10 @@ def run(args: argparse.Namespace) -> int:
     bench = bench_from_metadata(measurement.metadata, space, n_readings=args.readings, seed=args.seed,
                                 dwell=dwell if dwell > 0 else 2.0, end_time=float(measurement.time[-1]),
                                 progress=not quiet, **executor_options(args))
-    result = run_compensation(measurement, targets, space, settings, bench=bench, progress=not quiet)
+    from ..runs.form_floor import truth_from_measurement
+
+    result = run_compensation(measurement, targets, space, settings, bench=bench,
+                              truth=truth_from_measurement(measurement, space), progress=not quiet)
     report = build_report(result)
     report["settings"] = {"data": str(args.data), "targets": args.targets or "default (flexcal.validation.runs.targets)",
                           "readings": args.readings, "tolerance_urad": args.tolerance_urad,
@@ -155,6 +158,9 @@ def run(args: argparse.Namespace) -> int:
             plot_iterated(staging / "iterated.png", report)
     if quiet:
         return 0
+    from ..reports.form_floor import form_floor_line
+
+    print("flexcal compensate: " + form_floor_line(report["model_form_floor"]))
     if result.loop is None:
         print(f"flexcal compensate: real measurement (no prototype in the sidecar): stopped after step 3. "
               f"Inputs to send (mm, from the zero posture), also in {args.out}/inputs.csv:")

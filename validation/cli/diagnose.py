@@ -96,7 +96,21 @@ def markdown(report) -> str:
                      f"{', '.join(report['undetectable'])}.")
     if report["skipped_terms"]:
         lines.append(f"Skipped (column missing): {', '.join(report['skipped_terms'])}.")
+    if "model_form_floor" in report:
+        from ..reports.form_floor import form_floor_markdown
+
+        lines += [""] + form_floor_markdown(report["model_form_floor"])
     return "\n".join(lines) + "\n"
+
+
+def _form_floor(measurement, space, residual) -> dict:
+    """The baseline model's form floor from the sidecar's presets (the diagnosis itself never
+    reads the sidecar); residual (n, 3) [rad] measured - baseline."""
+    from ..runs.form_floor import model_form_floor, not_available, truth_from_measurement
+
+    truth = truth_from_measurement(measurement, space)
+    return not_available() if truth is None else model_form_floor(truth, measurement.inputs, space,
+                                                                  fit_residual=-residual)
 
 
 def data_path(args: argparse.Namespace) -> str:
@@ -141,6 +155,7 @@ def run(args: argparse.Namespace) -> int:
     report = diagnosis.report
     report["baseline"]["model_stiffness"] = args.model_stiffness
     report["baseline"]["second_order"] = bool(args.second_order)
+    report["model_form_floor"] = _form_floor(measurement, space, diagnosis.residual)
     share = report["heldout"]["share_not_repeated"]
     if share > EXTRAPOLATION_WARNING_SHARE:
         logging.getLogger("flexcal.diagnose").warning(

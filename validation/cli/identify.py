@@ -18,7 +18,7 @@ import dataclasses
 import time
 
 from .options import add_out
-from .options import add_source_options, load_source
+from .options import add_source_options, load_source_with_truth
 
 __all__ = ["configure", "run", "parse_sources", "EXAMPLES", "DEFAULT_CONFIG"]
 
@@ -68,6 +68,7 @@ def run(args: argparse.Namespace) -> int:
 
     from ..output import staged_output, write_report
     from ..prototype.scenario import mechanism_from_metadata
+    from ..reports.form_floor import form_floor_line, form_floor_markdown
     from ..reports.plots import plot_misalignment_curves
     from ..runs.model_correction import model_space
     from ..runs.verify import VerifySettings, run_verify
@@ -78,7 +79,7 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError(f"--particles={args.particles} must be >= 2 and --iterations={args.iterations} >= 1")
     selected = parse_sources(args.sources, parameter_space().names)
     progress = show_progress(args)
-    measurement, presets = load_source(args, parameter_space(), progress=progress)
+    measurement, presets, truth = load_source_with_truth(args, parameter_space(), progress=progress)
     settings = VerifySettings(method=args.method, prior_scale=prior_scale_option(args), sources=selected,
                               polish=args.polish, seed=args.calibration_seed, remove_offset=args.remove_offset,
                               noise_urad=args.noise_urad if args.noise_urad else None,
@@ -90,7 +91,7 @@ def run(args: argparse.Namespace) -> int:
     space = model_space(args.model_stiffness, args.second_order, progress=progress,
                         mechanism=mechanism_from_metadata(measurement.metadata), **executor_options(args))
     start = time.perf_counter()
-    result = run_verify(measurement, space, settings, presets=presets, progress=False)
+    result = run_verify(measurement, space, settings, presets=presets, truth=truth, progress=False)
     wall_s = time.perf_counter() - start
     verified = result.report
     angles = result.problem.angles
@@ -111,6 +112,7 @@ def run(args: argparse.Namespace) -> int:
         "estimation": verified.get("estimation"), "base_parameters": verified.get("base_parameters"),
         "noise_urad": verified["noise_urad"], "noise_source": verified["noise_source"],
         "offset_removed": bool(args.remove_offset),
+        "model_form_floor": verified["model_form_floor"],
         "wall_s": wall_s,
     }
     has_preset = presets is not None
@@ -132,6 +134,7 @@ def run(args: argparse.Namespace) -> int:
         if has_preset:
             cells += [f"{r['preset']:.5g}", f"{r['abs_error']:.3g}"]
         lines.append("| " + " | ".join(cells + ["yes" if r["identifiable"] else "no"]) + " |")
+    lines += [""] + form_floor_markdown(verified["model_form_floor"])
     ideal = ideal_angles(measurement.inputs, space)
     with staged_output(args.out, replace=args.force) as staging:
         write_report(staging, report)
@@ -144,4 +147,5 @@ def run(args: argparse.Namespace) -> int:
     print(f"flexcal identify: {len(selected)} sources ({args.method}), fit RMS {fit_rms * 1e6:.3g} urad, max "
           f"{summary['fit_max_urad']:.3g} urad, {wall_s:.1f} s; wrote {args.out}/report.json, report.md, fit.png"
           + (", convergence.png" if result.pso is not None else ""))
+    print("  " + form_floor_line(verified["model_form_floor"]))
     return 0

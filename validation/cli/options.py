@@ -17,7 +17,8 @@ __all__ = ["add_out", "add_seed", "add_scenario", "add_trajectory", "load_scenar
            "add_executor_options", "executor_options", "worker_count", "scheduler_address", "MODEL_DEFAULTS",
            "CALIBRATION_DEFAULTS", "add_model_options",
            "add_identification_options", "add_method_options", "prior_scale_option", "add_calibration_options",
-           "add_source_options", "load_source", "check_sobol_options", "add_point_model_options"]
+           "add_source_options", "load_source", "load_source_with_truth", "check_sobol_options",
+           "add_point_model_options"]
 
 
 def add_out(parser: argparse.ArgumentParser, *, required: bool = True, what: str = "report.json, report.md, PNGs",
@@ -189,7 +190,15 @@ def add_source_options(parser: argparse.ArgumentParser) -> None:
 
 def load_source(args: argparse.Namespace, space, *, progress: bool):
     """(measurement, presets (45,) [SI] or None) from ``--scenario`` or ``--data``."""
+    return load_source_with_truth(args, space, progress=progress)[:2]
+
+
+def load_source_with_truth(args: argparse.Namespace, space, *, progress: bool):
+    """``load_source`` and the truth of the model-form floor (``runs.form_floor.TruthCurve``:
+    the noise-free prototype curve of ``--scenario``, the sidecar's curve of ``--data``; None
+    for data without presets)."""
     from ..measurements import read_measurement
+    from ..runs.form_floor import truth_from_measurement, truth_from_run
 
     if args.noise_urad is not None and args.noise_urad < 0:
         raise ValueError(f"--noise-urad={args.noise_urad} must be >= 0")
@@ -201,7 +210,7 @@ def load_source(args: argparse.Namespace, space, *, progress: bool):
 
         provider = stiffness_provider(args.provider, progress=progress, **executor_options(args))
         truth = make_truth(scenario, provider, progress=progress)
-        return truth.measurement, scenario.values
+        return truth.measurement, scenario.values, truth_from_run(truth.run, scenario.values)
     if getattr(args, "trajectory", None):
         raise ValueError("--trajectory drives a --scenario; a --data file already holds its own trajectory")
     try:
@@ -212,7 +221,7 @@ def load_source(args: argparse.Namespace, space, *, progress: bool):
         raise ValueError(f"{args.data}: {error}") from None
     found = measurement.metadata.get("preset_errors")
     presets = space.build_values({e["name"]: e["value"] for e in found}, display_units=True) if found else None
-    return measurement, presets
+    return measurement, presets, truth_from_measurement(measurement, space)
 
 
 def check_sobol_options(args: argparse.Namespace) -> None:

@@ -15,6 +15,7 @@ import dataclasses
 
 import numpy as np
 
+from ..reports.form_floor import form_floor_line, form_floor_markdown
 from .options import CALIBRATION_DEFAULTS, add_calibration_options, add_out, prior_scale_option
 
 __all__ = ["configure", "run", "plot_calibration", "EXAMPLES", "DEFAULT_CONFIG"]
@@ -153,6 +154,7 @@ def _markdown(report) -> str:
         lines += [f"RMS of the z-scores (error / standard error) of the {report['n_z_scores']} identifiable sources: "
                   f"{report['z_rms_identifiable']:.3g} (honest error bars: about 1).", ""]
     lines += _identification_lines(report)
+    lines += form_floor_markdown(report.get("model_form_floor"))
     if "paper_comparison" in report:
         lines += ["## Against the paper's Table 1", "",
                   "| figure | paper | ours (all identified) | beats paper | ours (identifiable only) | beats paper "
@@ -196,7 +198,7 @@ def run(args: argparse.Namespace) -> int:
     from flexcal.calibration.pso_settings import PSOSettings
     from flexcal.model.parameters import parameter_space
 
-    from .options import check_sobol_options, load_source
+    from .options import check_sobol_options, load_source_with_truth
     from ..measurements import write_measurement
     from ..output import staged_output, write_report
     from ..runs.model_correction import model_space
@@ -215,10 +217,10 @@ def run(args: argparse.Namespace) -> int:
     from ..prototype.scenario import mechanism_from_metadata
 
     space = parameter_space()
-    measurement, presets = load_source(args, space, progress=not args.quiet)
+    measurement, presets, truth = load_source_with_truth(args, space, progress=not args.quiet)
     space = model_space(args.model_stiffness, args.second_order, progress=not args.quiet,
                         mechanism=mechanism_from_metadata(measurement.metadata), **executor_options(args))
-    result = run_verify(measurement, space, settings, presets=presets, progress=not args.quiet)
+    result = run_verify(measurement, space, settings, presets=presets, truth=truth, progress=not args.quiet)
     result.report["model_stiffness"] = ("closed-form chains scaled by FEM factors at the nominal design "
                                         "(docs/model.md 7)" if space.compliance_factors else "closed-form (paper Eq. 1)")
     result.report["model_second_order"] = bool(space.second_order)
@@ -230,6 +232,7 @@ def run(args: argparse.Namespace) -> int:
     report = result.report
     print(f"flexcal verify: fit RMS {report['fit_rms_urad']:.3g} urad, max {report['fit_max_urad']:.3g} urad, "
           f"{report['n_evaluations']} evaluations, {report['wall_s']:.1f} s; wrote {args.out}/report.json, report.md")
+    print("  " + form_floor_line(report.get("model_form_floor")))
     if report.get("z_rms_identifiable") is not None:
         print(f"  z-scores of the {report['n_z_scores']} identifiable sources: RMS {report['z_rms_identifiable']:.3g}")
     z_base = report.get("base_parameters", {}).get("z_rms")

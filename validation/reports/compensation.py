@@ -25,6 +25,7 @@ from typing import Any
 
 import numpy as np
 
+from .form_floor import form_floor_markdown
 from .plots import CLASS_COLOURS, _pyplot
 
 __all__ = ["build_report", "report_markdown", "plot_fit", "plot_first_round", "plot_iterated", "PAPER_TABLE2",
@@ -117,6 +118,7 @@ def build_report(result) -> dict[str, Any]:
         "return_offsets_urad": [{"leg": leg, **_per_angle(offset * 1e6)} for leg, offset in
                                 result.return_offsets.items()],
         "table2": _table2(result),
+        "model_form_floor": verify["model_form_floor"],
         "table2_paper": PAPER_TABLE2,
         "points": _points(result),
         "bench": result.bench,
@@ -211,6 +213,7 @@ def report_markdown(report: dict[str, Any]) -> str:
                   "|---:|---:|---|---|"]
         lines += [f"| {r['round']} | {r['n_corrected']} | " + ", ".join(_cell(r['mean_error_urad'][a]) for a in ANGLES)
                   + " | " + ", ".join(_cell(r['max_error_urad'][a]) for a in ANGLES) + " |" for r in report["rounds"]]
+    lines += [""] + form_floor_markdown(report.get("model_form_floor"))
     t2, p2 = report["table2"], report["table2_paper"]
     lines += ["", "## Table 2 layout: calibration fit by class (offsets removed)", "",
               "| | " + " | ".join(f"{c} θ{a[-1]}" for c in CLASSES for a in ANGLES) + " |", "|---|" + "---:|" * 9]

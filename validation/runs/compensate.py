@@ -306,14 +306,15 @@ class CompensationResult:
 
 def run_compensation(measurement: Measurement, targets: np.ndarray, space: ParameterSpace,
                      settings: CompensationSettings = CompensationSettings(), *, bench: Bench | None = None,
-                     progress: bool = True) -> CompensationResult:
+                     truth=None, progress: bool = True) -> CompensationResult:
     """Fig. 9 on ``measurement`` for relative ``targets`` (n, 3) [rad]; without a bench it
-    stops after step 3 (the inputs to send)."""
+    stops after step 3 (the inputs to send). truth: the model-form floor's truth
+    (``runs.form_floor.TruthCurve``; None: "not available" in the report)."""
     from flexcal.model.forward import forward
 
     log = print if progress else (lambda *a, **k: None)
     verify_settings = dataclasses.replace(settings.verify, remove_offset=True)
-    result = run_verify(measurement, space, verify_settings, progress=progress)
+    result = run_verify(measurement, space, verify_settings, truth=truth, progress=progress)
     values = identified_values(result, space)
     weak = unidentified_drive_sources(result)
     if weak:

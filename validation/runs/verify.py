@@ -46,6 +46,7 @@ from flexcal.model.parameters import DRIVE_SOURCE_NAMES, ParameterSpace
 
 from ..progress import progress_bar, with_progress
 from ..measurements import Measurement
+from .form_floor import TruthCurve, model_form_floor, not_available
 
 __all__ = ["VerifySettings", "VerifyResult", "run_verify", "PAPER_TABLE1"]
 
@@ -310,11 +311,14 @@ def _base_table(identification, space: ParameterSpace, presets: np.ndarray | Non
 
 
 def run_verify(measurement: Measurement, space: ParameterSpace, settings: VerifySettings = VerifySettings(), *,
-               presets: np.ndarray | None = None, progress: bool = True) -> VerifyResult:
+               presets: np.ndarray | None = None, truth: TruthCurve | None = None,
+               progress: bool = True) -> VerifyResult:
     """Identify and report on one measurement: ``settings.method`` "map" (default: all sources,
     cross-validated prior), "free" (all sources, no prior) or "paper" (Sobol screening +
     improved PSO); ``presets`` (45,) [SI] are the true values when the data are synthetic
-    (for the error columns and z-scores)."""
+    (for the error columns and z-scores); ``truth`` the curve and values the model-form
+    floor is measured against (``runs.form_floor``; default: the measured curve with
+    ``presets``, and "not available" without them)."""
     from flexcal.model.forward import CLASS_NAMES, forward, ideal_angles
 
     log = print if progress else (lambda *a, **k: None)
@@ -357,6 +361,11 @@ def run_verify(measurement: Measurement, space: ParameterSpace, settings: Verify
         "not_observable": unobservable,
         **core["extra"],
     }
+    if truth is None and presets is not None:
+        truth = TruthCurve(angles=measurement.angles, presets=presets,
+                           source="measured curve, its noise and sensor offset left in (no noise-free curve given)")
+    report["model_form_floor"] = not_available() if truth is None else model_form_floor(
+        truth, measurement.inputs, space, fit_residual=residual)
     ident = core["ident"]
     if ident is not None:
         report["identifiability"] = {"rank": ident.rank, "n_parameters": len(ident.names),

@@ -1,0 +1,114 @@
+"""The model-form error budget: each model at the true values against the FEM prototype.
+
+    .venv/bin/python benchmarks/bench_form_error.py [--scenario table1] [--provider fem]
+        [--walks 3] [--points 60] [--strokes 0.5,0.8] [--seed 1]
+
+Truth: the scenario's as-built virtual prototype (FEM segment stiffness by default, noise-free
+curve), driven along (1) the standard trajectory and (2) random multi-actuator walks. Models,
+each step adding one thing: the paper's (Eq. 1-8 as written: closed-form chains, no second
+order), + FEM-informed chain compliance (docs/model.md 7), + second-order geometric terms
+(docs/model.md 8; the calibration's default). Each is evaluated at the scenario's true values
+by ``flexcal.validation.runs.form_floor.model_form_floor``: RMS per angle and max [urad], and
+the RMS over multi-actuator postures and near a drive's unloading.
+
+A walk (``random_walk``): 60 points from zero; at each step every actuator moves with
+probability 2/3 by a uniform step of up to 0.35 x its stroke limit in a random direction,
+reflected at +-stroke x A_i (A_i the standard trajectory's amplitudes): with seed 1 each
+actuator reverses 15-26 times per walk and 58-59 of the 60 postures move two or three
+actuators. Walk k of stroke s uses seed [seed, k, round(100 s)]. Not a test: the figures go into docs/verification-table1.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import sys
+import time
+
+import numpy as np
+
+ANGLES = ("theta_x", "theta_y", "theta_z")
+STEP_SHARE = 0.35  # largest step per point as a share of the stroke limit (each walk reaches 0.5-1.0 of it)
+MOVE_PROBABILITY = 2 / 3  # chance that an actuator moves at a step (most postures: two or three moved)
+
+
+def random_walk(amplitudes: np.ndarray, n_points: int, stroke: float, rng) -> np.ndarray:
+    """(n_points, 3) [m] a walk from zero inside +-stroke x amplitudes (3,) [m] (module docstring)."""
+    rng = np.random.default_rng(rng)
+    limit = stroke * np.asarray(amplitudes, dtype=float)
+    x = np.zeros((n_points, 3))
+    for k in range(1, n_points):
+        step = rng.uniform(-1.0, 1.0, 3) * STEP_SHARE * limit * (rng.random(3) < MOVE_PROBABILITY)
+        nxt = x[k - 1] + step
+        nxt = np.where(nxt > limit, 2 * limit - nxt, nxt)  # reflect at the stroke limits
+        x[k] = np.where(nxt < -limit, -2 * limit - nxt, nxt)
+    return x
+
+
+def _row(label: str, model: str, floor: dict) -> str:
+    block = floor["models"][0]
+    rms = block["all"]["rms_urad"]
+    multi = block["actuators"]["multi"]
+    near = block["unloading"]["near"]
+
+    def overall(stats):
+        return "—" if not stats["n"] else f"{np.sqrt(np.mean([stats['rms_urad'][a] ** 2 for a in ANGLES])):.2f}"
+
+    return (f"| {label} | {model} | " + " / ".join(f"{rms[a]:.2f}" for a in ANGLES) + f" | {block['all']['max_urad']:.2f}"
+            f" | {overall(multi)} ({multi['n']}) | {overall(near)} ({near['n']}) |")
+
+
+def main(argv=None) -> int:
+    from flexcal.model.parameters import parameter_space
+    from flexcal.model.trajectory import standard_trajectory
+    from flexcal.validation.prototype.providers import stiffness_provider
+    from flexcal.validation.prototype.scenario import load_scenario
+    from flexcal.validation.prototype.truth import make_truth
+    from flexcal.validation.runs.form_floor import model_form_floor, truth_from_run
+    from flexcal.validation.runs.model_correction import corrected_space
+
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--scenario", default="table1")
+    parser.add_argument("--provider", default="fem", choices=("fem", "analytic"))
+    parser.add_argument("--walks", type=int, default=3)
+    parser.add_argument("--points", type=int, default=60)
+    parser.add_argument("--strokes", default="0.5,0.8")
+    parser.add_argument("--seed", type=int, default=1)
+    args = parser.parse_args(argv)
+    strokes = [float(s) for s in args.strokes.split(",")]
+
+    start = time.perf_counter()
+    provider = stiffness_provider(args.provider, progress=False, workers=None)
+    scenario = load_scenario(args.scenario)
+    paper = parameter_space(scenario.space.mechanism)
+    fem = corrected_space(paper, provider) if args.provider == "fem" else paper
+    models = (("paper's model", paper), ("+ FEM-informed compliance", fem),
+              ("+ second order (default)", dataclasses.replace(fem, second_order=True)))
+    amplitudes = standard_trajectory(scenario.space.mechanism).amplitudes
+    trajectories = [("standard (77 points)", scenario.inputs, scenario.leg)]
+    for stroke in strokes:
+        for k in range(args.walks):
+            seed = [args.seed, k, round(100 * stroke)]
+            inputs = random_walk(amplitudes, args.points, stroke, seed)
+            trajectories.append((f"walk {k + 1}, stroke {stroke:g}, seed {seed}", inputs,
+                                 np.ones(args.points, dtype=int)))
+    print(f"bench_form_error: scenario {args.scenario}, provider {args.provider}, amplitudes "
+          + ", ".join(f"{a * 1e3:.3f}" for a in amplitudes) + " mm; urad, true values vs the noise-free prototype curve",
+          flush=True)
+    print("| trajectory | model | RMS θx / θy / θz | max | RMS multi-actuator (n) | RMS near unloading (n) |")
+    print("|---|---|---|---:|---:|---:|")
+    for label, inputs, leg in trajectories:
+        case = dataclasses.replace(scenario, inputs=inputs, leg=leg)
+        run = make_truth(case, provider).run
+        truth = truth_from_run(run, case.values)
+        for name, space in models:
+            try:
+                print(_row(label, name, model_form_floor(truth, inputs, space)), flush=True)
+            except Exception as error:  # a model that does not converge on a walk is a result too
+                print(f"| {label} | {name} | failed: {error} | | | |", flush=True)
+    print(f"bench_form_error: {time.perf_counter() - start:.0f} s", file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
