@@ -128,7 +128,7 @@ def test_chain_sway_buckling_is_2k_over_L_for_ideal_pivots():
     for k_node, body in enumerate(bodies, start=1):
         poses[body, :3, 3] -= k_node * step * axis
     state = NominalState(poses=poses, tangent=None, segment_gradient=None, tension=np.full(6, -axial),
-                         weight_factor=1.0)
+                         weight_factor=1.0, commands=np.zeros(3))
     factors = chain_buckling_factors(prototype, state)
     placement = mechanism.chains[chain].chain
     pivots = placement.length - 2 * placement.end_block_length - placement.hinge_length

@@ -28,6 +28,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
                              "(minutes the first time, then from the FEM cache)")
     parser.add_argument("--elements-through", type=float,
                         help="FEM segments: quadratic tets through the thinnest leaf (default 2)")
+    parser.add_argument("--refine", action="store_true",
+                        help="FEM segments: the workspace stresses again with one more element through the leaves")
     parser.add_argument("--modes", type=int, default=12, help="number of mount modes (default %(default)s)")
     parser.add_argument("--trajectory-points", type=int, default=77,
                         help="points of the standard trajectory the stresses are taken over (1 + a multiple of 4, >= 13; 0: nominal only; "
@@ -45,12 +47,14 @@ def run(args: argparse.Namespace) -> int:
 
     if args.elements_through is not None:
         check_elements_through(args.elements_through)
+    if args.refine and args.segments != "fem":
+        raise ValueError("--refine needs --segments fem (beam-theory stresses have no mesh to refine)")
     if args.modes < 1:
         raise ValueError(f"--modes {args.modes} must be >= 1")
     if args.trajectory_points < 0:
         raise ValueError(f"--trajectory-points {args.trajectory_points} must be >= 0")
     report = structure_report(reference_mechanism(), segments=args.segments, elements_through=args.elements_through,
-                              n_modes=args.modes, trajectory_points=args.trajectory_points,
+                              n_modes=args.modes, trajectory_points=args.trajectory_points, refine=args.refine,
                               progress=show_progress(args))
     with staged_output(args.out, replace=args.force) as staging:
         write_report(staging, report)

@@ -37,33 +37,15 @@ def _segment_masses(prototype, source) -> np.ndarray:
     return out
 
 
-def _trajectory_stress(prototype, segments_fem, n_points: int):
-    """Peak stress (6,) [Pa] per chain over the standard trajectory's commands (beam bound
-    and, with FEM segments, the FEM field), and the commands (n, 3) [m]."""
-    from flexcal.model.trajectory import standard_trajectory
-
-    from .fem_segments import chain_peak_stress_fem
-    from .mount import nominal_state
-    from .stress import chain_peak_stress_beam
-
-    commands = standard_trajectory(prototype.mechanism, n_points=n_points).inputs
-    beam, fem = np.zeros(6), np.zeros(6)
-    poses = None
-    for command in commands:
-        state = nominal_state(prototype, commands=command, start=poses)
-        poses = state.poses
-        beam = np.maximum(beam, chain_peak_stress_beam(prototype, state.segment_gradient))
-        if segments_fem is not None:
-            fem = np.maximum(fem, chain_peak_stress_fem(prototype, state.poses, segments_fem))
-    return beam, (fem if segments_fem is not None else None), commands
-
-
 def structure_report(mechanism: MechanismParams, *, segments: str = "analytic", elements_through: float | None = None,
-                     n_modes: int = N_MODES, trajectory_points: int = 77, progress: bool = False) -> dict[str, Any]:
+                     n_modes: int = N_MODES, trajectory_points: int = 77, refine: bool = False,
+                     progress: bool = False) -> dict[str, Any]:
     """The structural report of ``mechanism`` (module docstring); ``segments`` "analytic"
     or "fem"; ``elements_through``: FEM mesh setting (default
     ``fem_segments.DEFAULT_ELEMENTS_THROUGH``); ``trajectory_points``: points of the
-    standard trajectory the stresses are taken over (0: nominal only)."""
+    standard trajectory the stresses are taken over (0: nominal only); ``refine`` (FEM
+    segments only): the workspace stresses again with one more element through the
+    leaves (same states, segments built or read from the cache)."""
     from ..blas_threads import single_blas_thread
     from ..prototype.mechanism import build_prototype
     from ..prototype.segments import analytic_provider
@@ -74,14 +56,23 @@ def structure_report(mechanism: MechanismParams, *, segments: str = "analytic", 
     from .segment_mass import chain_mass
     from .stress import chain_peak_stress_beam
 
+    from flexcal.model.trajectory import standard_trajectory
+
+    from .workspace_report import workspace_section
+
     if segments not in ("analytic", "fem"):
         raise ValueError(f"segments={segments!r} must be 'analytic' or 'fem'")
+    if refine and segments != "fem":
+        raise ValueError("refine needs segments='fem' (the beam-theory stresses have no mesh to refine)")
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
     fem = None
     if segments == "fem":
         fem = FemSegments(mechanism.material, elements_through=elements_through or DEFAULT_ELEMENTS_THROUGH,
                           progress=progress)
+    fem_fine = None
+    if refine:
+        fem_fine = FemSegments(mechanism.material, elements_through=fem.elements_through + 1.0, progress=progress)
     provider = fem if fem is not None else analytic_provider(mechanism.material)
     prototype = build_prototype(mechanism, [ActuatorTransmission()] * 3, provider)
     seg_mass = _segment_masses(prototype, fem)
@@ -105,9 +96,14 @@ def structure_report(mechanism: MechanismParams, *, segments: str = "analytic", 
         t = time.perf_counter()
         beam_nominal = chain_peak_stress_beam(prototype, loaded.segment_gradient)
         fem_nominal = chain_peak_stress_fem(prototype, loaded.poses, fem) if fem is not None else None
-        if trajectory_points:
-            beam_path, fem_path, commands = _trajectory_stress(prototype, fem, trajectory_points)
-        timings["stress_s"] = time.perf_counter() - t
+        commands = standard_trajectory(mechanism, n_points=trajectory_points).inputs if trajectory_points else None
+        workspace = workspace_section(prototype, fem=fem, fem_fine=fem_fine, trajectory_commands=commands,
+                                      nominal_stiffness=k_held)
+        if commands is not None:
+            path = workspace["trajectory"]
+            beam_path = np.array([path["beam"]["MPa"][c.name] for c in mechanism.chains]) * 1e6
+            fem_path = None if fem is None else np.array([path["fem"]["MPa"][c.name] for c in mechanism.chains]) * 1e6
+        timings["stress_workspace_s"] = time.perf_counter() - t
     yield_strength = mechanism.material.yield_strength
     names = [c.name for c in mechanism.chains]
 
@@ -122,7 +118,7 @@ def structure_report(mechanism: MechanismParams, *, segments: str = "analytic", 
         "nominal_beam_MPa": mpa(beam_nominal), "nominal_fem_MPa": mpa(fem_nominal),
     }
     governing = fem_nominal if fem_nominal is not None else beam_nominal
-    if trajectory_points:
+    if commands is not None:
         stress.update({"trajectory_points": int(len(commands)), "trajectory_beam_MPa": mpa(beam_path),
                        "trajectory_fem_MPa": mpa(fem_path)})
         governing = np.maximum(governing, fem_path if fem_path is not None else beam_path)
@@ -157,6 +153,7 @@ def structure_report(mechanism: MechanismParams, *, segments: str = "analytic", 
             "diagonal_nuts_held": dict(zip(AXES, np.diag(k_held).tolist())),
         },
         "stress": stress,
+        "workspace": workspace,
         "buckling": {
             "mount_weight_factor": factor,
             "chain_held": per_chain(chains["held"]),
@@ -218,6 +215,10 @@ def markdown(report: dict[str, Any]) -> str:
                      f"{_fmt(get(s['nominal_fem_MPa']))} | {_fmt(get(s.get('trajectory_beam_MPa')))} | "
                      f"{_fmt(get(s.get('trajectory_fem_MPa')))} | {_fmt(get(s['safety_factor_against_yield']))} | "
                      f"{_fmt(get(b['chain_held']))} | {_fmt(get(b['chain_sway']))} |")
+    if "workspace" in report:
+        from .workspace_report import workspace_markdown
+
+        lines += [""] + workspace_markdown(report["workspace"])
     lines += ["", f"Mount buckling: the payload's weight x **{b['mount_weight_factor']:.3g}** makes the mount's "
               "tangent singular (linearized about the unloaded state).", "",
               "Wall times [s]: " + ", ".join(f"{k} {v:.1f}" for k, v in report["timings_s"].items()), ""]
