@@ -165,6 +165,14 @@ def test_structure_command_writes_its_report(tmp_path, capsys):
     assert (out / "report.md").read_text().startswith("# Mount structure")
     assert "total_s" in json.loads((out / "timings.json").read_text())["timings_s"]
     assert "first mode" in capsys.readouterr().out
+    # mode pictures and the VTU with one displacement field per mode
+    assert [p.name for p in sorted(out.glob("mode_*.png"))] == [f"mode_{k}.png" for k in range(1, 7)]
+    import pyvista as pv
+
+    grid = pv.read(out / "modes.vtu")
+    assert grid.n_points == 44 and all(f"mode_{k}" in grid.point_data for k in range(1, 9))
+    assert len(report["modes"]["frequencies_without_preload_Hz"]) == 8
+    assert len(report["workspace"]["corners"]) == 8
     assert cli.main(["structure", "--modes", "0", "--out", str(tmp_path / "bad")]) == 2
 
 

@@ -39,13 +39,14 @@ def _segment_masses(prototype, source) -> np.ndarray:
 
 def structure_report(mechanism: MechanismParams, *, segments: str = "analytic", elements_through: float | None = None,
                      n_modes: int = N_MODES, trajectory_points: int = 77, refine: bool = False,
-                     progress: bool = False) -> dict[str, Any]:
+                     figures=None, progress: bool = False) -> dict[str, Any]:
     """The structural report of ``mechanism`` (module docstring); ``segments`` "analytic"
     or "fem"; ``elements_through``: FEM mesh setting (default
     ``fem_segments.DEFAULT_ELEMENTS_THROUGH``); ``trajectory_points``: points of the
     standard trajectory the stresses are taken over (0: nominal only); ``refine`` (FEM
     segments only): the workspace stresses again with one more element through the
-    leaves (same states, segments built or read from the cache)."""
+    leaves (same states, segments built or read from the cache); ``figures``: a folder
+    to write mode_1.png .. mode_6.png and modes.vtu into (``mode_shapes``), or None."""
     from ..blas_threads import single_blas_thread
     from ..prototype.mechanism import build_prototype
     from ..prototype.segments import analytic_provider
@@ -53,6 +54,8 @@ def structure_report(mechanism: MechanismParams, *, segments: str = "analytic", 
     from .fem_segments import DEFAULT_ELEMENTS_THROUGH, FemSegments, chain_peak_stress_fem
     from .mount import (chain_buckling_factors, chain_end_reduction, mount_buckling_factor, mount_mass, mount_modes, nominal_state,
                         payload_mass_matrix, support_stiffness)
+    from .buckling_check import newton_buckling_scan
+    from .craig_bampton import mount_reductions
     from .segment_mass import chain_mass
     from .stress import chain_peak_stress_beam
 
@@ -84,6 +87,18 @@ def structure_report(mechanism: MechanismParams, *, segments: str = "analytic", 
         t = time.perf_counter()
         M = mount_mass(prototype, seg_mass, payload_mass_matrix(mechanism))
         modes = mount_modes(prototype, loaded, M, n_modes)
+        # the same mass on the unloaded tangent: no stress stiffening by the payload's weight
+        unstiffened = mount_modes(prototype, unloaded, M, n_modes)
+        figure_names = []
+        if figures is not None:
+            from pathlib import Path
+
+            from .mode_shapes import write_mode_pngs, write_modes_vtu
+
+            figure_names = write_mode_pngs(Path(figures), prototype, loaded.poses, modes.modes, modes.frequencies)
+            write_modes_vtu(Path(figures) / "modes.vtu", prototype, loaded.poses, modes.modes, modes.frequencies)
+            figure_names.append("modes.vtu")
+        reductions = mount_reductions(prototype, loaded.tangent, M)
         timings["modes_s"] = time.perf_counter() - t
         t = time.perf_counter()
         k_held = support_stiffness(prototype, loaded.tangent)
@@ -92,6 +107,7 @@ def structure_report(mechanism: MechanismParams, *, segments: str = "analytic", 
         t = time.perf_counter()
         factor = mount_buckling_factor(unloaded, loaded)
         chains = chain_buckling_factors(prototype, loaded)
+        scan = newton_buckling_scan(prototype)
         timings["buckling_s"] = time.perf_counter() - t
         t = time.perf_counter()
         beam_nominal = chain_peak_stress_beam(prototype, loaded.segment_gradient)
@@ -140,11 +156,20 @@ def structure_report(mechanism: MechanismParams, *, segments: str = "analytic", 
         "axial_load_N": per_chain(loaded.tension),
         "modes": {
             "frequencies_Hz": modes.frequencies.tolist(),
+            "frequencies_without_preload_Hz": unstiffened.frequencies.tolist(),
+            "preload": "frequencies_Hz: tangent at the nominal state (the payload's weight, geometric stiffness "
+                       "included); without_preload: the unloaded tangent, same mass",
+            "figures": figure_names,
             "effective_mass": [dict(zip(AXES, row)) for row in modes.effective_mass.tolist()],
             "effective_mass_units": "kg for x, y, z; kg m^2 for rx, ry, rz (about O_C)",
             "captured_fraction": dict(zip(AXES, (total_modal / modes.total_mass).tolist())),
             "total_moving_mass": dict(zip(AXES, modes.total_mass.tolist())),
         },
+        "craig_bampton": {
+            "what": "mount frequencies [Hz] with the chains' interior DOFs condensed statically (guyan) or with n "
+                    "fixed-interface modes kept (craig_bampton_n), against all DOFs (full); fixed_interface_Hz: "
+                    "each chain's own lowest modes, payload frame and nuts held",
+            **reductions},
         "support_stiffness": {
             "point": "O_C, frame (mechanism) axes; DOFs ux, uy, uz [m], rx, ry, rz [rad]",
             "units": "N/m, N/rad (= N m/m), N m/rad",
@@ -158,6 +183,8 @@ def structure_report(mechanism: MechanismParams, *, segments: str = "analytic", 
             "mount_weight_factor": factor,
             "chain_held": per_chain(chains["held"]),
             "chain_sway": per_chain(chains["sway"]),
+            "newton_scan": {"what": "Newton at increasing weight factors; lowest_eigenvalue mu of K_T(s) phi = mu K_0 "
+                                    "phi (linearized: 1 - s / factor)", **scan},
             "note": "factors on the nominal load; inf (null in JSON) for a chain in tension",
         },
         "timings_s": {**timings, "total_s": time.perf_counter() - t0},
@@ -186,13 +213,17 @@ def markdown(report: dict[str, Any]) -> str:
              f"filling a {' x '.join(f'{v:g}' for v in report['payload']['box_mm'])} mm box, centre of gravity "
              f"{report['payload']['centre_of_gravity_mm']} mm. What each figure means and how far to trust it: "
              "docs/structure.md.", "", "## Modes", "",
-             "| mode | f [Hz] | " + " | ".join(f"m_eff {a}" for a in AXES) + " |",
-             "|---|---|" + "---|" * len(AXES)]
-    for k, (f, row) in enumerate(zip(report["modes"]["frequencies_Hz"], report["modes"]["effective_mass"]), 1):
-        lines.append(f"| {k} | {f:.2f} | " + " | ".join(_fmt(row[a]) for a in AXES) + " |")
+             "| mode | f [Hz] | f without preload [Hz] | " + " | ".join(f"m_eff {a}" for a in AXES) + " |",
+             "|---|---|---|" + "---|" * len(AXES)]
+    for k, (f, f0, row) in enumerate(zip(report["modes"]["frequencies_Hz"],
+                                         report["modes"]["frequencies_without_preload_Hz"],
+                                         report["modes"]["effective_mass"]), 1):
+        lines.append(f"| {k} | {f:.2f} | {f0:.2f} | " + " | ".join(_fmt(row[a]) for a in AXES) + " |")
     captured = report["modes"]["captured_fraction"]
     lines += ["", "Effective mass in kg (x, y, z) and kg m^2 (rx, ry, rz about O_C); the modes shown capture "
               + ", ".join(f"{a} {100 * captured[a]:.0f} %" for a in AXES) + " of the moving mass.", "",
+              "Without preload: the unloaded tangent (no stress stiffening by the payload's weight), same mass. "
+              + (f"Shapes: {', '.join(report['modes']['figures'])}." if report["modes"].get("figures") else ""), "",
               "## Support stiffness at O_C (nuts held)", "",
               "| | " + " | ".join(AXES) + " |", "|---|" + "---|" * 6]
     for a, row in zip(AXES, report["support_stiffness"]["nuts_held"]):
@@ -219,7 +250,21 @@ def markdown(report: dict[str, Any]) -> str:
         from .workspace_report import workspace_markdown
 
         lines += [""] + workspace_markdown(report["workspace"])
+    scan = b["newton_scan"]
     lines += ["", f"Mount buckling: the payload's weight x **{b['mount_weight_factor']:.3g}** makes the mount's "
-              "tangent singular (linearized about the unloaded state).", "",
+              "tangent singular (linearized about the unloaded state). Newton's check: the lowest eigenvalue of "
+              "K_T(s) against K_0 falls " + ", ".join(f"{m:.3f} at {f:g}" for f, m in
+                                                      zip(scan["factors"], scan["lowest_eigenvalue"]))
+              + f"; Newton converges up to x {_fmt(scan['newton_converged_to'])}, fails at x "
+              f"{_fmt(scan['newton_failed_at'])}; the eigenvalue reaches 0 at x {_fmt(scan['zero_crossing'])}.", "",
+              "## Chains: Craig-Bampton against Guyan", "",
+              "Each chain's own lowest modes (payload frame and nuts held) [Hz]: "
+              + "; ".join(f"{n} " + ", ".join(f"{v:.0f}" for v in f) for n, f in
+                          report["craig_bampton"]["fixed_interface_Hz"].items()) + ".", "",
+              "| model | " + " | ".join(str(k) for k in range(1, 13)) + " |", "|---|" + "---|" * 12]
+    for name, freqs in report["craig_bampton"].items():
+        if isinstance(freqs, list):
+            lines.append(f"| {name} | " + " | ".join(f"{v:.1f}" for v in freqs) + " |" + " - |" * (12 - len(freqs)))
+    lines += ["",
               "Wall times [s]: " + ", ".join(f"{k} {v:.1f}" for k, v in report["timings_s"].items()), ""]
     return "\n".join(lines)
