@@ -99,3 +99,18 @@ def test_stroke_limit_bisects_to_the_limit(prototype):
     assert stroke == pytest.approx((335e6 - p0) / c, rel=1e-3)
     assert stroke_limit(prototype, 1, 1.0, 5e6, peak) == 0.0
     assert stroke_limit(prototype, 1, 1.0, 1e12, peak, max_stroke=2e-3) == float("inf")
+
+
+def test_fem_figures_only_for_the_chains_asked(prototype):
+    """A FEM source asked for chains 3-5 only: those get its figure and place (the largest
+    over their segments), the others NaN and no place; the beam figures stay whole."""
+    class Fake:
+        def peak_von_mises_at(self, chain, x_start, x_end, motion):
+            return 1e6 * (1.0 + x_start), np.array([0.5 * (x_start + x_end), 0.0, 0.0])
+
+    state = nominal_state(prototype)
+    at = stress_at(prototype, state, Fake(), chains=(3, 4, 5))
+    assert np.all(np.isnan(at.fem[:3])) and at.fem_where[:3] == ("", "", "")
+    np.testing.assert_allclose(at.fem[3:], 1e6 * (1.0 + prototype.section_x[3:, 4]))
+    assert all(w.startswith("segment 5, ") for w in at.fem_where[3:])
+    assert np.all(np.isfinite(at.beam))

@@ -30,7 +30,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--elements-through", type=float,
                         help="FEM segments: quadratic tets through the thinnest leaf (default 2)")
     parser.add_argument("--refine", action="store_true",
-                        help="FEM segments: the workspace stresses again with one more element through the leaves")
+                        help="FEM segments: the driving chains' workspace stresses again with one more element through "
+                             "the leaves (their segments built once, ~10 min each on a loaded machine, then cached)")
     parser.add_argument("--modes", type=int, default=12, help="number of mount modes (default %(default)s)")
     parser.add_argument("--trajectory-points", type=int, default=77,
                         help="points of the standard trajectory the stresses are taken over (1 + a multiple of 4, >= 13; 0: nominal only; "

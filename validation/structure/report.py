@@ -44,8 +44,9 @@ def structure_report(mechanism: MechanismParams, *, segments: str = "analytic", 
     or "fem"; ``elements_through``: FEM mesh setting (default
     ``fem_segments.DEFAULT_ELEMENTS_THROUGH``); ``trajectory_points``: points of the
     standard trajectory the stresses are taken over (0: nominal only); ``refine`` (FEM
-    segments only): the workspace stresses again with one more element through the
-    leaves (same states, segments built or read from the cache); ``figures``: a folder
+    segments only): the workspace stresses of the driving chains again with one more
+    element through the leaves (``workspace_report.REFINED_CHAINS``; same states,
+    segments built or read from the cache); ``figures``: a folder
     to write mode_1.png .. mode_6.png and modes.vtu into (``mode_shapes``), or None."""
     from ..blas_threads import single_blas_thread
     from ..prototype.mechanism import build_prototype

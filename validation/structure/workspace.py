@@ -120,9 +120,10 @@ class StressAt:
         return self.fem if self.fem is not None else self.beam
 
 
-def stress_at(prototype: Prototype, state: NominalState, fem=None) -> StressAt:
+def stress_at(prototype: Prototype, state: NominalState, fem=None, chains=None) -> StressAt:
     """Peak stresses and where they sit (``StressAt``) at ``state``; ``fem`` a
-    ``FemSegments`` or None (beam bound only)."""
+    ``FemSegments`` or None (beam bound only); ``chains``: indices of the chains the FEM
+    figure is taken for (default all; the others get NaN and "")."""
     from ..prototype.equilibrium import node_poses
     from ..prototype.superelement import relative_pose, segment_deformation
     from .stress import chain_leaf_stresses
@@ -137,8 +138,11 @@ def stress_at(prototype: Prototype, state: NominalState, fem=None) -> StressAt:
     nodes = node_poses(a, state.poses)
     rel = relative_pose(nodes[a.segment_nodes[:, 0]], nodes[a.segment_nodes[:, 1]])
     xi = segment_deformation(rel, a.segment_reference_inverse).reshape(N_CHAINS, N_SEGMENTS, 6)
-    peak, where = np.zeros(N_CHAINS), []
+    peak, where = np.full(N_CHAINS, np.nan), []
     for c, placement in enumerate(prototype.mechanism.chains):
+        if chains is not None and c not in chains:
+            where.append("")
+            continue
         xs, best = prototype.section_x[c], (-1.0, "")
         for s in range(N_SEGMENTS):
             value, point = fem.peak_von_mises_at(placement.chain, xs[s], xs[s + 1], np.r_[np.zeros(6), xi[c, s]])

@@ -13,7 +13,7 @@ import numpy as np
 from ..prototype.mechanism import Prototype
 from .workspace import StressAt, commands_for_angles, frame_angles, stress_at, stroke_limit, workspace_corners
 
-__all__ = ["DESIGN_SAFETY", "workspace_section", "trajectory_peaks", "workspace_markdown"]
+__all__ = ["DESIGN_SAFETY", "REFINED_CHAINS", "workspace_section", "trajectory_peaks", "workspace_markdown"]
 
 DESIGN_SAFETY = 2.0
 """Safety factor on yield for the design stroke: the calibration repeats its strokes
@@ -23,8 +23,14 @@ concentration (beam bound) or do not resolve it fully (2 quadratic tets through 
 leaf; K_t ~ 1.1-1.2): 1.4 x 1.2-1.3 ~ 1.8, rounded up to 2."""
 
 
+REFINED_CHAINS = (3, 4, 5)
+"""The chains whose FEM stresses are refined: the driving chains D1-D3, which govern the
+safety (their leaf segments at 3 tets through took ~10 min each on the shared machine;
+the load chains' would double that)."""
+
+
 def _mpa(names, values):
-    return None if values is None else {n: float(v) / 1e6 for n, v in zip(names, values)}
+    return None if values is None else {n: (float(v) / 1e6 if np.isfinite(v) else None) for n, v in zip(names, values)}
 
 
 def _stress_entry(names, at: StressAt, fine: StressAt | None) -> dict[str, Any]:
@@ -45,18 +51,20 @@ def trajectory_peaks(prototype: Prototype, commands: np.ndarray, fem=None, fem_f
 
     sources = {"beam": None, "fem": fem, "fem_refined": fem_fine}
     best = {k: {"stress": np.zeros(6), "point": np.zeros(6, int), "where": [""] * 6} for k in sources}
+    if fem_fine is not None:  # chains not refined stay NaN
+        best["fem_refined"]["stress"][np.setdiff1d(np.arange(6), REFINED_CHAINS)] = np.nan
     poses = None
     for i, command in enumerate(commands):
         state = nominal_state(prototype, commands=command, start=poses)
         poses = state.poses
         at = stress_at(prototype, state, fem)
-        fine = stress_at(prototype, state, fem_fine) if fem_fine is not None else None
+        fine = stress_at(prototype, state, fem_fine, REFINED_CHAINS) if fem_fine is not None else None
         for name, values, where in (("beam", at.beam, at.beam_where), ("fem", at.fem, at.fem_where),
                                     ("fem_refined", None if fine is None else fine.fem,
                                      None if fine is None else fine.fem_where)):
             if values is None:
                 continue
-            for c in np.flatnonzero(values > best[name]["stress"]):
+            for c in np.flatnonzero(np.nan_to_num(values, nan=-1.0) > best[name]["stress"]):
                 best[name]["stress"][c], best[name]["point"][c], best[name]["where"][c] = values[c], i, where[c]
     return {k: (v if sources[k] is not None or k == "beam" else None) for k, v in best.items()}
 
@@ -77,7 +85,7 @@ def workspace_section(prototype: Prototype, *, fem=None, fem_fine=None, trajecto
     corner_rows = []
     for corner, command, state in zip(corners, commands, states):
         at = stress_at(prototype, state, fem)
-        fine = stress_at(prototype, state, fem_fine) if fem_fine is not None else None
+        fine = stress_at(prototype, state, fem_fine, REFINED_CHAINS) if fem_fine is not None else None
         k = support_stiffness(prototype, state.tangent)
         corner_rows.append({"angles_mrad": (1e3 * corner).tolist(), "commands_mm": (1e3 * command).tolist(),
                             "reached_mrad": (1e3 * (frame_angles(state) - theta0)).tolist(),
@@ -120,7 +128,7 @@ def workspace_section(prototype: Prototype, *, fem=None, fem_fine=None, trajecto
 
 
 def _cell(table, name, digits=3):
-    return "-" if table is None else f"{table[name]:.{digits}g}"
+    return "-" if table is None or table[name] is None else f"{table[name]:.{digits}g}"
 
 
 def workspace_markdown(section: dict[str, Any]) -> list[str]:
@@ -155,7 +163,7 @@ def workspace_markdown(section: dict[str, Any]) -> list[str]:
             if entry is None:
                 continue
             for n in names:
-                lines.append(f"| {n} | {source} | {entry['MPa'][n]:.3g} | {entry['point'][n]} | {entry['where'][n]} |")
+                lines.append(f"| {n} | {source} | {_cell(entry['MPa'], n)} | {entry['point'][n]} | {entry['where'][n]} |")
         lines.append("")
     if "support_stiffness" in section:
         k = section["support_stiffness"]
