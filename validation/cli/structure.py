@@ -18,7 +18,7 @@ from .options import add_out
 __all__ = ["configure", "run", "EXAMPLES"]
 
 EXAMPLES = (
-    "flexcal structure --out runs/structure                  # beam-theory segments, ~10 s (quiet machine)",
+    "flexcal structure --out runs/structure                  # beam-theory segments, ~7 s of CPU",
     "flexcal structure --segments fem --out runs/structure-fem  # meshed segments, ~10 min cold, cached",
 )
 
