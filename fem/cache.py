@@ -73,6 +73,10 @@ CACHE_ENV = "FLEXCAL_CACHE_DIR"
 # cache itself). Editing any other one changes the code version and therefore every key;
 # new numerics modules (the mesher's helpers) are included automatically.
 _NOT_NUMERICS = frozenset({"__init__.py", "cache.py", "results.py"})
+# dataclass fields no FEM result depends on, left out of the key so that changing them keeps
+# the cached entries: a material's yield strength only judges stresses (flexcal structure),
+# stiffness, mass and stress fields per unit motion do not depend on it
+_NOT_IN_KEY = {"Material": frozenset({"yield_strength"})}
 _KEY_ENTRY = "__key__"  # the key stored inside each file, checked on every load
 _DIGEST_ENTRY = "__digest__"  # SHA-256 of the arrays (names, dtypes, shapes, bytes)
 
@@ -132,10 +136,12 @@ def code_version() -> str:
 
 def canonical(value: Any) -> Any:
     """A JSON-ready form of ``value`` that is equal for equal inputs: dataclasses become
-    ``{"__type__": name, fields...}``, mappings get sorted keys, numpy arrays and
+    ``{"__type__": name, fields...}`` (without the fields in ``_NOT_IN_KEY``, e.g. a
+    ``Material``'s yield strength), mappings get sorted keys, numpy arrays and
     scalars become lists/numbers (JSON writes floats round-trip exact)."""
     if dataclasses.is_dataclass(value) and not isinstance(value, type):
-        fields = {f.name: canonical(getattr(value, f.name)) for f in dataclasses.fields(value)}
+        skip = _NOT_IN_KEY.get(type(value).__qualname__, frozenset())
+        fields = {f.name: canonical(getattr(value, f.name)) for f in dataclasses.fields(value) if f.name not in skip}
         return {"__type__": type(value).__qualname__, **fields}
     if isinstance(value, Mapping):
         return {str(k): canonical(v) for k, v in sorted(value.items(), key=lambda kv: str(kv[0]))}

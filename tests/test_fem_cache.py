@@ -272,3 +272,13 @@ def test_fem_hinge_completes_without_a_writable_cache(tmp_path, monkeypatch, cap
     np.testing.assert_array_equal(result.compliance_fem, reference.compliance_fem)
     np.testing.assert_array_equal(result.displacement, reference.displacement)
     assert result.timings.keys() == {"geometry", "mesh", "fem_solve"}  # computed here, not served
+
+
+def test_yield_strength_stays_out_of_the_key():
+    # no cached FEM result (stiffness, mass, stress per unit motion) depends on the yield
+    # strength: changing it must keep the entries; the elastic constants must not
+    stronger = dict(PARTS, material=dataclasses.replace(STEEL, yield_strength=900e6))
+    assert cache.cache_key(stronger) == cache.cache_key(PARTS)
+    denser = dict(PARTS, material=dataclasses.replace(STEEL, density=8000.0))
+    stiffer_nu = dict(PARTS, material=dataclasses.replace(STEEL, poisson_ratio=0.3))
+    assert len({cache.cache_key(p) for p in (PARTS, denser, stiffer_nu)}) == 3

@@ -128,7 +128,7 @@ def test_chain_sway_buckling_is_2k_over_L_for_ideal_pivots():
     for k_node, body in enumerate(bodies, start=1):
         poses[body, :3, 3] -= k_node * step * axis
     state = NominalState(poses=poses, tangent=None, segment_gradient=None, tension=np.full(6, -axial),
-                         weight_factor=1.0)
+                         weight_factor=1.0, commands=np.zeros(3))
     factors = chain_buckling_factors(prototype, state)
     placement = mechanism.chains[chain].chain
     pivots = placement.length - 2 * placement.end_block_length - placement.hinge_length
@@ -165,6 +165,14 @@ def test_structure_command_writes_its_report(tmp_path, capsys):
     assert (out / "report.md").read_text().startswith("# Mount structure")
     assert "total_s" in json.loads((out / "timings.json").read_text())["timings_s"]
     assert "first mode" in capsys.readouterr().out
+    # mode pictures and the VTU with one displacement field per mode
+    assert [p.name for p in sorted(out.glob("mode_*.png"))] == [f"mode_{k}.png" for k in range(1, 7)]
+    import pyvista as pv
+
+    grid = pv.read(out / "modes.vtu")
+    assert grid.n_points == 44 and all(f"mode_{k}" in grid.point_data for k in range(1, 9))
+    assert len(report["modes"]["frequencies_without_preload_Hz"]) == 8
+    assert len(report["workspace"]["corners"]) == 8
     assert cli.main(["structure", "--modes", "0", "--out", str(tmp_path / "bad")]) == 2
 
 

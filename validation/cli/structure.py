@@ -4,8 +4,9 @@ On the virtual prototype's reduced model at the nominal state (design commands, 
 payload's weight): the first mount modes [Hz] with effective masses, the 6 x 6 support
 stiffness at O_C with the actuator nuts held, the peak von Mises stress per chain
 (nominal and over the standard trajectory) against the material's yield strength, and
-buckling factors (the mount, each chain). Writes DIR/report.json, DIR/timings.json and
-DIR/report.md. docs/structure.md says what each figure means and how far to trust it.
+buckling factors (the mount, each chain); the workspace corners, stress-limited strokes.
+Writes DIR/report.json, DIR/timings.json, DIR/report.md, DIR/mode_1.png .. mode_6.png
+and DIR/modes.vtu. docs/structure.md says what each figure means and how far to trust it.
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ from .options import add_out
 __all__ = ["configure", "run", "EXAMPLES"]
 
 EXAMPLES = (
-    "flexcal structure --out runs/structure                  # beam-theory segments, ~5 s",
+    "flexcal structure --out runs/structure                  # beam-theory segments, ~7 s of CPU",
     "flexcal structure --segments fem --out runs/structure-fem  # meshed segments, ~10 min cold, cached",
 )
 
@@ -28,11 +29,14 @@ def configure(parser: argparse.ArgumentParser) -> None:
                              "(minutes the first time, then from the FEM cache)")
     parser.add_argument("--elements-through", type=float,
                         help="FEM segments: quadratic tets through the thinnest leaf (default 2)")
+    parser.add_argument("--refine", action="store_true",
+                        help="FEM segments: the driving chains' workspace stresses again with one more element through "
+                             "the leaves (their segments built once, ~10 min each on a loaded machine, then cached)")
     parser.add_argument("--modes", type=int, default=12, help="number of mount modes (default %(default)s)")
     parser.add_argument("--trajectory-points", type=int, default=77,
                         help="points of the standard trajectory the stresses are taken over (1 + a multiple of 4, >= 13; 0: nominal only; "
                              "default %(default)s)")
-    add_out(parser, what="report.json, timings.json, report.md")
+    add_out(parser, what="report.json, timings.json, report.md, mode_*.png, modes.vtu")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -45,14 +49,17 @@ def run(args: argparse.Namespace) -> int:
 
     if args.elements_through is not None:
         check_elements_through(args.elements_through)
+    if args.refine and args.segments != "fem":
+        raise ValueError("--refine needs --segments fem (beam-theory stresses have no mesh to refine)")
     if args.modes < 1:
         raise ValueError(f"--modes {args.modes} must be >= 1")
     if args.trajectory_points < 0:
         raise ValueError(f"--trajectory-points {args.trajectory_points} must be >= 0")
-    report = structure_report(reference_mechanism(), segments=args.segments, elements_through=args.elements_through,
-                              n_modes=args.modes, trajectory_points=args.trajectory_points,
-                              progress=show_progress(args))
     with staged_output(args.out, replace=args.force) as staging:
+        report = structure_report(reference_mechanism(), segments=args.segments,
+                                  elements_through=args.elements_through, n_modes=args.modes,
+                                  trajectory_points=args.trajectory_points, refine=args.refine, figures=staging,
+                                  progress=show_progress(args))
         write_report(staging, report)
         write_text(staging / "report.md", markdown(report))
     f = report["modes"]["frequencies_Hz"]

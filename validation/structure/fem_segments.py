@@ -58,7 +58,7 @@ def _compute(segment: ChainSegment, material: Material, elements_through: float)
     fields = reduced.solution.unit_motion_fields
     stress = np.stack([nodal_stress(mesh, material, fields[k]) for k in range(12)]).astype(np.float32)
     return {"stiffness": 0.5 * (reduced.stiffness + reduced.stiffness.T), "mass": reduced.mass,
-            "unit_stress": stress, "n_dof": np.array(3 * len(mesh.nodes)),
+            "unit_stress": stress, "nodes": np.asarray(mesh.nodes, float), "n_dof": np.array(3 * len(mesh.nodes)),
             "total_mass": np.array(reduced.total_mass), "wall_s": np.array(time.perf_counter() - start)}
 
 
@@ -66,15 +66,16 @@ def segment_structure(chain: FlexureChain, x_start: float, x_end: float, materia
                       elements_through: float = DEFAULT_ELEMENTS_THROUGH, cache_directory=None
                       ) -> tuple[dict[str, np.ndarray], bool]:
     """(arrays of the canonical segment, mirrored?) for the slice [x_start, x_end] [m]:
-    "stiffness", "mass" (12, 12) and "unit_stress" (12, n_nodes, 6) [Pa per unit motion]
-    of the canonical segment (module docstring); built or read from the cache."""
+    "stiffness", "mass" (12, 12), "unit_stress" (12, n_nodes, 6) [Pa per unit motion] and
+    "nodes" (n_nodes, 3) [m] (chain axes, x from the chain's end A) of the canonical segment (module docstring); built or read from the cache."""
     from flexcal.fem.cache import cached
 
     # the chain's length to 1 pm, like the cuts: L1-L3 are the same chain but their lengths,
     # |B - A| of rotated points, differ in the last bits, which would give three cache keys
     chain = dataclasses.replace(chain, length=round(chain.length, 12))
     segment, mirrored = canonical_segment(chain, x_start, x_end)
-    parts = {"kind": "structure_segment", "segment": segment, "material": material,
+    # "layout" 2: the entries hold the mesh nodes too (where a peak stress sits)
+    parts = {"kind": "structure_segment", "layout": 2, "segment": segment, "material": material,
              "mesh": {"elements_through_thickness": float(elements_through)}}
     return cached(parts, lambda: _compute(segment, material, elements_through), cache_directory), mirrored
 
@@ -121,12 +122,24 @@ class FemSegments:
 
     def peak_von_mises(self, chain: FlexureChain, x_start: float, x_end: float, motion: np.ndarray) -> float:
         """Largest nodal von Mises stress [Pa] of the slice under node motions (12,) [m, rad]."""
+        return self.peak_von_mises_at(chain, x_start, x_end, motion)[0]
+
+    def peak_von_mises_at(self, chain: FlexureChain, x_start: float, x_end: float, motion: np.ndarray
+                          ) -> tuple[float, np.ndarray]:
+        """(largest nodal von Mises stress [Pa], where (3,) [m]: that node in chain axes)
+        of the slice under node motions (12,) [m, rad]; a mirrored slice's node is turned
+        back into place (x -> L - x, y -> -y)."""
         from flexcal.fem.results import von_mises
 
         arrays, mirrored = self._get(chain, x_start, x_end)
         u = mirror_map().T @ motion if mirrored else np.asarray(motion, float)
         stress = np.einsum("k,kni->ni", u, arrays["unit_stress"].astype(float))
-        return float(von_mises(stress).max())
+        values = von_mises(stress)
+        k = int(np.argmax(values))
+        where = np.array(arrays["nodes"][k], float)
+        if mirrored:
+            where = _TURN_Z @ where + np.array([chain.length, 0.0, 0.0])
+        return float(values[k]), where
 
 
 def chain_peak_stress_fem(prototype: Prototype, poses: np.ndarray, segments: FemSegments) -> np.ndarray:

@@ -57,13 +57,15 @@ PAYLOAD_BOX = (0.200, 1.400, 0.420)
 class NominalState:
     """poses (n_bodies, 4, 4); tangent (n_dofs, n_dofs) [SI]; segment_gradient
     (n_segments, 12) [N, N m] (the load each segment carries at its nodes, node axes);
-    tension (6,) [N] axial load of each chain, tension positive; weight_factor [-]."""
+    tension (6,) [N] axial load of each chain, tension positive; weight_factor [-];
+    commands (3,) [m] the actuator commands."""
 
     poses: np.ndarray
     tangent: np.ndarray
     segment_gradient: np.ndarray
     tension: np.ndarray
     weight_factor: float
+    commands: np.ndarray
 
 
 def nominal_state(prototype: Prototype, weight_factor: float = 1.0, *, commands: np.ndarray | None = None,
@@ -87,7 +89,7 @@ def nominal_state(prototype: Prototype, weight_factor: float = 1.0, *, commands:
                                     where=f"at commands {commands * 1e3} mm, weight x {weight_factor:g}")
     tension = -info.segment_gradient.reshape(N_CHAINS, N_SEGMENTS, 12)[:, 0, 0]
     return NominalState(poses=poses, tangent=info.tangent, segment_gradient=info.segment_gradient, tension=tension,
-                        weight_factor=float(weight_factor))
+                        weight_factor=float(weight_factor), commands=commands.copy())
 
 
 def payload_mass_matrix(mechanism: MechanismParams, box: tuple[float, float, float] = PAYLOAD_BOX) -> np.ndarray:

@@ -25,7 +25,7 @@ from flexcal.geometry.params import FlexureChain
 
 from ..prototype.mechanism import N_CHAINS, N_SEGMENTS, Prototype
 
-__all__ = ["leaf_section_positions", "leaf_von_mises", "chain_peak_stress_beam"]
+__all__ = ["leaf_section_positions", "leaf_von_mises", "chain_leaf_stresses", "chain_peak_stress_beam"]
 
 
 def leaf_section_positions(chain: FlexureChain) -> list[tuple[str, float]]:
@@ -49,16 +49,27 @@ def leaf_von_mises(chain: FlexureChain, kind: str, force: np.ndarray, moment: np
     return float(np.sqrt(sigma**2 + 3.0 * tau**2))
 
 
-def chain_peak_stress_beam(prototype: Prototype, segment_gradient: np.ndarray) -> np.ndarray:
-    """Peak von Mises bound (6,) [Pa] over the leaves of each chain at a state whose
-    segment gradients are ``segment_gradient`` (n_segments, 12) [N, N m]."""
+def chain_leaf_stresses(prototype: Prototype, segment_gradient: np.ndarray) -> tuple[np.ndarray, list[list[str]]]:
+    """(stresses (6, 8) [Pa], labels): the von Mises bound at both ends of the thin part
+    of each chain's four leaves (``leaf_section_positions`` order) at a state whose
+    segment gradients are ``segment_gradient`` (n_segments, 12) [N, N m]; labels like
+    "leaf 2 (B end of thin part), x = 61.50 mm"."""
     g = np.asarray(segment_gradient, float).reshape(N_CHAINS, N_SEGMENTS, 12)
-    out = np.zeros(N_CHAINS)
+    out = np.zeros((N_CHAINS, 8))
+    labels = []
     for c, placement in enumerate(prototype.mechanism.chains):
-        xs = prototype.section_x[c]
-        for kind, x in leaf_section_positions(placement.chain):
+        xs, names = prototype.section_x[c], []
+        for k, (kind, x) in enumerate(leaf_section_positions(placement.chain)):
             s = int(np.clip(np.searchsorted(xs, x) - 1, 0, N_SEGMENTS - 1))
             force, moment = g[c, s, 6:9], g[c, s, 9:12]
             moment_x = moment + np.cross([xs[s + 1] - x, 0.0, 0.0], force)
-            out[c] = max(out[c], leaf_von_mises(placement.chain, kind, force, moment_x))
-    return out
+            out[c, k] = leaf_von_mises(placement.chain, kind, force, moment_x)
+            names.append(f"leaf {k // 2 + 1} ({'AB'[k % 2]} end of thin part), x = {x * 1e3:.2f} mm")
+        labels.append(names)
+    return out, labels
+
+
+def chain_peak_stress_beam(prototype: Prototype, segment_gradient: np.ndarray) -> np.ndarray:
+    """Peak von Mises bound (6,) [Pa] over the leaves of each chain at a state whose
+    segment gradients are ``segment_gradient`` (n_segments, 12) [N, N m]."""
+    return chain_leaf_stresses(prototype, segment_gradient)[0].max(axis=1)
