@@ -15,7 +15,8 @@ from ..prototype.providers import PROVIDERS
 __all__ = ["add_out", "add_seed", "add_scenario", "add_trajectory", "load_scenario_with_trajectory",
            "add_executor_options", "executor_options", "MODEL_DEFAULTS", "CALIBRATION_DEFAULTS", "add_model_options",
            "add_identification_options", "add_method_options", "prior_scale_option", "add_calibration_options",
-           "add_source_options", "load_source", "check_sobol_options", "add_point_model_options"]
+           "add_source_options", "load_source", "check_sobol_options", "add_point_model_options",
+           "add_unit_check_option", "read_data"]
 
 
 def add_out(parser: argparse.ArgumentParser, *, required: bool = True, what: str = "report.json, report.md, PNGs",
@@ -155,12 +156,41 @@ def add_source_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--provider", choices=PROVIDERS,
                         help="prototype segment stiffness for --scenario (default %(default)s)")
     add_trajectory(parser)
+    add_unit_check_option(parser)
+
+
+def add_unit_check_option(parser: argparse.ArgumentParser) -> None:
+    """``--skip-unit-check``: read a measurement whose gain or spans do not fit its mount."""
+    parser.add_argument("--skip-unit-check", action="store_true",
+                        help="read the measurement even when its gain (angle change per input change) or its spans "
+                             "do not fit the mount's, which is how angles in rad or inputs in m under the _urad/_mm "
+                             "columns show (flexcal.validation.plausibility); for a mount unlike the sidecar's")
+
+
+def read_data(path, args: argparse.Namespace):
+    """The measurement at ``path`` (``--data``, ``DATA.csv``): every message names the file,
+    and unless ``--skip-unit-check`` its gain and spans must fit its mount (the sidecar's, or
+    the reference mount): ``flexcal.validation.plausibility``."""
+    from ..measurements import read_measurement
+    from ..plausibility import mount_scale, unit_evidence, unit_problem
+    from ..prototype.scenario import mechanism_from_metadata
+
+    try:
+        measurement = read_measurement(path)
+    except ValueError as error:  # name the file in every message (some name only the row)
+        if str(path) in str(error):
+            raise
+        raise ValueError(f"{path}: {error}") from None
+    if not getattr(args, "skip_unit_check", False):
+        scale = mount_scale(mechanism_from_metadata(measurement.metadata))
+        problem = unit_problem(unit_evidence(measurement.inputs, measurement.angles, scale))
+        if problem:
+            raise ValueError(f"{path}: {problem}")
+    return measurement
 
 
 def load_source(args: argparse.Namespace, space, *, progress: bool):
     """(measurement, presets (45,) [SI] or None) from ``--scenario`` or ``--data``."""
-    from ..measurements import read_measurement
-
     if args.noise_urad is not None and args.noise_urad < 0:
         raise ValueError(f"--noise-urad={args.noise_urad} must be >= 0")
     if args.scenario is not None:
@@ -174,12 +204,7 @@ def load_source(args: argparse.Namespace, space, *, progress: bool):
         return truth.measurement, scenario.values
     if getattr(args, "trajectory", None):
         raise ValueError("--trajectory drives a --scenario; a --data file already holds its own trajectory")
-    try:
-        measurement = read_measurement(args.data)
-    except ValueError as error:  # name the file in every message (some name only the row)
-        if str(args.data) in str(error):
-            raise
-        raise ValueError(f"{args.data}: {error}") from None
+    measurement = read_data(args.data, args)
     found = measurement.metadata.get("preset_errors")
     presets = space.build_values({e["name"]: e["value"] for e in found}, display_units=True) if found else None
     return measurement, presets
