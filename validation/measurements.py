@@ -33,12 +33,8 @@ REQUIRED_COLUMNS = ("point", "time_s", "leg", "xa1_mm", "xa2_mm", "xa3_mm",
 INPUT_COLUMNS = REQUIRED_COLUMNS[3:6]
 ANGLE_COLUMNS = REQUIRED_COLUMNS[6:9]
 _UNIT_SUFFIXES = ("_mm", "_urad", "_s", "_c", "_k", "_n", "_um", "_deg", "_pct", "_count")
-# Plausibility limits: an actuator stroke beyond 100 mm or an angle beyond 0.1 rad is not a
-# flexure mount's misalignment curve but a unit mistake (m vs mm, rad vs urad).
-MAX_ABS_INPUT_MM = 100.0
-MAX_ABS_ANGLE_URAD = 1e5
-# point and leg are counters: beyond 2^53 a float no longer holds every integer exactly
-MAX_INDEX = 2.0**53
+# the file's limits, shared with every writer (flexcal truth refuses up front what they refuse)
+from .measurement_limits import MAX_ABS_ANGLE_URAD, MAX_ABS_INPUT_MM, MAX_INDEX, values_problem  # noqa: E402
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -203,6 +199,10 @@ def write_measurement(path: str | os.PathLike, measurement: Measurement) -> None
     from .output import write_json
 
     path = Path(path)
+    # rounded as written, so the check sees what the reader will
+    problem = values_problem(np.round(measurement.inputs * 1e3, 9), np.round(measurement.angles * 1e6, 6))
+    if problem:
+        raise ValueError(f"{path}: not written: {problem} (the reader would refuse it)")
     header = list(REQUIRED_COLUMNS) + list(measurement.extras)
     buffer = io.StringIO()
     writer = csv.writer(buffer, lineterminator="\n")
