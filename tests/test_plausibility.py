@@ -163,3 +163,14 @@ def test_no_motion_and_noise_are_not_judged(table1):
 def test_spans_far_beyond_the_mount_are_refused(table1):
     text = _problem(_scaled(table1, inputs=90.0, angles=25.0))
     assert text.startswith("column xa") and "x the stroke of the mount" in text
+
+
+def test_identify_shows_progress_on_its_long_loop(tmp_path, capsys, table1):
+    """identify ran 100k rows for 156 s without a sign of life; its fits now count on stderr
+    (one line per stage off a terminal: validation/progress.py)."""
+    path = tmp_path / "curves.csv"
+    write_measurement(path, table1)
+    assert cli.main(["identify", "--data", str(path), "--sources", "D3.x0", "--method", "free", "--model-stiffness",
+                     "closed-form", "--no-second-order", "--out", str(tmp_path / "run")]) == 0
+    err = capsys.readouterr().err
+    assert "free estimate: started" in err and "free estimate: done, 1/1 fit" in err
