@@ -52,6 +52,9 @@ SPAN_LIMIT = 20.0  # [-] a span beyond this many workspaces / strokes is no meas
 CONFIDENCE_Z = 3.0  # [-] a ratio is judged off only when off by more than this many standard errors
 JUDGED_SHARE = 0.1  # [-] an angle is judged when its predicted span is >= this share of the largest one
 MIN_MOVE = 1e-9  # [m] a drive whose input moves less does not move (model.trajectory.MIN_MOVE)
+# fewer points leave the ratios' standard errors meaningless (a 3-point file can be exactly
+# linear); every identification needs more (45 sources / 3 angles = 15, the diagnosis 20)
+MIN_POINTS = 10
 
 _ANGLE_UNITS = (("rad", 1e-6), ("mrad", 1e-3), ("deg", 1e-6 / (math.pi / 180.0)), ("nrad", 1e3))
 _INPUT_UNITS = (("m", 1e3), ("inch", 25.4), ("um", 1e-3), ("nm", 1e-6))
@@ -74,7 +77,7 @@ class MountScale:
 class UnitEvidence:
     """What a measurement says about its units (module doc). drive_ratio, drive_std (3,):
     k_i and its standard error (nan: drive i does not move); angle_ratio, angle_std (3,):
-    r_a and its standard error (nan: angle a is not judged); angle_span (3,): span of each
+    r_a and its standard error (nan: angle a is not judged; all nan below MIN_POINTS points); angle_span (3,): span of each
     angle / (2 workspace); input_span (3,): span of each input / (2 stroke)."""
 
     drive_ratio: np.ndarray
@@ -123,7 +126,7 @@ def unit_evidence(inputs: np.ndarray, angles: np.ndarray, scale: MountScale) -> 
     drive_ratio, drive_std = np.full(3, np.nan), np.full(3, np.nan)
     angle_ratio, angle_std = np.full(3, np.nan), np.full(3, np.nan)
     moving = np.flatnonzero(input_range > MIN_MOVE)
-    if moving.size and n > 1:
+    if moving.size and n >= MIN_POINTS:
         # per drive: sum_i k_i (x_i - mean) J[:, i], stacked over the three angles
         design = np.stack([(xc[:, i, None] * scale.gain[None, :, i]).ravel() for i in moving], axis=1)
         k, std = _ratio_fit(design, ac.ravel(), dof=3 * (n - 1) - moving.size)
