@@ -249,7 +249,8 @@ class CrossValidation:
 
 def choose_prior_scale(residuals_for: Callable[[np.ndarray], Residuals], n_params: int, folds: Sequence[np.ndarray],
                        n_points: int, *, scales: Sequence[float] = PRIOR_SCALES, noise: float | None = None,
-                       point_size: int = 3, reference_scale: float = 1.0) -> CrossValidation:
+                       point_size: int = 3, reference_scale: float = 1.0,
+                       on_fit: Callable[[], None] = lambda: None) -> CrossValidation:
     """The prior scale with the lowest held-out RMS.
 
     residuals_for(points (k,) int) -> batched residuals on those points only, (n, k *
@@ -259,12 +260,13 @@ def choose_prior_scale(residuals_for: Callable[[np.ndarray], Residuals], n_param
     the fold fits use that value (one fit each instead of up to ``max_noise_rounds``: the
     noise sets the data's weight against the prior, the quantity the scale trades against,
     so every scale is scored at the same noise); each fold fit gets 50 Jacobians' worth of
-    rows (a score needs the basin, not the last digit).
+    rows (a score needs the basin, not the last digit). on_fit() after each fit (progress).
     """
     all_points = np.arange(n_points)
     if noise is None:
         noise = estimate(residuals_for(all_points), uniform_prior(n_params, reference_scale),
                          point_size=point_size).noise
+        on_fit()
     scores = []
     for scale in scales:
         squares, count = 0.0, 0
@@ -272,6 +274,7 @@ def choose_prior_scale(residuals_for: Callable[[np.ndarray], Residuals], n_param
             train = np.setdiff1d(all_points, fold)
             fit = estimate(residuals_for(train), uniform_prior(n_params, scale), noise=noise, point_size=point_size,
                            max_evaluations=50 * (n_params + 2))
+            on_fit()
             r = np.asarray(residuals_for(fold)(fit.x[None]), float)[0]
             squares += float(r @ r)
             count += r.size

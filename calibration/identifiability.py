@@ -78,7 +78,7 @@ class IdentifiabilityReport:
 
 
 def _condition(s: np.ndarray, d: int) -> float:
-    if s.size < d or s[-1] <= 0.0:
+    if d == 0 or s.size < d or s[-1] <= 0.0:  # d = 0: rank 0, no subset to condition (was an IndexError)
         return float("inf")
     return float(s[0] / s[-1])
 

@@ -102,9 +102,11 @@ def check_determined(n_points: int, n_unknowns: int, what: str = "sources") -> N
 
 def identify_all(space: ParameterSpace, inputs: np.ndarray, angles: np.ndarray, leg: np.ndarray,
                  settings: IdentificationSettings = IdentificationSettings(), *,
-                 log: Callable[[str], None] = lambda _: None) -> Identification:
+                 log: Callable[[str], None] = lambda _: None, on_fit: Callable[[], None] = lambda: None,
+                 on_plan: Callable[[int], None] = lambda _: None) -> Identification:
     """Identify every active source of ``space`` from ordered inputs (n, 3) [m] and measured
-    angles (n, 3) [rad]; leg (n,) labels the trajectory's legs (held-out folds)."""
+    angles (n, 3) [rad]; leg (n,) labels the trajectory's legs (held-out folds). Progress:
+    on_plan(number of least-squares fits) once, on_fit() after each."""
     inputs, angles = np.asarray(inputs, float), np.asarray(angles, float)
     check_determined(inputs.shape[0], space.n_params)
     directions = travel_directions(inputs)
@@ -121,14 +123,18 @@ def identify_all(space: ParameterSpace, inputs: np.ndarray, angles: np.ndarray, 
         scale = settings.prior_scale
     else:
         folds = held_out_folds(leg, settings.n_folds)
+        on_plan((settings.noise is None) + len(settings.scales) * len(folds) + 1)
         cv = choose_prior_scale(residuals_for, space.n_params, folds, inputs.shape[0], scales=settings.scales,
-                                noise=settings.noise)
+                                noise=settings.noise, on_fit=on_fit)
         scale = cv.best
         log(f"prior scale {scale:g} by {cv.n_folds}-fold held-out cross-validation "
             f"(held-out RMS {', '.join(f'{s:g}: {r * 1e6:.3g}' for s, r in zip(cv.scales, cv.held_out_rms))} urad)")
+    if cv is None:
+        on_plan(1)
     prior = uniform_prior(space.n_params, scale)
     fit = estimate(problem.residuals, prior, noise=settings.noise,
                    max_evaluations=FREE_MAX_EVALUATIONS if math.isinf(scale) else None)
+    on_fit()
     base = base_parameters(fit.jacobian / fit.noise, space.names, max_std=settings.max_std)
     ranges = space.upper - space.lower
     values = space.full_values(space.from_unit(fit.x))

@@ -33,20 +33,9 @@ REQUIRED_COLUMNS = ("point", "time_s", "leg", "xa1_mm", "xa2_mm", "xa3_mm",
 INPUT_COLUMNS = REQUIRED_COLUMNS[3:6]
 ANGLE_COLUMNS = REQUIRED_COLUMNS[6:9]
 _UNIT_SUFFIXES = ("_mm", "_urad", "_s", "_c", "_k", "_n", "_um", "_deg", "_pct", "_count")
-# Plausibility limits: an actuator stroke beyond 100 mm or an angle beyond 0.1 rad is not a
-# flexure mount's misalignment curve but a unit mistake (m vs mm, rad vs urad).
-MAX_ABS_INPUT_MM = 100.0
-MAX_ABS_ANGLE_URAD = 1e5
-# point and leg are counters: beyond 2^53 a float no longer holds every integer exactly
-MAX_INDEX = 2.0**53
-# Points of a curve or a trajectory (the scenario's n_points, a trajectory file's and a
-# measurement's rows): the paper's curve has 77. The analytic truth takes ~30 ms a point
-# here (77 points in 2.4 s), so 1e5 points are about an hour of prototype, and every model
-# evaluation of an identification walks them all: more is a mistake, not a measurement.
-MAX_POINTS = 100_000
-# Bytes of a measurement or trajectory CSV, checked before reading: write_measurement's
-# rows are ~120 bytes with one optional column; 400 a row leaves room for a dozen more.
-MAX_TABLE_BYTES = 400 * MAX_POINTS
+# the file's limits, shared with every writer (flexcal truth refuses up front what they refuse)
+from .measurement_limits import (MAX_ABS_ANGLE_URAD, MAX_ABS_INPUT_MM, MAX_INDEX, MAX_POINTS,  # noqa: E402
+                                 MAX_TABLE_BYTES, values_problem)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -251,6 +240,10 @@ def write_measurement(path: str | os.PathLike, measurement: Measurement) -> None
     from .output import write_json
 
     path = Path(path)
+    # rounded as written, so the check sees what the reader will
+    problem = values_problem(np.round(measurement.inputs * 1e3, 9), np.round(measurement.angles * 1e6, 6))
+    if problem:
+        raise ValueError(f"{path}: not written: {problem} (the reader would refuse it)")
     header = list(REQUIRED_COLUMNS) + list(measurement.extras)
     buffer = io.StringIO()
     writer = csv.writer(buffer, lineterminator="\n")

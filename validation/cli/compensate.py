@@ -46,6 +46,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--data", metavar="CSV", required=True,
                         help="misalignment curve (measurement CSV); a virtual-prototype sidecar makes it drive that "
                              "prototype")
+    from .options import add_unit_check_option
+
+    add_unit_check_option(parser)
     parser.add_argument("--targets", metavar="CSV", help="relative targets (theta_x_urad, theta_y_urad, theta_z_urad "
                                                          "from the zero posture); default: 30 points over the workspace")
     add_seed(parser, what="the bench's sensor noise during compensation (default: the sidecar's seed)")
@@ -115,14 +118,15 @@ def run(args: argparse.Namespace) -> int:
     from flexcal.model.forward import ideal_angles
     from ..runs.compensate import bench_from_metadata, run_compensation
     from ..reports.compensation import build_report, plot_fit, plot_first_round, plot_iterated, report_markdown
-    from ..measurements import read_measurement
     from ..runs.model_correction import model_space
     from ..output import staged_output, write_report
     from ..runs.targets import default_targets, read_targets, write_targets
 
     quiet = getattr(args, "quiet", False)
     settings = _settings(args)
-    measurement = read_measurement(args.data)
+    from .options import read_data
+
+    measurement = read_data(args.data, args)
     targets = read_targets(args.targets) if args.targets else default_targets()
     from .options import executor_options
     from ..prototype.scenario import mechanism_from_metadata

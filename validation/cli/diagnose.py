@@ -39,6 +39,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="measurement CSV (format: flexcal.validation.measurements)")
     parser.add_argument("--data", dest="data_option", metavar="CSV",
                         help="the measurement CSV, as verify and identify take it (instead of DATA.csv)")
+    from .options import add_unit_check_option
+
+    add_unit_check_option(parser)
     add_seed(parser, what="the baseline calibration's optimizer", default=0)
     parser.add_argument("--particles", type=int, help="PSO particles of each baseline start (default %(default)s)")
     parser.add_argument("--iterations", type=int, help="PSO iterations of each baseline start (default %(default)s)")
@@ -136,13 +139,13 @@ def run(args: argparse.Namespace) -> int:
     from ..diagnosis.diagnose import check_measurement, run_diagnosis
     from ..diagnosis.baseline import BaselineSettings, calibrate_baseline
     from ..diagnosis.plots import plot_heldout, plot_residual, plot_strata
-    from ..measurements import read_measurement
     from ..runs.model_correction import model_space
     from ..output import staged_output, write_report
+    from .options import read_data
 
     if args.particles < 2 or args.iterations < 1:
         raise ValueError("--particles must be >= 2 and --iterations >= 1")
-    measurement = read_measurement(data_path(args))
+    measurement = read_data(data_path(args), args)
     check_measurement(measurement)  # before the model's FEM correction (~30 s cold)
     from .options import executor_options
     from ..prototype.scenario import mechanism_from_metadata

@@ -91,7 +91,9 @@ def run(args: argparse.Namespace) -> int:
     space = model_space(args.model_stiffness, args.second_order, progress=progress,
                         mechanism=mechanism_from_metadata(measurement.metadata), **executor_options(args))
     start = time.perf_counter()
-    result = run_verify(measurement, space, settings, presets=presets, truth=truth, progress=False)
+    # bars on stderr for the long loops (PSO iterations, least-squares fits); identify prints its own summary
+    result = run_verify(measurement, space, settings, presets=presets, truth=truth, progress=progress,
+                        log=lambda *a, **k: None)
     wall_s = time.perf_counter() - start
     verified = result.report
     angles = result.problem.angles

@@ -18,7 +18,7 @@ __all__ = ["add_out", "add_seed", "add_scenario", "add_trajectory", "load_scenar
            "CALIBRATION_DEFAULTS", "add_model_options",
            "add_identification_options", "add_method_options", "prior_scale_option", "add_calibration_options",
            "add_source_options", "load_source", "load_source_with_truth", "check_sobol_options",
-           "add_point_model_options"]
+           "add_point_model_options", "add_unit_check_option", "read_data"]
 
 
 def add_out(parser: argparse.ArgumentParser, *, required: bool = True, what: str = "report.json, report.md, PNGs",
@@ -186,6 +186,37 @@ def add_source_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--provider", choices=PROVIDERS,
                         help="prototype segment stiffness for --scenario (default %(default)s)")
     add_trajectory(parser)
+    add_unit_check_option(parser)
+
+
+def add_unit_check_option(parser: argparse.ArgumentParser) -> None:
+    """``--skip-unit-check``: read a measurement whose gain or spans do not fit its mount."""
+    parser.add_argument("--skip-unit-check", action="store_true",
+                        help="read the measurement even when its gain (angle change per input change) or its spans "
+                             "do not fit the mount's, which is how angles in rad or inputs in m under the _urad/_mm "
+                             "columns show (flexcal.validation.plausibility); for a mount unlike the sidecar's")
+
+
+def read_data(path, args: argparse.Namespace):
+    """The measurement at ``path`` (``--data``, ``DATA.csv``): every message names the file,
+    and unless ``--skip-unit-check`` its gain and spans must fit its mount (the sidecar's, or
+    the reference mount): ``flexcal.validation.plausibility``."""
+    from ..measurements import read_measurement
+    from ..plausibility import mount_scale, unit_evidence, unit_problem
+    from ..prototype.scenario import mechanism_from_metadata
+
+    try:
+        measurement = read_measurement(path)
+    except ValueError as error:  # name the file in every message (some name only the row)
+        if str(path) in str(error):
+            raise
+        raise ValueError(f"{path}: {error}") from None
+    if not getattr(args, "skip_unit_check", False):
+        scale = mount_scale(mechanism_from_metadata(measurement.metadata))
+        problem = unit_problem(unit_evidence(measurement.inputs, measurement.angles, scale))
+        if problem:
+            raise ValueError(f"{path}: {problem}")
+    return measurement
 
 
 def load_source(args: argparse.Namespace, space, *, progress: bool):
@@ -197,7 +228,6 @@ def load_source_with_truth(args: argparse.Namespace, space, *, progress: bool):
     """``load_source`` and the truth of the model-form floor (``runs.form_floor.TruthCurve``:
     the noise-free prototype curve of ``--scenario``, the sidecar's curve of ``--data``; None
     for data without presets)."""
-    from ..measurements import read_measurement
     from ..runs.form_floor import truth_from_measurement, truth_from_run
 
     if args.noise_urad is not None and args.noise_urad < 0:
@@ -213,12 +243,7 @@ def load_source_with_truth(args: argparse.Namespace, space, *, progress: bool):
         return truth.measurement, scenario.values, truth_from_run(truth.run, scenario.values)
     if getattr(args, "trajectory", None):
         raise ValueError("--trajectory drives a --scenario; a --data file already holds its own trajectory")
-    try:
-        measurement = read_measurement(args.data)
-    except ValueError as error:  # name the file in every message (some name only the row)
-        if str(args.data) in str(error):
-            raise
-        raise ValueError(f"{args.data}: {error}") from None
+    measurement = read_data(args.data, args)
     found = measurement.metadata.get("preset_errors")
     presets = space.build_values({e["name"]: e["value"] for e in found}, display_units=True) if found else None
     return measurement, presets, truth_from_measurement(measurement, space)

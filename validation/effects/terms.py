@@ -21,7 +21,7 @@ import numpy as np
 from .hooks import REFERENCE_TEMPERATURE_C
 
 __all__ = ["TermData", "ModelTerm", "build_term_data", "TERMS", "reversal_counts", "travel_since_reversal",
-           "path_length", "path_fraction", "SCREW_LEAD", "TERM_DAHL_LENGTH", "TERM_CREEP_TIME"]
+           "path_length", "path_fraction", "time_rate", "SCREW_LEAD", "TERM_DAHL_LENGTH", "TERM_CREEP_TIME"]
 
 SCREW_LEAD = 1e-3  # [m/rev] ball-screw lead of D1..D3 (the code has none; issue #7 guidance)
 TERM_DAHL_LENGTH = 50e-6  # [m] fixed transition length of the friction term (injectors draw 20..80 um)
@@ -186,6 +186,18 @@ def relaxed(series: np.ndarray, time: np.ndarray, time_constant: float) -> np.nd
 
 # ---------------------------------------------------------------- the terms
 
+def time_rate(values: np.ndarray, time: np.ndarray) -> np.ndarray:
+    """(n,) d values / dt [unit/s] of a series (n,) at times (n,) [s], non-decreasing: the
+    gradient over the distinct time stamps, points sharing a stamp (two readings in one
+    second) sharing their mean value's rate; 0 with fewer than two distinct stamps. (np.gradient
+    on the raw times divided by the zero step: RuntimeWarnings and NaN reached the diagnosis.)"""
+    unique, inverse = np.unique(np.asarray(time, dtype=float), return_inverse=True)
+    if unique.size < 2:
+        return np.zeros(np.shape(values))
+    mean = np.bincount(inverse, weights=np.asarray(values, dtype=float)) / np.bincount(inverse)
+    return np.gradient(mean, unique)[inverse]
+
+
 def _to_angles(dx: np.ndarray, data: TermData) -> np.ndarray:
     """Screw displacements (n, 3) [m] -> angle increments (n, 3) [rad] (Δθ = J Δx)."""
     return np.einsum("nai,ni->na", data.input_jacobian, dx)
@@ -238,7 +250,7 @@ def _gravity_sag(p, data):  # g_i [m/kN^2] of N_i^2 per driving chain, h [rad/kN
 
 def _thermal(p, data):  # k_a [rad/K] of T - T_ref, l_a [rad s/K] of dT/dt per channel (a lag ~ -tau dT/dt)
     temperature = np.asarray(data.extras["temperature_c"], dtype=float)
-    rate = np.gradient(temperature, data.time) if len(temperature) > 1 else np.zeros_like(temperature)
+    rate = time_rate(temperature, data.time)
     return np.outer(temperature - REFERENCE_TEMPERATURE_C, p[:3]) + np.outer(rate, p[3:6])
 
 

@@ -19,11 +19,12 @@ from flexcal.geometry.params import MechanismParams
 from flexcal.model.parameters import ParameterSpace
 
 from ..measurements import Measurement
+from .equilibrium import NonConvergenceError
 from .mechanism import PrototypeRun, build_prototype, simulate
 from ..effects.hooks import room_temperature
 from .scenario import Scenario
 
-__all__ = ["as_built", "make_truth", "TruthResult"]
+__all__ = ["as_built", "make_truth", "TruthResult", "why_no_equilibrium", "heaviest_payload"]
 
 _DIMENSION_FIELDS = {"w": "width", "a": "fillet", "l": "hinge_length", "t1": "thickness_1", "t2": "thickness_2"}
 
@@ -71,15 +72,28 @@ def make_truth(scenario: Scenario, provider: Callable, *, effects: tuple = (), p
     gives the same file; offsets are added as given.
     """
     from ..effects.library import effects_from_scenario
+    from ..measurement_limits import inputs_problem, sensor_problem, time_problem
 
+    with np.errstate(over="ignore", invalid="ignore"):  # an overflowing dwell is refused just below
+        time = np.arange(scenario.inputs.shape[0]) * scenario.dwell
+    # before any physics: what the file's reader would refuse (one set of limits)
+    problem = (sensor_problem(scenario.noise * 1e6, scenario.offset * 1e6) or inputs_problem(scenario.inputs * 1e3)
+               or time_problem(time))
+    if problem:
+        raise ValueError(f"scenario {scenario.name}: {problem}")
     mechanism, offsets, drives = as_built(scenario.space, scenario.values)
     transmissions = [(x0, cl, mu, scenario.breakaway_force) for x0, cl, mu in drives]
     prototype = build_prototype(mechanism, transmissions, provider, mount_offsets=offsets)
-    time = np.arange(scenario.inputs.shape[0]) * scenario.dwell
     temperature = room_temperature(time, scenario.seed)
     effects = effects_from_scenario(scenario.effects) + tuple(effects)
-    run = simulate(prototype, scenario.inputs, effects=effects, progress=progress, time=time,
-                   temperature=temperature)
+    try:
+        run = simulate(prototype, scenario.inputs, effects=effects, progress=progress, time=time,
+                       temperature=temperature)
+    except NonConvergenceError as error:
+        reason = why_no_equilibrium(prototype, scenario.inputs, str(error), scenario.space.mechanism)
+        if reason is None:
+            raise
+        raise ValueError(f"scenario {scenario.name}: {reason}") from error
     noise_rng = np.random.default_rng([scenario.seed, 2])  # stream 2: sensors (stream 1 drew the errors)
     angles = run.angles + scenario.offset + noise_rng.normal(size=run.angles.shape) * scenario.noise
     metadata: dict[str, Any] = {
@@ -104,3 +118,59 @@ def make_truth(scenario: Scenario, provider: Callable, *, effects: tuple = (), p
         metadata=metadata,
     )
     return TruthResult(measurement=measurement, run=run)
+
+
+def heaviest_payload(prototype, mass: float, *, steps: int = 8) -> tuple[float, float] | None:
+    """None if the prototype holds ``mass`` [kg] at zero inputs; else (lo, hi) [kg]: it finds
+    an equilibrium at zero inputs under a payload of ``lo`` and none under ``hi`` (geometric
+    bisection from 1 kg to ``mass``, ``steps`` halvings of the log-interval: +-5 % for 5
+    decades). ``lo`` is 0 if even 1 kg fails."""
+    def holds(m: float) -> bool:
+        trial = dataclasses.replace(prototype, mechanism=dataclasses.replace(prototype.mechanism, payload_mass=m))
+        try:
+            simulate(trial, np.zeros((1, 3)))
+        except NonConvergenceError:
+            return False
+        return True
+
+    if holds(mass):
+        return None
+    lo, hi = 1.0, float(mass)
+    if not holds(lo):
+        return 0.0, lo
+    for _ in range(steps):
+        mid = float(np.sqrt(lo * hi))
+        lo, hi = (mid, hi) if holds(mid) else (lo, mid)
+    return lo, hi
+
+
+def why_no_equilibrium(prototype, inputs: np.ndarray, message: str, nominal: MechanismParams) -> str | None:
+    """What to change when the prototype found no equilibrium (``message``: the solver's,
+    naming the 0-based point): a payload heavier than the mount holds (the figure found by
+    ``heaviest_payload``), or inputs beyond the stroke at that point (the stroke of drive i:
+    the input that alone reaches the edge of the workspace on ``nominal``'s small-deflection
+    model). None when neither explains it."""
+    import re
+
+    from ..plausibility import mount_scale
+
+    mass = float(prototype.mechanism.payload_mass)
+    bounds = heaviest_payload(prototype, mass)
+    if bounds is not None:
+        lo, hi = bounds
+        return (f"the payload of {mass:g} kg is more than this mount holds: under its weight at zero inputs the "
+                f"prototype finds no equilibrium above {lo:.3g} kg (none at {hi:.3g} kg); reduce payload_mass_kg "
+                f"under [mechanism] (the reference mount carries 300 kg)")
+    found = re.search(r"at point (\d+)", message)
+    if found is None:
+        return None
+    k = int(found.group(1))
+    stroke = mount_scale(nominal).stroke
+    ratio = np.abs(np.asarray(inputs, float)[k]) / stroke
+    i = int(np.argmax(ratio))
+    if ratio[i] <= 1.0:
+        return None
+    return (f"trajectory point {k + 1} (row {k + 2} of a trajectory file): xa{i + 1} = {inputs[k][i] * 1e3:.4g} mm is "
+            f"{ratio[i]:.3g} x the stroke of D{i + 1} (+-{stroke[i] * 1e3:.3g} mm reaches the edge of the +-1/+-5/+-3 "
+            f"mrad workspace on the nominal model); the prototype finds no equilibrium there: keep the inputs within "
+            f"the stroke")

@@ -34,7 +34,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
@@ -247,13 +247,17 @@ def _paper_identification(measurement: Measurement, angles: np.ndarray, space: P
 
 
 def _estimated_identification(measurement: Measurement, angles: np.ndarray, space: ParameterSpace,
-                              settings: VerifySettings, log) -> dict[str, Any]:
+                              settings: VerifySettings, log, progress: bool = False) -> dict[str, Any]:
     """MAP (cross-validated prior) or free least squares over all sources (``identify_all``)."""
     start = time.perf_counter()
     if settings.sources is not None:
         space = space.subset(settings.sources)
-    result = identify_all(space, measurement.inputs, angles, measurement.leg,
-                          IdentificationSettings(method=settings.method, prior_scale=settings.prior_scale), log=log)
+    with progress_bar(None, f"{settings.method} estimate", enabled=progress, unit="fit") as bar:
+        def plan(total: int) -> None:
+            bar.total = total
+        result = identify_all(space, measurement.inputs, angles, measurement.leg,
+                              IdentificationSettings(method=settings.method, prior_scale=settings.prior_scale),
+                              log=log, on_fit=lambda: bar.update(1), on_plan=plan)
     fit = result.estimate
     log(f"verify: {settings.method} estimate of {space.n_params} sources, {fit.n_evaluations} model runs in "
         f"{time.perf_counter() - start:.1f} s; {result.base.n_base} base parameters")
@@ -312,7 +316,7 @@ def _base_table(identification, space: ParameterSpace, presets: np.ndarray | Non
 
 def run_verify(measurement: Measurement, space: ParameterSpace, settings: VerifySettings = VerifySettings(), *,
                presets: np.ndarray | None = None, truth: TruthCurve | None = None,
-               progress: bool = True) -> VerifyResult:
+               progress: bool = True, log: Callable[..., None] | None = None) -> VerifyResult:
     """Identify and report on one measurement: ``settings.method`` "map" (default: all sources,
     cross-validated prior), "free" (all sources, no prior) or "paper" (Sobol screening +
     improved PSO); ``presets`` (45,) [SI] are the true values when the data are synthetic
@@ -321,13 +325,14 @@ def run_verify(measurement: Measurement, space: ParameterSpace, settings: Verify
     ``presets``, and "not available" without them)."""
     from flexcal.model.forward import CLASS_NAMES, forward, ideal_angles
 
-    log = print if progress else (lambda *a, **k: None)
+    if log is None:  # progress bars on stderr, the stage lines on stdout
+        log = print if progress else (lambda *a, **k: None)
     t0 = time.perf_counter()
     angles = remove_return_offsets(measurement) if settings.remove_offset else measurement.angles
     if settings.method == "paper":
         core = _paper_identification(measurement, angles, space, settings, log, progress)
     else:
-        core = _estimated_identification(measurement, angles, space, settings, log)
+        core = _estimated_identification(measurement, angles, space, settings, log, progress)
     values, fitted = core["values"], core["fitted"]
     residual = fitted - angles
     fit_rms = float(np.sqrt(np.mean(residual ** 2)))
