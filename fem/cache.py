@@ -123,13 +123,16 @@ def code_version() -> str:
     digest = hashlib.sha256()
     # unseeded fTetWild meshes (no _entropy build) must not be served as seeded ones
     digest.update(b"seeded mesher" if mesher_is_seeded() else b"unseeded mesher")
+    # subfolders too (the hinge profiles: geometry/profiles/, fem/profiles/), named by
+    # their path below the package's parent so that equal file names cannot collide
     folder = Path(__file__).parent
-    sources = [p for p in [*folder.glob("*.py"), *folder.glob("*.c")] if p.name not in _NOT_NUMERICS]
+    sources = [(folder, p) for p in [*folder.rglob("*.py"), *folder.glob("*.c")] if p.name not in _NOT_NUMERICS]
     spec = importlib.util.find_spec("flexcal.geometry")  # the solids the mesher meshes
     for folder in (spec.submodule_search_locations or []) if spec else []:
-        sources += [p for p in Path(folder).glob("*.py") if p.name != "__init__.py"]
-    for source in sorted(sources, key=lambda p: (p.parent.name, p.name)):
-        digest.update(f"{source.parent.name}/{source.name}".encode())
+        sources += [(Path(folder), p) for p in Path(folder).rglob("*.py") if p.name != "__init__.py"]
+    names = sorted((f"{root.name}/{source.relative_to(root).as_posix()}", source) for root, source in sources)
+    for name, source in names:
+        digest.update(name.encode())
         digest.update(source.read_bytes())
     return f"{package}+{digest.hexdigest()[:16]}"
 

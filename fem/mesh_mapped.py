@@ -1,11 +1,11 @@
-"""Deterministic mapped quadratic-tet meshes of single hinges (circular notch, corner-filleted leaf).
+"""Deterministic mapped quadratic-tet meshes of single hinges (any profile with a mapped outline).
 
 fTetWild seeds its own random generator from ``std::random_device`` (fTetWild's
 ``RandomSource.h``; pytetwild exposes no seed), so two ``mesh_part`` calls on the same
 solid give different meshes even with one thread: measured 13,635 / 13,659 / 14,089
 nodes for the R 5, t 1, b 10 mm notch at 3 elements through. A single hinge is a
 profile t(x) extruded along its width, so a tensor grid mapped onto it is exact and the
-same on every run and machine: x graded along the hinge (finer where the section is thin
+same on every run and machine (the outline per profile: ``flexcal.fem.profiles``): x graded along the hinge (finer where the section is thin
 and where the fillet arc turns), y the fraction of the local height, z uniform across the
 width. The linear grid then goes through the same snapping and measuring as a fTetWild
 mesh (``flexcal.fem.mesh_snap.snap_to_part``: mid-edge nodes projected onto the exact
@@ -22,10 +22,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from flexcal.geometry.params import CircularNotchHinge, LeafHinge
-
 from .mesh import MeshReport, TetMesh
 from .mesh_snap import _jacobian_ratios, snap_to_part
+from .profiles import MappedOutline, outline_of
 from .structured import _EDGES, _folded_tets, _straighten, grid_tet_mesh
 
 if TYPE_CHECKING:
@@ -39,29 +38,22 @@ __all__ = ["mapped_mesh_supported", "mapped_grid", "mapped_mesh_part", "MAX_MAPP
 MAX_MAPPED_DOF = 1_500_000
 
 
-def _profile(hinge: CircularNotchHinge | LeafHinge) -> tuple[float, float, float, float, float]:
-    """(c, rho, t, block_length, width) [m]: flat half-length, arc radius, neck thickness."""
-    if isinstance(hinge, CircularNotchHinge):
-        return 0.0, hinge.radius, hinge.thickness, hinge.block_length, hinge.width
-    return hinge.length / 2 - hinge.fillet, hinge.fillet, hinge.thickness, hinge.block_length, hinge.width
-
-
 def mapped_mesh_supported(params) -> bool:
-    """True for a notch hinge and for a leaf hinge whose blocks are as high as its fillets
-    reach (t + 2a, the default): their outline is one profile t(x)."""
-    if isinstance(params, CircularNotchHinge):
-        return True
-    return isinstance(params, LeafHinge) and params.height <= params.thickness + 2 * params.fillet + 1e-12
+    """True when the part is a hinge whose profile has a mapped outline for it
+    (``flexcal.fem.profiles``): notch hinges, leaf hinges whose blocks are as high as their
+    fillets reach (t + 2a, the default), ..."""
+    return outline_of(params) is not None
 
 
-def _height(x: np.ndarray, c: float, rho: float, t: float) -> np.ndarray:
-    """Local height [m] at x [m]: t on the flat part, t + 2(rho - sqrt(rho^2 - u^2)) on the
-    arcs (u = |x| - c), t + 2 rho on the blocks."""
-    u = np.clip(np.abs(x) - c, 0.0, rho)
-    return t + 2.0 * (rho - np.sqrt(np.maximum(rho * rho - u * u, 0.0)))
+def _outline(hinge) -> MappedOutline:
+    outline = outline_of(hinge)
+    if outline is None:
+        raise ValueError(f"the mapped mesher has no outline for this {type(hinge).__name__} (a leaf with blocks "
+                         f"higher than t + 2a, or a part that is no single hinge); use the tetwild mesher")
+    return outline
 
 
-def mapped_grid(hinge: CircularNotchHinge | LeafHinge, n_thickness: int, *, aspect: float = 2.0,
+def mapped_grid(hinge, n_thickness: int, *, aspect: float = 2.0,
                 n_arc: int = 8) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Corner coordinates (x [m], eta [-] in [-1/2, 1/2], z [m]) of the mapped grid.
 
@@ -69,7 +61,9 @@ def mapped_grid(hinge: CircularNotchHinge | LeafHinge, n_thickness: int, *, aspe
     and wide as they are high at the neck, growing with the height along the arcs, and at
     least ``n_arc`` cells along each quarter arc; about square cells on the blocks.
     """
-    c, rho, t, block, width = _profile(hinge)
+    outline = _outline(hinge)
+    c, rho, t = outline.flat_half_length, outline.arc_half_length, outline.neck_thickness
+    block, width = outline.block_length, outline.width
     n = int(n_thickness)
     half = [0.0]
     if c > 0:
@@ -78,7 +72,7 @@ def mapped_grid(hinge: CircularNotchHinge | LeafHinge, n_thickness: int, *, aspe
     if rho > 0:
         phi = np.linspace(0.0, 0.5 * np.pi, 8001)  # x = c + rho sin(phi): fine where the arc turns
         x = c + rho * np.sin(phi)
-        density = np.maximum(n * rho * np.cos(phi) / (aspect * _height(x, c, rho, t)), 2.0 * n_arc / np.pi)
+        density = np.maximum(n * rho * np.cos(phi) / (aspect * outline.height(x)), 2.0 * n_arc / np.pi)
         s = np.concatenate([[0.0], np.cumsum(0.5 * (density[1:] + density[:-1]) * np.diff(phi))])
         n_cells = max(1, math.ceil(s[-1]))
         arc = np.interp(np.linspace(0.0, s[-1], n_cells + 1), s, x)[1:]
@@ -86,7 +80,7 @@ def mapped_grid(hinge: CircularNotchHinge | LeafHinge, n_thickness: int, *, aspe
         half += list(arc)
     half = np.array(half)
     end = c + rho
-    height = t + 2 * rho
+    height = outline.block_height
     n_block = max(1, math.ceil(block / (height / n)))
     blocks = np.linspace(end, end + block, n_block + 1)[1:]
     x = np.concatenate([-blocks[::-1], -half[::-1], half[1:], blocks])
@@ -94,9 +88,9 @@ def mapped_grid(hinge: CircularNotchHinge | LeafHinge, n_thickness: int, *, aspe
     return x, np.linspace(-0.5, 0.5, n + 1), np.linspace(-width / 2, width / 2, n_width + 1)
 
 
-def _isoparametric(mesh: TetMesh, c: float, rho: float, t: float) -> tuple[TetMesh, int]:
+def _isoparametric(mesh: TetMesh, height) -> tuple[TetMesh, int]:
     """The mesh with every mid-edge node at the image of its edge's midpoint in the
-    parent grid (x, eta = y / h(x), z): curved elements that follow the profile inside
+    parent grid (x, eta = y / h(x), z; h = ``height(x)`` [m]): curved elements that follow the profile inside
     the part too, not only on its surface (measured: C_rz,Mz -1.3 % of converged with
     surface-projected mid-nodes only, -0.6 % with these, R 5, t 1, b 10 mm, 3 cells
     across). Tets whose curved map would fold keep straight edges. Returns (mesh, number
@@ -106,12 +100,12 @@ def _isoparametric(mesh: TetMesh, c: float, rho: float, t: float) -> tuple[TetMe
     corners = np.unique(tets[:, :4])
     parent = np.zeros_like(nodes)
     parent[corners] = nodes[corners]
-    parent[corners, 1] = nodes[corners, 1] / _height(nodes[corners, 0], c, rho, t)
+    parent[corners, 1] = nodes[corners, 1] / height(nodes[corners, 0])
     for j, (a, b) in enumerate(_EDGES):
         mid = tets[:, 4 + j]
         point = 0.5 * (parent[tets[:, a]] + parent[tets[:, b]])
         nodes[mid] = point
-        nodes[mid, 1] = point[:, 1] * _height(point[:, 0], c, rho, t)
+        nodes[mid, 1] = point[:, 1] * height(point[:, 0])
     straight: set[int] = set()
     for _ in range(10):
         folded = _folded_tets(nodes, tets)
@@ -134,9 +128,10 @@ def mapped_mesh_part(part: "Part", *, elements_through_thickness: float = 3, asp
     a mesh beyond ``MAX_MAPPED_DOF``.
     """
     params = part.params
-    if not mapped_mesh_supported(params):
-        raise ValueError("the mapped mesher handles notch hinges and leaf hinges with blocks t + 2a high; "
-                         "use the tetwild mesher for this part")
+    outline = outline_of(params)
+    if outline is None:
+        raise ValueError("the mapped mesher handles single hinges whose profile has a mapped outline (notch "
+                         "hinges, leaf hinges with blocks t + 2a high, ...); use the tetwild mesher for this part")
     n_float = float(elements_through_thickness)
     if not (math.isfinite(n_float) and n_float >= 1):
         raise ValueError(f"elements_through_thickness={elements_through_thickness!r} must be >= 1")
@@ -154,19 +149,19 @@ def mapped_mesh_part(part: "Part", *, elements_through_thickness: float = 3, asp
     used, tets4 = np.unique(grid.tets[:, :4], return_inverse=True)
     tets4 = tets4.reshape(-1, 4)
     nodes = grid.nodes[used].copy()
-    c, rho, t, _, _ = _profile(params)
-    nodes[:, 1] *= _height(nodes[:, 0], c, rho, t)
+    t = outline.neck_thickness
+    nodes[:, 1] *= outline.height(nodes[:, 0])
     timings["grid"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     # every corner node lies on its surface already; the tolerance only has to catch the
-    # mid-edge nodes on the chords of the arcs (sagitta <= rho (1 - cos(pi / (4 n_arc)))),
+    # mid-edge nodes on the chords of the arcs (sagitta <= rho (1 - cos(pi / (4 n_arc))) for circular arcs),
     # kept well below a neck cell (t / n) so no node is put on a surface it is not on.
     # snap_to_part measures the mesh (the report); the mid-edge nodes are then put where
     # the map sends them (isoparametric), as in structured.notch_hinge_tet_mesh
     h_min = t / n
     tolerance = 0.3 * h_min
     snapped, measured = snap_to_part(params, nodes, tets4, tolerance=tolerance, project=True, morph=False)
-    mesh, n_straight = _isoparametric(snapped, c, rho, t)
+    mesh, n_straight = _isoparametric(snapped, outline.height)
     jacobian = float(_jacobian_ratios(mesh.nodes, mesh.tets).min())
     measured.update(min_jacobian_ratio=jacobian, volume=mesh.volume,
                     volume_error=mesh.volume / measured["volume_exact"] - 1.0, n_straight_mid=n_straight)

@@ -67,16 +67,15 @@ def classify_faces(nodes: np.ndarray, faces: np.ndarray, patches: Sequence[Patch
 
 
 def tangent_pairs(patches: Sequence[Patch], rtol: float = 1e-9) -> set[tuple[int, int]]:
-    """Index pairs (i < j) of a plane and a cylinder that meet tangentially (a flat leaf
+    """Index pairs (i < j) of a plane and a curved patch that meet tangentially (a flat leaf
     face running into its fillet, a fillet running into a block face): their common
     line is no edge of the solid, so a node there belongs to one of them only."""
     out = set()
     for i, a in enumerate(patches):
         for j, b in enumerate(patches):
             if i < j and isinstance(a, PlanePatch) != isinstance(b, PlanePatch):
-                plane, cyl = (a, b) if isinstance(a, PlanePatch) else (b, a)
-                if plane.axis in cyl.plane_axes and abs(abs(plane.value - cyl.centre[plane.axis]) - cyl.radius) \
-                        <= rtol * cyl.radius:
+                plane, curved = (a, b) if isinstance(a, PlanePatch) else (b, a)
+                if curved.is_tangent_to(plane, rtol):
                     out.add((i, j))
     return out
 
@@ -114,10 +113,11 @@ def node_patch_sets(nodes: np.ndarray, faces: np.ndarray, face_patch: np.ndarray
 def project_onto(points: np.ndarray, patches: Sequence[Patch]) -> np.ndarray:
     """Points (n, 3) moved to the intersection of the given patches' surfaces (unbounded).
 
-    Planes fix their coordinate (a second plane on the same axis is ignored); a cylinder
-    then solves for its free in-plane coordinate or projects radially. Combinations with
-    no such solution (a cylinder whose two in-plane coordinates are both fixed, two
-    cylinders) keep the cylinder out and use the planes only.
+    Planes fix their coordinate (a second plane on the same axis is ignored); a curved
+    patch (cylinder, or a profile's own) then solves for its free in-plane coordinate or
+    projects onto itself (``project_constrained``). Combinations with no such solution (a
+    curved patch whose two in-plane coordinates are both fixed, two curved patches) keep
+    the curved patch out and use the planes only.
     """
     out = np.array(points, float, copy=True)
     fixed: set[int] = set()
@@ -125,21 +125,10 @@ def project_onto(points: np.ndarray, patches: Sequence[Patch]) -> np.ndarray:
         if isinstance(patch, PlanePatch) and patch.axis not in fixed:
             out[:, patch.axis] = patch.value
             fixed.add(patch.axis)
-    cylinders = [p for p in patches if isinstance(p, CylinderPatch)]
-    if len(cylinders) != 1:
+    curved = [p for p in patches if not isinstance(p, PlanePatch)]
+    if len(curved) != 1:
         return out
-    cyl = cylinders[0]
-    u, v = cyl.plane_axes
-    free = [a for a in (u, v) if a not in fixed]
-    if len(free) == 2:
-        return cyl.project(out)
-    if len(free) == 1:
-        a = free[0]
-        b = v if a == u else u
-        root = np.sqrt(np.maximum(cyl.radius**2 - (out[:, b] - cyl.centre[b]) ** 2, 0.0))
-        side = np.where(out[:, a] >= cyl.centre[a], 1.0, -1.0)
-        out[:, a] = cyl.centre[a] + side * root
-    return out
+    return curved[0].project_constrained(out, fixed)
 
 
 @dataclass(frozen=True)

@@ -20,17 +20,12 @@ resolve the thin sections (``sizing_grid``).
 
 from __future__ import annotations
 
-from typing import Union
-
 import numpy as np
 
-from flexcal.geometry.exact import NotchPiece, ThinSection, bounding_box, thin_sections
-from flexcal.geometry.params import ChainSegment, CircularNotchHinge, FlexureChain, LeafHinge
+from flexcal.geometry.exact import Params, ThinSection, bounding_box, thin_sections
+from flexcal.geometry.params import ChainSegment, FlexureChain
 
 __all__ = ["target_size", "sizing_grid", "default_max_element_size", "kuhn_tets"]
-
-Params = Union[CircularNotchHinge, LeafHinge, FlexureChain, ChainSegment]
-
 
 def default_max_element_size(params: Params) -> float:
     """Default coarse element size [m]: half the smaller cross-section dimension of the
@@ -44,12 +39,7 @@ def default_max_element_size(params: Params) -> float:
 
 def _curved_ranges(section: ThinSection) -> list[tuple[float, float, float]]:
     """(x_start, x_end, radius) [m] of the section's curved surfaces (notch, fillets)."""
-    p = section.piece
-    if isinstance(p, NotchPiece):
-        return [(p.x0, p.x1, p.radius)]
-    if p.fillet > 0:
-        return [(p.x0, p.x0 + p.fillet, p.fillet), (p.x1 - p.fillet, p.x1, p.fillet)]
-    return []
+    return section.piece.curved_ranges()
 
 
 def _section_size(section: ThinSection, points: np.ndarray, n_through: float, grading: float,
@@ -115,7 +105,7 @@ def sizing_grid(params: Params, *, n_through: float, h_max: float, grading: floa
     for s in sections:
         x_features += [s.x0, s.x1]
         for x0, x1, _ in _curved_ranges(s):
-            x_features += list(np.linspace(x0, x1, 41 if isinstance(s.piece, NotchPiece) else 9))
+            x_features += list(np.linspace(x0, x1, s.piece.sizing_lines))
         reach = max((h_max - s.neck_thickness / n_through) / grading, 0.0)
         ramp = np.linspace(0.0, reach, 5)[1:]
         x_features += list(s.x0 - ramp) + list(s.x1 + ramp)

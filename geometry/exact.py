@@ -8,24 +8,27 @@ Every part here is a row of *pieces* along its local x axis (frames as in
 ``flexcal.geometry.params``):
 
 - ``BoxPiece``: a rigid block or strut, x in [x0, x1], |y| <= half_y, |z| <= half_z;
-- ``LeafPiece``: a corner-filleted leaf, thin along ``thin_axis`` (1 = y, 2 = z) with
-  thickness t over x in [x0 + a, x1 - a], quarter-circle fillets of radius a at both
-  ends (thickness t + 2a at x0 and x1), width 2 half_width along the other axis;
-- ``NotchPiece``: a right-circular notch, x in [-R, R] about ``centre``, thickness
-  t(x) = t + 2R - 2 sqrt(R^2 - (x - centre)^2) along y, width 2 half_width along z.
+- a compliant piece (``ThinPiece``) of a hinge profile (``flexcal.geometry.profiles``):
+  ``NotchPiece`` (right-circular notch), ``LeafPiece`` (corner-filleted leaf, thin along
+  ``thin_axis`` 1 = y or 2 = z; every leaf of a chain too), ... Each gives its thickness
+  t(x), volume, boundary surfaces and CAD solid itself.
+
+A hinge is fixed block, its profile's piece, free block; a chain its segments.
 
 All lengths [m]. The boundary surfaces of the pieces are in ``flexcal.geometry.surfaces``.
 """
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Union
 
 import numpy as np
 
-from .params import ChainSegment, CircularNotchHinge, FlexureChain, LeafHinge
+from .params import ChainSegment, FlexureChain
+from .profiles.circular import NotchPiece
+from .profiles.leaf import LeafPiece
+from .profiles.protocol import HingeProfile, ThinPiece
 
 __all__ = [
     "BoxPiece",
@@ -42,7 +45,7 @@ __all__ = [
     "bounding_box",
 ]
 
-Params = Union[CircularNotchHinge, LeafHinge, FlexureChain, ChainSegment]
+Params = Union[HingeProfile, FlexureChain, ChainSegment]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -59,87 +62,11 @@ class BoxPiece:
         return self.half_y, self.half_z
 
 
-@dataclass(frozen=True, kw_only=True)
-class LeafPiece:
-    """Corner-filleted leaf, x in [x0, x1]; thin along ``thin_axis`` (1 = y, 2 = z).
-
-    thickness t [m], fillet a [m] (0 = plain leaf), half_width [m] along the other axis.
-    """
-
-    x0: float
-    x1: float
-    thin_axis: int
-    thickness: float
-    fillet: float
-    half_width: float
-
-    @property
-    def width_axis(self) -> int:
-        return 3 - self.thin_axis
-
-    def end_extent(self) -> tuple[float, float]:
-        half_thin = self.thickness / 2 + self.fillet
-        return (half_thin, self.half_width) if self.thin_axis == 1 else (self.half_width, half_thin)
-
-    def local_thickness(self, x: np.ndarray) -> np.ndarray:
-        """Thickness t(x) [m] along the thin axis at axial positions x (n,) [m] (x clamped to the piece)."""
-        x = np.clip(np.asarray(x, float), self.x0, self.x1)
-        a = self.fillet
-        dx = np.maximum(np.maximum(self.x0 + a - x, x - (self.x1 - a)), 0.0)
-        return self.thickness + 2.0 * (a - np.sqrt(np.maximum(a * a - dx * dx, 0.0)))
-
-
-@dataclass(frozen=True, kw_only=True)
-class NotchPiece:
-    """Right-circular notch of radius R, x in [centre - R, centre + R], thin along y."""
-
-    centre: float
-    radius: float
-    thickness: float
-    half_width: float
-    thin_axis: int = 1
-
-    @property
-    def x0(self) -> float:
-        return self.centre - self.radius
-
-    @property
-    def x1(self) -> float:
-        return self.centre + self.radius
-
-    @property
-    def width_axis(self) -> int:
-        return 2
-
-    def end_extent(self) -> tuple[float, float]:
-        return self.thickness / 2 + self.radius, self.half_width
-
-    def local_thickness(self, x: np.ndarray) -> np.ndarray:
-        """t(x) = t + 2R - 2 sqrt(R^2 - (x - centre)^2) [m], x (n,) [m] clamped to the piece."""
-        u = np.clip(np.asarray(x, float) - self.centre, -self.radius, self.radius)
-        return self.thickness + 2.0 * (self.radius - np.sqrt(np.maximum(self.radius**2 - u * u, 0.0)))
-
-
-Piece = Union[BoxPiece, LeafPiece, NotchPiece]
+Piece = Union[BoxPiece, ThinPiece]
 
 
 def pieces(params: Params) -> tuple[Piece, ...]:
     """The pieces of a hinge or chain from its fixed end / end A to its free end / end B."""
-    if isinstance(params, CircularNotchHinge):
-        h, R, b, e = params.height, params.radius, params.width, params.block_length
-        return (
-            BoxPiece(x0=-R - e, x1=-R, half_y=h / 2, half_z=b / 2),
-            NotchPiece(centre=0.0, radius=R, thickness=params.thickness, half_width=b / 2),
-            BoxPiece(x0=R, x1=R + e, half_y=h / 2, half_z=b / 2),
-        )
-    if isinstance(params, LeafHinge):
-        h, l, w, e = params.height, params.length, params.width, params.block_length
-        return (
-            BoxPiece(x0=-l / 2 - e, x1=-l / 2, half_y=h / 2, half_z=w / 2),
-            LeafPiece(x0=-l / 2, x1=l / 2, thin_axis=1, thickness=params.thickness, fillet=params.fillet,
-                      half_width=w / 2),
-            BoxPiece(x0=l / 2, x1=l / 2 + e, half_y=h / 2, half_z=w / 2),
-        )
     if isinstance(params, (FlexureChain, ChainSegment)):
         chain = params.chain if isinstance(params, ChainSegment) else params
         s = chain.section / 2
@@ -153,7 +80,16 @@ def pieces(params: Params) -> tuple[Piece, ...]:
             else:
                 out.append(BoxPiece(x0=x0, x1=x1, half_y=s, half_z=s))
         return tuple(out)
-    raise TypeError(f"expected CircularNotchHinge, LeafHinge, FlexureChain or ChainSegment, got {type(params).__name__}")
+    if not hasattr(params, "thin_piece"):
+        raise TypeError(f"expected a hinge (flexcal.geometry.profiles), FlexureChain or ChainSegment, "
+                        f"got {type(params).__name__}")
+    # a hinge: fixed block, the profile's compliant piece (centred at x = 0), free block
+    h, l, w, e = params.height, params.length, params.width, params.block_length
+    return (
+        BoxPiece(x0=-l / 2 - e, x1=-l / 2, half_y=h / 2, half_z=w / 2),
+        params.thin_piece(),
+        BoxPiece(x0=l / 2, x1=l / 2 + e, half_y=h / 2, half_z=w / 2),
+    )
 
 
 def piece_label(params: Params, index: int) -> str:
@@ -178,7 +114,7 @@ class ThinSection:
     """
 
     name: str
-    piece: LeafPiece | NotchPiece
+    piece: ThinPiece
 
     @property
     def x0(self) -> float:
@@ -212,14 +148,7 @@ class ThinSection:
     def neck_half_length(self) -> float:
         """Half-length [m] of the region about ``neck_x`` where t(x) <= 1.05 t (the flat
         part of a leaf, or |x| <= sqrt(0.05 t R) for a notch): where the neck is measured."""
-        p = self.piece
-        if isinstance(p, NotchPiece):
-            return math.sqrt(0.05 * p.thickness * p.radius)
-        flat = max(0.5 * (p.x1 - p.x0) - p.fillet, 0.0)
-        # 2 (a - sqrt(a^2 - dx^2)) <= 0.05 t  <=>  dx <= sqrt(0.05 t a - (0.025 t)^2)
-        # (a fillet shallower than 0.025 t stays below 1.05 t all the way)
-        a, t = p.fillet, p.thickness
-        return flat + (a if a <= 0.025 * t else math.sqrt(0.05 * t * a - (0.025 * t) ** 2))
+        return self.piece.neck_half_length()
 
     def thickness(self, x: np.ndarray) -> np.ndarray:
         return self.piece.local_thickness(x)
@@ -234,13 +163,7 @@ def thin_sections(params: Params) -> tuple[ThinSection, ...]:
 def _piece_volume(piece: Piece) -> float:
     if isinstance(piece, BoxPiece):
         return (piece.x1 - piece.x0) * 4.0 * piece.half_y * piece.half_z
-    if isinstance(piece, NotchPiece):
-        R, t = piece.radius, piece.thickness
-        # block 2R x (t + 2R) minus two half discs of radius R
-        return 2.0 * piece.half_width * (2.0 * R * (t + 2.0 * R) - math.pi * R * R)
-    length, t, a = piece.x1 - piece.x0, piece.thickness, piece.fillet
-    # leaf l*t plus the four corners a^2 - pi a^2 / 4 outside the fillet arcs
-    return 2.0 * piece.half_width * (length * t + 4.0 * a * a * (1.0 - math.pi / 4.0))
+    return piece.volume()
 
 
 def exact_volume(params: Params) -> float:

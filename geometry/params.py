@@ -26,7 +26,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .checks import require, require_finite
 from .frames import chain_rotation
+from .profiles.circular import CircularNotchHinge
+from .profiles.leaf import LeafHinge
 
 __all__ = [
     "Material",
@@ -41,16 +44,8 @@ __all__ = [
 ]
 
 
-def _require(condition: bool, name: str, value: float, allowed: str, unit: str = "mm") -> None:
-    """Raise ``ValueError`` naming the parameter, its value and the allowed range."""
-    if not condition:
-        shown = value * 1e3 if unit == "mm" else value
-        raise ValueError(f"{name}={shown:.6g} {unit} is out of range: must be {allowed}")
-
-
-def _finite(name: str, value: float) -> None:
-    if not (isinstance(value, (int, float, np.floating, np.integer)) and math.isfinite(float(value))):
-        raise ValueError(f"{name}={value!r} must be a finite number")
+_require = require
+_finite = require_finite
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -85,97 +80,6 @@ class Material:
 
 
 STEEL = Material()
-
-
-@dataclass(frozen=True, kw_only=True)
-class CircularNotchHinge:
-    """Right-circular notch hinge: a block of height t + 2R with two semicircular cuts.
-
-    radius R [m], thickness t [m] (minimum, at x = 0), width b [m] (along z),
-    block_length [m]: length of the rigid block on each side of the notch (the hinge
-    spans 2R in x; the part is 2R + 2 block_length long). The free end is the face at
-    x = R + block_length; the fixed end the face at x = -(R + block_length).
-    """
-
-    radius: float
-    thickness: float
-    width: float
-    block_length: float
-
-    def __post_init__(self) -> None:
-        for f in dataclasses.fields(self):
-            _finite(f.name, getattr(self, f.name))
-        _require(self.radius > 0, "radius", self.radius, "> 0 mm")
-        _require(self.thickness > 0, "thickness", self.thickness, "> 0 mm (a notch with t <= 0 cuts through the block)")
-        _require(self.width > 0, "width", self.width, "> 0 mm")
-        _require(self.block_length > 0, "block_length", self.block_length, "> 0 mm")
-
-    @property
-    def height(self) -> float:
-        """Block height t + 2R [m]."""
-        return self.thickness + 2.0 * self.radius
-
-    @property
-    def length(self) -> float:
-        """Length of the compliant (notched) part, 2R [m]."""
-        return 2.0 * self.radius
-
-    @property
-    def total_length(self) -> float:
-        """Length of the whole part including both blocks [m]."""
-        return self.length + 2.0 * self.block_length
-
-
-@dataclass(frozen=True, kw_only=True)
-class LeafHinge:
-    """Corner-filleted leaf hinge (paper Fig. 5c).
-
-    length l [m]: segment length including both fillets; thickness t [m];
-    width w [m] (along z); fillet radius a [m] (quarter circles at both ends, a = 0 is a
-    plain leaf); block_height [m]: height of the blocks the leaf joins (>= t + 2a;
-    ``None`` means t + 2a); block_length [m]: rigid block on each side.
-    """
-
-    length: float
-    thickness: float
-    width: float
-    fillet: float
-    block_length: float
-    block_height: float | None = None
-
-    def __post_init__(self) -> None:
-        for f in dataclasses.fields(self):
-            value = getattr(self, f.name)
-            if value is not None:
-                _finite(f.name, value)
-        _require(self.length > 0, "length", self.length, "> 0 mm")
-        _require(self.thickness > 0, "thickness", self.thickness, "> 0 mm")
-        _require(self.width > 0, "width", self.width, "> 0 mm")
-        _require(self.fillet >= 0, "fillet", self.fillet, ">= 0 mm")
-        _require(
-            2.0 * self.fillet <= self.length,
-            "fillet",
-            self.fillet,
-            f"<= length/2 = {self.length * 500:.6g} mm (both fillets must fit the segment)",
-        )
-        _require(self.block_length > 0, "block_length", self.block_length, "> 0 mm")
-        if self.block_height is not None:
-            _require(
-                self.block_height >= self.thickness + 2.0 * self.fillet - 1e-12,
-                "block_height",
-                self.block_height,
-                f">= t + 2a = {(self.thickness + 2 * self.fillet) * 1e3:.6g} mm",
-            )
-
-    @property
-    def height(self) -> float:
-        """Block height [m]."""
-        return self.thickness + 2.0 * self.fillet if self.block_height is None else self.block_height
-
-    @property
-    def total_length(self) -> float:
-        """Length of the whole part including both blocks [m]."""
-        return self.length + 2.0 * self.block_length
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -2,7 +2,7 @@
 
 Frames as in ``flexcal.geometry.params``; lengths in metres inside the CadQuery shapes
 too (``flexcal.geometry.export`` converts to mm when writing files). A solid is built
-from the pieces of ``flexcal.geometry.exact`` (blocks, leaves, notches along local x),
+from the pieces of ``flexcal.geometry.exact`` (blocks and the profiles' compliant pieces),
 the same decomposition the mesher uses for the exact surfaces, so CAD and analytic
 description cannot drift apart silently (tests compare them).
 
@@ -13,25 +13,21 @@ a minimum feature size that the CAD kernel can resolve.
 from __future__ import annotations
 
 import functools
-import math
 from dataclasses import dataclass, field
-from typing import Union
 
 import cadquery as cq
 import numpy as np
 from OCP.gp import gp_Trsf
 
-from .exact import BoxPiece, LeafPiece, NotchPiece, end_planes, pieces, reference_points
-from .params import ChainSegment, CircularNotchHinge, FlexureChain, LeafHinge, MechanismParams
+from .exact import BoxPiece, Params, end_planes, pieces, reference_points
+from .params import ChainSegment, FlexureChain, MechanismParams
+from .profiles.protocol import HingeProfile
 
 __all__ = ["Part", "hinge_solid", "chain_solid", "segment_solid", "mechanism_assembly", "MIN_FEATURE_SIZE"]
 
 #: Smallest dimension [m] the solids accept: 10x OpenCASCADE's confusion tolerance
 #: (1e-7 model units = 0.1 um here), below which faces merge or booleans fail.
 MIN_FEATURE_SIZE = 1e-6
-
-Params = Union[CircularNotchHinge, LeafHinge, FlexureChain, ChainSegment]
-
 
 @dataclass(frozen=True, kw_only=True, eq=False)
 class Part:
@@ -60,12 +56,8 @@ def _check_feature_sizes(params: Params) -> None:
     sizes: dict[str, float] = {}
     for i, p in enumerate(ps):
         sizes[f"piece {i} length"] = p.x1 - p.x0
-        if isinstance(p, (LeafPiece, NotchPiece)):
-            sizes["thickness"] = p.thickness
-            if isinstance(p, LeafPiece) and p.fillet > 0:
-                sizes["fillet"] = p.fillet
-                if p.x1 - p.x0 - 2 * p.fillet > 0:
-                    sizes["flat leaf length (length - 2 fillet)"] = p.x1 - p.x0 - 2 * p.fillet
+        if not isinstance(p, BoxPiece):
+            sizes.update(p.feature_sizes())
             for j in (i - 1, i + 1):
                 if 0 <= j < len(ps) and isinstance(ps[j], BoxPiece):
                     for k, (box, leaf) in enumerate(zip(ps[j].end_extent(), p.end_extent())):
@@ -78,44 +70,10 @@ def _check_feature_sizes(params: Params) -> None:
                 "resolves; make it zero (where allowed) or at least that large")
 
 
-def _leaf_solid(p: LeafPiece) -> cq.Shape:
-    """Leaf thin in y, extruded over z in [-hw, hw]; turned 90 deg about x when thin in z."""
-    t, a, hw, x0, x1 = p.thickness, p.fillet, p.half_width, p.x0, p.x1
-    h = t / 2 + a
-    c = a / math.sqrt(2.0)
-    wp = cq.Workplane("XY").workplane(offset=-hw).moveTo(x0, -h)
-    if a > 0:
-        flat = x1 - x0 - 2 * a > 0  # no flat part when the two fillets meet (length = 2 fillet)
-        wp = wp.threePointArc((x0 + a - c, -h + c), (x0 + a, -t / 2))
-        wp = wp.lineTo(x1 - a, -t / 2) if flat else wp
-        wp = wp.threePointArc((x1 - a + c, -h + c), (x1, -h)).lineTo(x1, h)
-        wp = wp.threePointArc((x1 - a + c, h - c), (x1 - a, t / 2))
-        wp = wp.lineTo(x0 + a, t / 2) if flat else wp
-        wp = wp.threePointArc((x0 + a - c, h - c), (x0, h))
-    else:
-        wp = wp.lineTo(x1, -h).lineTo(x1, h).lineTo(x0, h)
-    solid = wp.close().extrude(2 * hw).val()
-    if p.thin_axis == 2:
-        solid = solid.rotate(cq.Vector(0, 0, 0), cq.Vector(1, 0, 0), 90.0)
-    return solid
-
-
-def _notch_solid(p: NotchPiece) -> cq.Shape:
-    R, t, hw = p.radius, p.thickness, p.half_width
-    h = t / 2 + R
-    block = cq.Solid.makeBox(2 * R, 2 * h, 2 * hw, cq.Vector(p.x0, -h, -hw))
-    for sign in (-1, 1):
-        cutter = cq.Solid.makeCylinder(R, 4 * hw, cq.Vector(p.centre, sign * h, -2 * hw), cq.Vector(0, 0, 1))
-        block = block.cut(cutter)
-    return block
-
-
-def _piece_solid(p: BoxPiece | LeafPiece | NotchPiece) -> cq.Shape:
+def _piece_solid(p) -> cq.Shape:
     if isinstance(p, BoxPiece):
         return cq.Solid.makeBox(p.x1 - p.x0, 2 * p.half_y, 2 * p.half_z, cq.Vector(p.x0, -p.half_y, -p.half_z))
-    if isinstance(p, LeafPiece):
-        return _leaf_solid(p)
-    return _notch_solid(p)
+    return p.solid()  # the profile's compliant piece builds its own
 
 
 def _single_solid(shape: cq.Shape, what: str) -> cq.Solid:
@@ -133,12 +91,13 @@ def _solid_from_pieces(params: Params, what: str) -> cq.Solid:
     return _single_solid(fused, what)
 
 
-def hinge_solid(hinge: CircularNotchHinge | LeafHinge) -> Part:
+def hinge_solid(hinge: HingeProfile) -> Part:
     """Solid of one hinge in the hinge frame: x along the hinge from the fixed end face
     (x = -total_length/2) to the free end face (x = +total_length/2), thin along y, width
     along z, origin at the centre of the thin section. Reference points "fixed", "free"."""
-    if not isinstance(hinge, (CircularNotchHinge, LeafHinge)):
-        raise TypeError(f"hinge_solid takes a CircularNotchHinge or LeafHinge, got {type(hinge).__name__}")
+    if not hasattr(hinge, "thin_piece"):
+        raise TypeError(f"hinge_solid takes a hinge of flexcal.geometry.profiles (CircularNotchHinge, LeafHinge, "
+                        f"...), got {type(hinge).__name__}")
     shape = _solid_from_pieces(hinge, type(hinge).__name__)
     return Part(shape=shape, params=hinge, reference_points=reference_points(hinge), end_planes=end_planes(hinge))
 

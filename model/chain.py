@@ -19,11 +19,12 @@ from __future__ import annotations
 import numpy as np
 
 from flexcal.geometry.frames import twist_transform
-from flexcal.geometry.params import CircularNotchHinge, FlexureChain, LeafHinge, Material
+from flexcal.geometry.params import FlexureChain, Material
 
 from . import kernel
-from .hinge import (ENTRY_INDEX, _gauss_legendre, beam_compliance, circular_notch_compliance, entries_to_matrix,
-                    gauss_node_count, leaf_compliance, segment_entries, shear_coefficient, torsion_constant)
+from .hinge import (ENTRY_INDEX, _gauss_legendre, beam_compliance, entries_to_matrix, gauss_node_count,
+                    leaf_compliance, segment_entries, shear_coefficient, torsion_constant)
+from .profiles import closed_form_of
 
 __all__ = [
     "serial_compliance",
@@ -259,20 +260,14 @@ def chain_stiffness_matrix(chain: FlexureChain, material: Material) -> np.ndarra
     return out
 
 
-def hinge_part_compliance(hinge: LeafHinge | CircularNotchHinge, material: Material) -> np.ndarray:
+def hinge_part_compliance(hinge, material: Material) -> np.ndarray:
     """(6, 6) compliance of a whole hinge part at its free-end reference point with its two
     blocks elastic: fixed block, hinge, free block in series (Eq. 1), the blocks as
     Timoshenko beams of the block height x width. ``hinge_compliance_matrix`` takes the
     blocks rigid; an FEM of the part sees them, so this is the like-for-like reference.
     """
-    if isinstance(hinge, CircularNotchHinge):
-        core, half, width = circular_notch_compliance(hinge.radius, hinge.thickness, hinge.width, material), \
-            hinge.radius, hinge.width
-    elif isinstance(hinge, LeafHinge):
-        core, half, width = leaf_compliance(hinge.length, hinge.thickness, hinge.width, hinge.fillet, material), \
-            0.5 * hinge.length, hinge.width
-    else:
-        raise TypeError(f"expected CircularNotchHinge or LeafHinge, got {type(hinge).__name__}")
+    core = closed_form_of(hinge).compliance(hinge, material)
+    half, width = 0.5 * hinge.length, hinge.width
     block = beam_compliance(hinge.block_length, hinge.height, width, material)
     end = half + hinge.block_length
     elements = np.stack([block, core, block])

@@ -56,13 +56,15 @@ import functools
 import numpy as np
 
 from flexcal.geometry.frames import twist_transform
-from flexcal.geometry.params import CircularNotchHinge, LeafHinge, Material
+from flexcal.geometry.params import Material
 
 from . import kernel
+from .profiles import closed_form_of
 
 __all__ = [
     "segment_compliance",
     "segment_entries",
+    "entries_from_integrals",
     "entries_to_matrix",
     "ENTRY_INDEX",
     "leaf_compliance",
@@ -254,11 +256,21 @@ def segment_entries(flat_half_length, fillet, thickness, width, youngs_modulus, 
     """
     c, rho, t, w = np.broadcast_arrays(*(np.asarray(a, dtype=float) for a in (flat_half_length, fillet,
                                                                               thickness, width)))
+    return entries_from_integrals(profile_integrals(c, rho, t, w), c + rho, w, youngs_modulus, poisson_ratio)
+
+
+def entries_from_integrals(ints: dict[str, np.ndarray], half, width, youngs_modulus, poisson_ratio
+                           ) -> dict[str, np.ndarray]:
+    """``segment_entries`` from the profile integrals of any symmetric profile.
+
+    ints: "M0,t1", "M0,t3", "M0,J", "M2,t1", "M2,t3" as ``profile_integrals`` returns them
+    (over x in [-half, half], x from the middle); half [m]: half the segment's length;
+    width w [m]; youngs_modulus E [Pa], poisson_ratio nu [-].
+    """
+    w = np.asarray(width, dtype=float)
     e = float(youngs_modulus)
     g = e / (2.0 * (1.0 + float(poisson_ratio)))
     kappa = shear_coefficient(poisson_ratio)
-    ints = profile_integrals(c, rho, t, w)
-    half = c + rho
     shear = ints["M0,t1"] / (kappa * g * w)
     bend_z0 = 12.0 * ints["M0,t3"] / (e * w)  # about z, thin direction
     bend_y0 = 12.0 * ints["M0,t1"] / (e * w**3)  # about y, wide direction
@@ -328,55 +340,38 @@ def beam_compliance(length, height, width, material: Material) -> np.ndarray:
                               material.youngs_modulus, material.poisson_ratio)
 
 
-def hinge_compliance_matrix(hinge: LeafHinge | CircularNotchHinge, material: Material) -> np.ndarray:
+def hinge_compliance_matrix(hinge, material: Material) -> np.ndarray:
     """(6, 6) compliance of a stand-alone hinge at its free-end reference point.
 
     The reference point is the centre of the free end face (x = +total_length/2 in the
     hinge frame of geometry/params.py); the face at -total_length/2 is clamped and both
-    blocks are rigid, so the notch compliance is moved from x = +length/2 to the face by
-    the adjoint transform (Eq. 1 with one element). This is what the FEM condenses.
+    blocks are rigid, so the profile's closed form (``model.profiles``) is moved from
+    x = +length/2 to the face by the adjoint transform (Eq. 1 with one element). This is
+    what the FEM condenses.
     """
-    if isinstance(hinge, LeafHinge):
-        local = leaf_compliance(hinge.length, hinge.thickness, hinge.width, hinge.fillet, material)
-        notch_half = 0.5 * hinge.length
-    elif isinstance(hinge, CircularNotchHinge):
-        local = circular_notch_compliance(hinge.radius, hinge.thickness, hinge.width, material)
-        notch_half = hinge.radius
-    else:
-        raise ValueError(f"hinge must be a LeafHinge or CircularNotchHinge, got {type(hinge).__name__}")
+    local = closed_form_of(hinge).compliance(hinge, material)
+    notch_half = 0.5 * hinge.length
     transform = twist_transform(np.eye(3), np.array([notch_half - 0.5 * hinge.total_length, 0.0, 0.0]))
     return transform @ local @ transform.T
 
 
 # Where the Euler-Bernoulli/Saint-Venant closed forms stop describing the solid hinge,
 # from FEM runs with the deterministic mapped mesh (3 quadratic tets through the neck,
-# ``compare_hinge(..., mesher="mapped")``, docs/reliability.md):
-# - notch, working rotation rz/Mz: FEM / closed form 1.00 at t/R = 0.2, 1.07 at 0.5,
-#   1.12 at 1, 1.14 at 2 (R < t/2): past t/R = 1 the notch is a short thick block and the
-#   slender-beam integral is more than 10 % off;
+# ``compare_hinge(..., mesher="mapped")``, docs/reliability.md); each profile's own range
+# (the notch's t/R) is in its module of ``model.profiles``:
 # - torsion rx/Mx assumes free warping, a hinge much longer than wide: FEM / closed form
 #   0.24 at length/width 0.5 (leaf l 20, w 40 mm), 0.26 at 1 (notch R 5, b 10 mm), 0.81 at
 #   2.5, 0.95 at 10 (leaf l 400, w 40 mm): the blocks restrain the warping.
-NOTCH_MAX_T_OVER_R = 1.0
 TORSION_MIN_LENGTH_OVER_WIDTH = 10.0
 
 
-def closed_form_range_warnings(hinge: LeafHinge | CircularNotchHinge, *, torsion: bool = True) -> list[str]:
+def closed_form_range_warnings(hinge, *, torsion: bool = True) -> list[str]:
     """Where the closed forms leave their range for this hinge: one sentence per
     problem, naming the parameter, its value and the range (empty: within range).
     ``torsion=False`` leaves out the torsion note, which holds for most practical (short,
     wide) hinges."""
-    out = []
-    if isinstance(hinge, CircularNotchHinge):
-        ratio = hinge.thickness / hinge.radius
-        if ratio > NOTCH_MAX_T_OVER_R:
-            shallow = " (R < t/2: shallower than half the neck)" if ratio > 2 else ""
-            out.append(f"notch radius R={hinge.radius * 1e3:.4g} mm with t={hinge.thickness * 1e3:.4g} mm gives "
-                       f"t/R={ratio:.3g}{shallow}: the closed-form notch compliances hold for t/R <= "
-                       f"{NOTCH_MAX_T_OVER_R:g} (R >= t); beyond, its C_rz,Mz is 10-15 % lower than the solid's (FEM)")
-        length = hinge.length
-    else:
-        length = hinge.length
+    out = list(closed_form_of(hinge).range_warnings(hinge))
+    length = hinge.length
     slenderness = length / hinge.width
     if torsion and slenderness < TORSION_MIN_LENGTH_OVER_WIDTH:
         out.append(f"hinge length {length * 1e3:.4g} mm over width {hinge.width * 1e3:.4g} mm is "

@@ -22,15 +22,22 @@ DEFAULT_CONFIG = {"elements_through": 3.0, "mesher": "mapped"}
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--type", choices=("circular", "leaf"), required=True,
-                        help="circular notch hinge, or corner-filleted leaf hinge (paper Fig. 5c)")
+    from flexcal.geometry.profiles import hinge_types
+
+    types = hinge_types()  # one per module of flexcal/geometry/profiles/
+    parser.add_argument("--type", choices=tuple(types), required=True,
+                        help="; ".join(f"{name}: {cls.title}" for name, cls in types.items()))
     parser.add_argument("--thickness-mm", type=float, required=True, help="minimum thickness t [mm]")
     parser.add_argument("--width-mm", type=float, required=True, help="width b / w [mm]")
-    parser.add_argument("--radius-mm", type=float, help="notch radius R [mm] (circular)")
-    parser.add_argument("--length-mm", type=float, help="segment length l including fillets [mm] (leaf)")
-    parser.add_argument("--fillet-mm", type=float, default=0.0, help="fillet radius a [mm] (leaf; default 0)")
+    seen = {"thickness", "width"}
+    for cls in types.values():
+        for dimension in cls.dimensions:
+            if dimension.key not in seen:
+                seen.add(dimension.key)
+                parser.add_argument(dimension.option, type=float, default=dimension.default_mm, help=dimension.help)
     parser.add_argument("--block-mm", type=float, default=None,
-                        help="length of the rigid block at each end [mm] (default: R, or l/2 for a leaf)")
+                        help="length of the rigid block at each end [mm] (default: half the hinge length: R, or l/2 "
+                             "for a leaf)")
     parser.add_argument("--elements-through", type=float,
                         help="quadratic tets through the thinnest section, 1 to 16 (default %(default)s: C_rz,Mz "
                              "within ~0.6 %% of converged with the mapped mesh, ~0.3 %% with tetwild; 4 gives ~0.3 %% "
@@ -43,30 +50,27 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def build_hinge(args: argparse.Namespace):
-    from flexcal.geometry.params import CircularNotchHinge, LeafHinge
+    """The hinge of ``--type`` from its dimension options [mm] (checked first) and the
+    report's ``parameters_mm`` (the profile's dimensions in order, then "block")."""
+    from flexcal.geometry.profiles import hinge_type, hinge_types
 
     from .input_checks import check_length_mm
 
-    for option in ("thickness_mm", "width_mm", "radius_mm", "length_mm", "block_mm"):
-        check_length_mm("--" + option.replace("_", "-"), getattr(args, option))
-    check_length_mm("--fillet-mm", args.fillet_mm, allow_zero=True)
-    mm = 1e-3
-    if args.type == "circular":
-        if args.radius_mm is None:
-            raise ValueError("--type circular needs --radius-mm")
-        block = args.radius_mm if args.block_mm is None else args.block_mm
-        hinge = CircularNotchHinge(radius=args.radius_mm * mm, thickness=args.thickness_mm * mm,
-                                   width=args.width_mm * mm, block_length=block * mm)
-        params = {"radius": args.radius_mm, "thickness": args.thickness_mm, "width": args.width_mm, "block": block}
-    else:
-        if args.length_mm is None:
-            raise ValueError("--type leaf needs --length-mm")
-        block = args.length_mm / 2 if args.block_mm is None else args.block_mm
-        hinge = LeafHinge(length=args.length_mm * mm, thickness=args.thickness_mm * mm, width=args.width_mm * mm,
-                          fillet=args.fillet_mm * mm, block_length=block * mm)
-        params = {"length": args.length_mm, "thickness": args.thickness_mm, "width": args.width_mm,
-                  "fillet": args.fillet_mm, "block": block}
-    return hinge, params
+    def value(d):
+        return getattr(args, d.option[2:].replace("-", "_"))
+
+    # every dimension option given is checked, also those another --type would use
+    options = {d.option: d for cls in hinge_types().values() for d in cls.dimensions}
+    for d in sorted(options.values(), key=lambda d: d.allow_zero):
+        check_length_mm(d.option, value(d), allow_zero=d.allow_zero)
+    check_length_mm("--block-mm", args.block_mm)
+    cls = hinge_type(args.type)
+    dimensions = {d.key: value(d) for d in cls.dimensions}
+    for d in cls.dimensions:
+        if dimensions[d.key] is None:
+            raise ValueError(f"--type {args.type} needs {d.option}")
+    block = cls.default_block_mm(dimensions) if args.block_mm is None else args.block_mm
+    return cls.from_mm(dimensions, block), {**dimensions, "block": block}
 
 
 def warn_outside_closed_form_range(hinge) -> None:

@@ -17,7 +17,8 @@ from typing import Any, Callable
 
 import numpy as np
 
-from flexcal.geometry.params import STEEL, CircularNotchHinge, FlexureChain, LeafHinge, Material
+from flexcal.geometry.params import STEEL, FlexureChain, Material
+from flexcal.geometry.profiles import HingeProfile
 
 __all__ = ["ComparisonResult", "compare_hinge", "compare_chain", "percent_difference", "write_comparison"]
 
@@ -136,7 +137,7 @@ def _solve_cached(kind: str, params, material: Material, elements_through_thickn
     return mesh, report, arrays, timings
 
 
-def compare_hinge(hinge: CircularNotchHinge | LeafHinge, material: Material = STEEL, *,
+def compare_hinge(hinge: HingeProfile, material: Material = STEEL, *,
                   elements_through_thickness: float = 3, stage: Callable[[str], None] = _no_stage,
                   mesher: str = "tetwild", cache: bool = False) -> ComparisonResult:
     """FEM and closed-form 6 x 6 compliance of a hinge at its free end; ``stage(name)`` is

@@ -22,16 +22,15 @@ __all__ = ["mount_with_design", "identification_accuracy"]
 
 def mount_with_design(params):
     """The reference mechanism with the design's flexure dimensions in every chain."""
-    from flexcal.geometry.params import FlexureChain, LeafHinge, reference_mechanism
+    from flexcal.geometry.params import FlexureChain, reference_mechanism
 
     mechanism = reference_mechanism()
-    if isinstance(params, LeafHinge):
-        changes = {"hinge_length": params.length, "width": params.width, "fillet": params.fillet,
-                   "thickness_1": params.thickness, "thickness_2": params.thickness}
-    elif isinstance(params, FlexureChain):
+    if isinstance(params, FlexureChain):
         changes = {f.name: getattr(params, f.name) for f in dataclasses.fields(params) if f.name != "length"}
-    else:
-        raise ValueError(f"identification needs a leaf or chain design, not a {type(params).__name__}")
+    else:  # a hinge: its profile says which chain fields it sets (only a leaf fits the mount's chains)
+        changes = params.chain_dimensions() if hasattr(params, "chain_dimensions") else None
+        if changes is None:
+            raise ValueError(f"identification needs a leaf or chain design, not a {type(params).__name__}")
     chains = tuple(dataclasses.replace(p, chain=dataclasses.replace(p.chain, **changes)) for p in mechanism.chains)
     return dataclasses.replace(mechanism, chains=chains)
 

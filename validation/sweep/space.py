@@ -4,7 +4,7 @@ A sweep config (``examples/sweep_notch.toml``; every key and its default:
 ``flexcal sweep --print-config``)::
 
     [sweep]
-    kind = "circular"        # circular | leaf | chain: which table below is swept
+    kind = "circular"        # a hinge profile (circular | leaf | ...) or chain: which table below is swept
     method = "grid"          # grid: every combination of the listed values
                              # lhs: n_samples Latin-hypercube points in [low, high] ranges
     n_samples = 8            # lhs only
@@ -40,18 +40,24 @@ __all__ = ["DEFAULT_CONFIG", "resolve_config", "designs_from_config", "design_id
 _IDENTIFICATION_DEFAULTS = {"enabled": False, "provider": "analytic", "scenario": "table1", "sobol_n": 64,
                             "particles": 40, "iterations": 30, "seed": 0}
 
+def _hinge_types() -> dict[str, type]:
+    from flexcal.geometry.profiles import hinge_types
+
+    return hinge_types()
+
+
 DEFAULT_CONFIG: dict[str, Any] = {
     "sweep": {"kind": "circular", "method": "grid", "n_samples": 8, "seed": 0, "elements_through": 1.5},
-    # [mm]; defaults: the notch hinge of docs/hinge-verification.md, a leaf and a driving chain of the mount
-    "circular": {"radius_mm": [5.0], "thickness_mm": [0.5, 1.0, 1.5, 2.0], "width_mm": [10.0], "block_mm": [5.0]},
-    "leaf": {"length_mm": [20.0], "thickness_mm": [4.0], "width_mm": [40.0], "fillet_mm": [6.0],
-             "block_mm": [10.0]},
+    # [mm]; one table per hinge profile (its ``sweep_defaults_mm``: the notch hinge of
+    # docs/hinge-verification.md, a leaf of the mount, ...) and a driving chain of the mount
+    **{name: {key: list(values) for key, values in cls.sweep_defaults_mm.items()}
+       for name, cls in _hinge_types().items()},
     "chain": {"length_mm": [150.0], "hinge_length_mm": [20.0], "width_mm": [40.0], "fillet_mm": [6.0],
               "t1_mm": [3.0], "t2_mm": [3.0], "section_mm": [50.0], "connector_mm": [10.0],
               "end_block_mm": [10.0]},
     "identification": dict(_IDENTIFICATION_DEFAULTS),
 }
-KINDS = ("circular", "leaf", "chain")
+KINDS = (*_hinge_types(), "chain")
 
 
 def resolve_config(config: dict[str, Any], source: str = "sweep config") -> dict[str, Any]:
@@ -121,15 +127,15 @@ def designs_from_config(config: dict[str, Any], *, seed: int | None = None) -> l
     if elements < 1:
         raise ValueError(f"[sweep] elements_through = {elements} must be >= 1")
     identification = _identification(config["identification"])
-    if identification["enabled"] and kind == "circular":
-        raise ValueError("[identification] needs kind = 'leaf' or 'chain' (the mount's chains are leaf flexures)")
     designs = []
     for sample in _samples(config[kind], sweep["method"], sweep["n_samples"],
                            sweep["seed"] if seed is None else seed, kind):
         design = {"kind": kind, **sample, "elements_through": elements}
         if identification["enabled"]:
             design["identification"] = identification
-        build_part_params(design)  # raises ValueError with the dimension's name
+        params = build_part_params(design)  # raises ValueError with the dimension's name
+        if identification["enabled"] and kind != "chain" and params.chain_dimensions() is None:
+            raise ValueError("[identification] needs kind = 'leaf' or 'chain' (the mount's chains are leaf flexures)")
         designs.append(design)
     return designs
 
@@ -147,22 +153,20 @@ def design_id(design: dict[str, Any]) -> str:
 
 
 def build_part_params(design: dict[str, Any]):
-    """The ``CircularNotchHinge``, ``LeafHinge`` or ``FlexureChain`` of a design [m]."""
-    from flexcal.geometry.params import CircularNotchHinge, FlexureChain, LeafHinge
+    """The hinge (``CircularNotchHinge``, ``LeafHinge``, ... by profile name) or
+    ``FlexureChain`` of a design [m]."""
+    from flexcal.geometry.params import FlexureChain
 
     mm = 1e-3
     kind = design["kind"]
-    if kind == "circular":
-        return CircularNotchHinge(radius=design["radius_mm"] * mm, thickness=design["thickness_mm"] * mm,
-                                  width=design["width_mm"] * mm, block_length=design["block_mm"] * mm)
-    if kind == "leaf":
-        return LeafHinge(length=design["length_mm"] * mm, thickness=design["thickness_mm"] * mm,
-                         width=design["width_mm"] * mm, fillet=design["fillet_mm"] * mm,
-                         block_length=design["block_mm"] * mm)
+    types = _hinge_types()
+    if kind in types:
+        cls = types[kind]
+        return cls.from_mm({d.key: design[f"{d.key}_mm"] for d in cls.dimensions}, design["block_mm"])
     if kind == "chain":
         return FlexureChain(length=design["length_mm"] * mm, hinge_length=design["hinge_length_mm"] * mm,
                             width=design["width_mm"] * mm, fillet=design["fillet_mm"] * mm,
                             thickness_1=design["t1_mm"] * mm, thickness_2=design["t2_mm"] * mm,
                             section=design["section_mm"] * mm, connector_length=design["connector_mm"] * mm,
                             end_block_length=design["end_block_mm"] * mm)
-    raise ValueError(f"design kind {kind!r} must be circular, leaf or chain")
+    raise ValueError(f"design kind {kind!r} must be one of {', '.join(KINDS)}")
