@@ -14,8 +14,11 @@ too. Names and units: docs/parameters.md. I/O only; the values are checked by
 from __future__ import annotations
 
 import json
+import math
 import tomllib
 from pathlib import Path
+
+from flexcal.geometry.schema import MAX_SETTINGS_BYTES, read_text
 
 __all__ = ["read_parameter_file"]
 
@@ -24,10 +27,11 @@ def read_parameter_file(path) -> dict[str, float]:
     """{name: value in display units} from a .toml or .json file.
 
     Raises ``FileNotFoundError`` if it is missing and ``ValueError`` naming the file if it
-    is not a flat mapping of names to numbers.
+    is larger than a settings file may be, not UTF-8, or not a flat mapping of names to
+    finite numbers (the bounded read of ``geometry.schema``, shared by every input file).
     """
     path = Path(path)
-    text = path.read_text()
+    text = read_text(path, max_bytes=MAX_SETTINGS_BYTES, what="parameter file")
     suffix = path.suffix.lower()
     try:
         if suffix == ".json":
@@ -50,5 +54,7 @@ def read_parameter_file(path) -> dict[str, float]:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise ValueError(f"parameter file {path}: {name} = {value!r} is not a number "
                              f"(names look like 'D1.CL'; a nested table per chain is not supported)")
+        if not math.isfinite(value):
+            raise ValueError(f"parameter file {path}: {name} = {value!r} must be a finite number")
         out[str(name)] = float(value)
     return out

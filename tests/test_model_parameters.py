@@ -106,6 +106,24 @@ def test_parameter_files(tmp_path):
         read_parameter_file(bad)
 
 
+def test_parameter_files_refused_in_one_line_naming_the_file(tmp_path):
+    """A Latin-1 file, a NaN value and a file larger than a settings file may be are each
+    refused with a ValueError naming the file (the bounded read of geometry.schema)."""
+    latin = tmp_path / "latin.toml"
+    latin.write_bytes('"D1.CL" = 0.25 # caf\xe9\n'.encode("latin-1"))
+    with pytest.raises(ValueError, match=r"latin\.toml: not UTF-8"):
+        read_parameter_file(latin)
+    nan = tmp_path / "nan.toml"
+    nan.write_text('"D1.CL" = nan\n')
+    with pytest.raises(ValueError, match=r"nan\.toml: D1\.CL = nan must be a finite number"):
+        read_parameter_file(nan)
+    big = tmp_path / "big.toml"
+    with big.open("wb") as handle:  # sparse: no 4 MiB written
+        handle.truncate(5 * 2**20)
+    with pytest.raises(ValueError, match=r"big\.toml: .* bytes is more than a parameter file may hold"):
+        read_parameter_file(big)
+
+
 def test_docs_parameter_table_is_current():
     doc = Path(__file__).resolve().parents[1] / "docs" / "parameters.md"
     assert doc.read_text() == parameter_table_markdown(), "regenerate docs/parameters.md with parameter_table_markdown()"
