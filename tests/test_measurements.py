@@ -51,6 +51,8 @@ HEADER = "point,time_s,leg,xa1_mm,xa2_mm,xa3_mm,theta_x_urad,theta_y_urad,theta_
         (HEADER + "\n1,0,1,0,0,0,0.004,0,0\n2,0,1,0,0,0,0,0,2e6\n", ["row 3", "theta_z_urad", "microradians"]),
         (HEADER + ",temperature\n1,0,1,0,0,0,0,0,0,20\n", ["temperature", "unit"]),
         (HEADER + "\n1,0,1,0,0,0\n", ["row 2", "6 values"]),
+        # time stamps beyond 317 years (MAX_TIME_S): numpy's rates overflowed in diagnose
+        (HEADER + "\n1,0,1,0,0,0,0,0,0\n2,1e200,1,0,0,0,0,0,0\n", ["row 3", "'time_s'", "seconds"]),
         (HEADER + "\n", ["no data rows"]),
     ],
 )

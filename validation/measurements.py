@@ -35,7 +35,7 @@ ANGLE_COLUMNS = REQUIRED_COLUMNS[6:9]
 _UNIT_SUFFIXES = ("_mm", "_urad", "_s", "_c", "_k", "_n", "_um", "_deg", "_pct", "_count")
 # the file's limits, shared with every writer (flexcal truth refuses up front what they refuse)
 from .measurement_limits import (MAX_ABS_ANGLE_URAD, MAX_ABS_INPUT_MM, MAX_INDEX, MAX_POINTS,  # noqa: E402
-                                 MAX_TABLE_BYTES, values_problem)
+                                 MAX_TABLE_BYTES, MAX_TIME_S, values_problem)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -161,6 +161,9 @@ def read_measurement(path: str | os.PathLike) -> Measurement:
             if abs(values[column]) > MAX_ABS_ANGLE_URAD:
                 raise ValueError(f"{path}: row {row_number}, column {column!r}: {values[column]:g} urad exceeds "
                                  f"{MAX_ABS_ANGLE_URAD:g} urad (angles are in microradians)")
+        if abs(values["time_s"]) > MAX_TIME_S:  # the truth writer's limit too (measurement_limits.time_problem)
+            raise ValueError(f"{path}: row {row_number}, column 'time_s': {values['time_s']:g} s exceeds "
+                             f"{MAX_TIME_S:g} s (time stamps are in seconds)")
         if values["leg"] < 0:
             raise ValueError(f"{path}: row {row_number}, column 'leg': must be >= 0")
         if rows:
