@@ -97,10 +97,10 @@ def test_registered_under_its_name_and_reached_by_every_package():
     x = np.linspace(-12e-3, 12e-3, 49)
     # the mapped mesher's height is the geometry's thickness (and the block height beyond)
     np.testing.assert_allclose(outline.height(x), REFERENCE.thin_piece().local_thickness(x), rtol=1e-14)
-    assert outline.block_height == pytest.approx(REFERENCE.height, rel=1e-15)
+    assert outline.block_height == pytest.approx(REFERENCE.height, rel=1e-15)  # 1e-15: the same sum t + 2b, round-off only
     # the compliance at the free face moves the notch's by the rigid block: uy/Fy grows
     at_face = model_hinge.hinge_compliance_matrix(REFERENCE, STEEL)
-    assert at_face[5, 5] == pytest.approx(closed_form_of(REFERENCE).compliance(REFERENCE, STEEL)[5, 5], rel=1e-14)
+    assert at_face[5, 5] == pytest.approx(closed_form_of(REFERENCE).compliance(REFERENCE, STEEL)[5, 5], rel=1e-14)  # 1e-14: one formula reached by two paths (the block's rigid shift adds to uy/Fy, not rz/Mz), round-off
     assert at_face[1, 1] > closed_form_of(REFERENCE).compliance(REFERENCE, STEEL)[1, 1]
 
 
@@ -125,7 +125,7 @@ def test_notch_patch_projects_onto_the_ellipse_and_is_the_closest_point():
     on = notch.project(points)
     # 1e-12: Newton converged to round-off on the ellipse equation
     np.testing.assert_allclose(((on[:, 0] - notch.centre[0]) / a) ** 2 + ((on[:, 1] - notch.centre[1]) / b) ** 2,
-                               1.0, atol=1e-12)
+                               1.0, atol=1e-12)  # 1e-12: round-off of the closest-point iteration on the ellipse equation
     theta = np.linspace(-np.pi, np.pi, 200001)
     dense = np.column_stack([notch.centre[0] + a * np.cos(theta), notch.centre[1] + b * np.sin(theta)])
     brute = np.array([np.min(np.hypot(*(dense - p[:2]).T)) for p in points])

@@ -44,15 +44,15 @@ def test_craig_bampton_keeps_every_mode_exactly_and_guyan_the_static_stiffness()
     guyan = craig_bampton(K, M, boundary, 0)
     schur = K[np.ix_(boundary, boundary)] - K[np.ix_(boundary, interior)] @ np.linalg.solve(
         K[np.ix_(interior, interior)], K[np.ix_(interior, boundary)])
-    np.testing.assert_allclose(guyan.stiffness, schur, rtol=1e-12)
+    np.testing.assert_allclose(guyan.stiffness, schur, rtol=1e-12)  # 1e-12: the same Schur complement by two routes, round-off
     fixed = np.sqrt(scipy.linalg.eigh(K[np.ix_(interior, interior)], M[np.ix_(interior, interior)],
                                       eigvals_only=True)[:3]) / (2 * np.pi)
-    np.testing.assert_allclose(craig_bampton(K, M, boundary, 3).fixed_interface_Hz, fixed, rtol=1e-12)
+    np.testing.assert_allclose(craig_bampton(K, M, boundary, 3).fixed_interface_Hz, fixed, rtol=1e-12)  # 1e-12: the same fixed-interface eigenproblem solved twice, round-off
     # Rayleigh-Ritz: a reduced basis never lowers an eigenvalue, and more modes come closer
     two = scipy.linalg.eigh(craig_bampton(K, M, boundary, 2).stiffness, craig_bampton(K, M, boundary, 2).mass,
                             eigvals_only=True)
     g = scipy.linalg.eigh(guyan.stiffness, guyan.mass, eigvals_only=True)
-    assert np.all(two >= full[:4] * (1 - 1e-12)) and two[0] - full[0] <= g[0] - full[0]
+    assert np.all(two >= full[:4] * (1 - 1e-12)) and two[0] - full[0] <= g[0] - full[0]  # 1e-12: Rayleigh-Ritz bound up to round-off
 
 
 def test_point_motion_of_rigid_motions(mount):
@@ -64,14 +64,14 @@ def test_point_motion_of_rigid_motions(mount):
     r = rigid_influence(prototype, state.poses)
     shift = point_motion(prototype, state.poses, r[:, 0])
     six = np.array([prototype.assembly.body_selection[b].shape[1] == 6 for b in bodies])
-    np.testing.assert_allclose(shift[six], np.tile([1.0, 0, 0], (six.sum(), 1)), atol=1e-12)
+    np.testing.assert_allclose(shift[six], np.tile([1.0, 0, 0], (six.sum(), 1)), atol=1e-12)  # 1e-12: an exact linear map, round-off
     for nut in NUT_BODIES:
         axis = state.poses[nut, :3, 0]
-        np.testing.assert_allclose(shift[bodies == nut], np.tile(axis[0] * axis, ((bodies == nut).sum(), 1)), atol=1e-12)
+        np.testing.assert_allclose(shift[bodies == nut], np.tile(axis[0] * axis, ((bodies == nut).sum(), 1)), atol=1e-12)  # 1e-12: exact, round-off
     assert np.all(shift[np.array([prototype.assembly.body_selection[b].shape[1] == 0 for b in bodies])] == 0)
     turn = point_motion(prototype, state.poses, r[:, 5])
     box = bodies == FRAME_BODY
-    np.testing.assert_allclose(turn[box], np.cross([0.0, 0.0, 1.0], points[box]), atol=1e-12)
+    np.testing.assert_allclose(turn[box], np.cross([0.0, 0.0, 1.0], points[box]), atol=1e-12)  # 1e-12: exact, round-off
 
 
 def test_newton_scan_at_the_nominal_weight_reproduces_the_linearized_factor(mount):
@@ -82,7 +82,7 @@ def test_newton_scan_at_the_nominal_weight_reproduces_the_linearized_factor(moun
     prototype, state = mount
     scan = newton_buckling_scan(prototype, (1.0,))
     factor = mount_buckling_factor(nominal_state(prototype, 0.0), state)
-    assert 1.0 / (1.0 - scan["lowest_eigenvalue"][0]) == pytest.approx(factor, rel=1e-3)
+    assert 1.0 / (1.0 - scan["lowest_eigenvalue"][0]) == pytest.approx(factor, rel=1e-3)  # 1e-3: the docstring's bound on the tangent's nonlinearity (~3e-4)
 
 
 @pytest.mark.slow
@@ -95,5 +95,5 @@ def test_newton_fails_where_the_lowest_eigenvalue_reaches_zero(mount):
     assert scan["newton_failed_at"] is not None
     # 3 %: the linear extrapolation of mu over the last 10 % of the load, mu is concave there
     assert scan["newton_failed_at"] == pytest.approx(scan["zero_crossing"], rel=0.03)
-    assert scan["newton_converged_to"] > 1.5 * mount_buckling_factor(nominal_state(prototype, 0.0),
+    assert scan["newton_converged_to"] > 1.5 * mount_buckling_factor(nominal_state(prototype, 0.0),  # 1.5: the nonlinear path stiffens: Newton converged to 95.6 vs the linearized 55.5
                                                                      nominal_state(prototype))

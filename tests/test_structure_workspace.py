@@ -40,7 +40,7 @@ def test_corner_commands_put_the_prototype_at_the_corner(prototype):
     theta0 = frame_angles(nominal_state(prototype))
     for x, t in zip(commands, target):
         reached = frame_angles(nominal_state(prototype, commands=x)) - theta0
-        np.testing.assert_allclose(reached, t, rtol=0, atol=2 * ANGLE_TOL)
+        np.testing.assert_allclose(reached, t, rtol=0, atol=2 * ANGLE_TOL)  # 2 x ANGLE_TOL: the corner search stops within ANGLE_TOL, the fresh Newton adds its own
     # the corners need more than the trajectory's ~1 mm strokes (all three at once)
     assert np.abs(commands).max() > 2e-3
 
@@ -83,7 +83,7 @@ def test_fem_peak_of_a_mirrored_slice_is_turned_back_into_place():
     motion[k] = 1e-3
     value, where = fem.peak_von_mises_at(chain, L - 0.035, L, motion)
     assert value == pytest.approx(1e6, rel=1e-6)  # float32 of 1e9 x 1e-3
-    np.testing.assert_allclose(where, [L - 0.020, 0.001, 0.004], rtol=0, atol=1e-15)
+    np.testing.assert_allclose(where, [L - 0.020, 0.001, 0.004], rtol=0, atol=1e-15)  # 1e-15 m: the mirror map is exact coordinate arithmetic, round-off
 
 
 def test_stroke_limit_bisects_to_the_limit(prototype):
@@ -96,7 +96,7 @@ def test_stroke_limit_bisects_to_the_limit(prototype):
         return p0 + c * abs(state.commands[1])
 
     stroke = stroke_limit(prototype, 1, -1.0, 335e6, peak, rel_tol=1e-3)
-    assert stroke == pytest.approx((335e6 - p0) / c, rel=1e-3)
+    assert stroke == pytest.approx((335e6 - p0) / c, rel=1e-3)  # 1e-3: the bisection's rel_tol
     assert stroke_limit(prototype, 1, 1.0, 5e6, peak) == 0.0
     assert stroke_limit(prototype, 1, 1.0, 1e12, peak, max_stroke=2e-3) == float("inf")
 
