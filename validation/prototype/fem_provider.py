@@ -22,6 +22,7 @@ cheap strut segments), and a local job thread meshes and solves on its share of 
 from __future__ import annotations
 
 import sys
+import threading
 import time
 from typing import Any, Callable, Iterable
 
@@ -71,6 +72,14 @@ def canonical_segment(chain: FlexureChain, x_start: float, x_end: float) -> tupl
     return ChainSegment(chain=chain, x_start=round(max(a, 0.0), 12), x_end=round(min(b, length), 12)), mirrored
 
 
+# CadQuery's multimethod dispatch (Solid.extrudeLinear, ...) resolves its signatures on the
+# first call and is not safe for two threads at once: a cold threaded build of the FEM
+# goal test failed once with "DispatchError: ('extrudeLinear: 0 methods found', ...)" (session
+# 11; a rerun passed). The solid is a fraction of a second of a segment's tens of seconds of
+# meshing and solving, so building solids one thread at a time costs nothing measurable.
+_CAD_LOCK = threading.Lock()
+
+
 def segment_stiffness_fem(segment: ChainSegment, material: Material = STEEL, *,
                           elements_through_thickness: float = DEFAULT_ELEMENTS_THROUGH,
                           cache_directory=None, mesher_threads: int = 0) -> np.ndarray:
@@ -85,7 +94,8 @@ def segment_stiffness_fem(segment: ChainSegment, material: Material = STEEL, *,
         from flexcal.fem.mesh import mesh_part
         from flexcal.geometry.solids import segment_solid
 
-        part = segment_solid(segment)
+        with _CAD_LOCK:
+            part = segment_solid(segment)
         mesh, _report = mesh_part(part, elements_through_thickness=elements_through_thickness,
                                   num_threads=mesher_threads)
         (plane_a, plane_b) = (part.end_planes["A"], part.end_planes["B"])
