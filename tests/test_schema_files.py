@@ -168,7 +168,9 @@ def test_measurement_row_count_is_bounded(tmp_path, monkeypatch):
     ("xa1_mm,xa2_mm,xa3_mm,leg\n0,0,0,1.7\n", ["row 2", "'leg'", "'1.7' must be an integer"]),  # was leg 1
     ("xa1_mm,xa2_mm,xa3_mm\n0,abc,0\n", ["row 2", "'xa2_mm'", "'abc' is not a number"]),
     ("xa1_mm,xa2_mm\n0,0\n", ["lacks column 'xa3_mm'"]),
-], ids=["missing-cell", "fractional-leg", "not-a-number", "missing-column"])
+    # used to be accepted: 250 mm is a unit mistake (m for mm x 1000), the measurement reader's limit
+    ("xa1_mm,xa2_mm,xa3_mm\n0,0,0\n0,250,0\n", ["row 3", "'xa2_mm'", "250 mm exceeds the file limit of 100 mm"]),
+], ids=["missing-cell", "fractional-leg", "not-a-number", "missing-column", "input-beyond-limit"])
 def test_trajectory_rows_are_checked(tmp_path, body, words):
     path = tmp_path / "trajectory.csv"
     path.write_text(body)

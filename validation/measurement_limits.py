@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = ["MAX_ABS_INPUT_MM", "MAX_ABS_ANGLE_URAD", "MAX_INDEX", "NOISE_SIGMAS", "SENSOR_SHARE",
-           "sensor_problem", "inputs_problem", "values_problem", "time_problem", "MAX_TIME_S", "MAX_POINTS",
+           "COLUMN_LIMITS", "first_beyond", "sensor_problem", "inputs_problem", "values_problem", "time_problem", "MAX_TIME_S", "MAX_POINTS",
            "MAX_TABLE_BYTES"]
 
 MAX_ABS_INPUT_MM = 100.0  # [mm] |xa*_mm| above this is refused (module doc)
@@ -46,30 +46,55 @@ def sensor_problem(noise_urad, offset_urad) -> str | None:
     return None
 
 
+# (column, limit of |value|, what the unit is): the one table of a measurement's value limits
+COLUMN_LIMITS = (
+    *((f"xa{i}_mm", MAX_ABS_INPUT_MM, "inputs are in mm") for i in (1, 2, 3)),
+    *((f"theta_{a}_urad", MAX_ABS_ANGLE_URAD, "angles are in microradians") for a in "xyz"),
+)
+
+
+def first_beyond(columns: dict[str, np.ndarray]) -> tuple[int, str, str] | None:
+    """(row index, column, message) of the first value of ``columns`` (name -> (n,) values in
+    the file's units; the names of ``COLUMN_LIMITS`` and ``time_s`` that are present) that is
+    not finite or beyond its limit, in row order, or None. The one check of the reader and of
+    every writer."""
+    limits = [(name, limit, unit) for name, limit, unit in COLUMN_LIMITS if name in columns]
+    if "time_s" in columns:
+        limits.append(("time_s", MAX_TIME_S, "time stamps are in seconds"))
+    if not limits:
+        return None
+    values = np.column_stack([np.asarray(columns[name], dtype=float) for name, _, _ in limits])
+    bad = ~np.isfinite(values) | (np.abs(values) > np.array([limit for _, limit, _ in limits]))
+    if not np.any(bad):
+        return None
+    row, k = (int(i) for i in np.argwhere(bad)[0])
+    name, limit, unit = limits[k]
+    suffix = name.rsplit("_", 1)[1]
+    return row, name, f"{values[row, k]:g} {suffix} exceeds the file limit of {limit:g} {suffix} ({unit})"
+
+
+def _columns(inputs_mm=None, angles_urad=None) -> dict[str, np.ndarray]:
+    out = {}
+    if inputs_mm is not None:
+        x = np.asarray(inputs_mm, dtype=float)
+        out.update({f"xa{i + 1}_mm": x[:, i] for i in range(3)})
+    if angles_urad is not None:
+        a = np.asarray(angles_urad, dtype=float)
+        out.update({f"theta_{'xyz'[i]}_urad": a[:, i] for i in range(3)})
+    return out
+
+
 def inputs_problem(inputs_mm) -> str | None:
     """Why trajectory inputs (n, 3) [mm] would be refused by the reader, or None."""
-    x = np.asarray(inputs_mm, dtype=float)
-    bad = ~np.isfinite(x) | (np.abs(x) > MAX_ABS_INPUT_MM)
-    if np.any(bad):
-        row, column = (int(i) for i in np.argwhere(bad)[0])
-        return (f"trajectory point {row + 1}, xa{column + 1}_mm = {x[row, column]:g} mm exceeds the file limit of "
-                f"{MAX_ABS_INPUT_MM:g} mm")
-    return None
+    beyond = first_beyond(_columns(inputs_mm=inputs_mm))
+    return None if beyond is None else f"trajectory point {beyond[0] + 1}, {beyond[1]} = {beyond[2]}"
 
 
 def values_problem(inputs_mm, angles_urad) -> str | None:
     """Why inputs (n, 3) [mm] or angles (n, 3) [urad] about to be written would be refused by
     the reader, or None (the writer's check)."""
-    problem = inputs_problem(inputs_mm)
-    if problem:
-        return problem
-    a = np.asarray(angles_urad, dtype=float)
-    bad = ~np.isfinite(a) | (np.abs(a) > MAX_ABS_ANGLE_URAD)
-    if np.any(bad):
-        row, column = (int(i) for i in np.argwhere(bad)[0])
-        return (f"point {row + 1}, theta_{'xyz'[column]}_urad = {a[row, column]:g} urad exceeds the file limit of "
-                f"{MAX_ABS_ANGLE_URAD:g} urad")
-    return None
+    beyond = first_beyond(_columns(inputs_mm, angles_urad))
+    return None if beyond is None else f"point {beyond[0] + 1}, {beyond[1]} = {beyond[2]}"
 
 
 MAX_TIME_S = 1e10  # [s] 317 years: above any measurement's time stamps (Unix seconds included)

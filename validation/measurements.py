@@ -34,8 +34,8 @@ INPUT_COLUMNS = REQUIRED_COLUMNS[3:6]
 ANGLE_COLUMNS = REQUIRED_COLUMNS[6:9]
 _UNIT_SUFFIXES = ("_mm", "_urad", "_s", "_c", "_k", "_n", "_um", "_deg", "_pct", "_count")
 # the file's limits, shared with every writer (flexcal truth refuses up front what they refuse)
-from .measurement_limits import (MAX_ABS_ANGLE_URAD, MAX_ABS_INPUT_MM, MAX_INDEX, MAX_POINTS,  # noqa: E402
-                                 MAX_TABLE_BYTES, MAX_TIME_S, values_problem)
+from .measurement_limits import (MAX_INDEX, MAX_POINTS, MAX_TABLE_BYTES, first_beyond,  # noqa: E402
+                                 values_problem)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -153,17 +153,6 @@ def read_measurement(path: str | os.PathLike) -> Measurement:
                                                integer=column in ("point", "leg"))
         except ValueError as error:  # name the file: diagnose and compensate show it as is
             raise ValueError(f"{path}: {error}") from None
-        for column in INPUT_COLUMNS:
-            if abs(values[column]) > MAX_ABS_INPUT_MM:
-                raise ValueError(f"{path}: row {row_number}, column {column!r}: {values[column]:g} mm exceeds "
-                                 f"{MAX_ABS_INPUT_MM:g} mm (inputs are in mm)")
-        for column in ANGLE_COLUMNS:
-            if abs(values[column]) > MAX_ABS_ANGLE_URAD:
-                raise ValueError(f"{path}: row {row_number}, column {column!r}: {values[column]:g} urad exceeds "
-                                 f"{MAX_ABS_ANGLE_URAD:g} urad (angles are in microradians)")
-        if abs(values["time_s"]) > MAX_TIME_S:  # the truth writer's limit too (measurement_limits.time_problem)
-            raise ValueError(f"{path}: row {row_number}, column 'time_s': {values['time_s']:g} s exceeds "
-                             f"{MAX_TIME_S:g} s (time stamps are in seconds)")
         if values["leg"] < 0:
             raise ValueError(f"{path}: row {row_number}, column 'leg': must be >= 0")
         if rows:
@@ -177,6 +166,11 @@ def read_measurement(path: str | os.PathLike) -> Measurement:
 
     def column(name: str) -> np.ndarray:
         return np.array([values[name] for _, values in rows])
+
+    beyond = first_beyond({name: column(name) for name in (*INPUT_COLUMNS, *ANGLE_COLUMNS, "time_s")})
+    if beyond is not None:
+        index, name, message = beyond
+        raise ValueError(f"{path}: row {rows[index][0]}, column {name!r}: {message}")
 
     from .sidecar import read_sidecar
 
@@ -201,7 +195,8 @@ def read_trajectory(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
     [mm] and optionally leg (an integer >= 0; a blank cell or no column: 1), e.g. ``flexcal
     design``'s trajectory.csv; other columns are ignored. ``ValueError`` naming the file
     and the row (header = row 1) for a short row, a cell that is not a number, a leg that
-    is not an integer, more than MAX_POINTS rows or more than MAX_TABLE_BYTES bytes."""
+    is not an integer, an input beyond the file limit (``measurement_limits``), more than
+    MAX_POINTS rows or more than MAX_TABLE_BYTES bytes."""
     path = Path(path)
     reader = csv.reader(io.StringIO(_csv_text(path, "trajectory file")))
     try:
@@ -212,7 +207,7 @@ def read_trajectory(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
         if column not in header:
             raise ValueError(f"{path}: row 1 (header) lacks column {column!r}")
     at = {name: header.index(name) for name in (*TRAJECTORY_COLUMNS, "leg") if name in header}
-    inputs, legs = [], []
+    inputs, legs, row_numbers = [], [], []
     for row_number, raw in _csv_rows(reader, path):
         if not raw or all(not cell.strip() for cell in raw):
             continue
@@ -221,7 +216,7 @@ def read_trajectory(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
         if len(inputs) == MAX_POINTS:
             raise ValueError(f"{path}: more than {MAX_POINTS} rows (points); split the trajectory")
         try:
-            inputs.append([_parse_number(raw[at[c]].strip(), row_number, c) * 1e-3 for c in TRAJECTORY_COLUMNS])
+            inputs.append([_parse_number(raw[at[c]].strip(), row_number, c) for c in TRAJECTORY_COLUMNS])
             cell = raw[at["leg"]].strip() if "leg" in at else ""
             leg = _parse_number(cell, row_number, "leg", integer=True) if cell else 1
         except ValueError as error:
@@ -229,9 +224,15 @@ def read_trajectory(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
         if leg < 0:
             raise ValueError(f"{path}: row {row_number}, column 'leg': {cell} must be >= 0")
         legs.append(int(leg))
+        row_numbers.append(row_number)
     if not inputs:
         raise ValueError(f"{path}: no rows")
-    return np.array(inputs), np.array(legs)
+    inputs_mm = np.array(inputs)
+    beyond = first_beyond(dict(zip(TRAJECTORY_COLUMNS, inputs_mm.T)))
+    if beyond is not None:
+        index, name, message = beyond
+        raise ValueError(f"{path}: row {row_numbers[index]}, column {name!r}: {message}")
+    return inputs_mm * 1e-3, np.array(legs)
 
 
 def write_measurement(path: str | os.PathLike, measurement: Measurement) -> None:
