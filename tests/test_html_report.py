@@ -211,3 +211,23 @@ def test_json_depth_counts_outside_strings():
     assert json_depth("3") == 0
     data = {"a": {"b": [[1, 2], [3, 4]]}}
     assert json_depth(json.dumps(data)) == 4
+
+
+def _parsed_depth(value) -> int:
+    if isinstance(value, dict):
+        return 1 + max((_parsed_depth(v) for v in value.values()), default=0)
+    if isinstance(value, list):
+        return 1 + max((_parsed_depth(v) for v in value), default=0)
+    return 0
+
+
+_JSON = st.recursive(st.none() | st.booleans() | st.integers() | st.text(alphabet='[]{}"\\ab'),
+                     lambda inner: st.lists(inner, max_size=4) | st.dictionaries(st.text(alphabet='[]{}"\\a'), inner,
+                                                                                 max_size=4), max_leaves=30)
+
+
+@settings(max_examples=300, deadline=None)
+@given(_JSON, st.booleans())
+def test_json_depth_is_the_parsed_depth(data, ascii_only):
+    """Strings full of brackets, quotes and backslashes, escaped or not (ensure_ascii)."""
+    assert json_depth(json.dumps(data, ensure_ascii=ascii_only)) == _parsed_depth(data)
