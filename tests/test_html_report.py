@@ -3,15 +3,19 @@
 import base64
 import html
 import json
+import os
 import re
 import subprocess
 import sys
+import time
 
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from flexcal.fem.owners import host_hash, process_state
 from flexcal.validation import cli
+from flexcal.validation.out_lock import LOCK_NAME
 from flexcal.validation.reports.html import json_depth, render_run_folder
 from flexcal.validation.reports.safe_markdown import markdown_html, md_text
 
@@ -231,3 +235,30 @@ _JSON = st.recursive(st.none() | st.booleans() | st.integers() | st.text(alphabe
 def test_json_depth_is_the_parsed_depth(data, ascii_only):
     """Strings full of brackets, quotes and backslashes, escaped or not (ensure_ascii)."""
     assert json_depth(json.dumps(data, ensure_ascii=ascii_only)) == _parsed_depth(data)
+
+
+def test_hard_linked_png_from_outside_is_not_embedded(run_folder, tmp_path):
+    outside = tmp_path / "outside.png"
+    outside.write_bytes(PNG + b"outside")  # a real PNG, bytes no folder file has
+    os.link(outside, run_folder / "linked.png")  # used to be embedded: a hard link is a regular file
+    page = render_run_folder(run_folder)
+    assert base64.b64encode(outside.read_bytes()).decode() not in page
+    assert page.count("data:image/png;base64,") == 2                       # fit.png and extra.png only
+    assert "(hard link, not read)" in page
+
+
+def test_report_of_a_folder_a_run_is_writing_is_refused(run_folder, capsys):
+    sleeper = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    try:
+        lock = run_folder / LOCK_NAME
+        owner = f"{host_hash()}-{sleeper.pid}-{process_state(sleeper.pid)[1]}"
+        lock.write_text(json.dumps({"owner": owner, "command": "verify", "since": time.time()}) + "\n")
+        status = cli.main(["report", str(run_folder)])  # used to render the half-written folder
+        err = capsys.readouterr().err
+        assert status == 2 and len(err.strip().splitlines()) == 1 and "in use" in err, err
+        assert not (run_folder / "report.html").exists()
+    finally:
+        sleeper.kill()
+        sleeper.wait()
+    assert cli.main(["report", str(run_folder)]) == 0  # its owner gone, the lock is cleared
+    assert (run_folder / "report.html").exists() and not (run_folder / LOCK_NAME).exists()

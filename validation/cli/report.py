@@ -47,6 +47,23 @@ def write_html_report(folder: str | os.PathLike, target: str | os.PathLike | Non
 
 
 def run(args: argparse.Namespace) -> int:
-    target = write_html_report(args.folder, args.html)
+    """The page of a folder no run is writing: the folder's ``--out`` lock is taken while
+    it is read and the page written (``out_lock.reserved``), so a running command's folder
+    is refused (one line, exit 2) instead of rendered half-written, and no command can
+    start writing it meanwhile. A folder this user cannot write (someone else's run,
+    read-only media) is read without the lock: no run of this user can be writing it."""
+    import contextlib
+
+    from ..out_lock import OutInUse, reserved
+
+    with contextlib.ExitStack() as stack:
+        if Path(args.folder).is_dir():
+            try:
+                stack.enter_context(reserved(args.folder, command="report"))
+            except OutInUse:
+                raise
+            except OSError:
+                pass
+        target = write_html_report(args.folder, args.html)
     print(f"flexcal report: wrote {target} ({target.stat().st_size / 1e3:.0f} kB, self-contained)")
     return 0

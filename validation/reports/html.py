@@ -18,7 +18,8 @@ their address, and its images are kept only as the folder's own PNGs held in the
 Only the folder's own regular files are read: a symbolic link is never followed (a
 ``x.png`` linked to ``/etc/passwd`` is listed, not read; a linked report.md or
 report.json is an error), a PNG is embedded only when its first 8 bytes are the PNG
-signature, and a report.json nested deeper than ``MAX_JSON_DEPTH`` is refused before it
+signature, a file with a second name (a hard link, which may be a file from anywhere) is
+listed and not read, and a report.json nested deeper than ``MAX_JSON_DEPTH`` is refused before it
 is parsed. Tables wider than the page scroll sideways.
 """
 
@@ -219,7 +220,8 @@ MAX_JSON_DEPTH = 64
 
 def _own_file_bytes(path: Path) -> bytes | None:
     """The bytes of ``path`` if it is a regular file of its folder (not a symbolic link,
-    FIFO or device; its resolved path inside the folder), else None."""
+    FIFO or device; its resolved path inside the folder; one name only: a hard link may be
+    a file from anywhere else), else None."""
     import os
     import stat
 
@@ -230,7 +232,8 @@ def _own_file_bytes(path: Path) -> bytes | None:
     except OSError:
         return None
     with os.fdopen(handle, "rb") as stream:
-        if not stat.S_ISREG(os.fstat(stream.fileno()).st_mode):
+        status = os.fstat(stream.fileno())
+        if not stat.S_ISREG(status.st_mode) or status.st_nlink > 1:
             return None
         return stream.read()
 
@@ -242,8 +245,8 @@ def _report_text(path: Path) -> str | None:
         return None
     data = _own_file_bytes(path)
     if data is None:
-        raise ValueError(f"{path} is a symbolic link or not a regular file; flexcal report reads only the run "
-                         "folder's own files (copy the file in)")
+        raise ValueError(f"{path} is a symbolic link, a hard link or not a regular file; flexcal report reads only "
+                         "the run folder's own files (copy the file in)")
     try:
         return data.decode("utf-8")
     except UnicodeDecodeError as error:
@@ -296,7 +299,8 @@ def _folder_files(folder: Path) -> tuple[dict[str, str], list[_File]]:
         if is_png and data is not None and data.startswith(PNG_SIGNATURE):
             pictures[path.name] = base64.b64encode(data).decode("ascii")
         elif path.is_file():
-            note = "not a PNG image, not embedded" if is_png else ""
+            hard_link = is_png and path.stat().st_nlink > 1
+            note = "hard link, not read" if hard_link else "not a PNG image, not embedded" if is_png else ""
             files.append(_File(path.name, urllib.parse.quote(path.name), f"{path.stat().st_size / 1e3:.1f}", note))
     return pictures, files
 
