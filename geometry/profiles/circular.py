@@ -6,15 +6,14 @@ piece, ``ThinPiece``): t(x) = t + 2R - 2 sqrt(R^2 - x^2) over x in [-R, R]. Leng
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from dataclasses import dataclass
 from typing import ClassVar
 
 import numpy as np
 
-from ..checks import require, require_finite
 from ..patches import CylinderPatch, Patch, axis_vector, side_cap
+from ._rules import HingeRules
 from .protocol import Dimension
 
 __all__ = ["CircularNotchHinge", "NotchPiece", "HINGE"]
@@ -93,7 +92,7 @@ class NotchPiece:
 
 
 @dataclass(frozen=True, kw_only=True)
-class CircularNotchHinge:
+class CircularNotchHinge(HingeRules):
     """Right-circular notch hinge: a block of height t + 2R with two semicircular cuts.
 
     radius R [m], thickness t [m] (minimum, at x = 0), width b [m] (along z),
@@ -109,6 +108,7 @@ class CircularNotchHinge:
         Dimension(key="thickness", field="thickness", help="minimum thickness t [mm]"),
         Dimension(key="width", field="width", help="width b / w [mm]"),
     )
+    refusal_notes: ClassVar[dict[str, str]] = {"thickness": "(a notch with t <= 0 cuts through the block)"}
     sweep_defaults_mm: ClassVar[dict[str, list[float]]] = {
         "radius_mm": [5.0], "thickness_mm": [0.5, 1.0, 1.5, 2.0], "width_mm": [10.0], "block_mm": [5.0]}
 
@@ -116,14 +116,6 @@ class CircularNotchHinge:
     thickness: float
     width: float
     block_length: float
-
-    def __post_init__(self) -> None:
-        for f in dataclasses.fields(self):
-            require_finite(f.name, getattr(self, f.name))
-        require(self.radius > 0, "radius", self.radius, "> 0 mm")
-        require(self.thickness > 0, "thickness", self.thickness, "> 0 mm (a notch with t <= 0 cuts through the block)")
-        require(self.width > 0, "width", self.width, "> 0 mm")
-        require(self.block_length > 0, "block_length", self.block_length, "> 0 mm")
 
     @property
     def height(self) -> float:
@@ -135,19 +127,8 @@ class CircularNotchHinge:
         """Length of the compliant (notched) part, 2R [m]."""
         return 2.0 * self.radius
 
-    @property
-    def total_length(self) -> float:
-        """Length of the whole part including both blocks [m]."""
-        return self.length + 2.0 * self.block_length
-
     def thin_piece(self) -> NotchPiece:
         return NotchPiece(centre=0.0, radius=self.radius, thickness=self.thickness, half_width=self.width / 2)
-
-    @classmethod
-    def from_mm(cls, dimensions_mm: dict[str, float], block_mm: float) -> "CircularNotchHinge":
-        mm = 1e-3
-        return cls(radius=dimensions_mm["radius"] * mm, thickness=dimensions_mm["thickness"] * mm,
-                   width=dimensions_mm["width"] * mm, block_length=block_mm * mm)
 
     @classmethod
     def default_block_mm(cls, dimensions_mm: dict[str, float]) -> float:
@@ -159,9 +140,6 @@ class CircularNotchHinge:
     def shape_ratio(self) -> float:
         """t/R [-]."""
         return self.thickness / self.radius
-
-    def chain_dimensions(self) -> None:
-        return None
 
 
 HINGE = CircularNotchHinge

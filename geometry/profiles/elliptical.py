@@ -9,15 +9,14 @@ Lengths [m]. Smith et al. (1997), "Elliptical flexure hinges", Rev. Sci. Instrum
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from dataclasses import dataclass
 from typing import ClassVar
 
 import numpy as np
 
-from ..checks import require, require_finite
 from ..patches import PlanePatch, axis_vector, side_cap
+from ._rules import HingeRules
 from .protocol import Dimension
 
 __all__ = ["EllipticalNotchHinge", "EllipticalNotchPiece", "EllipseCylinderPatch", "HINGE"]
@@ -210,7 +209,7 @@ class EllipticalNotchPiece:
 
 
 @dataclass(frozen=True, kw_only=True)
-class EllipticalNotchHinge:
+class EllipticalNotchHinge(HingeRules):
     """Elliptical notch hinge: a block of height t + 2b with two half-elliptical cuts.
 
     semi_axis_x a [m]: half the notch length (the hinge spans 2a in x); semi_axis_y b [m]:
@@ -227,6 +226,7 @@ class EllipticalNotchHinge:
         Dimension(key="thickness", field="thickness", help="minimum thickness t [mm]"),
         Dimension(key="width", field="width", help="width b / w [mm]"),
     )
+    refusal_notes: ClassVar[dict[str, str]] = {"thickness": "(a notch with t <= 0 cuts through the block)"}
     sweep_defaults_mm: ClassVar[dict[str, list[float]]] = {
         "semi_axis_x_mm": [10.0], "semi_axis_y_mm": [5.0], "thickness_mm": [0.5, 1.0, 1.5, 2.0],
         "width_mm": [10.0], "block_mm": [5.0]}
@@ -236,15 +236,6 @@ class EllipticalNotchHinge:
     thickness: float
     width: float
     block_length: float
-
-    def __post_init__(self) -> None:
-        for f in dataclasses.fields(self):
-            require_finite(f.name, getattr(self, f.name))
-        require(self.semi_axis_x > 0, "semi_axis_x", self.semi_axis_x, "> 0 mm")
-        require(self.semi_axis_y > 0, "semi_axis_y", self.semi_axis_y, "> 0 mm")
-        require(self.thickness > 0, "thickness", self.thickness, "> 0 mm (a notch with t <= 0 cuts through the block)")
-        require(self.width > 0, "width", self.width, "> 0 mm")
-        require(self.block_length > 0, "block_length", self.block_length, "> 0 mm")
 
     @property
     def height(self) -> float:
@@ -256,20 +247,9 @@ class EllipticalNotchHinge:
         """Length of the notched part, 2a [m]."""
         return 2.0 * self.semi_axis_x
 
-    @property
-    def total_length(self) -> float:
-        return self.length + 2.0 * self.block_length
-
     def thin_piece(self) -> EllipticalNotchPiece:
         return EllipticalNotchPiece(centre=0.0, semi_axis_x=self.semi_axis_x, semi_axis_y=self.semi_axis_y,
                                     thickness=self.thickness, half_width=self.width / 2)
-
-    @classmethod
-    def from_mm(cls, dimensions_mm: dict[str, float], block_mm: float) -> "EllipticalNotchHinge":
-        mm = 1e-3
-        return cls(semi_axis_x=dimensions_mm["semi_axis_x"] * mm, semi_axis_y=dimensions_mm["semi_axis_y"] * mm,
-                   thickness=dimensions_mm["thickness"] * mm, width=dimensions_mm["width"] * mm,
-                   block_length=block_mm * mm)
 
     @classmethod
     def default_block_mm(cls, dimensions_mm: dict[str, float]) -> float:
@@ -282,9 +262,6 @@ class EllipticalNotchHinge:
     def shape_ratio(self) -> float:
         """t/b [-] (the notch's t/R)."""
         return self.thickness / self.semi_axis_y
-
-    def chain_dimensions(self) -> None:
-        return None
 
 
 HINGE = EllipticalNotchHinge

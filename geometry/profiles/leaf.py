@@ -7,15 +7,15 @@ both ends (thickness t + 2a at the ends). Lengths [m].
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from dataclasses import dataclass
 from typing import ClassVar
 
 import numpy as np
 
-from ..checks import require, require_finite
+from ..checks import require
 from ..patches import CylinderPatch, Patch, PlanePatch, axis_vector, side_cap
+from ._rules import HingeRules
 from .protocol import Dimension
 
 __all__ = ["LeafHinge", "LeafPiece", "HINGE"]
@@ -123,7 +123,7 @@ class LeafPiece:
 
 
 @dataclass(frozen=True, kw_only=True)
-class LeafHinge:
+class LeafHinge(HingeRules):
     """Corner-filleted leaf hinge (paper Fig. 5c).
 
     length l [m]: segment length including both fillets; thickness t [m];
@@ -152,21 +152,13 @@ class LeafHinge:
     block_height: float | None = None
 
     def __post_init__(self) -> None:
-        for f in dataclasses.fields(self):
-            value = getattr(self, f.name)
-            if value is not None:
-                require_finite(f.name, value)
-        require(self.length > 0, "length", self.length, "> 0 mm")
-        require(self.thickness > 0, "thickness", self.thickness, "> 0 mm")
-        require(self.width > 0, "width", self.width, "> 0 mm")
-        require(self.fillet >= 0, "fillet", self.fillet, ">= 0 mm")
+        super().__post_init__()
         require(
             2.0 * self.fillet <= self.length,
             "fillet",
             self.fillet,
             f"<= length/2 = {self.length * 500:.6g} mm (both fillets must fit the segment)",
         )
-        require(self.block_length > 0, "block_length", self.block_length, "> 0 mm")
         if self.block_height is not None:
             require(
                 self.block_height >= self.thickness + 2.0 * self.fillet - 1e-12,
@@ -180,21 +172,10 @@ class LeafHinge:
         """Block height [m]."""
         return self.thickness + 2.0 * self.fillet if self.block_height is None else self.block_height
 
-    @property
-    def total_length(self) -> float:
-        """Length of the whole part including both blocks [m]."""
-        return self.length + 2.0 * self.block_length
-
     def thin_piece(self) -> LeafPiece:
         l = self.length
         return LeafPiece(x0=-l / 2, x1=l / 2, thin_axis=1, thickness=self.thickness, fillet=self.fillet,
                          half_width=self.width / 2)
-
-    @classmethod
-    def from_mm(cls, dimensions_mm: dict[str, float], block_mm: float) -> "LeafHinge":
-        mm = 1e-3
-        return cls(length=dimensions_mm["length"] * mm, thickness=dimensions_mm["thickness"] * mm,
-                   width=dimensions_mm["width"] * mm, fillet=dimensions_mm["fillet"] * mm, block_length=block_mm * mm)
 
     @classmethod
     def default_block_mm(cls, dimensions_mm: dict[str, float]) -> float:
