@@ -73,6 +73,10 @@ CACHE_ENV = "FLEXCAL_CACHE_DIR"
 # cache itself). Editing any other one changes the code version and therefore every key;
 # new numerics modules (the mesher's helpers) are included automatically.
 _NOT_NUMERICS = frozenset({"__init__.py", "cache.py", "results.py"})
+# geometry modules no solid or mesh depends on: the typed input layer (files -> params; the
+# params themselves are in every key) and the STEP writer. Leaving one out that does matter
+# would serve stale results, so this lists only modules that cannot: keep it short.
+_GEOMETRY_NOT_SOLIDS = frozenset({"__init__.py", "schema.py", "export.py"})
 # dataclass fields no FEM result depends on, left out of the key so that changing them keeps
 # the cached entries: a material's yield strength only judges stresses (flexcal structure),
 # stiffness, mass and stress fields per unit motion do not depend on it
@@ -129,7 +133,7 @@ def code_version() -> str:
     sources = [(folder, p) for p in [*folder.rglob("*.py"), *folder.glob("*.c")] if p.name not in _NOT_NUMERICS]
     spec = importlib.util.find_spec("flexcal.geometry")  # the solids the mesher meshes
     for folder in (spec.submodule_search_locations or []) if spec else []:
-        sources += [(Path(folder), p) for p in Path(folder).rglob("*.py") if p.name != "__init__.py"]
+        sources += [(Path(folder), p) for p in Path(folder).rglob("*.py") if p.name not in _GEOMETRY_NOT_SOLIDS]
     names = sorted((f"{root.name}/{source.relative_to(root).as_posix()}", source) for root, source in sources)
     for name, source in names:
         digest.update(name.encode())

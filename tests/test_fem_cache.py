@@ -36,6 +36,25 @@ def test_code_version_enters_the_key(monkeypatch):
     assert cache.cache_key(PARTS) != key
 
 
+@pytest.mark.parametrize("edited, changes", [("geometry/solids.py", True), ("fem/mesh.py", True),
+                                              ("geometry/profiles/leaf.py", True), ("geometry/schema.py", False),
+                                              ("geometry/export.py", False)])
+def test_code_version_follows_the_sources_of_solids_and_meshes(monkeypatch, edited, changes):
+    """An edit of a module that makes solids or meshes is a new code version (every key new);
+    an edit of the input layer or the STEP writer is not (it used to be: a cold rebuild)."""
+    from pathlib import Path
+
+    before = cache.code_version()
+    read_bytes = Path.read_bytes
+
+    def edited_read(path):
+        data = read_bytes(path)
+        return data + b"# edited\n" if path.as_posix().endswith(edited) else data
+
+    monkeypatch.setattr(Path, "read_bytes", edited_read)
+    assert (cache.code_version() != before) == changes
+
+
 def test_unkeyable_values_are_rejected():
     with pytest.raises(ValueError, match="cannot key"):
         cache.cache_key({"x": object()})
