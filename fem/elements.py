@@ -47,6 +47,7 @@ __all__ = [
     "element_stiffness_blocks",
     "element_volumes",
     "element_strain_at_nodes",
+    "voigt_strain",
 ]
 
 EDGES = np.array([[0, 1], [1, 2], [0, 2], [0, 3], [1, 3], [2, 3]])
@@ -305,15 +306,12 @@ def element_strain_at_nodes(coords: np.ndarray, displacements: np.ndarray) -> np
         raise ValueError("a tet has a non-positive Jacobian at a node; check the mesh orientation")
     G = np.matmul(dN[None], inverse)  # (e, p, a, i)
     grad_u = np.einsum("...eak,epai->...epki", displacements, G, optimize=True)  # du_k/dx_i
-    strain = np.stack(
-        [
-            grad_u[..., 0, 0],
-            grad_u[..., 1, 1],
-            grad_u[..., 2, 2],
-            grad_u[..., 1, 2] + grad_u[..., 2, 1],
-            grad_u[..., 0, 2] + grad_u[..., 2, 0],
-            grad_u[..., 0, 1] + grad_u[..., 1, 0],
-        ],
-        axis=-1,
-    )
-    return strain
+    return voigt_strain(grad_u)
+
+
+def voigt_strain(grad_u: np.ndarray) -> np.ndarray:
+    """Small strain (..., 6) [-], Voigt order xx, yy, zz, yz, xz, xy with engineering shear
+    (gamma = 2 epsilon), of displacement gradients grad_u (..., 3, 3), [k, i] = du_k/dx_i."""
+    g = grad_u
+    return np.stack([g[..., 0, 0], g[..., 1, 1], g[..., 2, 2],
+                     g[..., 1, 2] + g[..., 2, 1], g[..., 0, 2] + g[..., 2, 0], g[..., 0, 1] + g[..., 1, 0]], axis=-1)

@@ -27,7 +27,7 @@ import scipy.sparse as sp
 from flexcal.geometry.params import Material
 
 from .assembly import DEFAULT_CHUNK, check_mesh, node_pattern
-from .elements import TET_14POINT, InvalidElementError, _physical_gradients, elasticity_matrix
+from .elements import TET_14POINT, InvalidElementError, _physical_gradients, elasticity_matrix, voigt_strain
 
 __all__ = ["quadrature_stress", "assemble_geometric_stiffness", "axial_link_geometric_stiffness", "STRESS_RULE"]
 
@@ -52,18 +52,7 @@ def quadrature_stress(mesh, material: Material, u: np.ndarray, *, chunk_size: in
         except InvalidElementError as error:
             raise InvalidElementError(start + error.elements) from None
         grad_u = np.einsum("eak,eqai->eqki", u[tets[chunk]], G, optimize=True)  # du_k/dx_i
-        strain = np.stack(
-            [
-                grad_u[..., 0, 0],
-                grad_u[..., 1, 1],
-                grad_u[..., 2, 2],
-                grad_u[..., 1, 2] + grad_u[..., 2, 1],
-                grad_u[..., 0, 2] + grad_u[..., 2, 0],
-                grad_u[..., 0, 1] + grad_u[..., 1, 0],
-            ],
-            axis=-1,
-        )
-        out[chunk] = strain @ D.T
+        out[chunk] = voigt_strain(grad_u) @ D.T
     return out
 
 
