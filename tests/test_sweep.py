@@ -248,8 +248,10 @@ def test_chain_design_record(tmp_path):
 
     config = {"sweep": {"kind": "chain", "elements_through": 1.0},
               "chain": {"length_mm": [130.0], "t1_mm": [3.0, 4.0]}}
+    structures = []
     for design in designs_from_config(config):
         record = evaluate_design(design, cache_directory=str(tmp_path))
+        structures.append(record["structure"])
         c = np.array(record["compliance_fem"])
         d = np.sqrt(np.diag(c))
         assert np.linalg.eigvalsh(0.5 * (c + c.T) / np.outer(d, d))[0] > 0
@@ -258,3 +260,9 @@ def test_chain_design_record(tmp_path):
         assert abs(record["discrepancy_percent"]["rz_Mz"]) < 15.0
         # measured 1.03 / 0.99 with one tet through the leaves (was 0.5 .. 2)
         assert 0.8 < record["stress_per_rad_fem"] / record["stress_per_rad_nominal"] < 1.25
+    thin, thick = structures  # t1 = 3 and 4 mm: leaf 1 bends in the chain's z sway (rz), the y sway is leaf 2's
+    assert thin["buckling_factor"] == thin["buckling_load_sway_n"] / 3080.0  # the default axial_load_n
+    # a thicker leaf 1: a stiffer chain, a higher first frequency and sway load, more stress per stroke
+    assert thick["first_frequency_clamped_hz"] > thin["first_frequency_clamped_hz"] > 0
+    assert thick["buckling_load_sway_n"] > thin["buckling_load_sway_n"] > 0
+    assert thick["stress_per_m_lateral_y"] > thin["stress_per_m_lateral_y"] > 0

@@ -10,7 +10,10 @@ value 6 / (b t^2 C_rz,Mz) of the closed form: nominal bending stress at the thin
 section, no stress concentration.
 
 For a chain (kind chain) the compliance is the one at end B with end A clamped, the
-stress the one of a pure moment Mz at B (leaf 1 bending) per radian of B's rotation.
+stress the one of a pure moment Mz at B (leaf 1 bending) per radian of B's rotation; and
+its structural figures (``sweep.chain_structure``): first clamped frequency, peak stress
+in the leaves per metre of B's sideways stroke, sway buckling load and its factor on the
+design's ``axial_load_n``.
 
 The FEM numbers go through the content-addressed cache (``flexcal.fem.cache``), so a
 design solved once, by any sweep, is never meshed again.
@@ -51,21 +54,25 @@ def _hinge_fem(hinge, material, elements_through: float) -> dict[str, np.ndarray
 
 
 def _chain_fem(chain, material, elements_through: float) -> dict[str, np.ndarray]:
+    from flexcal.fem.assembly import assemble_stiffness
     from flexcal.fem.condense import chain_displacement, solve_chain
     from flexcal.fem.results import nodal_stress, von_mises
     from flexcal.geometry.solids import chain_solid
 
+    from .chain_structure import chain_structure
+
     part = chain_solid(chain)
     mesh, _ = _mesh(part, elements_through)
+    K = assemble_stiffness(mesh, material)
     solution = solve_chain(mesh, material, part.end_planes["A"], part.reference_points["A"], part.end_planes["B"],
-                           part.reference_points["B"])
+                           part.reference_points["B"], stiffness=K)
     stiffness = 0.5 * (solution.stiffness + solution.stiffness.T)
     compliance = np.linalg.inv(stiffness[6:, 6:])  # at B, A clamped
     motion_b = compliance @ np.array([0.0, 0, 0, 0, 0, 1.0])  # Mz = 1 N m at B
     u = chain_displacement(solution, np.concatenate([np.zeros(6), motion_b]))
     peak = von_mises(nodal_stress(mesh, material, u)).max()
     return {"compliance": compliance, "peak_stress_unit_moment": np.array(peak),
-            "n_nodes": np.array(len(mesh.nodes))}
+            "n_nodes": np.array(len(mesh.nodes)), **chain_structure(mesh, material, part, chain, solution, K)}
 
 
 def fem_summary(params, material, elements_through: float, cache_directory=None) -> dict[str, np.ndarray]:
@@ -74,8 +81,10 @@ def fem_summary(params, material, elements_through: float, cache_directory=None)
     from flexcal.fem.cache import cached
     from flexcal.geometry.params import FlexureChain
 
-    solve = _chain_fem if isinstance(params, FlexureChain) else _hinge_fem
-    parts = {"kind": "sweep_fem_summary", "part": params, "material": material,
+    is_chain = isinstance(params, FlexureChain)
+    solve = _chain_fem if is_chain else _hinge_fem
+    # a chain's entry holds its structural figures too (sweep.chain_structure): its own kind
+    parts = {"kind": "sweep_chain_summary" if is_chain else "sweep_fem_summary", "part": params, "material": material,
              "mesh": {"elements_through_thickness": float(elements_through), "num_threads": 1}}
     return cached(parts, lambda: solve(params, material, elements_through), cache_directory)
 
@@ -119,6 +128,14 @@ def evaluate_design(design: dict[str, Any], *, cache_directory: str | None = Non
         "stress_per_rad_nominal": 6.0 / (width * thickness**2 * c_ana[5, 5]),
         "n_nodes": int(fem["n_nodes"]),
     }
+    if "buckling_load_sway" in fem:  # a chain (sweep.chain_structure)
+        record["structure"] = {
+            "first_frequency_clamped_hz": float(fem["first_frequency_clamped_hz"]),
+            "stress_per_m_lateral_y": float(fem["stress_per_m_lateral"][0]),
+            "stress_per_m_lateral_z": float(fem["stress_per_m_lateral"][1]),
+            "buckling_load_sway_n": float(fem["buckling_load_sway"]),
+            "buckling_factor": float(fem["buckling_load_sway"]) / design["axial_load_n"],
+        }
     if design.get("identification", {}).get("enabled"):
         from .identify import identification_accuracy
 

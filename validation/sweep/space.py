@@ -54,7 +54,10 @@ DEFAULT_CONFIG: dict[str, Any] = {
        for name, cls in _hinge_types().items()},
     "chain": {"length_mm": [150.0], "hinge_length_mm": [20.0], "width_mm": [40.0], "fillet_mm": [6.0],
               "t1_mm": [3.0], "t2_mm": [3.0], "section_mm": [50.0], "connector_mm": [10.0],
-              "end_block_mm": [10.0]},
+              "end_block_mm": [10.0],
+              # [N] compression the chain carries, for its buckling factor: the reference mount's
+              # load chains L2 and L3 carry 3074-3077 N under the 300 kg payload (flexcal structure)
+              "axial_load_n": [3080.0]},
     "identification": dict(_IDENTIFICATION_DEFAULTS),
 }
 KINDS = (*_hinge_types(), "chain")

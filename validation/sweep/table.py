@@ -47,6 +47,13 @@ def table_rows(records: list[dict[str, Any] | None], designs_ids: list[str], kin
         row["stress_per_rotation_fem_MPa_per_mrad"] = record["stress_per_rad_fem"] * _MPA_PER_MRAD
         row["stress_per_rotation_nominal_MPa_per_mrad"] = record["stress_per_rad_nominal"] * _MPA_PER_MRAD
         row["stress_concentration"] = record["stress_per_rad_fem"] / record["stress_per_rad_nominal"]
+        if "structure" in record:  # a chain: MPa per mm of B's sideways stroke (Pa/m x 1e-9)
+            structure = record["structure"]
+            row["first_frequency_clamped_Hz"] = structure["first_frequency_clamped_hz"]
+            row["stress_per_lateral_stroke_y_MPa_per_mm"] = structure["stress_per_m_lateral_y"] * 1e-9
+            row["stress_per_lateral_stroke_z_MPa_per_mm"] = structure["stress_per_m_lateral_z"] * 1e-9
+            row["buckling_load_sway_kN"] = structure["buckling_load_sway_n"] * 1e-3
+            row["buckling_factor"] = structure["buckling_factor"]
         if "identification" in record:
             row.update({f"identification_{k}": v for k, v in record["identification"].items()
                         if isinstance(v, (int, float))})
