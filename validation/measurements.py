@@ -241,7 +241,7 @@ def write_measurement(path: str | os.PathLike, measurement: Measurement) -> None
     Inputs are written in mm with 9 decimals (1 pm), angles in µrad with 6 decimals
     (1 prad): far below any sensor's resolution, so a round trip is lossless for use.
     """
-    from .output import write_json
+    from .output import write_json, write_text
 
     path = Path(path)
     # rounded as written, so the check sees what the reader will
@@ -258,8 +258,6 @@ def write_measurement(path: str | os.PathLike, measurement: Measurement) -> None
         row += [f"{v * 1e6:.6f}" for v in measurement.angles[k]]
         row += [f"{measurement.extras[name][k]:.9g}" for name in measurement.extras]
         writer.writerow(row)
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(buffer.getvalue())
-    os.replace(tmp, path)
+    write_text(path, buffer.getvalue())
     if measurement.metadata:
         write_json(sidecar_path(path), measurement.metadata)

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import tempfile
 from pathlib import Path
 
 __all__ = ["configure", "run", "EXAMPLES", "write_html_report"]
@@ -27,6 +26,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 def write_html_report(folder: str | os.PathLike, target: str | os.PathLike | None = None) -> Path:
     """Render ``folder`` and write the page whole or not at all; returns its path."""
+    from ..output import write_text
     from ..reports.html import render_run_folder
 
     page = render_run_folder(folder)
@@ -34,15 +34,7 @@ def write_html_report(folder: str | os.PathLike, target: str | os.PathLike | Non
     if target.is_dir():
         raise ValueError(f"--html {target} is a folder; give a file name")
     target.parent.mkdir(parents=True, exist_ok=True)
-    handle, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
-    try:
-        with os.fdopen(handle, "w", encoding="utf-8") as stream:
-            stream.write(page)
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, target)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    write_text(target, page)
     return target
 
 

@@ -34,6 +34,8 @@ import numpy as np
 
 from flexcal.model.trajectory import WORKSPACE
 
+from ..output import write_text
+
 __all__ = ["TARGET_COLUMNS", "DEFAULT_N_TARGETS", "DEFAULT_FILL", "default_targets", "read_targets",
            "write_targets", "check_targets"]
 
@@ -101,6 +103,4 @@ def write_targets(path: str | os.PathLike, targets: np.ndarray) -> None:
     """Write relative targets (n, 3) [rad] in the targets-file format (urad, 6 decimals)."""
     path = Path(path)
     lines = [",".join(TARGET_COLUMNS)] + [",".join(f"{v * 1e6:.6f}" for v in row) for row in np.asarray(targets)]
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text("\n".join(lines) + "\n")
-    os.replace(tmp, path)
+    write_text(path, "\n".join(lines) + "\n")
