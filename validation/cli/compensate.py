@@ -21,7 +21,7 @@ import dataclasses
 
 import numpy as np
 
-from .options import add_out, add_seed
+from .options import add_out, add_seed, calibration_defaults
 
 __all__ = ["configure", "run", "EXAMPLES", "DEFAULT_CONFIG"]
 
@@ -37,9 +37,9 @@ EXAMPLES = (
 # 9 Table 1 sources that the 0.01 screening keeps (verify's default), at ~10x the identification time.
 # method "paper": the identification measured for docs/compensation.md; "map" (verify's default)
 # is available with --method map (its compensation figures are not yet measured on the FEM run).
-DEFAULT_CONFIG = {"method": "paper", "prior_scale": 0.0, "sobol_n": 512, "sobol_threshold": 0.0, "particles": 300, "iterations": 150, "polish": True,
-                  "calibration_seed": 0, "readings": 10, "tolerance_urad": 1.0, "max_rounds": 8, "gain": 1.0,
-                  "model_stiffness": "fem", "second_order": True}
+DEFAULT_CONFIG = calibration_defaults("prior_scale", "sobol_n", "particles", "iterations", "polish", "calibration_seed",
+                                      "model_stiffness", "second_order", method="paper", sobol_threshold=0.0,
+                                      readings=10, tolerance_urad=1.0, max_rounds=8, gain=1.0)
 
 
 def configure(parser: argparse.ArgumentParser) -> None:

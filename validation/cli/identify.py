@@ -17,7 +17,7 @@ import argparse
 import dataclasses
 import time
 
-from .options import add_out
+from .options import add_out, calibration_defaults
 from .options import add_source_options, load_source_with_truth
 
 __all__ = ["configure", "run", "parse_sources", "EXAMPLES", "DEFAULT_CONFIG"]
@@ -27,8 +27,9 @@ EXAMPLES = (
     "flexcal identify --data curves.csv --sources D1.x0,D1.CL,D1.mu --remove-offset --out runs/d1",
     "flexcal identify --scenario table1 --provider analytic --particles 40 --iterations 20 --out runs/quick",
 )
-DEFAULT_CONFIG = {"model_stiffness": "fem", "second_order": True, "provider": "fem", "sources": "table1", "particles": 300, "iterations": 150, "polish": True,
-                  "remove_offset": False, "calibration_seed": 0, "method": "paper", "prior_scale": 0.0}
+DEFAULT_CONFIG = calibration_defaults("model_stiffness", "second_order", "particles", "iterations", "polish",
+                                      "remove_offset", "calibration_seed", "prior_scale", provider="fem",
+                                      sources="table1", method="paper")
 
 
 def configure(parser: argparse.ArgumentParser) -> None:

@@ -15,7 +15,7 @@ from ..prototype.providers import PROVIDERS
 
 __all__ = ["add_out", "add_seed", "add_scenario", "add_trajectory", "load_scenario_with_trajectory",
            "add_executor_options", "executor_options", "worker_count", "scheduler_address", "MODEL_DEFAULTS",
-           "CALIBRATION_DEFAULTS", "add_model_options",
+           "CALIBRATION_DEFAULTS", "calibration_defaults", "add_model_options",
            "add_identification_options", "add_method_options", "prior_scale_option", "add_calibration_options",
            "add_source_options", "load_source", "load_source_with_truth", "check_sobol_options",
            "add_point_model_options", "add_unit_check_option", "read_data"]
@@ -114,9 +114,27 @@ def executor_options(args: argparse.Namespace) -> dict[str, Any]:
 MODEL_DEFAULTS = {"model_stiffness": "fem", "second_order": True}
 
 
-CALIBRATION_DEFAULTS = {"sobol_n": 512, "sobol_threshold": 0.01, "particles": 300, "iterations": 150,
-                        "polish": True, "remove_offset": False, "calibration_seed": 0, "method": "map",
-                        "prior_scale": 0.0, **MODEL_DEFAULTS}
+def _calibration_defaults() -> dict[str, Any]:
+    """The calibration commands' defaults, read from the one place they are set: the
+    pipeline's ``VerifySettings`` and ``PSOSettings`` (prior_scale 0: the command line's
+    "no prior", where the settings' None means cross-validated)."""
+    from flexcal.calibration.pso_settings import PSOSettings
+
+    from ..runs.settings import VerifySettings
+
+    run, pso = VerifySettings(), PSOSettings()
+    return {"sobol_n": run.sobol_n, "sobol_threshold": run.sobol_threshold, "particles": pso.n_particles,
+            "iterations": pso.max_iterations, "polish": run.polish, "remove_offset": run.remove_offset,
+            "calibration_seed": run.seed, "method": run.method, "prior_scale": 0.0, **MODEL_DEFAULTS}
+
+
+CALIBRATION_DEFAULTS = _calibration_defaults()
+
+
+def calibration_defaults(*names: str, **overrides: Any) -> dict[str, Any]:
+    """``CALIBRATION_DEFAULTS`` restricted to ``names`` (a command's own options), then
+    ``overrides`` (a command's own values, e.g. compensate's method "paper")."""
+    return {**{name: CALIBRATION_DEFAULTS[name] for name in names}, **overrides}
 
 
 def add_model_options(parser: argparse.ArgumentParser) -> None:

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import argparse
 
-from .options import add_out, add_source_options, check_sobol_options, load_source
+from .options import add_out, add_source_options, calibration_defaults, check_sobol_options, load_source
 
 __all__ = ["configure", "run", "screen", "EXAMPLES", "DEFAULT_CONFIG"]
 
@@ -20,7 +20,8 @@ EXAMPLES = (
     "flexcal sensitivity --data curves.csv --sobol-n 128 --out runs/sobol-quick",
     "flexcal sensitivity --scenario table1 --provider analytic --sobol-n 64 --json --out runs/s",
 )
-DEFAULT_CONFIG = {"model_stiffness": "fem", "second_order": True, "provider": "fem", "sobol_n": 512, "sobol_threshold": 0.01, "calibration_seed": 0}
+DEFAULT_CONFIG = calibration_defaults("model_stiffness", "second_order", "sobol_n", "sobol_threshold", "calibration_seed",
+                                      provider="fem")
 
 
 def configure(parser: argparse.ArgumentParser) -> None:

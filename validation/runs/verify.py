@@ -33,20 +33,20 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, Callable
 
 import numpy as np
 
 from flexcal.calibration.pipeline import IdentificationSettings, identify_all, identify_swarm
 from flexcal.calibration.problem import CalibrationProblem
-from flexcal.calibration.pso_settings import PSOSettings
 from flexcal.calibration.sensitivity import select_parameters, sobol_indices
 from flexcal.model.parameters import DRIVE_SOURCE_NAMES, ParameterSpace
 
 from ..progress import progress_bar, with_progress
 from ..measurements import Measurement
 from .form_floor import TruthCurve, model_form_floor, not_available
+from .settings import VerifySettings
 
 __all__ = ["VerifySettings", "VerifyResult", "run_verify", "PAPER_TABLE1"]
 
@@ -59,35 +59,6 @@ PAPER_TABLE1 = {
     "orientation_fit_max_urad": 0.015,
 }
 OUTPUTS = ("overall", "theta_x", "theta_y", "theta_z")
-
-
-@dataclass(frozen=True, kw_only=True)
-class VerifySettings:
-    """sobol_n: Sobol base sample N (power of two); sobol_threshold: total index [-] from
-    which a source is identified; pso: PSO settings (paper defaults); polish: run the
-    least-squares polish; seed: one seed for the Sobol sample and the PSO;
-    remove_offset: subtract each leg's return offset first (paper Sec. 4.2);
-    noise_urad: the sensor noise level [urad] (the paper method's identifiability; the
-    noise floor of the fit-RMS goal; None: from the fit); method: "map", "free" or "paper";
-    prior_scale: the MAP prior scale (None: cross-validated); sources: identify only these
-    (the others at nominal; with "paper" instead of the Sobol selection; ``flexcal identify``)."""
-
-    sobol_n: int = 512
-    sobol_threshold: float = 0.01
-    pso: PSOSettings = field(default_factory=PSOSettings)
-    polish: bool = True
-    seed: int = 0
-    remove_offset: bool = False
-    noise_urad: float | None = None
-    method: str = "map"
-    prior_scale: float | None = None
-    sources: tuple[str, ...] | None = None
-
-    def __post_init__(self) -> None:
-        if self.method not in ("map", "free", "paper"):
-            raise ValueError(f"method={self.method!r} must be 'map', 'free' or 'paper'")
-        if self.sources is not None and not self.sources:
-            raise ValueError("sources=() names no source to identify")
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)

@@ -1,0 +1,40 @@
+"""The settings of a calibration run (``VerifySettings``), in a module light enough for the
+command line to read its defaults at start-up (``cli.options.CALIBRATION_DEFAULTS``): the
+one place the run's defaults are set."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from flexcal.calibration.pso_settings import PSOSettings
+
+__all__ = ["VerifySettings"]
+
+
+@dataclass(frozen=True, kw_only=True)
+class VerifySettings:
+    """sobol_n: Sobol base sample N (power of two); sobol_threshold: total index [-] from
+    which a source is identified; pso: PSO settings (paper defaults); polish: run the
+    least-squares polish; seed: one seed for the Sobol sample and the PSO;
+    remove_offset: subtract each leg's return offset first (paper Sec. 4.2);
+    noise_urad: the sensor noise level [urad] (the paper method's identifiability; the
+    noise floor of the fit-RMS goal; None: from the fit); method: "map", "free" or "paper";
+    prior_scale: the MAP prior scale (None: cross-validated); sources: identify only these
+    (the others at nominal; with "paper" instead of the Sobol selection; ``flexcal identify``)."""
+
+    sobol_n: int = 512
+    sobol_threshold: float = 0.01
+    pso: PSOSettings = field(default_factory=PSOSettings)
+    polish: bool = True
+    seed: int = 0
+    remove_offset: bool = False
+    noise_urad: float | None = None
+    method: str = "map"
+    prior_scale: float | None = None
+    sources: tuple[str, ...] | None = None
+
+    def __post_init__(self) -> None:
+        if self.method not in ("map", "free", "paper"):
+            raise ValueError(f"method={self.method!r} must be 'map', 'free' or 'paper'")
+        if self.sources is not None and not self.sources:
+            raise ValueError("sources=() names no source to identify")
