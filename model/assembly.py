@@ -59,7 +59,8 @@ class MechanismMatrices:
     parasitic_coefficient K_L = 1/(2 L_d) (n_c, 6) [1/m]; hysteresis mu (n_c, 3) [-];
     clearance CL (n_c, 3) [m]; initial_position x0 (n_c, 3) [m]; point_b (n_c, 6, 3) [m] the
     chains' frame-side ends; second_order (n_c,) bool: apply ``model.second_order`` (the
-    frame stiffness then holds the preload P-delta).
+    frame stiffness then holds the preload P-delta); breakaway_band (n_c, 3) [m] the play
+    band F_b / s_i of each nut (``ParameterSpace.breakaway_force``), -1 without play state.
     """
 
     chain_stiffness: np.ndarray
@@ -84,6 +85,7 @@ class MechanismMatrices:
     initial_position: np.ndarray
     point_b: np.ndarray
     second_order: np.ndarray
+    breakaway_band: np.ndarray
 
     @property
     def n_candidates(self) -> int:
@@ -255,4 +257,6 @@ def mechanism_matrices(values, space: ParameterSpace, *, candidate_offset: int =
         mu=mu.copy(), clearance=clearance.copy(), initial_position=initial_position.copy(),
         point_b=np.broadcast_to(point_b, (n_c,) + point_b.shape).copy(),
         second_order=np.full(n_c, bool(space.second_order)),
+        breakaway_band=(np.full((n_c, 3), -1.0) if space.breakaway_force is None
+                        else float(space.breakaway_force) / nut),
     )

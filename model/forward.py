@@ -153,6 +153,14 @@ def solve_matrices(matrices: MechanismMatrices, inputs: np.ndarray, directions: 
     if clearance_mode not in CLEARANCE_MODES:
         raise ValueError(f"clearance_mode={clearance_mode!r} must be one of {CLEARANCE_MODES}")
     m = matrices
+    play = bool(clearance and np.all(m.breakaway_band >= 0))
+    if play and clearance_mode != "force_only":
+        raise ValueError("the clearance's play state (ParameterSpace.breakaway_force) is written for "
+                         "clearance_mode='force_only'; use that mode or breakaway_force=None")
+    if play and resolve_engine(engine) != "numba":
+        raise ValueError("the clearance's play state (ParameterSpace.breakaway_force) runs in the compiled engine "
+                         "only (it carries each nut's offset from point to point); install numba or set "
+                         "breakaway_force=None")
     d = np.ones_like(directions) if clearance_mode == "force_only" else directions
     options = dict(parasitic=parasitic, clearance=clearance, tol=tol, max_iter=max_iter, divergence=DIVERGENCE_LIMIT)
     if resolve_engine(engine) == "numba":
@@ -221,6 +229,8 @@ def forward(space_values, inputs, directions=None, *, space: ParameterSpace | No
     if values.ndim != 2:
         raise ValueError(f"space_values must have shape (n_candidates, 45) or (45,), got {np.shape(space_values)}")
     x, d = _check_points(inputs, directions)
+    if space.breakaway_force is not None and engine == "auto" and kernel.available():
+        engine = "numba"  # the play state runs compiled only
     options = dict(parasitic=parasitic, clearance=clearance, clearance_mode=clearance_mode, tol=tol,
                    max_iter=max_iter, engine=resolve_engine(engine, values.shape[0] * x.shape[0]),
                    chunk_size=chunk_size)

@@ -115,7 +115,11 @@ class ParameterSpace:
     (``model.hinge.ENTRY_INDEX`` order) of the closed-form chains, empty = all 1 -- a
     correction measured once against a richer model (FEM, docs/model.md section 7);
     second_order: add the second-order geometric terms (chain-force P-delta, rigid
-    second-order frame kinematics; ``model.second_order``, docs/model.md section 8). Vectors in the
+    second-order frame kinematics; ``model.second_order``, docs/model.md section 8);
+    breakaway_force [N] or None: None is the paper's memoryless clip of Eq. 7; a value >= 0
+    carries each nut's offset along the ordered trajectory as a play state with the
+    breakaway band ``F_b / s_i`` (docs/model.md section 9; force_only clearance, compiled
+    engine). Vectors in the
     methods below are over the *active* parameters, ``(..., n_active)``, except
     ``full_values`` / ``build_values`` which return all 45 (what ``forward`` takes).
     """
@@ -126,8 +130,12 @@ class ParameterSpace:
     base_values: tuple[float, ...] = ()
     compliance_factors: tuple[tuple[float, ...], ...] = ()
     second_order: bool = False
+    breakaway_force: float | None = None
 
     def __post_init__(self) -> None:
+        if self.breakaway_force is not None and not (np.isfinite(self.breakaway_force) and self.breakaway_force >= 0):
+            raise ValueError(f"breakaway_force={self.breakaway_force!r} N must be a finite value >= 0 (or None for "
+                             "the paper's memoryless clearance)")
         if self.compliance_factors:
             factors = np.asarray(self.compliance_factors, dtype=float)
             if factors.shape != (len(self.mechanism.chains), 8) or not np.all(np.isfinite(factors) & (factors > 0)):
