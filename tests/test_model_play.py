@@ -46,7 +46,8 @@ def paper_walk():
     for force in (0.0, 2.0, 5.0):
         case = dataclasses.replace(scenario, inputs=inputs, leg=np.ones(N_WALK, dtype=int), breakaway_force=force)
         curves[force] = make_truth(case, provider).run
-    assert np.any(curves[5.0].nut_offsets > 0), "the walk must take a nut off its flank (else it tests nothing)"
+    off_flank = curves[5.0].nut_offsets  # [m]; the walk must take a nut off its flank (else it tests nothing)
+    assert np.any(off_flank > 0), "the walk must take a nut off its flank (else it tests nothing)"
     return scenario, inputs, curves
 
 
@@ -74,8 +75,8 @@ def test_the_play_state_bounds_the_error_at_two_breakaway_forces(paper_walk, for
     # the whole error with the play state: 1 urad per angle bounds what the second-order model
     # leaves on this walk (measured 0.26 / 0.85 / 0.45 urad at both forces; theta_y is the
     # kinematic floor of docs/model.md 9, not the play); without it theta_y is 3.1 / 7.4 urad
-    assert np.all(_rms_urad(with_play - curves[force].angles) <= 1.0)
-    assert np.any(_rms_urad(without - curves[force].angles) > 1.0)
+    assert np.all(_rms_urad(with_play - curves[force].angles) <= 1.0)  # 1 urad: see the comment above
+    assert np.any(_rms_urad(without - curves[force].angles) > 1.0)  # the same bound fails without the play
 
 
 def test_a_zero_band_is_the_memoryless_clip():
@@ -90,7 +91,8 @@ def test_a_zero_band_is_the_memoryless_clip():
     play = forward(scenario.values, x, space=dataclasses.replace(space, breakaway_force=0.0))
     assert np.any(clip.clearance > 0)  # the paper mount's drives pass through their clearance
     # tol 1e-13 m on u times the input gain (~5 rad/m) is 5e-13 rad; 1e-12 leaves 2x
-    np.testing.assert_allclose(play.angles, clip.angles, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(play.angles, clip.angles, rtol=0, atol=1e-12)  # 1e-12 rad: the line above
+    # the offsets to 1e-12 m: the fixed point's 1e-13 m on u, 10x
     np.testing.assert_allclose(play.clearance, clip.clearance, rtol=0, atol=1e-12)
 
 
@@ -104,8 +106,8 @@ def test_a_wide_band_holds_the_nut_where_it_was():
     free = forward(scenario.values, x, space=scenario.space)
     assert np.ptp(free.clearance[0], axis=0).max() > 1e-6  # without friction the offsets move by > 1 um
     # 1e6 N / s ~ 0.5 m of band: the offsets keep the first point's values (1e-15 m: round-off)
-    np.testing.assert_allclose(held.clearance[0], np.broadcast_to(held.clearance[0, :1], held.clearance[0].shape),
-                               rtol=0, atol=1e-15)
+    first = np.broadcast_to(held.clearance[0, :1], held.clearance[0].shape)
+    np.testing.assert_allclose(held.clearance[0], first, rtol=0, atol=1e-15)  # 1e-15 m: round-off of a held value
 
 
 def test_the_play_state_is_refused_where_it_is_not_written():
