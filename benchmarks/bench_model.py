@@ -81,6 +81,14 @@ def main() -> None:
           f"median) -> {n_evals / wall_second / 1e6:5.2f} M postures/s = {wall_second / wall_linear:.2f}x the "
           f"linear model's time")
 
+    # + the clearance's play state with a breakaway band (docs/model.md 9), same run
+    play = dataclasses.replace(second, breakaway_force=2.0)
+    forward(values, trajectory.inputs, space=play)
+    wall_play, median_play, _ = best_of(lambda: forward(values, trajectory.inputs, space=play), args.repeat)
+    print(f"  second-order + play state (F_b 2 N): {wall_play * 1e3:7.2f} ms best ({median_play * 1e3:7.2f} median) "
+          f"-> {n_evals / wall_play / 1e6:5.2f} M postures/s = {wall_play / wall_second:.2f}x the second-order model's "
+          f"time")
+
     subset = list(range(min(args.baseline_candidates, args.candidates)))
     matrices = mechanism_matrices(values[subset], space)
     start = time.perf_counter()
