@@ -120,3 +120,13 @@ def test_the_play_state_is_refused_where_it_is_not_written():
         forward(values, x, space=space, clearance_mode="directional")
     with pytest.raises(ValueError, match="breakaway_force"):
         dataclasses.replace(parameter_space(), breakaway_force=-1.0)
+
+
+def test_the_paper_model_stays_the_paper_model():
+    """The model-form floor's paper row is Eq. 1-8 as written: the play state is not carried over."""
+    from flexcal.validation.runs.form_floor import model_description, paper_model_space
+
+    space = dataclasses.replace(parameter_space(), second_order=True, breakaway_force=2.0)
+    assert paper_model_space(space).breakaway_force is None
+    assert "play state with breakaway force 2 N" in model_description(space)
+    assert model_description(paper_model_space(space)).startswith("the paper's model")
