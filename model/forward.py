@@ -47,10 +47,11 @@ STATE_TOLERANCE = 1e-12  # [m] |C| below this is engaged, within this of CL is t
 CLEARANCE_MODES = ("directional", "force_only")
 ENGINES = ("auto", "numba", "numpy")
 AUTO_COMPILED_MIN = 200  # postures per call from which "auto" loads numba
-# the consistent model's fixed point contracts by ~0.96 per step where a nut sits in its gap (the
-# nut amplifies the second-order load change by mu / (1 - mu)): 1e-11 m/rad (1e-5 urad) within
-# 1500 steps there, one or two steps elsewhere
-CONSISTENT_MAX_ITER = 1500
+# the consistent model's fixed point oscillates with a factor down to -0.96 per step where a nut
+# sits in its gap (the nut amplifies the second-order load change by mu / (1 - mu)): 1e-11 m/rad
+# (1e-5 urad) takes up to a few thousand steps there, one to ten elsewhere (damped steps were
+# tried and jump to another clearance face: not used)
+CONSISTENT_MAX_ITER = 6000
 CONSISTENT_TOL = 1e-11
 DIVERGENCE_LIMIT = 1e-2  # [m] a parasitic shortening this large (~1000x the workspace's) means it ran away
 
