@@ -126,7 +126,8 @@ def test_the_paper_model_stays_the_paper_model():
     """The model-form floor's paper row is Eq. 1-8 as written: the play state is not carried over."""
     from flexcal.validation.runs.form_floor import model_description, paper_model_space
 
-    space = dataclasses.replace(parameter_space(), second_order=True, breakaway_force=2.0)
-    assert paper_model_space(space).breakaway_force is None
+    space = dataclasses.replace(parameter_space(), second_order=True, breakaway_force=2.0,
+                                chain_shortening=tuple(np.zeros(216)))
+    assert paper_model_space(space).breakaway_force is None and not paper_model_space(space).chain_shortening
     assert "play state with breakaway force 2 N" in model_description(space)
     assert model_description(paper_model_space(space)).startswith("the paper's model")
