@@ -1,13 +1,20 @@
 """The model-form error budget: each model at the true values against the FEM prototype.
 
-    .venv/bin/python benchmarks/bench_form_error.py [--scenario table1] [--provider fem]
-        [--walks 3] [--points 60] [--strokes 0.5,0.8] [--seed 1]
+    .venv/bin/python benchmarks/bench_form_error.py [--scenario table1[,paper]] [--provider fem]
+        [--walks 3] [--points 60] [--strokes 0.5,0.8] [--seed 1] [--breakaway 2]
+        [--trajectory table1=DIR/trajectory.csv ...]
 
 Truth: the scenario's as-built virtual prototype (FEM segment stiffness by default, noise-free
 curve), driven along (1) the standard trajectory and (2) random multi-actuator walks. Models,
 each step adding one thing: the paper's (Eq. 1-8 as written: closed-form chains, no second
 order), + FEM-informed chain compliance (docs/model.md 7), + second-order geometric terms
-(docs/model.md 8; the calibration's default). Each is evaluated at the scenario's true values
+(docs/model.md 8; the calibration's default), + the clearance's play state with the
+prototype's breakaway force given (docs/model.md 9), + the consistent second-order model:
+the chains' second-order shortening measured on the prototype's chains at the nominal design
+and the second-order terms solved inside the fixed point (docs/model.md 10). The prototype's breakaway force is
+``--breakaway`` (comma-separated values: one table per value; the prototype's default is
+2 N); ``--trajectory NAME=FILE`` adds a trajectory file (e.g. ``flexcal design``'s
+trajectory.csv) for scenario NAME. Each is evaluated at the scenario's true values
 by ``flexcal.validation.runs.form_floor.model_form_floor``: RMS per angle and max [urad], and
 the RMS over multi-actuator postures and near a drive's unloading.
 
@@ -59,13 +66,7 @@ def _row(label: str, model: str, floor: dict) -> str:
 
 
 def main(argv=None) -> int:
-    from flexcal.model.parameters import parameter_space
-    from flexcal.model.trajectory import standard_trajectory
     from flexcal.validation.prototype.providers import stiffness_provider
-    from flexcal.validation.prototype.scenario import load_scenario
-    from flexcal.validation.prototype.truth import make_truth
-    from flexcal.validation.runs.form_floor import model_form_floor, truth_from_run
-    from flexcal.validation.runs.model_correction import corrected_space
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--scenario", default="table1")
@@ -74,25 +75,54 @@ def main(argv=None) -> int:
     parser.add_argument("--points", type=int, default=60)
     parser.add_argument("--strokes", default="0.5,0.8")
     parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--breakaway", default="2", help="the prototype's breakaway force(s) [N], comma-separated")
+    parser.add_argument("--trajectory", action="append", default=[], metavar="SCENARIO=FILE",
+                        help="a trajectory file (columns xa1_mm, xa2_mm, xa3_mm) to add for that scenario")
     args = parser.parse_args(argv)
     strokes = [float(s) for s in args.strokes.split(",")]
-
+    forces = [float(f) for f in args.breakaway.split(",")]
+    files = dict(item.split("=", 1) for item in args.trajectory)
     start = time.perf_counter()
     provider = stiffness_provider(args.provider, progress=False, workers=None)
-    scenario = load_scenario(args.scenario)
+    for name in args.scenario.split(","):
+        for force in forces:
+            _table(name, provider, args, strokes, force, files.get(name))
+    print(f"bench_form_error: {time.perf_counter() - start:.0f} s", file=sys.stderr)
+    return 0
+
+
+def _table(scenario_name, provider, args, strokes, force, trajectory_file) -> None:
+    """One table: every trajectory of one scenario at one prototype breakaway force [N]."""
+    from flexcal.model.parameters import parameter_space
+    from flexcal.model.trajectory import standard_trajectory
+    from flexcal.validation.prototype.scenario import load_scenario, read_trajectory
+    from flexcal.validation.prototype.truth import make_truth
+    from flexcal.validation.runs.form_floor import model_form_floor, truth_from_run
+    from flexcal.validation.runs.chain_kinematics import consistent_space
+    from flexcal.validation.runs.model_correction import corrected_space
+
+
+    scenario = dataclasses.replace(load_scenario(scenario_name), breakaway_force=force)
     paper = parameter_space(scenario.space.mechanism)
     fem = corrected_space(paper, provider) if args.provider == "fem" else paper
-    models = (("paper's model", paper), ("+ FEM-informed compliance", fem),
-              ("+ second order (default)", dataclasses.replace(fem, second_order=True)))
+    second = dataclasses.replace(fem, second_order=True)
+    consistent = dataclasses.replace(consistent_space(fem, provider), breakaway_force=force)
+    models = (("paper's model", paper), ("+ FEM-informed compliance", fem), ("+ second order (default)", second),
+              (f"+ play state (F_b {force:g} N given)", dataclasses.replace(second, breakaway_force=force)),
+              ("+ consistent second order, measured chain S", consistent))
     amplitudes = standard_trajectory(scenario.space.mechanism).amplitudes
     trajectories = [("standard (77 points)", scenario.inputs, scenario.leg)]
+    if trajectory_file:
+        designed, leg = read_trajectory(trajectory_file)
+        trajectories.append((f"{trajectory_file} ({len(designed)} points)", designed, leg))
     for stroke in strokes:
         for k in range(args.walks):
             seed = [args.seed, k, round(100 * stroke)]
             inputs = random_walk(amplitudes, args.points, stroke, seed)
             trajectories.append((f"walk {k + 1}, stroke {stroke:g}, seed {seed}", inputs,
                                  np.ones(args.points, dtype=int)))
-    print(f"bench_form_error: scenario {args.scenario}, provider {args.provider}, amplitudes "
+    print(f"\nbench_form_error: scenario {scenario_name}, provider {args.provider}, prototype breakaway force "
+          f"{force:g} N, amplitudes "
           + ", ".join(f"{a * 1e3:.3f}" for a in amplitudes) + " mm; urad, true values vs the noise-free prototype curve",
           flush=True)
     print("| trajectory | model | RMS θx / θy / θz | max | RMS multi-actuator (n) | RMS near unloading (n) |")
@@ -106,8 +136,6 @@ def main(argv=None) -> int:
                 print(_row(label, name, model_form_floor(truth, inputs, space)), flush=True)
             except Exception as error:  # a model that does not converge on a walk is a result too
                 print(f"| {label} | {name} | failed: {error} | | | |", flush=True)
-    print(f"bench_form_error: {time.perf_counter() - start:.0f} s", file=sys.stderr)
-    return 0
 
 
 if __name__ == "__main__":

@@ -81,6 +81,33 @@ def main() -> None:
           f"median) -> {n_evals / wall_second / 1e6:5.2f} M postures/s = {wall_second / wall_linear:.2f}x the "
           f"linear model's time")
 
+    # + the clearance's play state with a breakaway band (docs/model.md 9), same run
+    play = dataclasses.replace(second, breakaway_force=2.0)
+    forward(values, trajectory.inputs, space=play)
+    wall_play, median_play, _ = best_of(lambda: forward(values, trajectory.inputs, space=play), args.repeat)
+    print(f"  second-order + play state (F_b 2 N): {wall_play * 1e3:7.2f} ms best ({median_play * 1e3:7.2f} median) "
+          f"-> {n_evals / wall_play / 1e6:5.2f} M postures/s = {wall_play / wall_second:.2f}x the second-order model's "
+          f"time")
+
+    # the consistent second-order model (docs/model.md 10; its measured S correction does not
+    # change the work, zeros here), with the play state, same run
+    consistent = dataclasses.replace(play, chain_shortening=tuple(np.zeros(36 * len(space.mechanism.chains))))
+    from flexcal.model.forward import ConvergenceError
+
+    try:
+        forward(values, trajectory.inputs, space=consistent)
+    except ConvergenceError as error:  # mu near 1 amplifies the in-loop second-order loads (docs/model.md 10)
+        print(f"  consistent second order + play state: not converged on these candidates ({error})")
+    # where it converges: table1's true values (300 copies), both models, same run
+    from flexcal.validation.prototype.scenario import load_scenario
+
+    table1 = np.repeat(load_scenario("table1").values[None], args.candidates, axis=0)
+    for label, space_x in (("second-order + play state", play), ("consistent second order + play state", consistent)):
+        forward(table1, trajectory.inputs, space=space_x)
+        wall_x, median_x, _ = best_of(lambda: forward(table1, trajectory.inputs, space=space_x), args.repeat)
+        print(f"  {label}, table1's true values x {args.candidates}: {wall_x * 1e3:7.2f} ms best "
+              f"({median_x * 1e3:7.2f} median) -> {n_evals / wall_x / 1e6:5.2f} M postures/s")
+
     subset = list(range(min(args.baseline_candidates, args.candidates)))
     matrices = mechanism_matrices(values[subset], space)
     start = time.perf_counter()

@@ -133,10 +133,51 @@ def solve_box(a, b, lo, hi, status, tol, c, faces, trial):
             return True
     return enumerate_box(a, b, lo, hi, status, tol, c, faces, trial)
 
+@njit(cache=True, nogil=True, fastmath=_FAST)
+def solve_play(a, b, lo, hi, c_prev, band, side, lo2, hi2, a2, status, tol, c, faces, trial, fresh):
+    """C = clip(play(C_prev, a + B C, band), lo, hi) in place into c (docs/model.md 9); False if it failed.
+
+    The play operator median(t - band, C_prev, t + band) of the target t = a + B C, clipped
+    to [lo, hi], is on the rising side (t >= C_prev - band) the box problem
+    ``C = clip(a - band + B C, max(lo, C_prev), hi)`` and on the falling side
+    ``C = clip(a + band + B C, lo, min(hi, C_prev))``: solved exactly as a box (``solve_box``)
+    for a guess of the sides, which are then checked at the solution and flipped where wrong.
+    """
+    if fresh:  # side guess: where the target at the previous offsets lies
+        for i in range(3):
+            t = a[i] + b[i, 0] * c_prev[0] + b[i, 1] * c_prev[1] + b[i, 2] * c_prev[2]
+            side[i] = 1.0 if t >= c_prev[i] else -1.0
+    for _attempt in range(8):
+        for i in range(3):
+            if side[i] > 0:
+                lo2[i] = max(lo[i], c_prev[i])
+                hi2[i] = hi[i]
+                a2[i] = a[i] - band[i]
+            else:
+                lo2[i] = lo[i]
+                hi2[i] = min(hi[i], c_prev[i])
+                a2[i] = a[i] + band[i]
+            if lo2[i] > hi2[i]:
+                lo2[i] = hi2[i]
+        if not solve_box(a2, b, lo2, hi2, status, tol, c, faces, trial):
+            return False
+        changed = False
+        for i in range(3):
+            t = a[i] + b[i, 0] * c[0] + b[i, 1] * c[1] + b[i, 2] * c[2]
+            if side[i] > 0 and t < c_prev[i] - band[i] - tol:
+                side[i] = -1.0
+                changed = True
+            elif side[i] < 0 and t > c_prev[i] + band[i] + tol:
+                side[i] = 1.0
+                changed = True
+        if not changed:
+            return True
+    return False
+
 @njit(cache=True, nogil=True, parallel=True, fastmath=_FAST)
 def solve(q, delta_g, k_l, gain_d, n_g_d, scale, coupling, limit, x0, inputs, directions, parasitic, clearance,
           tol, max_iter, divergence, faces, input_gain, gravity_pose, load_gain, gravity_loads, nut, state_tol,
-          pose_out, load_out, c_out, release_out, r_out, state_out, class_out, code_out, iter_out):
+          band, play, pose_out, load_out, c_out, release_out, r_out, state_out, class_out, code_out, iter_out):
     n_c = q.shape[0]
     n_p = inputs.shape[0]
     for cand in prange(n_c):
@@ -151,6 +192,11 @@ def solve(q, delta_g, k_l, gain_d, n_g_d, scale, coupling, limit, x0, inputs, di
         c = np.zeros(3)
         a = np.zeros(3)
         trial = np.zeros(3)
+        c_prev = np.zeros(3)
+        side = np.zeros(3)
+        lo2 = np.zeros(3)
+        hi2 = np.zeros(3)
+        a2 = np.zeros(3)
         use_clearance = False
         if clearance:
             for i in range(3):
@@ -204,7 +250,13 @@ def solve(q, delta_g, k_l, gain_d, n_g_d, scale, coupling, limit, x0, inputs, di
                             acc += gain_d[cand, i, j] * r[j]
                         a[i] = scale[cand, i] * acc
                         amax = max(amax, abs(a[i]))
-                    if not solve_box(a, b, lo, hi, status, 1e-13 + 1e-13 * amax, c, faces, trial):
+                    box_tol = 1e-13 + 1e-13 * amax
+                    if play and p > 0:
+                        if not solve_play(a, b, lo, hi, c_prev, band[cand], side, lo2, hi2, a2, status, box_tol, c,
+                                          faces, trial, it == 0):
+                            code = CLEARANCE_FAILED
+                            break
+                    elif not solve_box(a, b, lo, hi, status, box_tol, c, faces, trial):
                         code = CLEARANCE_FAILED
                         break
                 change = 0.0
@@ -252,6 +304,8 @@ def solve(q, delta_g, k_l, gain_d, n_g_d, scale, coupling, limit, x0, inputs, di
                 if load_out[cand, p, 3 + i] >= 0:
                     compressed = False
             class_out[cand, p] = 2 if in_clearance else (1 if compressed else 3)
+            for i in range(3):
+                c_prev[i] = c[i]
             code_out[cand, p] = code
             iter_out[cand, p] = iterations
 

@@ -33,6 +33,7 @@ from flexcal.geometry.params import MechanismParams
 
 from . import kernel
 from .chain import chain_compliance_entries, stiffness_from_entries
+from .consistent import shortening_matrices
 from .second_order import preload_geometric_stiffness
 from .parameters import CHAIN_NAMES, DRIVING, LOAD, N_CHAINS, ParameterSpace
 
@@ -59,7 +60,11 @@ class MechanismMatrices:
     parasitic_coefficient K_L = 1/(2 L_d) (n_c, 6) [1/m]; hysteresis mu (n_c, 3) [-];
     clearance CL (n_c, 3) [m]; initial_position x0 (n_c, 3) [m]; point_b (n_c, 6, 3) [m] the
     chains' frame-side ends; second_order (n_c,) bool: apply ``model.second_order`` (the
-    frame stiffness then holds the preload P-delta).
+    frame stiffness then holds the preload P-delta); breakaway_band (n_c, 3) [m] the play
+    band F_b / s_i of each nut (``ParameterSpace.breakaway_force``), -1 without play state;
+    shortening S_j (n_c, 6, 6, 6) the chains' second-order shortening forms and consistent
+    (n_c,) bool: solve with ``model.consistent`` (``ParameterSpace.chain_shortening``; the
+    frame stiffness is then the linear one, the P-delta is in the fixed point).
     """
 
     chain_stiffness: np.ndarray
@@ -84,6 +89,9 @@ class MechanismMatrices:
     initial_position: np.ndarray
     point_b: np.ndarray
     second_order: np.ndarray
+    breakaway_band: np.ndarray
+    shortening: np.ndarray
+    consistent: np.ndarray
 
     @property
     def n_candidates(self) -> int:
@@ -214,7 +222,7 @@ def mechanism_matrices(values, space: ParameterSpace, *, candidate_offset: int =
         rhs = np.concatenate([axial_gain, np.broadcast_to(fixed["wrench"][:, None], (n_c, 6, 1))], axis=-1)
         solved = np.linalg.solve(frame_stiffness, rhs)
         input_gain, gravity_pose = solved[..., :6], solved[..., 6]
-    if space.second_order:
+    if space.second_order and not space.chain_shortening:
         # the chains' weight preload tilts with their swing: P-delta stiffness (model.second_order)
         rows = _parasitic_rows(rotation, point_b, end_block, l, connector, length)
         pivot = length - 2.0 * end_block - 2.0 * l - connector
@@ -255,4 +263,9 @@ def mechanism_matrices(values, space: ParameterSpace, *, candidate_offset: int =
         mu=mu.copy(), clearance=clearance.copy(), initial_position=initial_position.copy(),
         point_b=np.broadcast_to(point_b, (n_c,) + point_b.shape).copy(),
         second_order=np.full(n_c, bool(space.second_order)),
+        breakaway_band=(np.full((n_c, 3), -1.0) if space.breakaway_force is None
+                        else float(space.breakaway_force) / nut),
+        shortening=(np.zeros((n_c, N_CHAINS, 6, 6)) if not space.chain_shortening else shortening_matrices(
+            np.reshape(space.chain_shortening, (N_CHAINS, 6, 6)), end_block, l, connector, length)),
+        consistent=np.full(n_c, bool(space.chain_shortening)),
     )

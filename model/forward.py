@@ -31,7 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import kernel, point_status, solver
+from . import consistent, kernel, point_status, solver
 from .assembly import MechanismMatrices, mechanism_matrices
 from .clearance import ConvergenceError
 from .parameters import DRIVING, ParameterSpace, parameter_space
@@ -47,6 +47,12 @@ STATE_TOLERANCE = 1e-12  # [m] |C| below this is engaged, within this of CL is t
 CLEARANCE_MODES = ("directional", "force_only")
 ENGINES = ("auto", "numba", "numpy")
 AUTO_COMPILED_MIN = 200  # postures per call from which "auto" loads numba
+# the consistent model's fixed point oscillates with a factor down to -0.96 per step where a nut
+# sits in its gap (the nut amplifies the second-order load change by mu / (1 - mu)): 1e-11 m/rad
+# (1e-5 urad) takes up to a few thousand steps there, one to ten elsewhere (damped steps were
+# tried and jump to another clearance face: not used)
+CONSISTENT_MAX_ITER = 6000
+CONSISTENT_TOL = 1e-11
 DIVERGENCE_LIMIT = 1e-2  # [m] a parasitic shortening this large (~1000x the workspace's) means it ran away
 
 
@@ -153,7 +159,19 @@ def solve_matrices(matrices: MechanismMatrices, inputs: np.ndarray, directions: 
     if clearance_mode not in CLEARANCE_MODES:
         raise ValueError(f"clearance_mode={clearance_mode!r} must be one of {CLEARANCE_MODES}")
     m = matrices
+    play = bool(clearance and np.all(m.breakaway_band >= 0))
+    if play and clearance_mode != "force_only":
+        raise ValueError("the clearance's play state (ParameterSpace.breakaway_force) is written for "
+                         "clearance_mode='force_only'; use that mode or breakaway_force=None")
+    if play and resolve_engine(engine) != "numba":
+        raise ValueError("the clearance's play state (ParameterSpace.breakaway_force) runs in the compiled engine "
+                         "only (it carries each nut's offset from point to point); install numba or set "
+                         "breakaway_force=None")
     d = np.ones_like(directions) if clearance_mode == "force_only" else directions
+    if np.any(m.consistent):
+        return _solve_consistent(m, inputs, clearance=clearance, clearance_mode=clearance_mode, parasitic=parasitic,
+                                 tol=tol, max_iter=max_iter, engine=engine, n_threads=n_threads,
+                                 candidate_offset=candidate_offset)
     options = dict(parasitic=parasitic, clearance=clearance, tol=tol, max_iter=max_iter, divergence=DIVERGENCE_LIMIT)
     if resolve_engine(engine) == "numba":
         out = kernel.solve_points_compiled(m, inputs, d, state_tolerance=STATE_TOLERANCE, n_threads=n_threads,
@@ -173,6 +191,22 @@ def solve_matrices(matrices: MechanismMatrices, inputs: np.ndarray, directions: 
     states, classes = _states_and_classes(c, limit, loads[..., DRIVING])
     return _with_second_order(m, {"pose": pose, "loads": loads, "clearance": c, "release": release, "parasitic": r,
                                   "states": states, "point_class": classes, "n_iterations": max(p[3] for p in parts)})
+
+
+def _solve_consistent(m: MechanismMatrices, inputs, *, clearance, clearance_mode, parasitic, tol, max_iter, engine,
+                      n_threads, candidate_offset) -> dict:
+    """``model.consistent``'s compiled solve (force_only clearance, parasitic terms on)."""
+    if not np.all(m.consistent):
+        raise ValueError("candidates of one call must all use the consistent model or none")
+    if clearance_mode != "force_only" or not parasitic or resolve_engine(engine) != "numba":
+        raise ValueError("the consistent second-order model (ParameterSpace.chain_shortening) runs with "
+                         "clearance_mode='force_only', parasitic=True and the compiled engine (numba)")
+    out = consistent.solve_points_consistent(m, inputs, clearance=clearance, tol=max(tol, CONSISTENT_TOL),
+                                             max_iter=CONSISTENT_MAX_ITER, divergence=DIVERGENCE_LIMIT,
+                                             state_tolerance=STATE_TOLERANCE, n_threads=n_threads)
+    _raise_for_codes(out.pop("codes"), CONSISTENT_MAX_ITER, max(tol, CONSISTENT_TOL), candidate_offset)
+    out["n_iterations"] = int(out.pop("iterations").max(initial=0))
+    return out
 
 
 def _with_second_order(m: MechanismMatrices, out: dict) -> dict:
@@ -221,6 +255,8 @@ def forward(space_values, inputs, directions=None, *, space: ParameterSpace | No
     if values.ndim != 2:
         raise ValueError(f"space_values must have shape (n_candidates, 45) or (45,), got {np.shape(space_values)}")
     x, d = _check_points(inputs, directions)
+    if (space.breakaway_force is not None or space.chain_shortening) and engine == "auto" and kernel.available():
+        engine = "numba"  # the play state runs compiled only
     options = dict(parasitic=parasitic, clearance=clearance, clearance_mode=clearance_mode, tol=tol,
                    max_iter=max_iter, engine=resolve_engine(engine, values.shape[0] * x.shape[0]),
                    chunk_size=chunk_size)

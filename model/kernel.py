@@ -122,7 +122,8 @@ def solve_points_compiled(matrices, inputs: np.ndarray, directions: np.ndarray, 
         c(clearance_coupling(m.coupling[:, DRIVING, DRIVING], m.nut_stiffness, m.mu)), c(m.clearance),
         c(m.initial_position), c(inputs, dtype=float), c(directions, dtype=float), bool(parasitic), bool(clearance),
         float(tol), int(max_iter), float(divergence), _FACES, c(m.input_gain), c(m.gravity_pose), c(m.load_gain),
-        c(m.gravity_loads), c(m.nut_stiffness), float(state_tolerance), out["pose"], out["loads"], out["clearance"],
+        c(m.gravity_loads), c(m.nut_stiffness), float(state_tolerance), c(np.maximum(m.breakaway_band, 0.0)),
+        bool(clearance and np.all(m.breakaway_band >= 0)), out["pose"], out["loads"], out["clearance"],
         out["release"], out["parasitic"], out["states"], out["point_class"], out["codes"], out["iterations"])
     previous = numba.get_num_threads()
     numba.set_num_threads(max(1, min(int(n_threads), numba.config.NUMBA_NUM_THREADS)))

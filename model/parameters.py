@@ -115,7 +115,14 @@ class ParameterSpace:
     (``model.hinge.ENTRY_INDEX`` order) of the closed-form chains, empty = all 1 -- a
     correction measured once against a richer model (FEM, docs/model.md section 7);
     second_order: add the second-order geometric terms (chain-force P-delta, rigid
-    second-order frame kinematics; ``model.second_order``, docs/model.md section 8). Vectors in the
+    second-order frame kinematics; ``model.second_order``, docs/model.md section 8);
+    breakaway_force [N] or None: None is the paper's memoryless clip of Eq. 7; a value >= 0
+    carries each nut's offset along the ordered trajectory as a play state with the
+    breakaway band ``F_b / s_i`` (docs/model.md section 9; force_only clearance, compiled
+    engine); chain_shortening: (n_chains, 6, 6) the measured correction of each chain's
+    second-order shortening form to Eq. 4-5's pivot form at the nominal chains [1/m, 1, m],
+    empty = off; set, the second-order terms are solved inside the fixed point
+    (``model.consistent``, docs/model.md 10). Vectors in the
     methods below are over the *active* parameters, ``(..., n_active)``, except
     ``full_values`` / ``build_values`` which return all 45 (what ``forward`` takes).
     """
@@ -126,8 +133,17 @@ class ParameterSpace:
     base_values: tuple[float, ...] = ()
     compliance_factors: tuple[tuple[float, ...], ...] = ()
     second_order: bool = False
+    breakaway_force: float | None = None
+    chain_shortening: tuple[float, ...] = ()
 
     def __post_init__(self) -> None:
+        if self.chain_shortening and (len(self.chain_shortening) != 36 * len(self.mechanism.chains)
+                                      or not np.all(np.isfinite(self.chain_shortening))):
+            raise ValueError(f"chain_shortening must be {len(self.mechanism.chains)} x 6 x 6 finite values "
+                             f"(flattened), got {len(self.chain_shortening)}")
+        if self.breakaway_force is not None and not (np.isfinite(self.breakaway_force) and self.breakaway_force >= 0):
+            raise ValueError(f"breakaway_force={self.breakaway_force!r} N must be a finite value >= 0 (or None for "
+                             "the paper's memoryless clearance)")
         if self.compliance_factors:
             factors = np.asarray(self.compliance_factors, dtype=float)
             if factors.shape != (len(self.mechanism.chains), 8) or not np.all(np.isfinite(factors) & (factors > 0)):

@@ -98,15 +98,21 @@ def truth_from_measurement(measurement: Measurement, space: ParameterSpace) -> T
 def paper_model_space(space: ParameterSpace) -> ParameterSpace:
     """The paper's model (Eq. 1-8 as written) on the mount of ``space``: closed-form chain
     compliance (``--model-stiffness closed-form``), no second-order terms (``--no-second-order``)."""
-    return dataclasses.replace(space, compliance_factors=(), second_order=False)
+    return dataclasses.replace(space, compliance_factors=(), second_order=False, breakaway_force=None,
+                               chain_shortening=())
 
 
 def model_description(space: ParameterSpace) -> str:
     """Which model a space evaluates, in the command line's words."""
-    if not space.compliance_factors and not space.second_order:
+    if (not space.compliance_factors and not space.second_order and space.breakaway_force is None
+            and not space.chain_shortening):
         return "the paper's model (Eq. 1-8 as written: closed-form chain stiffness, no second-order terms)"
     stiffness = "FEM-informed chain stiffness" if space.compliance_factors else "closed-form chain stiffness (Eq. 1)"
-    return f"{stiffness}, second-order terms {'on' if space.second_order else 'off'}"
+    play = ("" if space.breakaway_force is None
+            else f", clearance play state with breakaway force {space.breakaway_force:g} N")
+    terms = ("consistent (measured chain shortening, solved with the clearance)" if space.chain_shortening
+             else "on" if space.second_order else "off")
+    return f"{stiffness}, second-order terms {terms}{play}"
 
 
 def posture_groups(inputs: np.ndarray, point_class: np.ndarray, release: np.ndarray,
@@ -171,7 +177,8 @@ def model_form_floor(truth: TruthCurve, inputs: np.ndarray, space: ParameterSpac
     groups = posture_groups(inputs, run.point_class[0], run.release[0], run.directions)
     paper = paper_model_space(space)
     models = [("run", space, run.angles[0])]
-    if (space.compliance_factors, space.second_order) != (paper.compliance_factors, paper.second_order):
+    if ((space.compliance_factors, space.second_order, space.breakaway_force, space.chain_shortening)
+            != (paper.compliance_factors, paper.second_order, paper.breakaway_force, paper.chain_shortening)):
         models.append(("paper", paper, forward(truth.presets, inputs, space=paper).angles[0]))
     out: dict[str, Any] = {
         "available": True,

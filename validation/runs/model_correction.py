@@ -72,12 +72,13 @@ def corrected_space(space: ParameterSpace, provider: StiffnessProvider) -> Param
 
 
 def model_space(stiffness: str = "fem", second_order: bool = True, *, progress: bool = False, workers: int | None = 0,
-                scheduler: str | None = None, mechanism=None) -> ParameterSpace:
+                scheduler: str | None = None, mechanism=None, breakaway_force: float | None = None) -> ParameterSpace:
     """The parameter space of ``mechanism`` (the reference one by default) with the model
     options the calibration commands share: stiffness "fem" (FEM-informed chain compliance,
     FEM solves cached) or "closed-form" (the paper's Eq. 1); second_order: the geometric
-    second-order terms (``flexcal.model.second_order``); workers / scheduler: where missing
-    FEM segments are built (``fem_provider``)."""
+    second-order terms (``flexcal.model.second_order``); breakaway_force [N]: the clearance's
+    play state with that breakaway force (None: Eq. 7's memoryless clip; docs/model.md 9);
+    workers / scheduler: where missing FEM segments are built (``fem_provider``)."""
     from flexcal.model.parameters import parameter_space
 
     if stiffness not in ("fem", "closed-form"):
@@ -87,5 +88,5 @@ def model_space(stiffness: str = "fem", second_order: bool = True, *, progress: 
         from ..prototype.fem_provider import fem_provider
 
         space = corrected_space(space, fem_provider(progress=progress, workers=workers, scheduler=scheduler))
-    return dataclasses.replace(space, second_order=bool(second_order))
+    return dataclasses.replace(space, second_order=bool(second_order), breakaway_force=breakaway_force)
 

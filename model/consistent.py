@@ -1,0 +1,86 @@
+"""The consistent second-order model (docs/model.md 10): the chains' second-order shortening,
+their P-delta and the frame's rigid second-order kinematics solved inside the per-point fixed
+point, together with the clearance and its play state -- instead of Eq. 4-5's pivot rows and
+one Newton step after the clearance (``model.second_order``).
+
+Per chain j, with D_j the 6-vector displacement of its end B in its own frame (``J_j X`` plus
+the rigid second-order part ``R_j^T 1/2 theta x (theta x p_j)``):
+
+    shortening    r_j = -D_j^T S_j D_j                        (Eq. 4-5 as a full quadratic form)
+    axial load    N_j = g_j^T X - k_j u_j + K_j[0, :3] R_j^T ext_j
+    frame         K_CC X = F_C + sum_j g_j u_j - sum_j (2 N_j J_j^T S_j D_j + J_j^T K_j [ext_j; 0])
+
+``S_j`` (6 x 6, chain frame at B) is Eq. 4-5's pivot form ``dy^2/(2 L_y) + dz^2/(2 L_z)`` of the
+candidate's chain plus a correction measured once at the nominal chains
+(``ParameterSpace.chain_shortening``: ``S_measured(P0) - S_pivot(P0)``; the calibration layer
+measures it on the virtual prototype's chains, ``validation/runs/chain_kinematics.py``), so a
+dimension error still acts through the pivot distances. Energy-consistent: the P-delta is the
+gradient of N r, so the parasitic shortening and the geometric stiffness come from one S.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["pivot_shortening", "shortening_matrices", "solve_points_consistent"]
+
+
+def pivot_shortening(end_block, hinge_length, connector, length) -> np.ndarray:
+    """Eq. 4-5's shortening form (..., 6, 6) [1/m, 1, m] in the chain frame at B: the local-y
+    displacement of the B-side leaf-1 centre (``e + l/2`` from B) over ``2 L_y`` and the local-z
+    one of the B-side leaf-2 centre (``e + 3l/2 + c``) over ``2 L_z`` (docs/model.md 5)."""
+    e, l, c, length = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (end_block, hinge_length, connector,
+                                                                                  length)))
+    span_y = length - 2.0 * e - l
+    span_z = length - 2.0 * e - 3.0 * l - 2.0 * c
+    row_y = np.zeros(e.shape + (6,))
+    row_z = np.zeros(e.shape + (6,))
+    row_y[..., 1], row_y[..., 5] = 1.0, -(e + 0.5 * l)  # uy - e_y rz
+    row_z[..., 2], row_z[..., 4] = 1.0, e + 1.5 * l + c  # uz + e_z ry
+    return (row_y[..., :, None] * row_y[..., None, :] / (2.0 * span_y)[..., None, None]
+            + row_z[..., :, None] * row_z[..., None, :] / (2.0 * span_z)[..., None, None])
+
+
+def shortening_matrices(correction, end_block, hinge_length, connector, length) -> np.ndarray:
+    """S_j (n_c, 6, 6, 6) = pivot form of each candidate's chains + the measured correction (6, 6, 6)."""
+    return pivot_shortening(end_block, hinge_length, connector, length) + np.asarray(correction, dtype=float)
+
+
+def solve_points_consistent(matrices, inputs: np.ndarray, *, clearance: bool, tol: float, max_iter: int,
+                            divergence: float, state_tolerance: float, n_threads: int = 1) -> dict[str, np.ndarray]:
+    """Run the compiled consistent kernel; same outputs as ``kernel.solve_points_compiled``
+    (force_only clearance; ``tol`` [m, rad] on the pose update per point)."""
+    import numba
+
+    from . import _numba_consistent
+    from .clearance import clearance_coupling
+    from .kernel import _FACES
+    from .parameters import DRIVING
+
+    m = matrices
+    n_c, n_p = m.n_candidates, inputs.shape[0]
+    c = np.ascontiguousarray
+    out = {"pose": np.empty((n_c, n_p, 6)), "loads": np.empty((n_c, n_p, 6)), "clearance": np.empty((n_c, n_p, 3)),
+           "release": np.empty((n_c, n_p, 3)), "parasitic": np.empty((n_c, n_p, 6)),
+           "states": np.empty((n_c, n_p, 3), dtype=np.int8), "point_class": np.empty((n_c, n_p), dtype=np.int8),
+           "codes": np.empty((n_c, n_p), dtype=np.int64), "iterations": np.empty((n_c, n_p), dtype=np.int64)}
+    compliance = np.linalg.inv(m.frame_stiffness)
+    wrench = np.einsum("cab,cb->ca", m.frame_stiffness, m.gravity_pose)
+    to_wrench = np.einsum("cjba,cjbk,cjlk->cjal", m.frame_transform, m.chain_stiffness[..., :3], m.rotation,
+                          optimize=True)  # J^T K[:, :3] R^T (n_c, 6 chains, 6, 3)
+    arguments = (
+        c(compliance), c(wrench), c(m.axial_gain), c(m.axial_stiffness), c(m.frame_transform), c(m.shortening),
+        c(m.rotation), c(m.point_b), c(m.chain_stiffness[:, :, 0, :3]), c(to_wrench),
+        c(m.load_gain[:, DRIVING][:, :, DRIVING]), c(m.mu / m.nut_stiffness),
+        c(clearance_coupling(m.coupling[:, DRIVING, DRIVING], m.nut_stiffness, m.mu)), c(m.clearance),
+        c(m.initial_position), c(m.nut_stiffness), c(np.maximum(m.breakaway_band, 0.0)),
+        bool(clearance and np.all(m.breakaway_band >= 0)), c(inputs, dtype=float), bool(clearance), float(tol),
+        int(max_iter), float(divergence), _FACES, float(state_tolerance), out["pose"], out["loads"], out["clearance"],
+        out["release"], out["parasitic"], out["states"], out["point_class"], out["codes"], out["iterations"])
+    previous = numba.get_num_threads()
+    numba.set_num_threads(max(1, min(int(n_threads), numba.config.NUMBA_NUM_THREADS)))
+    try:
+        _numba_consistent.solve(*arguments)
+    finally:
+        numba.set_num_threads(previous)
+    return out
