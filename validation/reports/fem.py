@@ -64,8 +64,8 @@ MESHERS = ("mapped", "tetwild")
 
 
 def _mesh(part, elements_through_thickness: float, mesher: str):
-    """(mesh, report) of ``part`` by the mapped mesher (deterministic, single hinges) or
-    fTetWild (any part; a new random mesh on every call)."""
+    """(mesh, report) of ``part`` by the mapped mesher (deterministic: hinges, chains and
+    chain segments) or fTetWild (any part; repeatable only with the compiled seed)."""
     if mesher == "mapped":
         from flexcal.fem.mesh_mapped import mapped_mesh_part
 
@@ -171,10 +171,11 @@ def _clamped_a_compliance(stiffness_12: np.ndarray) -> np.ndarray:
 
 
 def compare_chain(chain: FlexureChain, material: Material = STEEL, *,
-                  elements_through_thickness: float = 2, stage: Callable[[str], None] = _no_stage,
-                  cache: bool = False) -> ComparisonResult:
+                  elements_through_thickness: float = 3, stage: Callable[[str], None] = _no_stage,
+                  mesher: str = "mapped", cache: bool = False) -> ComparisonResult:
     """FEM and analytic (Eq. 1) stiffness of a chain between its end faces A and B;
-    ``stage(name)`` and ``cache`` as in ``compare_hinge`` (chains are meshed by fTetWild)."""
+    ``stage(name)``, ``mesher`` and ``cache`` as in ``compare_hinge`` (the mapped mesher:
+    ``flexcal.fem.mesh_mapped_chain``)."""
     from flexcal.fem.condense import chain_displacement, solve_chain
     from flexcal.geometry.solids import chain_solid
     from flexcal.model.chain import chain_stiffness_matrix
@@ -191,7 +192,7 @@ def compare_chain(chain: FlexureChain, material: Material = STEEL, *,
         return {"stiffness": stiffness,
                 "displacement": chain_displacement(solution, np.concatenate([np.zeros(6), motion_b]))}
 
-    mesh, report, arrays, timings = _solve_cached("chain", chain, material, elements_through_thickness, "tetwild",
+    mesh, report, arrays, timings = _solve_cached("chain", chain, material, elements_through_thickness, mesher,
                                                   cache, solve, chain_solid, stage)
     stiffness_fem = arrays["stiffness"]
     stiffness_analytic = chain_stiffness_matrix(chain, material)
