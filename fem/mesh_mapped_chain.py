@@ -52,7 +52,8 @@ __all__ = ["ChainGrid", "chain_grid", "chain_mapped_supported", "mapped_mesh_cha
 # The defaults of the chain mapper, chosen by accuracy (docs/meshing.md, "Mapped chain
 # meshes"): every dominant entry of the D1 and L1 chain stiffness within 0.5 % of its
 # Richardson limit.
-DEFAULT_CHAIN_OPTIONS = {"aspect": 2.0, "n_arc": 8, "width_aspect": 4.0, "grading": 0.5, "max_cell": 0.25}
+DEFAULT_CHAIN_OPTIONS = {"aspect": 6.0, "n_arc": 8, "width_aspect": 12.0, "edge_aspect": 3.0, "grading": 0.5,
+                         "max_cell": 0.25}
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -114,9 +115,12 @@ def _graded(a: float, b: float, h_a: float | None, h_b: float | None, grading: f
 
 
 def _section_lines(axis: int, leaves: list[LeafPiece], half_section: float, n: int, width_cell: float,
-                   grading: float, h_max: float) -> tuple[np.ndarray, float | None]:
+                   edge_aspect: float, grading: float, h_max: float) -> tuple[np.ndarray, float | None]:
     """Cross-section lines along ``axis`` (1 = y, 2 = z) [m], symmetric, and the half core
-    height [m] (None when no leaf is thin along this axis)."""
+    height [m] (None when no leaf is thin along this axis): n uniform cells across the core
+    t + 2a of the leaves thin along this axis, then graded towards the side faces of the
+    leaves wide along it (cells of a neck cell t / n there: where a side face meets a block
+    face the stress is singular) and out to the section."""
     thin = [leaf for leaf in leaves if leaf.thin_axis == axis]
     wide = [leaf for leaf in leaves if leaf.width_axis == axis]
     core = None
@@ -125,28 +129,28 @@ def _section_lines(axis: int, leaves: list[LeafPiece], half_section: float, n: i
         if len(heights) > 1:
             raise ValueError("the chain mapper needs every leaf thin along one axis to reach the same height t + 2a")
         core = 0.5 * heights.pop()
-    half_width = max((leaf.half_width for leaf in wide), default=None)
-    if core is not None:
-        inner = np.linspace(-core, core, n + 1)
-        reach, size = core, 2.0 * core / n
-    elif half_width is not None:
-        m = max(2, math.ceil(2.0 * half_width / width_cell - 1e-9))
-        inner = np.linspace(-half_width, half_width, m + 1)
-        reach, size = half_width, 2.0 * half_width / m
-    else:
+    if not thin and not wide:
         m = max(2, math.ceil(2.0 * half_section / h_max - 1e-9))
         return np.linspace(-half_section, half_section, m + 1), None
-    half = [inner[inner >= 0] if n % 2 == 0 or core is None else inner[inner > 0]]
-    stops = sorted({b for b in (half_width, half_section) if b is not None and b > reach * (1 + 1e-9)})
-    for stop in stops:
-        cell = min(max(size, width_cell), h_max) if stop == half_width else h_max
-        lines = _graded(reach, stop, size, None, grading, cell)
-        half.append(lines[1:])
-        reach, size = stop, lines[-1] - lines[-2]
-    positive = np.concatenate(half)
-    positive = positive[positive > 0]
+    if core is not None:
+        positive = [np.linspace(-core, core, n + 1)]
+        reach, size = core, 2.0 * core / n
+    else:
+        positive, reach, size = [], 0.0, None
+    if wide:
+        half_width = max(leaf.half_width for leaf in wide)
+        edge = edge_aspect * min(leaf.thickness for leaf in wide) / n
+        if half_width > reach * (1 + 1e-9):
+            lines = _graded(reach, half_width, size, edge, grading, width_cell)
+            positive.append(lines[1:])
+            reach = half_width
+        size = edge
+    if half_section > reach * (1 + 1e-9):
+        positive.append(_graded(reach, half_section, size, None, grading, h_max)[1:])
+    half = np.concatenate(positive)
+    half = half[half > 0]
     middle = [0.0] if (core is None or n % 2 == 0) else []
-    return np.concatenate([-positive[::-1], middle, positive]), core
+    return np.concatenate([-half[::-1], middle, half]), core
 
 
 def _leaf_lines(leaf: LeafPiece, n: int, aspect: float, n_arc: float) -> np.ndarray:
@@ -171,13 +175,14 @@ def _refine(lines: np.ndarray, r: int) -> np.ndarray:
     return np.concatenate([inner, lines[-1:]])
 
 
-def chain_grid(params, n_thickness: int, *, aspect: float = 2.0, n_arc: int = 8, width_aspect: float = 4.0,
-               grading: float = 0.5, max_cell: float = 0.25, refinement: int = 1) -> ChainGrid:
+def chain_grid(params, n_thickness: int, *, aspect: float = 6.0, n_arc: int = 8, width_aspect: float = 12.0,
+               edge_aspect: float = 3.0, grading: float = 0.5, max_cell: float = 0.25, refinement: int = 1) -> ChainGrid:
     """The parent grid of a chain or segment (module docstring).
 
     n_thickness: cells across every leaf's core (so across t at its neck); aspect: leaf
     cell length / neck cell height on the flat part; n_arc: least cells per fillet arc;
     width_aspect: leaf cell width / neck cell height across the width (the thinnest leaf);
+    edge_aspect: cell width at the leaves' side faces / neck cell height;
     grading: growth of the cell size per unit distance away from the leaves [-];
     max_cell: largest cell as a fraction of the section [-]; refinement: every cell split
     into refinement^3 (nested meshes for convergence studies).
@@ -191,18 +196,16 @@ def chain_grid(params, n_thickness: int, *, aspect: float = 2.0, n_arc: int = 8,
     t_min = min((leaf.thickness for leaf in leaves), default=2.0 * half_section)
     h_max = max_cell * 2.0 * half_section
     width_cell = min(width_aspect * t_min / n, h_max)
-    p, core_y = _section_lines(1, leaves, half_section, n, width_cell, grading, h_max)
-    q, core_z = _section_lines(2, leaves, half_section, n, width_cell, grading, h_max)
+    p, core_y = _section_lines(1, leaves, half_section, n, width_cell, edge_aspect, grading, h_max)
+    q, core_z = _section_lines(2, leaves, half_section, n, width_cell, edge_aspect, grading, h_max)
     # x: leaves as the hinge mapper, blocks graded away from the leaf faces
     x_parts: list[np.ndarray] = []
     for i, piece in enumerate(ps):
         if isinstance(piece, LeafPiece):
             lines = _leaf_lines(piece, n, aspect, n_arc)
         else:
-            def face_cell(j: int) -> float | None:
-                if 0 <= j < len(ps) and isinstance(ps[j], LeafPiece):
-                    return (ps[j].thickness + 2 * ps[j].fillet) / n
-                return None
+            def face_cell(j: int) -> float | None:  # as at the leaves' side faces (singular edges there)
+                return edge_aspect * ps[j].thickness / n if 0 <= j < len(ps) and isinstance(ps[j], LeafPiece) else None
 
             lines = _graded(piece.x0, piece.x1, face_cell(i - 1), face_cell(i + 1), grading, h_max)
         x_parts.append(lines if not x_parts else lines[1:])
@@ -238,7 +241,7 @@ def _quadratic_mesh(grid: ChainGrid) -> tuple[np.ndarray, np.ndarray, np.ndarray
     return full.nodes[order], new[tets], np.arange(len(corners))
 
 
-def mapped_mesh_chain(params, *, elements_through_thickness: float = 3, refinement: int = 1,
+def mapped_mesh_chain(params, *, elements_through_thickness: float = 6, refinement: int = 1,
                       measure: bool = True, **options) -> tuple[TetMesh, MeshReport]:
     """Mapped quadratic tet mesh of a chain or chain segment (parameters, not a CAD solid)
     and its report (as ``mesh_part``). Options as ``chain_grid`` (defaults
