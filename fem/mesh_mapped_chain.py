@@ -53,7 +53,7 @@ __all__ = ["ChainGrid", "chain_grid", "chain_mapped_supported", "mapped_mesh_cha
 # meshes"): every dominant entry of the D1 and L1 chain stiffness within 0.5 % of its
 # Richardson limit.
 DEFAULT_CHAIN_OPTIONS = {"aspect": 6.0, "n_arc": 8, "width_aspect": 12.0, "edge_aspect": 3.0, "grading": 0.5,
-                         "max_cell": 0.25}
+                         "max_aspect": 24.0}
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -115,7 +115,7 @@ def _graded(a: float, b: float, h_a: float | None, h_b: float | None, grading: f
 
 
 def _section_lines(axis: int, leaves: list[LeafPiece], half_section: float, n: int, width_cell: float,
-                   edge_aspect: float, grading: float, h_max: float) -> tuple[np.ndarray, float | None]:
+                   edge_cell: float, grading: float, h_max: float) -> tuple[np.ndarray, float | None]:
     """Cross-section lines along ``axis`` (1 = y, 2 = z) [m], symmetric, and the half core
     height [m] (None when no leaf is thin along this axis): n uniform cells across the core
     t + 2a of the leaves thin along this axis, then graded towards the side faces of the
@@ -130,8 +130,8 @@ def _section_lines(axis: int, leaves: list[LeafPiece], half_section: float, n: i
             raise ValueError("the chain mapper needs every leaf thin along one axis to reach the same height t + 2a")
         core = 0.5 * heights.pop()
     if not thin and not wide:
-        m = max(2, math.ceil(2.0 * half_section / h_max - 1e-9))
-        return np.linspace(-half_section, half_section, m + 1), None
+        half = _graded(0.0, half_section, None, edge_cell, grading, h_max)[1:]
+        return np.concatenate([-half[::-1], [0.0], half]), None
     if core is not None:
         positive = [np.linspace(-core, core, n + 1)]
         reach, size = core, 2.0 * core / n
@@ -139,14 +139,14 @@ def _section_lines(axis: int, leaves: list[LeafPiece], half_section: float, n: i
         positive, reach, size = [], 0.0, None
     if wide:
         half_width = max(leaf.half_width for leaf in wide)
-        edge = edge_aspect * min(leaf.thickness for leaf in wide) / n
+        edge = edge_cell
         if half_width > reach * (1 + 1e-9):
             lines = _graded(reach, half_width, size, edge, grading, width_cell)
             positive.append(lines[1:])
             reach = half_width
         size = edge
-    if half_section > reach * (1 + 1e-9):
-        positive.append(_graded(reach, half_section, size, None, grading, h_max)[1:])
+    if half_section > reach * (1 + 1e-9):  # graded towards the section's edges too (the end faces' rims)
+        positive.append(_graded(reach, half_section, size, edge_cell, grading, h_max)[1:])
     half = np.concatenate(positive)
     half = half[half > 0]
     middle = [0.0] if (core is None or n % 2 == 0) else []
@@ -176,15 +176,16 @@ def _refine(lines: np.ndarray, r: int) -> np.ndarray:
 
 
 def chain_grid(params, n_thickness: int, *, aspect: float = 6.0, n_arc: int = 8, width_aspect: float = 12.0,
-               edge_aspect: float = 3.0, grading: float = 0.5, max_cell: float = 0.25, refinement: int = 1) -> ChainGrid:
+               edge_aspect: float = 3.0, grading: float = 0.5, max_aspect: float = 24.0, refinement: int = 1) -> ChainGrid:
     """The parent grid of a chain or segment (module docstring).
 
     n_thickness: cells across every leaf's core (so across t at its neck); aspect: leaf
     cell length / neck cell height on the flat part; n_arc: least cells per fillet arc;
     width_aspect: leaf cell width / neck cell height across the width (the thinnest leaf);
     edge_aspect: cell width at the leaves' side faces / neck cell height;
-    grading: growth of the cell size per unit distance away from the leaves [-];
-    max_cell: largest cell as a fraction of the section [-]; refinement: every cell split
+    grading: growth of the cell size per unit distance away from the leaves, the end faces
+    and the section's edges [-]; max_aspect: largest cell / neck cell (at most half the
+    section); refinement: every cell split
     into refinement^3 (nested meshes for convergence studies).
     """
     if not chain_mapped_supported(params):
@@ -193,19 +194,23 @@ def chain_grid(params, n_thickness: int, *, aspect: float = 6.0, n_arc: int = 8,
     ps = pieces(params)
     leaves = _leaves(params)
     half_section = max(max(p.half_y, p.half_z) for p in ps if isinstance(p, BoxPiece))
-    t_min = min((leaf.thickness for leaf in leaves), default=2.0 * half_section)
-    h_max = max_cell * 2.0 * half_section
-    width_cell = min(width_aspect * t_min / n, h_max)
-    p, core_y = _section_lines(1, leaves, half_section, n, width_cell, edge_aspect, grading, h_max)
-    q, core_z = _section_lines(2, leaves, half_section, n, width_cell, edge_aspect, grading, h_max)
+    # every size relative to the neck cell t / n of the thinnest leaf, so that n refines all
+    # of the part (a segment of strut alone: as if its leaves were a quarter section thick)
+    cell = min((leaf.thickness for leaf in leaves), default=0.5 * half_section) / n
+    h_max = min(max_aspect * cell, half_section)
+    width_cell = min(width_aspect * cell, h_max)
+    edge_cell = min(edge_aspect * cell, h_max)
+    p, core_y = _section_lines(1, leaves, half_section, n, width_cell, edge_cell, grading, h_max)
+    q, core_z = _section_lines(2, leaves, half_section, n, width_cell, edge_cell, grading, h_max)
     # x: leaves as the hinge mapper, blocks graded away from the leaf faces
     x_parts: list[np.ndarray] = []
     for i, piece in enumerate(ps):
         if isinstance(piece, LeafPiece):
             lines = _leaf_lines(piece, n, aspect, n_arc)
         else:
-            def face_cell(j: int) -> float | None:  # as at the leaves' side faces (singular edges there)
-                return edge_aspect * ps[j].thickness / n if 0 <= j < len(ps) and isinstance(ps[j], LeafPiece) else None
+            def face_cell(j: int) -> float | None:  # fine at a leaf's face and at the part's end
+                # faces (where the stress is singular: re-entrant edges, rims of the coupled faces)
+                return edge_cell if j < 0 or j >= len(ps) or isinstance(ps[j], LeafPiece) else None
 
             lines = _graded(piece.x0, piece.x1, face_cell(i - 1), face_cell(i + 1), grading, h_max)
         x_parts.append(lines if not x_parts else lines[1:])
