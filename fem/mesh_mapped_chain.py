@@ -52,7 +52,7 @@ __all__ = ["ChainGrid", "chain_grid", "chain_mapped_supported", "mapped_mesh_cha
 # The defaults of the chain mapper, chosen by accuracy (docs/meshing.md, "Mapped chain
 # meshes"): every dominant entry of the D1 and L1 chain stiffness within 0.5 % of its
 # Richardson limit.
-DEFAULT_CHAIN_OPTIONS = {"aspect": 6.0, "n_arc": 8, "width_aspect": 12.0, "edge_aspect": 3.0, "grading": 0.5,
+DEFAULT_CHAIN_OPTIONS = {"aspect": 3.0, "n_arc": 8, "width_aspect": 12.0, "edge_aspect": 3.0, "grading": 0.5,
                          "max_aspect": 24.0}
 
 
@@ -175,7 +175,7 @@ def _refine(lines: np.ndarray, r: int) -> np.ndarray:
     return np.concatenate([inner, lines[-1:]])
 
 
-def chain_grid(params, n_thickness: int, *, aspect: float = 6.0, n_arc: int = 8, width_aspect: float = 12.0,
+def chain_grid(params, n_thickness: int, *, aspect: float = 3.0, n_arc: int = 8, width_aspect: float = 12.0,
                edge_aspect: float = 3.0, grading: float = 0.5, max_aspect: float = 24.0, refinement: int = 1) -> ChainGrid:
     """The parent grid of a chain or segment (module docstring).
 

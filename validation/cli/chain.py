@@ -20,7 +20,7 @@ EXAMPLES = (
     "flexcal chain --length-mm 150 --t1-mm 3 --out runs/chain",
     "flexcal report runs/chain-d1",
 )
-DEFAULT_CONFIG = {"elements_through": 3.0, "mesher": "mapped"}
+DEFAULT_CONFIG = {"elements_through": 6.0, "mesher": "mapped"}
 
 
 def configure(parser: argparse.ArgumentParser) -> None:

@@ -32,12 +32,18 @@ from flexcal.geometry.params import STEEL, ChainSegment, FlexureChain, Material
 
 __all__ = ["fem_provider", "segment_stiffness_fem", "mirror_segment_stiffness", "DEFAULT_ELEMENTS_THROUGH",
            "canonical_segment", "segment_cache_key", "build_segments", "build_segment_job", "segment_build_cost",
-           "plan_local_builds", "BUILD_MEMORY_BYTES", "DEFAULT_MESHER", "MESHERS"]
+           "plan_local_builds", "BUILD_MEMORY_BYTES", "DEFAULT_MESHER", "MESHERS", "TETWILD_ELEMENTS_THROUGH"]
 
-# 3 cells through the thinnest leaf section of the mapped multi-block mesh: every dominant
-# entry of the D1 and L1 chain stiffness within 0.5 % of its Richardson limit
-# (docs/meshing.md, "Mapped chain meshes"; tests/test_mesh_mapped_chain.py).
-DEFAULT_ELEMENTS_THROUGH = 3
+# 6 cells through the thinnest leaf section of the mapped multi-block mesh: every dominant
+# entry of the 12 x 12 of the D1 and L1 leaf segments within 0.5 % of its Richardson limit
+# (measured 0.41 % at most; 4 through: 2.3 %; docs/meshing.md, "Mapped chain meshes";
+# tests/test_mesh_mapped_chain.py). fTetWild keeps its own default (TETWILD_ELEMENTS_THROUGH).
+DEFAULT_ELEMENTS_THROUGH = 6
+# 3 quadratic tets through the thinnest leaf section of a fTetWild mesh: within ~0.3 % of the
+# converged bending compliance on the reference notch hinge after snapping (docs/meshing.md),
+# at a third of the cost of 4; the leaf segment D1 [0, m1]: within 0.4 % of the mapped
+# Richardson limit on every dominant entry.
+TETWILD_ELEMENTS_THROUGH = 3
 # "mapped": the deterministic multi-block mesher (flexcal.fem.mesh_mapped_chain), pure numpy,
 # the same mesh on every machine; "tetwild": fTetWild on the CadQuery solid (repeatable
 # only through the compiled seed, fem/_entropy.c).

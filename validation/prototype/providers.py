@@ -21,5 +21,9 @@ def stiffness_provider(kind: str, *, progress: bool = True, workers: int | None 
         return analytic_provider()
     from .fem_provider import fem_provider
 
-    mesher = "tetwild" if kind == "fem-tetwild" else "mapped"
-    return fem_provider(progress=progress, workers=workers, scheduler=scheduler, mesher=mesher)
+    if kind == "fem-tetwild":
+        from .fem_provider import TETWILD_ELEMENTS_THROUGH
+
+        return fem_provider(progress=progress, workers=workers, scheduler=scheduler, mesher="tetwild",
+                            elements_through_thickness=TETWILD_ELEMENTS_THROUGH)
+    return fem_provider(progress=progress, workers=workers, scheduler=scheduler)

@@ -171,7 +171,7 @@ def _clamped_a_compliance(stiffness_12: np.ndarray) -> np.ndarray:
 
 
 def compare_chain(chain: FlexureChain, material: Material = STEEL, *,
-                  elements_through_thickness: float = 3, stage: Callable[[str], None] = _no_stage,
+                  elements_through_thickness: float = 6, stage: Callable[[str], None] = _no_stage,
                   mesher: str = "mapped", cache: bool = False) -> ComparisonResult:
     """FEM and analytic (Eq. 1) stiffness of a chain between its end faces A and B;
     ``stage(name)``, ``mesher`` and ``cache`` as in ``compare_hinge`` (the mapped mesher:
