@@ -7,13 +7,16 @@ Each piece is a block of one tensor grid of hexahedra over the part's bounding b
 grid lines are shared by all pieces, so neighbouring blocks meet on the same nodes
 (conforming: no coupling, no duplicate nodes at the joints):
 
+- every size is relative to the neck cell t / n of the thinnest leaf (n = elements
+  through the neck), so n refines the whole part;
 - x lines: in a leaf those of the single-hinge mapper (``mesh_mapped.mapped_grid``: at
-  most ``aspect`` times a neck cell long on the flat part, at least ``n_arc`` cells per
-  fillet arc), in a block graded from the cell size at the leaf faces (height / n) by
-  ``grading`` per unit distance up to ``max_cell`` times the section;
+  most ``aspect`` neck cells long on the flat part, at least ``n_arc`` cells per fillet
+  arc), in a block graded from ``edge_aspect`` neck cells at a leaf face and at the part's
+  end faces by ``grading`` per unit distance up to ``max_aspect`` neck cells;
 - y and z lines (the cross-section): across the fillet-to-fillet height t + 2a of the
-  leaves thin along that axis n uniform cells (n = elements through the neck), then
-  graded out to the leaves' width and to the block section;
+  leaves thin along that axis n uniform cells, then graded to ``edge_aspect`` neck cells
+  at the side faces of the leaves wide along that axis (at most ``width_aspect`` across
+  the width) and again to the section's rims;
 - each piece keeps the cells inside it: a block all, a leaf those inside its footprint
   (t + 2a by w at its ends).
 
@@ -49,9 +52,10 @@ from .structured import _EDGES, _folded_tets, _straighten, grid_tet_mesh
 
 __all__ = ["ChainGrid", "chain_grid", "chain_mapped_supported", "mapped_mesh_chain", "DEFAULT_CHAIN_OPTIONS"]
 
-# The defaults of the chain mapper, chosen by accuracy (docs/meshing.md, "Mapped chain
-# meshes"): every dominant entry of the D1 and L1 chain stiffness within 0.5 % of its
-# Richardson limit.
+# The defaults of the chain mapper, chosen by accuracy with n = 6 through the neck
+# (docs/meshing.md, "Mapped chain meshes": every dominant entry of the D1 leaf segment's
+# 12 x 12 within 0.51 % of its Richardson limit; more cells through the leaf buy more
+# accuracy per DOF than shorter or narrower cells).
 DEFAULT_CHAIN_OPTIONS = {"aspect": 3.0, "n_arc": 8, "width_aspect": 12.0, "edge_aspect": 3.0, "grading": 0.5,
                          "max_aspect": 24.0}
 
