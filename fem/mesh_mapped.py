@@ -41,11 +41,8 @@ MAX_MAPPED_DOF = 1_500_000
 def mapped_mesh_supported(params) -> bool:
     """True when the part is a hinge whose profile has a mapped outline for it
     (``flexcal.fem.profiles``): notch hinges, leaf hinges whose blocks are as high as their
-    fillets reach (t + 2a, the default), ...; or a chain or chain segment of leaves
-    (``flexcal.fem.mesh_mapped_chain``)."""
-    from .mesh_mapped_chain import chain_mapped_supported
-
-    return chain_mapped_supported(params) or outline_of(params) is not None
+    fillets reach (t + 2a, the default), ..."""
+    return outline_of(params) is not None
 
 
 def _outline(hinge) -> MappedOutline:
@@ -123,8 +120,7 @@ def _isoparametric(mesh: TetMesh, height) -> tuple[TetMesh, int]:
 
 def mapped_mesh_part(part: "Part", *, elements_through_thickness: float = 3, aspect: float = 2.0,
                      n_arc: int = 8) -> tuple[TetMesh, MeshReport]:
-    """Mapped quadratic tet mesh of a hinge ``Part`` and its report (as ``mesh_part``);
-    chains and chain segments go to ``mesh_mapped_chain.mapped_mesh_chain`` (its defaults).
+    """Mapped quadratic tet mesh of a hinge ``Part`` and its report (as ``mesh_part``).
 
     ``elements_through_thickness`` is rounded up to whole cells across the neck (each cell
     splits into six tets, so a line through the neck crosses about that many tets).
@@ -132,10 +128,6 @@ def mapped_mesh_part(part: "Part", *, elements_through_thickness: float = 3, asp
     a mesh beyond ``MAX_MAPPED_DOF``.
     """
     params = part.params
-    from .mesh_mapped_chain import chain_mapped_supported, mapped_mesh_chain
-
-    if chain_mapped_supported(params):
-        return mapped_mesh_chain(params, elements_through_thickness=elements_through_thickness)
     outline = outline_of(params)
     if outline is None:
         raise ValueError("the mapped mesher handles single hinges whose profile has a mapped outline (notch "

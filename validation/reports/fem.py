@@ -68,7 +68,10 @@ def _mesh(part, elements_through_thickness: float, mesher: str):
     chain segments) or fTetWild (any part; repeatable only with the compiled seed)."""
     if mesher == "mapped":
         from flexcal.fem.mesh_mapped import mapped_mesh_part
+        from flexcal.fem.mesh_mapped_chain import chain_mapped_supported, mapped_mesh_chain
 
+        if chain_mapped_supported(part.params):
+            return mapped_mesh_chain(part.params, elements_through_thickness=elements_through_thickness)
         return mapped_mesh_part(part, elements_through_thickness=elements_through_thickness)
     if mesher != "tetwild":
         raise ValueError(f"mesher={mesher!r} must be one of {', '.join(MESHERS)}")
