@@ -53,9 +53,9 @@ from .structured import _EDGES, _folded_tets, _straighten, grid_tet_mesh
 __all__ = ["ChainGrid", "chain_grid", "chain_mapped_supported", "mapped_mesh_chain", "DEFAULT_CHAIN_OPTIONS"]
 
 # The defaults of the chain mapper, chosen by accuracy with n = 6 through the neck
-# (docs/meshing.md, "Mapped chain meshes": every dominant entry of the D1 leaf segment's
-# 12 x 12 within 0.51 % of its Richardson limit; more cells through the leaf buy more
-# accuracy per DOF than shorter or narrower cells).
+# (docs/meshing.md, "Mapped chain meshes": every dominant entry of the D1 leaf segments'
+# 12 x 12 within 0.51 % of its Richardson limit, L1's compliant entries within 1.1 %; more
+# cells through the leaf buy more accuracy per DOF than shorter or narrower cells).
 DEFAULT_CHAIN_OPTIONS = {"aspect": 3.0, "n_arc": 8, "width_aspect": 12.0, "edge_aspect": 3.0, "grading": 0.5,
                          "max_aspect": 24.0}
 

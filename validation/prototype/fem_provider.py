@@ -35,9 +35,10 @@ __all__ = ["fem_provider", "segment_stiffness_fem", "mirror_segment_stiffness", 
            "plan_local_builds", "BUILD_MEMORY_BYTES", "DEFAULT_MESHER", "MESHERS", "TETWILD_ELEMENTS_THROUGH"]
 
 # 6 cells through the thinnest leaf section of the mapped multi-block mesh: every dominant
-# entry of the 12 x 12 of the D1 and L1 leaf segments within 0.5 % of its Richardson limit
-# (measured 0.41 % at most; 4 through: 2.3 %; docs/meshing.md, "Mapped chain meshes";
-# tests/test_mesh_mapped_chain.py). fTetWild keeps its own default (TETWILD_ELEMENTS_THROUGH).
+# entry of the 12 x 12 of the D1 leaf segments within 0.51 % of its Richardson limit (4
+# through: 1.6 %), the L1 leaf segments' compliant entries within 1.1 % (8 through: 0.64 %,
+# at twice the CPU); docs/meshing.md, "Mapped chain meshes"; tests/test_mesh_mapped_chain.py.
+# fTetWild keeps its own default (TETWILD_ELEMENTS_THROUGH).
 DEFAULT_ELEMENTS_THROUGH = 6
 # 3 quadratic tets through the thinnest leaf section of a fTetWild mesh: within ~0.3 % of the
 # converged bending compliance on the reference notch hinge after snapping (docs/meshing.md),
