@@ -156,7 +156,14 @@ def test_three_chain_runs_on_fresh_caches_write_the_same_bytes(tmp_path):
     bytes. Unseeded, three runs gave 149,115 / 141,807 / 141,810 DOF (docs/reliability.md).
     At 1 element through the thickness, ~10 s a run on the 2-core machine."""
     _same_bytes_but_timings(_three_runs_on_fresh_caches(
-        tmp_path, ["chain", "--reference", "D1", "--elements-through", "1"]))
+        tmp_path, ["chain", "--reference", "D1", "--elements-through", "1", "--mesher", "tetwild"]))
+
+
+def test_three_mapped_chain_runs_on_fresh_caches_write_the_same_bytes(tmp_path):
+    """The default chain mesher (mapped multi-block, pure numpy) needs no seed: three
+    ``flexcal chain`` processes on empty caches write the same bytes."""
+    _same_bytes_but_timings(_three_runs_on_fresh_caches(
+        tmp_path, ["chain", "--reference", "D1", "--elements-through", "2"]))
 
 
 def test_hinge_uses_the_cache_and_recomputes_edited_entries(tmp_path, monkeypatch):

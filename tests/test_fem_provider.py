@@ -98,3 +98,26 @@ def test_parallel_builds_into_an_unwritable_cache_keep_their_matrices(tmp_path, 
         np.testing.assert_allclose(provider(chain_, a, b), analytic(chain_, a, b), rtol=0,
                                    atol=1e-9 * np.abs(analytic(chain_, a, b)).max())  # round-off of the mirror
     assert len(warnings()) == 1 and "cannot be written" in warnings()[0]
+
+
+def test_segments_are_meshed_by_the_mapped_mesher_by_default_under_their_own_key(tmp_path, monkeypatch):
+    """The default provider meshes a segment without fTetWild (the deterministic mapped
+    mesher); fTetWild stays selectable, under another cache key; an unknown mesher is refused."""
+    import flexcal.fem.mesh
+
+    from flexcal.validation.prototype.fem_provider import canonical_segment, segment_cache_key
+
+    chain = reference_mechanism().chains[3].chain
+    xs = section_nodes(chain)
+    segment, _ = canonical_segment(chain, xs[0], xs[1])
+    assert segment_cache_key(segment) != segment_cache_key(segment, mesher="tetwild")
+
+    def no_tetwild(*args, **kwargs):
+        raise AssertionError("fTetWild was called")
+
+    monkeypatch.setattr(flexcal.fem.mesh, "mesh_part", no_tetwild)
+    provider = fem_provider(elements_through_thickness=2, cache_directory=tmp_path, progress=False)
+    stiffness = provider(chain, xs[0], xs[1])
+    assert "mapped" in provider.description and np.all(np.isfinite(stiffness))
+    with pytest.raises(ValueError, match="mapped, tetwild"):
+        fem_provider(mesher="gmsh")

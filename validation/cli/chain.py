@@ -20,7 +20,7 @@ EXAMPLES = (
     "flexcal chain --length-mm 150 --t1-mm 3 --out runs/chain",
     "flexcal report runs/chain-d1",
 )
-DEFAULT_CONFIG = {"elements_through": 2.0}
+DEFAULT_CONFIG = {"elements_through": 6.0, "mesher": "mapped"}
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -34,8 +34,12 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--t2-mm", type=float, help="thickness of leaf 2, thin in local z [mm] (default 4)")
     parser.add_argument("--section-mm", type=float, help="square section of blocks and strut [mm] (default 50)")
     parser.add_argument("--elements-through", type=float,
-                        help="quadratic tets through the thinnest leaf (default %(default)s: ~1 %% of converged, "
-                             "a 150 mm chain then has ~50k nodes)")
+                        help="quadratic tets through the thinnest leaf (default %(default)s: every dominant "
+                             "stiffness entry of a leaf segment within ~0.5 %% of converged with the mapped mesher, "
+                             "docs/meshing.md)")
+    parser.add_argument("--mesher", choices=("mapped", "tetwild"),
+                        help="mapped multi-block mesh (default %(default)s: the same mesh on every machine) or "
+                             "fTetWild")
     add_out(parser, what="report.json, timings.json, report.md, chain.png, chain-mesh.png, chain.vtu")
 
 
@@ -72,7 +76,8 @@ def run(args: argparse.Namespace) -> int:
     check_elements_through(args.elements_through)
     chain, params = build_chain(args)  # validates before any CAD or meshing
     result, data = run_comparison(compare_chain, chain, params, args.out,
-                                  elements_through_thickness=args.elements_through, progress=show_progress(args),
+                                  elements_through_thickness=args.elements_through, mesher=args.mesher,
+                                  progress=show_progress(args),
                                   cache=True, replace=args.force)
     print(f"flexcal chain: largest diagonal compliance difference FEM vs Eq. 1 "
           f"{data['max_abs_percent_difference_diagonal']:.1f} %; {data['mesh']['n_dof']} DOF, "

@@ -33,8 +33,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--noise-urad", type=float, default=None,
                         help="sensor noise standard deviation per channel [urad] (default: the scenario's; table1: 0)")
     parser.add_argument("--provider", choices=PROVIDERS,
-                        help="segment stiffness: FEM condensation of the as-built solids (default) or the "
-                             "closed-form compliance (fast, for checks only: then truth shares the model's hinge formulas)")
+                        help="segment stiffness: FEM condensation of the as-built segments on the mapped mesh "
+                             "(default), the same on fTetWild meshes (fem-tetwild) or the closed-form compliance "
+                             "(fast, for checks only: then truth shares the model's hinge formulas)")
     add_trajectory(parser)
     from .options import add_executor_options
 

@@ -32,12 +32,24 @@ from flexcal.geometry.params import STEEL, ChainSegment, FlexureChain, Material
 
 __all__ = ["fem_provider", "segment_stiffness_fem", "mirror_segment_stiffness", "DEFAULT_ELEMENTS_THROUGH",
            "canonical_segment", "segment_cache_key", "build_segments", "build_segment_job", "segment_build_cost",
-           "plan_local_builds", "BUILD_MEMORY_BYTES"]
+           "plan_local_builds", "BUILD_MEMORY_BYTES", "DEFAULT_MESHER", "MESHERS", "TETWILD_ELEMENTS_THROUGH"]
 
-# 3 quadratic tets through the thinnest leaf section: within ~0.3 % of the converged
-# bending compliance on the reference notch hinge after snapping (docs/meshing.md), at a
-# third of the cost of 4.
-DEFAULT_ELEMENTS_THROUGH = 3
+# 6 cells through the thinnest leaf section of the mapped multi-block mesh: every dominant
+# entry of the 12 x 12 of the D1 leaf segments within 0.51 % of its Richardson limit (4
+# through: 1.6 %), the L1 leaf segments' compliant entries within 1.1 % (8 through: 0.64 %,
+# at twice the CPU); docs/meshing.md, "Mapped chain meshes"; tests/test_mesh_mapped_chain.py.
+# fTetWild keeps its own default (TETWILD_ELEMENTS_THROUGH).
+DEFAULT_ELEMENTS_THROUGH = 6
+# 3 quadratic tets through the thinnest leaf section of a fTetWild mesh: within ~0.3 % of the
+# converged bending compliance on the reference notch hinge after snapping (docs/meshing.md),
+# at a third of the cost of 4; the leaf segment D1 [0, m1]: within 0.4 % of the mapped
+# Richardson limit on every dominant entry.
+TETWILD_ELEMENTS_THROUGH = 3
+# "mapped": the deterministic multi-block mesher (flexcal.fem.mesh_mapped_chain), pure numpy,
+# the same mesh on every machine; "tetwild": fTetWild on the CadQuery solid (repeatable
+# only through the compiled seed, fem/_entropy.c).
+MESHERS = ("mapped", "tetwild")
+DEFAULT_MESHER = "mapped"
 _TURN_Z = np.diag([-1.0, -1.0, 1.0])  # rotation by pi about local z
 
 
@@ -49,17 +61,21 @@ def mirror_segment_stiffness(stiffness: np.ndarray) -> np.ndarray:
     return P @ stiffness @ P.T
 
 
-def _segment_parts(segment: ChainSegment, material: Material, elements_through_thickness: float) -> dict:
+def _segment_parts(segment: ChainSegment, material: Material, elements_through_thickness: float,
+                   mesher: str = DEFAULT_MESHER) -> dict:
+    if mesher not in MESHERS:
+        raise ValueError(f"mesher={mesher!r} must be one of {', '.join(MESHERS)}")
     return {"kind": "chain_segment_stiffness", "segment": segment, "material": material,
-            "mesh": {"elements_through_thickness": float(elements_through_thickness)}}
+            "mesh": {"mesher": mesher, "elements_through_thickness": float(elements_through_thickness)}}
 
 
 def segment_cache_key(segment: ChainSegment, material: Material = STEEL, *,
-                      elements_through_thickness: float = DEFAULT_ELEMENTS_THROUGH) -> str:
+                      elements_through_thickness: float = DEFAULT_ELEMENTS_THROUGH,
+                      mesher: str = DEFAULT_MESHER) -> str:
     """The FEM cache key of a segment's stiffness (``flexcal.fem.cache.cache_key``)."""
     from flexcal.fem.cache import cache_key
 
-    return cache_key(_segment_parts(segment, material, elements_through_thickness))
+    return cache_key(_segment_parts(segment, material, elements_through_thickness, mesher))
 
 
 def canonical_segment(chain: FlexureChain, x_start: float, x_end: float) -> tuple[ChainSegment, bool]:
@@ -82,29 +98,38 @@ _CAD_LOCK = threading.Lock()
 
 def segment_stiffness_fem(segment: ChainSegment, material: Material = STEEL, *,
                           elements_through_thickness: float = DEFAULT_ELEMENTS_THROUGH,
-                          cache_directory=None, mesher_threads: int = 0) -> np.ndarray:
+                          cache_directory=None, mesher_threads: int = 0, mesher: str = DEFAULT_MESHER) -> np.ndarray:
     """Condensed 12 x 12 stiffness [SI] of one chain segment between its end-face centres
     (node A at x_start, node B at x_end; DOF order ux, uy, uz, rx, ry, rz), cached.
-    mesher_threads: fTetWild's threads (0: all cores; not part of the cache key: the
-    seeded fTetWild gives the same mesh on any number of threads, docs/meshing.md)."""
+    mesher: "mapped" (``flexcal.fem.mesh_mapped_chain``, no CAD solid needed) or "tetwild"
+    (``MESHERS``); mesher_threads: fTetWild's threads (0: all cores; not part of the cache
+    key: the seeded fTetWild gives the same mesh on any number of threads, docs/meshing.md)."""
     from flexcal.fem.cache import cached
+
+    parts = _segment_parts(segment, material, elements_through_thickness, mesher)
 
     def compute() -> dict[str, np.ndarray]:
         from flexcal.fem.condense import chain_stiffness
-        from flexcal.fem.mesh import mesh_part
-        from flexcal.geometry.solids import segment_solid
+        from flexcal.geometry.exact import end_planes, reference_points
 
-        with _CAD_LOCK:
-            part = segment_solid(segment)
-        mesh, _report = mesh_part(part, elements_through_thickness=elements_through_thickness,
-                                  num_threads=mesher_threads)
-        (plane_a, plane_b) = (part.end_planes["A"], part.end_planes["B"])
-        stiffness = chain_stiffness(mesh, material, plane_a, part.reference_points["A"], plane_b,
-                                    part.reference_points["B"])
+        if mesher == "mapped":
+            from flexcal.fem.mesh_mapped_chain import mapped_mesh_chain
+
+            mesh, _report = mapped_mesh_chain(segment, elements_through_thickness=elements_through_thickness,
+                                              measure=False)
+        else:
+            from flexcal.fem.mesh import mesh_part
+            from flexcal.geometry.solids import segment_solid
+
+            with _CAD_LOCK:
+                part = segment_solid(segment)
+            mesh, _report = mesh_part(part, elements_through_thickness=elements_through_thickness,
+                                      num_threads=mesher_threads)
+        planes, points = end_planes(segment), reference_points(segment)
+        stiffness = chain_stiffness(mesh, material, planes["A"], points["A"], planes["B"], points["B"])
         return {"stiffness": 0.5 * (stiffness + stiffness.T)}
 
-    return cached(_segment_parts(segment, material, elements_through_thickness), compute,
-                  cache_directory)["stiffness"]
+    return cached(parts, compute, cache_directory)["stiffness"]
 
 
 def segment_build_cost(segment: ChainSegment) -> float:
@@ -163,7 +188,8 @@ def plan_local_builds(workers: int | None, n_missing: int, *, cores: int, availa
 
 
 def build_segment_job(segment: ChainSegment, *, material: Material, elements_through_thickness: float,
-                      cache_directory=None, mesher_threads: int = 0, solver_threads: int = 0) -> dict[str, Any]:
+                      cache_directory=None, mesher_threads: int = 0, solver_threads: int = 0,
+                      mesher: str = DEFAULT_MESHER) -> dict[str, Any]:
     """One segment build on a worker: {"key": its cache key there, "stiffness": (12, 12),
     "wall_s": [s]}; the worker's cache gets the entry too (``segment_stiffness_fem``);
     fTetWild on ``mesher_threads`` threads and PARDISO on ``solver_threads`` MKL threads
@@ -175,14 +201,17 @@ def build_segment_job(segment: ChainSegment, *, material: Material, elements_thr
     start = time.perf_counter()
     with mkl_threads(solver_threads) if solver_threads else contextlib.nullcontext():
         stiffness = segment_stiffness_fem(segment, material, elements_through_thickness=elements_through_thickness,
-                                          cache_directory=cache_directory, mesher_threads=mesher_threads)
-    return {"key": segment_cache_key(segment, material, elements_through_thickness=elements_through_thickness),
+                                          cache_directory=cache_directory, mesher_threads=mesher_threads,
+                                          mesher=mesher)
+    return {"key": segment_cache_key(segment, material, elements_through_thickness=elements_through_thickness,
+                                     mesher=mesher),
             "stiffness": stiffness, "wall_s": time.perf_counter() - start}
 
 
 def build_segments(slices: Iterable[tuple[FlexureChain, float, float]], material: Material = STEEL, *,
                    elements_through_thickness: float = DEFAULT_ELEMENTS_THROUGH, cache_directory=None,
-                   workers: int | None = None, scheduler: str | None = None, progress: bool = True) -> int:
+                   workers: int | None = None, scheduler: str | None = None, progress: bool = True,
+                   mesher: str = DEFAULT_MESHER) -> int:
     """Build the FEM segments of ``slices`` [(chain, x_start [m], x_end [m])] that the cache
     lacks, in parallel on the shared executor, into the cache; returns how many were built.
 
@@ -203,7 +232,8 @@ def build_segments(slices: Iterable[tuple[FlexureChain, float, float]], material
     missing: dict[str, ChainSegment] = {}
     for chain, x_start, x_end in slices:
         segment, _ = canonical_segment(chain, float(x_start), float(x_end))
-        key = segment_cache_key(segment, material, elements_through_thickness=elements_through_thickness)
+        key = segment_cache_key(segment, material, elements_through_thickness=elements_through_thickness,
+                                mesher=mesher)
         if key not in missing and load_cached(key, cache_directory) is None:
             missing[key] = segment
     if not missing:
@@ -236,7 +266,7 @@ def build_segments(slices: Iterable[tuple[FlexureChain, float, float]], material
     # the jobs write into the same folder when it is shared (threads of this process: always)
     options = {"material": material, "elements_through_thickness": float(elements_through_thickness),
                "cache_directory": None if cache_directory is None else str(cache_directory),
-               "mesher_threads": cores_each, "solver_threads": cores_each}
+               "mesher_threads": cores_each, "solver_threads": cores_each, "mesher": mesher}
     # longest first (stable): the cheap strut segments fill the gaps at the end instead of a
     # leaf segment started last keeping one worker busy while the others idle
     ordered = sorted(missing.values(), key=segment_build_cost, reverse=True)
@@ -253,21 +283,24 @@ def build_segments(slices: Iterable[tuple[FlexureChain, float, float]], material
 
 def fem_provider(material: Material = STEEL, *, elements_through_thickness: float = DEFAULT_ELEMENTS_THROUGH,
                  cache_directory=None, progress: bool = True, workers: int | None = 0,
-                 scheduler: str | None = None) -> Callable[[FlexureChain, float, float], np.ndarray]:
+                 scheduler: str | None = None,
+                 mesher: str = DEFAULT_MESHER) -> Callable[[FlexureChain, float, float], np.ndarray]:
     """A provider ``(chain, x_start, x_end) -> (12, 12)`` for ``build_prototype``.
 
     workers / scheduler: where ``provider.prepare(slices)`` builds the missing segments
     (``build_segments``); the default ``workers=0`` without a scheduler builds them one
     after the other in this process as the provider is called (the command line's
     default, ``--workers`` not given, is None: one thread per usable core,
-    ``plan_local_builds``).
+    ``plan_local_builds``). mesher: "mapped" (default) or "tetwild" (``MESHERS``).
     """
+    if mesher not in MESHERS:  # refused here, not at the first segment
+        raise ValueError(f"mesher={mesher!r} must be one of {', '.join(MESHERS)}")
 
     def provider(chain: FlexureChain, x_start: float, x_end: float) -> np.ndarray:
         segment, mirrored = canonical_segment(chain, x_start, x_end)
         start = time.perf_counter()
         stiffness = segment_stiffness_fem(segment, material, elements_through_thickness=elements_through_thickness,
-                                          cache_directory=cache_directory)
+                                          cache_directory=cache_directory, mesher=mesher)
         if progress and time.perf_counter() - start > 0.5:
             print(f"  FEM segment [{segment.x_start * 1e3:.1f}, {segment.x_end * 1e3:.1f}] mm of a "
                   f"{chain.length * 1e3:.1f} mm chain: {time.perf_counter() - start:.1f} s", file=sys.stderr)
@@ -278,8 +311,9 @@ def fem_provider(material: Material = STEEL, *, elements_through_thickness: floa
             return 0  # built lazily, in order, by the calls that follow
         return build_segments(slices, material, elements_through_thickness=elements_through_thickness,
                               cache_directory=cache_directory, workers=workers, scheduler=scheduler,
-                              progress=progress)
+                              progress=progress, mesher=mesher)
 
     provider.prepare = prepare
-    provider.description = f"FEM (quadratic tets, {elements_through_thickness:g} through the thinnest section)"
+    provider.description = (f"FEM (quadratic tets, {mesher} mesh, {elements_through_thickness:g} through the thinnest "
+                            f"section)")
     return provider

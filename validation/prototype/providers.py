@@ -1,12 +1,13 @@
 """The virtual prototype's segment stiffness, chosen by name: ``fem`` (FEM condensation of the
-as-built solids, cached) or ``analytic`` (the closed-form compliance; truth then shares the
+as-built segments on the mapped multi-block mesh, cached), ``fem-tetwild`` (the same on fTetWild
+meshes of the CadQuery solids) or ``analytic`` (the closed-form compliance; truth then shares the
 model's hinge formulas, so it is for checks only)."""
 
 from __future__ import annotations
 
 __all__ = ["stiffness_provider", "PROVIDERS"]
 
-PROVIDERS = ("fem", "analytic")
+PROVIDERS = ("fem", "fem-tetwild", "analytic")
 
 
 def stiffness_provider(kind: str, *, progress: bool = True, workers: int | None = 0, scheduler: str | None = None):
@@ -20,4 +21,9 @@ def stiffness_provider(kind: str, *, progress: bool = True, workers: int | None 
         return analytic_provider()
     from .fem_provider import fem_provider
 
+    if kind == "fem-tetwild":
+        from .fem_provider import TETWILD_ELEMENTS_THROUGH
+
+        return fem_provider(progress=progress, workers=workers, scheduler=scheduler, mesher="tetwild",
+                            elements_through_thickness=TETWILD_ELEMENTS_THROUGH)
     return fem_provider(progress=progress, workers=workers, scheduler=scheduler)

@@ -64,11 +64,14 @@ MESHERS = ("mapped", "tetwild")
 
 
 def _mesh(part, elements_through_thickness: float, mesher: str):
-    """(mesh, report) of ``part`` by the mapped mesher (deterministic, single hinges) or
-    fTetWild (any part; a new random mesh on every call)."""
+    """(mesh, report) of ``part`` by the mapped mesher (deterministic: hinges, chains and
+    chain segments) or fTetWild (any part; repeatable only with the compiled seed)."""
     if mesher == "mapped":
         from flexcal.fem.mesh_mapped import mapped_mesh_part
+        from flexcal.fem.mesh_mapped_chain import chain_mapped_supported, mapped_mesh_chain
 
+        if chain_mapped_supported(part.params):
+            return mapped_mesh_chain(part.params, elements_through_thickness=elements_through_thickness)
         return mapped_mesh_part(part, elements_through_thickness=elements_through_thickness)
     if mesher != "tetwild":
         raise ValueError(f"mesher={mesher!r} must be one of {', '.join(MESHERS)}")
@@ -171,10 +174,11 @@ def _clamped_a_compliance(stiffness_12: np.ndarray) -> np.ndarray:
 
 
 def compare_chain(chain: FlexureChain, material: Material = STEEL, *,
-                  elements_through_thickness: float = 2, stage: Callable[[str], None] = _no_stage,
-                  cache: bool = False) -> ComparisonResult:
+                  elements_through_thickness: float = 6, stage: Callable[[str], None] = _no_stage,
+                  mesher: str = "mapped", cache: bool = False) -> ComparisonResult:
     """FEM and analytic (Eq. 1) stiffness of a chain between its end faces A and B;
-    ``stage(name)`` and ``cache`` as in ``compare_hinge`` (chains are meshed by fTetWild)."""
+    ``stage(name)``, ``mesher`` and ``cache`` as in ``compare_hinge`` (the mapped mesher:
+    ``flexcal.fem.mesh_mapped_chain``)."""
     from flexcal.fem.condense import chain_displacement, solve_chain
     from flexcal.geometry.solids import chain_solid
     from flexcal.model.chain import chain_stiffness_matrix
@@ -191,7 +195,7 @@ def compare_chain(chain: FlexureChain, material: Material = STEEL, *,
         return {"stiffness": stiffness,
                 "displacement": chain_displacement(solution, np.concatenate([np.zeros(6), motion_b]))}
 
-    mesh, report, arrays, timings = _solve_cached("chain", chain, material, elements_through_thickness, "tetwild",
+    mesh, report, arrays, timings = _solve_cached("chain", chain, material, elements_through_thickness, mesher,
                                                   cache, solve, chain_solid, stage)
     stiffness_fem = arrays["stiffness"]
     stiffness_analytic = chain_stiffness_matrix(chain, material)

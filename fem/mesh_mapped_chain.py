@@ -1,0 +1,334 @@
+"""Deterministic mapped multi-block quadratic-tet meshes of flexure chains and chain segments.
+
+A chain (``FlexureChain``) or a slice of one (``ChainSegment``) is a row of pieces along
+x (``flexcal.geometry.exact.pieces``): square blocks (end blocks, connectors, strut) and
+corner-filleted leaves, leaf 1 thin in y, leaf 2 thin in z and narrower than the blocks.
+Each piece is a block of one tensor grid of hexahedra over the part's bounding box; the
+grid lines are shared by all pieces, so neighbouring blocks meet on the same nodes
+(conforming: no coupling, no duplicate nodes at the joints):
+
+- every size is relative to the neck cell t / n of the thinnest leaf (n = elements
+  through the neck), so n refines the whole part;
+- x lines: in a leaf those of the single-hinge mapper (``mesh_mapped.mapped_grid``: at
+  most ``aspect`` neck cells long on the flat part, at least ``n_arc`` cells per fillet
+  arc), in a block graded from ``edge_aspect`` neck cells at a leaf face and at the part's
+  end faces by ``grading`` per unit distance up to ``max_aspect`` neck cells;
+- y and z lines (the cross-section): across the fillet-to-fillet height t + 2a of the
+  leaves thin along that axis n uniform cells, then graded to ``edge_aspect`` neck cells
+  at the side faces of the leaves wide along that axis (at most ``width_aspect`` across
+  the width) and again to the section's rims;
+- each piece keeps the cells inside it: a block all, a leaf those inside its footprint
+  (t + 2a by w at its ends).
+
+The grid is then mapped: inside a leaf thin along y the lines of the core, y = eta (t + 2a),
+move to y = eta t(x) (t(x) the exact leaf profile, ``LeafPiece.local_thickness``); likewise
+z for leaves thin along z; elsewhere the map is the identity. Every hexahedron splits into
+six Kuhn tets (``structured.grid_tet_mesh``) and every mid-edge node is the map's image of
+its edge's midpoint in the parent grid: curved (isoparametric) P2 elements on the fillet
+cylinders, inside the part as well as on its surface; the few tets whose curved map would
+fold (where a fillet turns vertical into a block face) keep straight edges. The linear
+grid is measured like any other mesh (``flexcal.fem.mesh_snap.snap_to_part``, the
+``MeshReport``). Pure numpy: the same arrays on every run and machine, with or without the
+compiled fTetWild seed (``fem/_entropy.c``).
+
+Chain frame as in ``flexcal.geometry.params``; SI.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from flexcal.geometry.exact import BoxPiece, pieces
+from flexcal.geometry.params import ChainSegment, FlexureChain, LeafHinge
+from flexcal.geometry.profiles.leaf import LeafPiece
+
+from .mesh import MeshReport, TetMesh
+from .mesh_snap import _jacobian_ratios, snap_to_part
+from .structured import _EDGES, _folded_tets, _straighten, grid_tet_mesh
+
+__all__ = ["ChainGrid", "chain_grid", "chain_mapped_supported", "mapped_mesh_chain", "DEFAULT_CHAIN_OPTIONS"]
+
+# The defaults of the chain mapper, chosen by accuracy with n = 6 through the neck
+# (docs/meshing.md, "Mapped chain meshes": every dominant entry of the D1 leaf segments'
+# 12 x 12 within 0.51 % of its Richardson limit, L1's compliant entries within 1.1 %; more
+# cells through the leaf buy more accuracy per DOF than shorter or narrower cells).
+DEFAULT_CHAIN_OPTIONS = {"aspect": 3.0, "n_arc": 8, "width_aspect": 12.0, "edge_aspect": 3.0, "grading": 0.5,
+                         "max_aspect": 24.0}
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class ChainGrid:
+    """The parent grid of a chain mesh and its map.
+
+    x, p, q: grid lines along x, y, z in the parent space [m] (p, q: the cross-section
+    coordinates the leaves' ends have, y = p outside a core); active (n_x, n_y, n_z) bool:
+    the cells inside the part; cores: axis (1 = y, 2 = z) -> (half core height (t + 2a) / 2 [m],
+    the leaves thin along that axis).
+    """
+
+    x: np.ndarray
+    p: np.ndarray
+    q: np.ndarray
+    active: np.ndarray
+    cores: dict
+
+    def physical(self, parent: np.ndarray) -> np.ndarray:
+        """Points (n, 3) of the part [m] from parent points (n, 3) [m]: in a leaf's core
+        the thin coordinate scales with t(x) / (t + 2a) (module docstring)."""
+        out = np.array(parent, float, copy=True)
+        for axis, (half, leaves) in self.cores.items():
+            inside = np.abs(parent[:, axis]) <= half * (1 + 1e-12)
+            for leaf in leaves:
+                here = inside & (parent[:, 0] >= leaf.x0) & (parent[:, 0] <= leaf.x1)
+                scale = leaf.local_thickness(parent[here, 0]) / (2.0 * half)
+                out[here, axis] = parent[here, axis] * scale
+        return out
+
+
+def _leaves(params) -> list[LeafPiece]:
+    return [p for p in pieces(params) if not isinstance(p, BoxPiece)]
+
+
+def chain_mapped_supported(params) -> bool:
+    """True for a ``FlexureChain`` or ``ChainSegment`` whose compliant pieces are leaves
+    no higher and no wider than its section (every valid chain)."""
+    if not isinstance(params, (FlexureChain, ChainSegment)):
+        return False
+    return all(isinstance(p, LeafPiece) for p in _leaves(params))
+
+
+def _graded(a: float, b: float, h_a: float | None, h_b: float | None, grading: float, h_max: float) -> np.ndarray:
+    """Lines from a to b [m] (both included): cell size min(h_max, h_a + g (s - a),
+    h_b + g (b - s)) (h_a / h_b None: no bound from that end)."""
+    s = np.linspace(a, b, 2001)
+    size = np.full_like(s, h_max)
+    if h_a is not None:
+        size = np.minimum(size, h_a + grading * (s - a))
+    if h_b is not None:
+        size = np.minimum(size, h_b + grading * (b - s))
+    density = 1.0 / size
+    cumulative = np.concatenate([[0.0], np.cumsum(0.5 * (density[1:] + density[:-1]) * np.diff(s))])
+    n = max(1, math.ceil(cumulative[-1] - 1e-9))
+    lines = np.interp(np.linspace(0.0, cumulative[-1], n + 1), cumulative, s)
+    lines[0], lines[-1] = a, b
+    return lines
+
+
+def _section_lines(axis: int, leaves: list[LeafPiece], half_section: float, n: int, width_cell: float,
+                   edge_cell: float, grading: float, h_max: float) -> tuple[np.ndarray, float | None]:
+    """Cross-section lines along ``axis`` (1 = y, 2 = z) [m], symmetric, and the half core
+    height [m] (None when no leaf is thin along this axis): n uniform cells across the core
+    t + 2a of the leaves thin along this axis, then graded towards the side faces of the
+    leaves wide along it (cells of a neck cell t / n there: where a side face meets a block
+    face the stress is singular) and out to the section."""
+    thin = [leaf for leaf in leaves if leaf.thin_axis == axis]
+    wide = [leaf for leaf in leaves if leaf.width_axis == axis]
+    core = None
+    if thin:
+        heights = {round(leaf.thickness + 2 * leaf.fillet, 12) for leaf in thin}
+        if len(heights) > 1:
+            raise ValueError("the chain mapper needs every leaf thin along one axis to reach the same height t + 2a")
+        core = 0.5 * heights.pop()
+    if not thin and not wide:
+        half = _graded(0.0, half_section, None, edge_cell, grading, h_max)[1:]
+        return np.concatenate([-half[::-1], [0.0], half]), None
+    if core is not None:
+        positive = [np.linspace(-core, core, n + 1)]
+        reach, size = core, 2.0 * core / n
+    else:
+        positive, reach, size = [], 0.0, None
+    if wide:
+        half_width = max(leaf.half_width for leaf in wide)
+        edge = edge_cell
+        if half_width > reach * (1 + 1e-9):
+            lines = _graded(reach, half_width, size, edge, grading, width_cell)
+            positive.append(lines[1:])
+            reach = half_width
+        size = edge
+    if half_section > reach * (1 + 1e-9):  # graded towards the section's edges too (the end faces' rims)
+        positive.append(_graded(reach, half_section, size, edge_cell, grading, h_max)[1:])
+    half = np.concatenate(positive)
+    half = half[half > 0]
+    middle = [0.0] if (core is None or n % 2 == 0) else []
+    return np.concatenate([-half[::-1], middle, half]), core
+
+
+def _leaf_lines(leaf: LeafPiece, n: int, aspect: float, n_arc: float) -> np.ndarray:
+    """x lines [m] over a leaf, as the single-hinge mapper draws them (``mapped_grid``)."""
+    from .mesh_mapped import mapped_grid
+
+    hinge = LeafHinge(length=leaf.x1 - leaf.x0, thickness=leaf.thickness, width=2 * leaf.half_width,
+                      fillet=leaf.fillet, block_length=leaf.x1 - leaf.x0)
+    x, _, _ = mapped_grid(hinge, n, aspect=aspect, n_arc=n_arc)
+    half = 0.5 * (leaf.x1 - leaf.x0)
+    x = x[np.abs(x) <= half * (1 + 1e-12)]
+    x[0], x[-1] = -half, half
+    return 0.5 * (leaf.x0 + leaf.x1) + x
+
+
+def _refine(lines: np.ndarray, r: int) -> np.ndarray:
+    """Every interval split into r equal ones (nested grids)."""
+    if r == 1:
+        return lines
+    t = np.linspace(0.0, 1.0, r + 1)[:-1]
+    inner = (lines[:-1, None] + np.diff(lines)[:, None] * t[None, :]).ravel()
+    return np.concatenate([inner, lines[-1:]])
+
+
+def chain_grid(params, n_thickness: int, *, aspect: float = 3.0, n_arc: int = 8, width_aspect: float = 12.0,
+               edge_aspect: float = 3.0, grading: float = 0.5, max_aspect: float = 24.0, refinement: int = 1) -> ChainGrid:
+    """The parent grid of a chain or segment (module docstring).
+
+    n_thickness: cells across every leaf's core (so across t at its neck); aspect: leaf
+    cell length / neck cell height on the flat part; n_arc: least cells per fillet arc;
+    width_aspect: leaf cell width / neck cell height across the width (the thinnest leaf);
+    edge_aspect: cell width at the leaves' side faces / neck cell height;
+    grading: growth of the cell size per unit distance away from the leaves, the end faces
+    and the section's edges [-]; max_aspect: largest cell / neck cell (at most half the
+    section); refinement: every cell split
+    into refinement^3 (nested meshes for convergence studies).
+    """
+    if not chain_mapped_supported(params):
+        raise ValueError(f"the chain mapper takes a FlexureChain or ChainSegment of leaves, got {type(params).__name__}")
+    n = int(n_thickness)
+    ps = pieces(params)
+    leaves = _leaves(params)
+    half_section = max(max(p.half_y, p.half_z) for p in ps if isinstance(p, BoxPiece))
+    # every size relative to the neck cell t / n of the thinnest leaf, so that n refines all
+    # of the part (a segment of strut alone: as if its leaves were a quarter section thick)
+    cell = min((leaf.thickness for leaf in leaves), default=0.5 * half_section) / n
+    h_max = min(max_aspect * cell, half_section)
+    width_cell = min(width_aspect * cell, h_max)
+    edge_cell = min(edge_aspect * cell, h_max)
+    p, core_y = _section_lines(1, leaves, half_section, n, width_cell, edge_cell, grading, h_max)
+    q, core_z = _section_lines(2, leaves, half_section, n, width_cell, edge_cell, grading, h_max)
+    # x: leaves as the hinge mapper, blocks graded away from the leaf faces
+    x_parts: list[np.ndarray] = []
+    for i, piece in enumerate(ps):
+        if isinstance(piece, LeafPiece):
+            lines = _leaf_lines(piece, n, aspect, n_arc)
+        else:
+            def face_cell(j: int) -> float | None:  # fine at a leaf's face and at the part's end
+                # faces (where the stress is singular: re-entrant edges, rims of the coupled faces)
+                return edge_cell if j < 0 or j >= len(ps) or isinstance(ps[j], LeafPiece) else None
+
+            lines = _graded(piece.x0, piece.x1, face_cell(i - 1), face_cell(i + 1), grading, h_max)
+        x_parts.append(lines if not x_parts else lines[1:])
+    x = np.concatenate(x_parts)
+    r = int(refinement)
+    x, p, q = _refine(x, r), _refine(p, r), _refine(q, r)
+    # which cells each piece keeps
+    xm, pm, qm = 0.5 * (x[1:] + x[:-1]), 0.5 * (p[1:] + p[:-1]), 0.5 * (q[1:] + q[:-1])
+    active = np.zeros((len(xm), len(pm), len(qm)), bool)
+    for piece in ps:
+        rows = (xm > piece.x0) & (xm < piece.x1)
+        half_y, half_z = piece.end_extent()
+        inside = (np.abs(pm)[:, None] < half_y) & (np.abs(qm)[None, :] < half_z)
+        active[rows] = inside[None]
+    cores = {}
+    if core_y is not None:
+        cores[1] = (core_y, tuple(leaf for leaf in leaves if leaf.thin_axis == 1))
+    if core_z is not None:
+        cores[2] = (core_z, tuple(leaf for leaf in leaves if leaf.thin_axis == 2))
+    return ChainGrid(x=x, p=p, q=q, active=active, cores=cores)
+
+
+def _quadratic_mesh(grid: ChainGrid) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(parent nodes (n, 3) [m], tets (m, 10), corner node ids) of the active cells, the
+    corners numbered first; unused grid nodes dropped."""
+    full = grid_tet_mesh(grid.x, grid.p, grid.q)
+    tets = full.tets.reshape(-1, 6, 10)[grid.active.ravel()].reshape(-1, 10)
+    corners = np.unique(tets[:, :4])
+    mids = np.setdiff1d(np.unique(tets[:, 4:]), corners, assume_unique=True)
+    order = np.concatenate([corners, mids])
+    new = np.full(len(full.nodes), -1, np.int64)
+    new[order] = np.arange(len(order))
+    return full.nodes[order], new[tets], np.arange(len(corners))
+
+
+def mapped_mesh_chain(params, *, elements_through_thickness: float = 6, refinement: int = 1,
+                      measure: bool = True, **options) -> tuple[TetMesh, MeshReport]:
+    """Mapped quadratic tet mesh of a chain or chain segment (parameters, not a CAD solid)
+    and its report (as ``mesh_part``). Options as ``chain_grid`` (defaults
+    ``DEFAULT_CHAIN_OPTIONS``). ``measure=False`` skips the boundary measurements of
+    ``snap_to_part`` (the report then has NaN there); the mesh is the same.
+    Raises ValueError for a part it cannot map or bad options.
+    """
+    from .mesh_mapped import MAX_MAPPED_DOF
+
+    n_float = float(elements_through_thickness)
+    if not (math.isfinite(n_float) and n_float >= 1):
+        raise ValueError(f"elements_through_thickness={elements_through_thickness!r} must be >= 1")
+    if int(refinement) != refinement or refinement < 1:
+        raise ValueError(f"refinement={refinement!r} must be a positive integer")
+    unknown = set(options) - set(DEFAULT_CHAIN_OPTIONS)
+    if unknown:
+        raise ValueError(f"unknown chain mesh options {sorted(unknown)}; use {sorted(DEFAULT_CHAIN_OPTIONS)}")
+    settings = {**DEFAULT_CHAIN_OPTIONS, **options}
+    n = math.ceil(n_float - 1e-9)
+    timings: dict[str, float] = {}
+    cpu0 = time.process_time()
+    t0 = time.perf_counter()
+    grid = chain_grid(params, n, refinement=int(refinement), **settings)
+    n_dof_bound = 3 * (2 * len(grid.x) - 1) * (2 * len(grid.p) - 1) * (2 * len(grid.q) - 1) * grid.active.mean()
+    if n_dof_bound > MAX_MAPPED_DOF:
+        raise ValueError(f"the mesh would have about {n_dof_bound:,.0f} DOF (limit {MAX_MAPPED_DOF:,}: the solver "
+                         f"would run out of memory); use fewer elements through the thickness or less refinement")
+    parent, tets, corners = _quadratic_mesh(grid)
+    nodes = grid.physical(parent)
+    timings["grid"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    n_straight = _unfold(nodes, parent, tets)
+    mesh = TetMesh(nodes, tets)
+    timings["map"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    measured = _measure(params, mesh, corners, n) if measure else _unmeasured(params, mesh, len(corners))
+    measured.update(min_jacobian_ratio=float(_jacobian_ratios(mesh.nodes, mesh.tets).min()), n_straight_mid=n_straight)
+    timings["measure"] = time.perf_counter() - t0
+    timings["cpu"] = time.process_time() - cpu0
+    report = MeshReport(
+        n_nodes=mesh.n_nodes, n_tets=mesh.n_tets, epsilon=0.0, n_retries=0, retry_reasons=(),
+        options=dict(mesher="mapped", elements_through_thickness=float(n), refinement=int(refinement), **settings,
+                     n_cells=[len(grid.x) - 1, len(grid.p) - 1, len(grid.q) - 1], n_hexes=int(grid.active.sum())),
+        timings=timings, **measured)
+    return mesh, report
+
+
+def _unfold(nodes: np.ndarray, parent: np.ndarray, tets: np.ndarray) -> int:
+    """Straighten (in place) the edges of tets whose curved map folds; returns how many
+    mid-nodes were put back on their chords. Only tets touching a leaf can fold."""
+    curved = np.flatnonzero(np.any(np.abs(nodes[tets] - parent[tets]) > 0, axis=(1, 2)))
+    straight: set[int] = set()
+    for _ in range(10):
+        folded = curved[_folded_tets(nodes, tets[curved])]
+        if folded.size == 0:
+            return len(straight)
+        straight.update(tets[folded, 4:].ravel().tolist())
+        _straighten(nodes, tets, folded)
+    raise RuntimeError("could not unfold the mapped chain mesh; use the tetwild mesher")  # pragma: no cover
+
+
+def _measure(params, mesh: TetMesh, corners: np.ndarray, n: int) -> dict:
+    """The ``MeshReport`` fields of ``snap_to_part`` for the linear corner mesh (its
+    corners lie on the exact surfaces already), with the volume of the curved mesh."""
+    thin = min((leaf.thickness for leaf in _leaves(params)), default=None)
+    tolerance = 0.3 * (thin / n if thin else 1e-4)  # below a neck cell: no node put on a surface it is not on
+    nodes4 = mesh.nodes[corners]
+    _, measured = snap_to_part(params, nodes4, mesh.tets[:, :4], tolerance=tolerance, project=True, morph=False)
+    measured.update(volume=mesh.volume, volume_error=mesh.volume / measured["volume_exact"] - 1.0)
+    return measured
+
+
+def _unmeasured(params, mesh: TetMesh, n_corner: int) -> dict:
+    from flexcal.geometry.exact import exact_volume
+
+    exact = exact_volume(params)
+    nan = float("nan")
+    return dict(n_corner_nodes=n_corner, radius_ratio_min=nan, radius_ratio_median=nan, min_dihedral_deg=nan,
+                volume=mesh.volume, volume_exact=exact, volume_error=mesh.volume / exact - 1.0,
+                volume_error_raw=nan, max_surface_deviation=nan, max_surface_deviation_raw=nan,
+                end_plane_deviation=nan, n_unassigned=0, n_demoted=0, n_unsnapped=0, necks=())
