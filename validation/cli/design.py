@@ -147,12 +147,15 @@ def run(args: argparse.Namespace) -> int:
     gain = mechanism_matrices(space.nominal_full, space).input_gain[0, 3:, 3:]
     reference = standard_trajectory(space.mechanism, n_points=77).inputs
     say = (lambda text: print(f"design: {text}")) if progress else None
+    inadequacy = _inadequacy(space, scenario.space, False) if args.inadequacy == "analytic" else None
+    # never where the model is known to be worse than anywhere on the standard trajectory
+    # (calibration.design): the largest expected error over its own postures
+    limit = None if inadequacy is None else float(np.max(inadequacy(reference)))
     design = design_trajectory(jacobian, gain, WORKSPACE, reference, n_points=args.points,
                                n_candidates=args.candidates, noise=args.noise_urad * 1e-6,
                                prior_precision=prior.precision, prior_scale=args.prior_scale,
                                points_per_leg=args.points_per_leg, rng=args.design_seed, progress=say,
-                               inadequacy=_inadequacy(space, scenario.space, False) if args.inadequacy == "analytic"
-                               else None)
+                               inadequacy=inadequacy, max_inadequacy=limit)
     wall = time.perf_counter() - start
     report = _report(design, space, args, wall)
     with staged_output(args.out, replace=args.force) as staging:
@@ -184,6 +187,7 @@ def _report(design, space, args, wall: float) -> dict:
                                                                             * 1e6),
         "criterion": "D-optimal: log det(W^T W + prior precision), W = model Jacobian / noise on the unit box, at "
                      "the prior mean",
+        "avoided": _avoided(design),
         "names": list(space.names), "designed": _quality(design.quality),
         "standard_trajectory": _quality(design.reference_quality), "wall_s": wall,
         "note": "sigma_min and condition number are those of the data-only W (no prior); a rank below 45 means "
@@ -191,26 +195,34 @@ def _report(design, space, args, wall: float) -> dict:
     }
 
 
-def _markdown(report: dict) -> str:
-    d, s = report["designed"], report["standard_trajectory"]
-    cond = lambda v: "inf (rank-deficient)" if v is None else f"{v:.3g}"  # noqa: E731
-    lines = ["# Designed calibration trajectory", "",
-             f"{report['n_points']} postures chosen from {report['n_candidates']} candidates, noise "
-             f"{report['noise_urad']:g} urad, prior scale {report['prior_scale']:g}, model inadequacy: "
-             f"{report['inadequacy']} (wall-clock time: timings.json).", "",
-             "| figure | designed | standard trajectory (77) |", "|---|---:|---:|",
-             f"| log det M (D-criterion) | {d['log_det_information']:.2f} | {s['log_det_information']:.2f} |",
-             f"| det(M)^(1/45) | {d['d_efficiency']:.4g} | {s['d_efficiency']:.4g} |",
-             f"| rank of W | {d['rank']} | {s['rank']} |",
-             f"| sigma_min of W | {d['sigma_min']:.3g} | {s['sigma_min']:.3g} |",
-             f"| condition number of W | {cond(d['condition_number'])} | {cond(s['condition_number'])} |",
-             f"| sources with expected std <= 1 % of range | {d['n_sources_below_1pct']} | "
-             f"{s['n_sources_below_1pct']} |", "",
-             "![expected standard errors](design.png)", "", "## Expected standard error per source [% of range]", "",
-             "| source | designed | standard |", "|---|---:|---:|"]
-    for name, a, b in zip(report["names"], d["expected_std_of_range"], s["expected_std_of_range"]):
-        lines.append(f"| `{name}` | {100 * a:.3g} | {100 * b:.3g} |")
-    return "\n".join(lines) + "\n"
+def _avoided(design) -> dict | None:
+    """Which candidate postures the design did not offer and why (None: no inadequacy)."""
+    if design.avoided is None:
+        return None
+    error = np.abs(design.inadequacy).max(axis=1)  # [rad] the worst angle at each candidate
+    n = int(design.avoided.sum())
+    kept = ~design.avoided
+    return {"n_avoided": n, "n_candidates": int(design.avoided.size),
+            "max_model_error_urad": design.max_inadequacy * 1e6,
+            "why": "the model's expected error there (against the analytic virtual prototype at the nominal design) "
+                   "exceeds the largest it reaches on the standard trajectory's own postures: a form error the fit "
+                   "would absorb into the sources as a bias the error bars of the noise do not carry",
+            "avoided_model_error_urad": {"median": float(np.median(error[design.avoided]) * 1e6) if n else None,
+                                         "max": float(error[design.avoided].max() * 1e6) if n else None},
+            "kept_inputs_mm_max_abs": (np.abs(design.candidates[kept]).max(axis=0) * 1e3).tolist(),
+            "avoided_inputs_mm_median_abs": (np.median(np.abs(design.candidates[design.avoided]), axis=0) * 1e3).tolist()
+            if n else None}
+
+
+def _avoided_lines(avoided: dict | None) -> list[str]:
+    if not avoided:
+        return ["No posture avoided (--inadequacy none: the model's own error is not known here).", ""]
+    median = avoided["avoided_model_error_urad"]["median"]
+    return [f"Postures avoided: {avoided['n_avoided']} of {avoided['n_candidates']} candidates, those where the model's "
+            f"expected error exceeds {avoided['max_model_error_urad']:.3g} urad on some angle"
+            + ("" if median is None else f" (median {median:.3g} urad, up to "
+               f"{avoided['avoided_model_error_urad']['max']:.3g} urad)")
+            + f". Why: {avoided['why']}.", ""]
 
 
 def _write_trajectory(path, design) -> None:
