@@ -214,6 +214,29 @@ def _avoided(design) -> dict | None:
             if n else None}
 
 
+def _markdown(report: dict) -> str:
+    d, s = report["designed"], report["standard_trajectory"]
+    cond = lambda v: "inf (rank-deficient)" if v is None else f"{v:.3g}"  # noqa: E731
+    lines = ["# Designed calibration trajectory", "",
+             f"{report['n_points']} postures chosen from {report['n_candidates']} candidates, noise "
+             f"{report['noise_urad']:g} urad, prior scale {report['prior_scale']:g}, model inadequacy: "
+             f"{report['inadequacy']} (wall-clock time: timings.json).", "",
+             "| figure | designed | standard trajectory (77) |", "|---|---:|---:|",
+             f"| log det M (D-criterion) | {d['log_det_information']:.2f} | {s['log_det_information']:.2f} |",
+             f"| det(M)^(1/45) | {d['d_efficiency']:.4g} | {s['d_efficiency']:.4g} |",
+             f"| rank of W | {d['rank']} | {s['rank']} |",
+             f"| sigma_min of W | {d['sigma_min']:.3g} | {s['sigma_min']:.3g} |",
+             f"| condition number of W | {cond(d['condition_number'])} | {cond(s['condition_number'])} |",
+             f"| sources with expected std <= 1 % of range | {d['n_sources_below_1pct']} | "
+             f"{s['n_sources_below_1pct']} |", "",
+             *_avoided_lines(report.get("avoided")),
+             "![expected standard errors](design.png)", "", "## Expected standard error per source [% of range]", "",
+             "| source | designed | standard |", "|---|---:|---:|"]
+    for name, a, b in zip(report["names"], d["expected_std_of_range"], s["expected_std_of_range"]):
+        lines.append(f"| `{name}` | {100 * a:.3g} | {100 * b:.3g} |")
+    return "\n".join(lines) + "\n"
+
+
 def _avoided_lines(avoided: dict | None) -> list[str]:
     if not avoided:
         return ["No posture avoided (--inadequacy none: the model's own error is not known here).", ""]

@@ -277,6 +277,10 @@ def _estimated_identification(measurement: Measurement, angles: np.ndarray, spac
                     "n_folds": cv.n_folds, "folds": "whole legs held out"},
                 "noise_urad": fit.noise * 1e6, "noise_source": fit.noise_source,
                 "residual_autocorrelation": fit.autocorrelation, "noise_variance_inflation": fit.inflation,
+                "discrepancy": None if fit.discrepancy is None else {
+                    **fit.discrepancy.as_dict(),
+                    "error_bars": "sandwich covariance with the noise + model-discrepancy covariance "
+                                  "(flexcal.calibration.discrepancy)"},
                 "effective_parameters": fit.p_eff, "n_observations": fit.n_observations,
                 "base_parameters": result.base.as_dict()}}}
 
