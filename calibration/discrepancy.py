@@ -146,19 +146,14 @@ def fit_discrepancy(residual: np.ndarray, jacobian: np.ndarray, x: np.ndarray, p
                        log_likelihood=-float(best.fun), coordinates=c)
 
 
-def sandwich_covariance(J: np.ndarray, weight_noise: float, prior_precision: np.ndarray,
-                        data_covariance: np.ndarray) -> np.ndarray:
+def sandwich_covariance(posterior_covariance: np.ndarray, J: np.ndarray, weight_noise: float,
+                        prior_precision: np.ndarray, data_covariance: np.ndarray) -> np.ndarray:
     """Cov (d, d) [unit box^2] of the estimate weighted by rows / weight_noise [rad] and prior
-    precision (d,), when the data's error has covariance data_covariance (m, m) [rad^2]:
-    A (J^T Sigma J / sigma_w^4 + P) A, A = (J^T J / sigma_w^2 + P)^+ (pseudo-inverse as in
-    ``estimation.posterior``)."""
-    from flexcal.calibration.estimation import Prior, posterior
-
-    d = J.shape[1]
-    prior = Prior(mean=np.zeros(d), std=np.where(prior_precision > 0, 1.0 / np.sqrt(
-        np.where(prior_precision > 0, prior_precision, 1.0)), np.inf))
-    A, _, _ = posterior(J, weight_noise, prior)
-    Jw = J / weight_noise ** 2
+    precision (d,) [1/unit box^2], when the data's error has covariance data_covariance (m, m)
+    [rad^2]: A (J^T Sigma J / sigma_w^4 + P) A with A = posterior_covariance (d, d), the
+    estimator's own (J^T J / sigma_w^2 + P)^+ (``estimation.posterior``)."""
+    A = np.asarray(posterior_covariance, float)
+    Jw = np.asarray(J, float) / weight_noise ** 2
     middle = Jw.T @ data_covariance @ Jw + np.diag(prior_precision)
     cov = A @ middle @ A
     return 0.5 * (cov + cov.T)

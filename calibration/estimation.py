@@ -233,7 +233,7 @@ def estimate(residuals: Residuals, prior: Prior, *, noise: float | None = None, 
             raise ValueError(f"discrepancy error bars need 3 angles a point, got point_size={point_size}")
         discrepancy = fit_discrepancy(r, J, x, prior.mean, prior.std, coordinates, noise=noise)
         gauss_newton = sigma_matrix
-        sigma_matrix = sandwich_covariance(J, sigma, prior.precision, discrepancy.covariance)
+        sigma_matrix = sandwich_covariance(sigma_matrix, J, sigma, prior.precision, discrepancy.covariance)
         std = np.where(np.isfinite(std), np.sqrt(np.maximum(np.diag(sigma_matrix), 0.0)), np.inf)
     return Estimate(x=x, std=std, covariance=sigma_matrix, noise=sigma, discrepancy=discrepancy,
                     gauss_newton_covariance=gauss_newton,

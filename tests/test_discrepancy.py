@@ -64,7 +64,7 @@ def test_sandwich_is_the_posterior_when_the_data_error_is_the_weighting():
     rng = np.random.default_rng(0)
     J, precision = rng.normal(size=(30, 4)), np.array([1.0, 2.0, 0.5, 3.0])
     A = np.linalg.inv(J.T @ J / 0.3 ** 2 + np.diag(precision))
-    np.testing.assert_allclose(sandwich_covariance(J, 0.3, precision, 0.09 * np.eye(30)), A, rtol=1e-9)
+    np.testing.assert_allclose(sandwich_covariance(A, J, 0.3, precision, 0.09 * np.eye(30)), A, rtol=1e-9)
 
 
 def test_fit_discrepancy_recovers_noise_and_amplitude():
