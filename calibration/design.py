@@ -23,9 +23,9 @@ identifiable, before anything is measured:
 - what the model cannot do: with an ``inadequacy`` (the model's expected error at each
   candidate, e.g. against a richer virtual prototype) the postures weigh by
   sqrt(noise^2 + delta^2), and with ``max_inadequacy`` the candidates whose expected error
-  exceeds it (on any angle) are not offered at all: the CLI sets it to the largest expected
-  error over the standard trajectory's own postures, so a design never measures where the
-  model is known to be worse than anywhere on the standard trajectory. A model-form error
+  exceeds it (on any angle) are not offered at all: the CLI sets it to the upper quartile of
+  the expected error over the standard trajectory's own postures, so a design never measures
+  where the model is known to be worse than on most of the standard trajectory. A model-form error
   there is not noise that averages out: the fit absorbs it into the sources (a bias the
   information matrix does not see), so the D-criterion alone seeks exactly those postures
   (largest signatures at the workspace corners, where the model is worst);
