@@ -80,20 +80,28 @@ def discrepancy_covariance(coordinates: np.ndarray, noise: float, amplitude: np.
     return K + noise ** 2 * np.eye(K.shape[0])
 
 
-def _negative_log_likelihood(theta: np.ndarray, z: np.ndarray, base: np.ndarray, distance: np.ndarray,
+def _negative_log_likelihood(theta: np.ndarray, z: np.ndarray, G: np.ndarray, distance: np.ndarray,
                              noise: float | None, keep: np.ndarray | None) -> float:
+    """-log N(z; 0, G G^T + Sigma) up to a constant, Sigma = sigma^2 I + K (projected by keep),
+    by the Woodbury identity and the determinant lemma: Sigma is well conditioned (sigma^2 on
+    its diagonal), I + G^T Sigma^-1 G has eigenvalues >= 1, so a sensitive source (G's columns
+    10^4 noise units and more on a designed trajectory) does not break the factorization."""
     if noise is None:
         sigma, amplitude, length = math.exp(theta[0]), np.exp(theta[1:4]), math.exp(theta[4])
     else:
         sigma, amplitude, length = noise, np.exp(theta[0:3]), math.exp(theta[3])
     S = np.kron(matern52(distance, length), np.diag(amplitude ** 2)) + sigma ** 2 * np.eye(distance.shape[0] * 3)
-    S = base + (S if keep is None else keep.T @ S @ keep)
+    if keep is not None:
+        S = keep.T @ S @ keep
     try:
         L = np.linalg.cholesky(S)
+        w, V = np.linalg.solve(L, z), np.linalg.solve(L, G)
+        inner = np.eye(G.shape[1]) + V.T @ V
+        M = np.linalg.cholesky(inner)
     except np.linalg.LinAlgError:
         return 1e300
-    w = np.linalg.solve(L, z)
-    return float(0.5 * w @ w + np.sum(np.log(np.diag(L))))
+    u = np.linalg.solve(M, V.T @ w)
+    return float(0.5 * (w @ w - u @ u) + np.sum(np.log(np.diag(L))) + np.sum(np.log(np.diag(M))))
 
 
 def fit_discrepancy(residual: np.ndarray, jacobian: np.ndarray, x: np.ndarray, prior_mean: np.ndarray,
@@ -115,13 +123,13 @@ def fit_discrepancy(residual: np.ndarray, jacobian: np.ndarray, x: np.ndarray, p
     finite = np.isfinite(prior_std)
     offset = np.where(finite, np.asarray(x, float) - prior_mean, 0.0)
     z = J @ offset - r
-    base = (J[:, finite] * prior_std[finite] ** 2) @ J[:, finite].T
+    G = J[:, finite] * prior_std[finite]  # the prior's part: J D J^T = G G^T
     keep = None
     if not np.all(finite):  # free directions: project them out (restricted likelihood)
         from scipy.linalg import null_space
 
         keep = null_space(J[:, ~finite].T)  # (m, m - rank): directions no free source reaches
-        z, base = keep.T @ z, keep.T @ base @ keep
+        z, G = keep.T @ z, keep.T @ G
     distance = np.linalg.norm(c[:, None, :] - c[None, :, :], axis=-1)
     scale = max(float(np.sqrt(np.mean(r ** 2))), 1e-12)
     lo, hi = math.log(LENGTH_BOUNDS[0]), math.log(LENGTH_BOUNDS[1])
@@ -133,7 +141,7 @@ def fit_discrepancy(residual: np.ndarray, jacobian: np.ndarray, x: np.ndarray, p
         if noise is None:
             theta0 = [math.log(scale / 2.0)] + theta0
             bounds = [(math.log(scale * 1e-3), math.log(scale * 10.0))] + bounds
-        found = minimize(_negative_log_likelihood, np.array(theta0), args=(z, base, distance, noise, keep),
+        found = minimize(_negative_log_likelihood, np.array(theta0), args=(z, G, distance, noise, keep),
                          method="L-BFGS-B", bounds=bounds)
         if best is None or found.fun < best.fun:
             best = found
