@@ -133,12 +133,10 @@ def identify_all(space: ParameterSpace, inputs: np.ndarray, angles: np.ndarray, 
         on_plan(1)
     prior = uniform_prior(space.n_params, scale)
     # error bars with the model's discrepancy, a process over the postures: the measured angles
-    # in workspace half-widths and the travel direction of each actuator (+-1: the clearance and
-    # hysteresis make the model's error differ going out and coming back at one posture)
-    # (calibration.discrepancy)
+    # in workspace half-widths (calibration.discrepancy)
     fit = estimate(problem.residuals, prior, noise=settings.noise,
                    max_evaluations=FREE_MAX_EVALUATIONS if math.isinf(scale) else None,
-                   coordinates=np.hstack([angles / WORKSPACE, directions]))
+                   coordinates=angles / WORKSPACE)
     on_fit()
     base = base_parameters(fit.jacobian / fit.noise, space.names, max_std=settings.max_std)
     ranges = space.upper - space.lower
