@@ -78,3 +78,31 @@ def test_fit_discrepancy_recovers_noise_and_amplitude():
     found = fit_discrepancy(-y, np.zeros((240, 1)), np.zeros(1), np.zeros(1), np.ones(1), c)
     assert 1 / 1.5 < found.noise < 1.5
     assert np.all((found.amplitude > 4.0 / 3.0) & (found.amplitude < 4.0 * 3.0)), found.amplitude
+
+
+def test_design_never_offers_postures_where_the_model_is_known_to_be_off():
+    """A toy design whose largest signatures sit where the model's expected error is largest
+    (|angle| near the workspace edge): with max_inadequacy those candidates are avoided (never
+    chosen, listed in Design.avoided); weighted by the inadequacy alone the D-criterion still
+    picks them (a 3-noise model error only divides their information by ~10)."""
+    from flexcal.calibration.design import design_trajectory
+
+    workspace = np.array([1e-3, 5e-3, 3e-3])
+    gain = np.eye(3)
+
+    def jacobian(inputs):  # signatures grow with the posture: the corners inform most
+        u = inputs / workspace
+        rows = np.stack([u, u ** 2, np.ones_like(u)], axis=-1)  # (k, 3, 3)
+        return np.concatenate([rows, rows ** 3], axis=-1).reshape(-1, 6) * 1e-5
+
+    def inadequacy(inputs):  # [rad] the model is off by 3 noise beyond 60 % of the workspace
+        return np.where(np.abs(inputs / workspace) > 0.6, 1.5e-6, 0.1e-6)
+
+    kwargs = dict(n_points=12, n_candidates=300, noise=0.5e-6, prior_precision=np.full(6, 12.0),
+                  inadequacy=inadequacy, rng=1)
+    free = design_trajectory(jacobian, gain, workspace, np.zeros((5, 3)), **kwargs)
+    kept = design_trajectory(jacobian, gain, workspace, np.zeros((5, 3)), max_inadequacy=1e-6, **kwargs)
+    off = lambda inputs: np.any(np.abs(inputs / workspace) > 0.6, axis=1)  # noqa: E731
+    assert np.any(off(free.inputs))
+    assert not np.any(off(kept.inputs))
+    assert kept.avoided.sum() == np.sum(off(kept.candidates)) > 0
