@@ -11,8 +11,9 @@ the information of a clearance or hysteresis source depends on the drive loads, 
 depend on the sources themselves); the prior is the paper's ranges scaled by ``--prior-scale``, the noise ``--noise-urad``; with ``--inadequacy analytic``
 (default) the model's own error at each candidate posture, measured once against the
 analytic virtual prototype at the nominal design, is added to the noise, so that postures
-where the model is known to be off (large combined rotations) weigh less
-(``flexcal.calibration.design``).
+where the model is known to be off (large combined rotations) weigh less, and the
+candidates where it exceeds the upper quartile of its error over the standard trajectory's
+postures are avoided; report.md says how many and why (``flexcal.calibration.design``).
 """
 
 from __future__ import annotations
@@ -60,7 +61,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--design-seed", type=int, metavar="N", help="seed of the candidate draw (default %(default)s)")
     parser.add_argument("--inadequacy", choices=("analytic", "none"),
                         help="add the model's error at each candidate (against the analytic prototype at the nominal "
-                             "design) to the noise (default %(default)s)")
+                             "design) to the noise and avoid the candidates where it exceeds the upper quartile of "
+                             "its error on the standard trajectory (default %(default)s)")
     add_model_options(parser)
     add_out(parser, what="trajectory.csv, report.json, report.md, design.png")
 
