@@ -94,6 +94,20 @@ class BaseParameters:
                 C[k, index[other]] = self.coefficients[k, j]
         return C
 
+    def reported_combinations(self, names: Sequence[str], min_coefficient: float = 0.05) -> np.ndarray:
+        """C (n_base, d) as the reports give the base parameters: a source identified alone
+        (``pure``) is the source itself (its row 1 at the source, 0 elsewhere), so that it has
+        one value and one error bar, the same as in the sources' table (its regrouped terms
+        are below ``min_coefficient`` and its label names it alone); the others as
+        ``combinations``."""
+        C = self.combinations(names)
+        index = {n: i for i, n in enumerate(names)}
+        for k, name in enumerate(self.base):
+            if name in self.pure(min_coefficient):
+                C[k] = 0.0
+                C[k, index[name]] = 1.0
+        return C
+
     def pure(self, min_coefficient: float = 0.05) -> tuple[str, ...]:
         """Base sources identified alone: no regrouped source enters their combination with a
         coefficient of ``min_coefficient`` or more (range units): their own value is meaningful."""

@@ -20,6 +20,16 @@ identifiable, before anything is measured:
   not depend on the direction, the hardware's backlash does), cut into legs of
   ``points_per_leg`` for held-out cross-validation.
 
+- what the model cannot do: with an ``inadequacy`` (the model's expected error at each
+  candidate, e.g. against a richer virtual prototype) the postures weigh by
+  sqrt(noise^2 + delta^2), and with ``max_inadequacy`` the candidates whose expected error
+  exceeds it (on any angle) are not offered at all: the CLI sets it to the upper quartile of
+  the expected error over the standard trajectory's own postures, so a design never measures
+  where the model is known to be worse than on most of the standard trajectory. A model-form error
+  there is not noise that averages out: the fit absorbs it into the sources (a bias the
+  information matrix does not see), so the D-criterion alone seeks exactly those postures
+  (largest signatures at the workspace corners, where the model is worst);
+
 The design is local (at one parameter point) like any nonlinear D-optimal design; the
 report gives the criterion, sigma_min, the condition number and the expected standard
 error of every source against the standard trajectory at the same point.
@@ -161,7 +171,9 @@ class Design:
     (n - 1,) indices into them (visiting order); quality and reference_quality: the
     ``DesignQuality`` of this trajectory and of the reference one (the standard trajectory)
     at the same design point, noise and prior; noise [rad]; prior_scale; inadequacy (n_c, 3)
-    [rad] or None: the model's expected error at each candidate, added to the noise."""
+    [rad] or None: the model's expected error at each candidate, added to the noise; avoided
+    (n_c,) bool or None: candidates not offered because their expected error exceeds
+    max_inadequacy [rad]."""
 
     inputs: np.ndarray
     leg: np.ndarray
@@ -172,13 +184,15 @@ class Design:
     noise: float
     prior_scale: float
     inadequacy: np.ndarray | None
+    avoided: np.ndarray | None = None
+    max_inadequacy: float | None = None
 
 
 def design_trajectory(jacobian: Callable[[np.ndarray], np.ndarray], angle_gain: np.ndarray, workspace: np.ndarray,
                       reference_inputs: np.ndarray, *, n_points: int = 77, n_candidates: int = 2000,
                       noise: float = 0.5e-6, prior_precision: np.ndarray, prior_scale: float = 1.0,
                       points_per_leg: int = 11, inadequacy: Callable[[np.ndarray], np.ndarray] | None = None,
-                      rng: np.random.Generator | int | None = 0,
+                      max_inadequacy: float | None = None, rng: np.random.Generator | int | None = 0,
                       progress: Callable[[str], None] | None = None) -> Design:
     """D-optimal trajectory of ``n_points`` postures (the zero posture first, then n - 1 chosen).
 
@@ -187,7 +201,9 @@ def design_trajectory(jacobian: Callable[[np.ndarray], np.ndarray], angle_gain: 
     reference_inputs (k, 3) [m] the trajectory to compare with; noise [rad] per channel;
     prior_precision (d,) [1/unit box^2]; inadequacy(inputs) -> (k, 3) [rad] the model's
     expected error there (None: none), combined with the noise as sqrt(noise^2 + delta^2) so
-    that postures where the model is known to be off weigh less.
+    that postures where the model is known to be off weigh less; max_inadequacy [rad]: with an
+    inadequacy, candidates whose expected error exceeds it on any angle are avoided (never
+    chosen; ValueError when fewer than n_points - 1 remain: draw more candidates or raise it).
     """
     if n_points < 2:
         raise ValueError(f"n_points={n_points} must be >= 2 (the zero posture and at least one more)")
@@ -198,15 +214,25 @@ def design_trajectory(jacobian: Callable[[np.ndarray], np.ndarray], angle_gain: 
     say = progress or (lambda _: None)
     candidates = candidate_postures(angle_gain, workspace, n_candidates, rng)
     J = np.asarray(jacobian(candidates), float).reshape(n_candidates, 3, -1)
-    delta = None
+    delta, avoided = None, None
     sigma = np.full((n_candidates, 3), float(noise))
+    offered = np.arange(n_candidates)
     if inadequacy is not None:
         say("model inadequacy at the candidates")
         delta = np.asarray(inadequacy(candidates), float)
         sigma = np.sqrt(sigma ** 2 + delta ** 2)
+        if max_inadequacy is not None:
+            avoided = np.max(np.abs(delta), axis=1) > max_inadequacy
+            offered = np.flatnonzero(~avoided)
+            if offered.size < n_points - 1:
+                raise ValueError(f"only {offered.size} of {n_candidates} candidates have an expected model error <= "
+                                 f"{max_inadequacy * 1e6:.3g} urad, fewer than the {n_points - 1} postures to choose: "
+                                 f"draw more candidates or allow a larger model error")
     start = np.asarray(jacobian(np.zeros((1, 3))), float) / noise
-    say(f"greedy D-optimal selection of {n_points - 1} of {n_candidates} postures")
-    chosen, _ = greedy_d_optimal(J / sigma[:, :, None], prior_precision, n_points - 1, fixed=start, progress=say)
+    say(f"greedy D-optimal selection of {n_points - 1} of {offered.size} postures")
+    picked, _ = greedy_d_optimal(J[offered] / sigma[offered, :, None], prior_precision, n_points - 1, fixed=start,
+                                 progress=say)
+    chosen = offered[picked]
     scale = np.abs(np.linalg.solve(angle_gain, workspace))
     order = order_postures(candidates[chosen], scale)
     chosen = chosen[order]
@@ -217,4 +243,5 @@ def design_trajectory(jacobian: Callable[[np.ndarray], np.ndarray], angle_gain: 
     return Design(inputs=inputs, leg=leg, candidates=candidates, chosen=chosen,
                   quality=design_quality(W, prior_precision),
                   reference_quality=design_quality(W_reference, prior_precision), noise=float(noise),
-                  prior_scale=float(prior_scale), inadequacy=delta)
+                  prior_scale=float(prior_scale), inadequacy=delta, avoided=avoided,
+                  max_inadequacy=None if avoided is None else float(max_inadequacy))

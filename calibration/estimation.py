@@ -23,9 +23,13 @@ prior, so that the sources the data cannot see stay at their prior instead of wa
   size n (1 - rho) / (1 + rho)); white noise gives rho ~ 0 and no inflation. It enters the
   fit's weighting too, so correlated misfit pulls less against the prior;
 - the Gauss-Newton covariance at the solution, ``Sigma = (J^T J / sigma^2 + diag(1/std^2))^-1``
-  [unit box^2], gives every source's standard error (times its range for SI). At an active
-  bound the covariance is the unconstrained one: a standard error then overstates what the
-  bound already pins down (reported as ``at_bound``).
+  [unit box^2], gives every source's standard error (times its range for SI) when the misfit
+  is white. With posture ``coordinates`` (the pipeline passes them) the error bars carry the
+  model's discrepancy instead (``calibration.discrepancy``): a Gaussian process over the
+  postures plus white noise, sized by maximum marginal likelihood from the residual, and the
+  sandwich covariance of the estimate under it; the AR(1)-inflated sigma then only weighs the
+  data against the prior in the fit. At an active bound the covariance is the unconstrained
+  one: a standard error then overstates what the bound already pins down (``at_bound``).
 
 The prior scale is chosen by K-fold cross-validation over held-out *whole legs* (contiguous
 blocks of the trajectory): random held-out points leak time-correlated information (docs/
@@ -40,6 +44,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
+from flexcal.calibration.discrepancy import Discrepancy, fit_discrepancy, sandwich_covariance
 from flexcal.calibration.polish import batched_jacobian_fd, least_squares_polish
 
 __all__ = ["Prior", "uniform_prior", "Estimate", "estimate", "posterior", "residual_autocorrelation", "choose_prior_scale", "CrossValidation",
@@ -99,7 +104,10 @@ class Estimate:
     (1 when the noise is given); n_observations m; p_eff effective
     number of parameters; residual (m,) at x; jacobian (m, d) of the residual at x (forward
     differences) [residual units per unit box]; rss; at_bound (d,) bool; n_evaluations
-    (residual rows, Jacobians included); prior: the prior used."""
+    (residual rows, Jacobians included); prior: the prior used; discrepancy: the model
+    discrepancy the error bars carry (None: white misfit assumed, ``covariance`` is the
+    Gauss-Newton one); gauss_newton_covariance (d, d): the white-misfit covariance at the same
+    weighting, kept for comparison (None when it is ``covariance``)."""
 
     x: np.ndarray
     std: np.ndarray
@@ -116,6 +124,8 @@ class Estimate:
     at_bound: np.ndarray
     n_evaluations: int
     prior: Prior
+    discrepancy: Discrepancy | None = None
+    gauss_newton_covariance: np.ndarray | None = None
 
     @property
     def rms(self) -> float:
@@ -160,7 +170,7 @@ def residual_autocorrelation(r: np.ndarray, point_size: int = 3) -> float:
 
 def estimate(residuals: Residuals, prior: Prior, *, noise: float | None = None, x0: np.ndarray | None = None,
              max_noise_rounds: int = 4, noise_rtol: float = 0.05, max_evaluations: int | None = None,
-             point_size: int = 3, correlated: bool = True) -> Estimate:
+             point_size: int = 3, correlated: bool = True, coordinates: np.ndarray | None = None) -> Estimate:
     """MAP (or free least squares when ``prior.is_free``) estimate on the unit box.
 
     residuals: ``r(X (n, d)) -> (n, m)`` [residual units, e.g. rad]; noise: sigma in those
@@ -171,7 +181,9 @@ def estimate(residuals: Residuals, prior: Prior, *, noise: float | None = None, 
     residual rows per fit (None: 100 Jacobians' worth; free least squares on a rank-deficient
     problem creeps along its null space, give it more); point_size: residuals per point (the
     layout for the autocorrelation); correlated: inflate an estimated noise by the residual's
-    AR(1) factor (module doc).
+    AR(1) factor (module doc); coordinates (m / point_size, k) [workspace units]: the postures,
+    for the model-discrepancy error bars (``calibration.discrepancy``; needs point_size 3 and a
+    prior on every source, else ValueError); None: Gauss-Newton error bars.
     """
     d = prior.mean.size
     x = np.clip(prior.mean if x0 is None else np.asarray(x0, float), 0.0, 1.0)
@@ -215,7 +227,16 @@ def estimate(residuals: Residuals, prior: Prior, *, noise: float | None = None, 
     sigma_matrix, p_eff, std = posterior(J, sigma, prior)
     rho = 0.0 if given or not correlated else residual_autocorrelation(r, point_size)
     at_bound = (x <= 1e-9) | (x >= 1.0 - 1e-9)
-    return Estimate(x=x, std=std, covariance=sigma_matrix, noise=sigma,
+    discrepancy, gauss_newton = None, None
+    if coordinates is not None:
+        if point_size != 3:
+            raise ValueError(f"discrepancy error bars need 3 angles a point, got point_size={point_size}")
+        discrepancy = fit_discrepancy(r, J, x, prior.mean, prior.std, coordinates, noise=noise)
+        gauss_newton = sigma_matrix
+        sigma_matrix = sandwich_covariance(sigma_matrix, J, sigma, prior.precision, discrepancy.covariance)
+        std = np.where(np.isfinite(std), np.sqrt(np.maximum(np.diag(sigma_matrix), 0.0)), np.inf)
+    return Estimate(x=x, std=std, covariance=sigma_matrix, noise=sigma, discrepancy=discrepancy,
+                    gauss_newton_covariance=gauss_newton,
                     noise_source="given" if given else "estimated from the residual (RSS / (m - p_eff)) x AR(1) "
                                                        "inflation (1 + rho) / (1 - rho)",
                     autocorrelation=rho, inflation=(1.0 + rho) / (1.0 - rho),

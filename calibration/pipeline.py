@@ -32,7 +32,7 @@ from flexcal.calibration.problem import CalibrationProblem
 from flexcal.calibration.pso import identify
 from flexcal.calibration.pso_settings import PSOResult, PSOSettings
 from flexcal.model.parameters import ParameterSpace
-from flexcal.model.trajectory import travel_directions
+from flexcal.model.trajectory import WORKSPACE, travel_directions
 
 __all__ = ["IdentificationSettings", "Identification", "identify_all", "METHODS", "FREE_MAX_EVALUATIONS",
            "check_determined", "SwarmIdentification", "identify_swarm"]
@@ -132,8 +132,11 @@ def identify_all(space: ParameterSpace, inputs: np.ndarray, angles: np.ndarray, 
     if cv is None:
         on_plan(1)
     prior = uniform_prior(space.n_params, scale)
+    # error bars with the model's discrepancy, a process over the postures: the measured angles
+    # in workspace half-widths (calibration.discrepancy)
     fit = estimate(problem.residuals, prior, noise=settings.noise,
-                   max_evaluations=FREE_MAX_EVALUATIONS if math.isinf(scale) else None)
+                   max_evaluations=FREE_MAX_EVALUATIONS if math.isinf(scale) else None,
+                   coordinates=angles / WORKSPACE)
     on_fit()
     base = base_parameters(fit.jacobian / fit.noise, space.names, max_std=settings.max_std)
     ranges = space.upper - space.lower

@@ -151,3 +151,23 @@ def test_identify_goes_through_the_one_pipeline_with_error_bars(tmp_path):
     assert rows["D3.x0"]["z_score"] is not None and abs(rows["D3.x0"]["z_score"]) <= 4.0  # 1-in-15,000 for an honest error bar (docstring)
     assert rows["L1.w"]["std_error"] is None and not rows["L1.w"]["was_identified"]  # not chosen: stays nominal
     assert not (out / "convergence.png").exists()  # no swarm, no convergence picture
+
+
+def test_error_bars_stay_honest_with_a_deliberately_imperfect_model(tmp_path):
+    """The paper's model (no second-order terms) on the analytic prototype, seeds 1-2: its form
+    error (residual ~2x the 0.5 urad noise, smooth along the postures) biases the drive sources.
+    The Gauss-Newton bars with the AR(1) inflation gave a pooled z RMS of 2.5 over the 8 sources
+    identified alone (measured); the model-discrepancy bars (calibration.discrepancy) must be
+    inside the issue's honesty band [0.5, 2] (measured 1.18). Each source has one error bar: a
+    source identified alone is its own row in the base table, with the same standard error."""
+    z = []
+    for seed in ("1", "2"):
+        report, _ = _analytic_verify(tmp_path / seed, "--scenario", "table1", "--seed", seed, "--no-second-order")
+        z += [r["z_score"] for r in report["parameters"] if r["identifiable"]]
+        rows = {r["name"]: r for r in report["parameters"]}
+        table = {r["label"]: r for r in report["base_parameters"]["rows"]}
+        for name in report["base_parameters"]["pure"]:  # same error and truth: same z only with the same bar
+            # one number computed twice from the same covariance entry: only rounding may differ
+            assert np.isclose(table[name]["z_score"], rows[name]["z_score"], rtol=1e-6), name
+    assert len(z) >= 8
+    assert 0.5 <= float(np.sqrt(np.mean(np.square(z)))) <= 2.0  # the issue's honesty band

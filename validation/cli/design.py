@@ -11,8 +11,9 @@ the information of a clearance or hysteresis source depends on the drive loads, 
 depend on the sources themselves); the prior is the paper's ranges scaled by ``--prior-scale``, the noise ``--noise-urad``; with ``--inadequacy analytic``
 (default) the model's own error at each candidate posture, measured once against the
 analytic virtual prototype at the nominal design, is added to the noise, so that postures
-where the model is known to be off (large combined rotations) weigh less
-(``flexcal.calibration.design``).
+where the model is known to be off (large combined rotations) weigh less, and the
+candidates where it exceeds the upper quartile of its error over the standard trajectory's
+postures are avoided; report.md says how many and why (``flexcal.calibration.design``).
 """
 
 from __future__ import annotations
@@ -32,6 +33,8 @@ EXAMPLES = (
     "flexcal truth --scenario table1 --trajectory runs/design/trajectory.csv --noise-urad 0.5 --out runs/t1",
     "flexcal design --at runs/first-verify/report.json --out runs/design-2   # design at the identified values",
 )
+MODEL_ERROR_QUANTILE = 0.75  # candidates whose expected model error exceeds this quantile of the standard
+# trajectory's are avoided (the report says how many and why)
 DEFAULT_CONFIG = {"points": 77, "candidates": 2000, "noise_urad": 0.5, "prior_scale": 1.0, "points_per_leg": 11,
                   "design_seed": 0, "inadequacy": "analytic", "at": "", "scenario": "table1", "model_stiffness": "fem",
                   "second_order": True}
@@ -58,7 +61,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--design-seed", type=int, metavar="N", help="seed of the candidate draw (default %(default)s)")
     parser.add_argument("--inadequacy", choices=("analytic", "none"),
                         help="add the model's error at each candidate (against the analytic prototype at the nominal "
-                             "design) to the noise (default %(default)s)")
+                             "design) to the noise and avoid the candidates where it exceeds the upper quartile of "
+                             "its error on the standard trajectory (default %(default)s)")
     add_model_options(parser)
     add_out(parser, what="trajectory.csv, report.json, report.md, design.png")
 
@@ -147,12 +151,17 @@ def run(args: argparse.Namespace) -> int:
     gain = mechanism_matrices(space.nominal_full, space).input_gain[0, 3:, 3:]
     reference = standard_trajectory(space.mechanism, n_points=77).inputs
     say = (lambda text: print(f"design: {text}")) if progress else None
+    inadequacy = _inadequacy(space, scenario.space, False) if args.inadequacy == "analytic" else None
+    # never where the model is known to be worse than on most of the standard trajectory
+    # (calibration.design): the upper quartile of the expected error over its own postures (its
+    # largest, 15.6 urad on table1 at one stroke end, left all but 7 of 2000 candidates in)
+    limit = None if inadequacy is None else float(np.quantile(np.max(inadequacy(reference), axis=1),
+                                                              MODEL_ERROR_QUANTILE))
     design = design_trajectory(jacobian, gain, WORKSPACE, reference, n_points=args.points,
                                n_candidates=args.candidates, noise=args.noise_urad * 1e-6,
                                prior_precision=prior.precision, prior_scale=args.prior_scale,
                                points_per_leg=args.points_per_leg, rng=args.design_seed, progress=say,
-                               inadequacy=_inadequacy(space, scenario.space, False) if args.inadequacy == "analytic"
-                               else None)
+                               inadequacy=inadequacy, max_inadequacy=limit)
     wall = time.perf_counter() - start
     report = _report(design, space, args, wall)
     with staged_output(args.out, replace=args.force) as staging:
@@ -184,11 +193,31 @@ def _report(design, space, args, wall: float) -> dict:
                                                                             * 1e6),
         "criterion": "D-optimal: log det(W^T W + prior precision), W = model Jacobian / noise on the unit box, at "
                      "the prior mean",
+        "avoided": _avoided(design),
         "names": list(space.names), "designed": _quality(design.quality),
         "standard_trajectory": _quality(design.reference_quality), "wall_s": wall,
         "note": "sigma_min and condition number are those of the data-only W (no prior); a rank below 45 means "
                 "some combinations stay at their prior",
     }
+
+
+def _avoided(design) -> dict | None:
+    """Which candidate postures the design did not offer and why (None: no inadequacy)."""
+    if design.avoided is None:
+        return None
+    error = np.abs(design.inadequacy).max(axis=1)  # [rad] the worst angle at each candidate
+    n = int(design.avoided.sum())
+    kept = ~design.avoided
+    return {"n_avoided": n, "n_candidates": int(design.avoided.size),
+            "max_model_error_urad": design.max_inadequacy * 1e6,
+            "why": "the model's expected error there (against the analytic virtual prototype at the nominal design) "
+                   "exceeds what it reaches on 75 % of the standard trajectory's own postures: a form error the fit "
+                   "would absorb into the sources as a bias the error bars of the noise do not carry",
+            "avoided_model_error_urad": {"median": float(np.median(error[design.avoided]) * 1e6) if n else None,
+                                         "max": float(error[design.avoided].max() * 1e6) if n else None},
+            "kept_inputs_mm_max_abs": (np.abs(design.candidates[kept]).max(axis=0) * 1e3).tolist(),
+            "avoided_inputs_mm_median_abs": (np.median(np.abs(design.candidates[design.avoided]), axis=0) * 1e3).tolist()
+            if n else None}
 
 
 def _markdown(report: dict) -> str:
@@ -206,11 +235,23 @@ def _markdown(report: dict) -> str:
              f"| condition number of W | {cond(d['condition_number'])} | {cond(s['condition_number'])} |",
              f"| sources with expected std <= 1 % of range | {d['n_sources_below_1pct']} | "
              f"{s['n_sources_below_1pct']} |", "",
+             *_avoided_lines(report.get("avoided")),
              "![expected standard errors](design.png)", "", "## Expected standard error per source [% of range]", "",
              "| source | designed | standard |", "|---|---:|---:|"]
     for name, a, b in zip(report["names"], d["expected_std_of_range"], s["expected_std_of_range"]):
         lines.append(f"| `{name}` | {100 * a:.3g} | {100 * b:.3g} |")
     return "\n".join(lines) + "\n"
+
+
+def _avoided_lines(avoided: dict | None) -> list[str]:
+    if not avoided:
+        return ["No posture avoided (--inadequacy none: the model's own error is not known here).", ""]
+    median = avoided["avoided_model_error_urad"]["median"]
+    return [f"Postures avoided: {avoided['n_avoided']} of {avoided['n_candidates']} candidates, those where the model's "
+            f"expected error exceeds {avoided['max_model_error_urad']:.3g} urad on some angle"
+            + ("" if median is None else f" (median {median:.3g} urad, up to "
+               f"{avoided['avoided_model_error_urad']['max']:.3g} urad)")
+            + f". Why: {avoided['why']}.", ""]
 
 
 def _write_trajectory(path, design) -> None:

@@ -248,6 +248,10 @@ def _estimated_identification(measurement: Measurement, angles: np.ndarray, spac
                     "n_folds": cv.n_folds, "folds": "whole legs held out"},
                 "noise_urad": fit.noise * 1e6, "noise_source": fit.noise_source,
                 "residual_autocorrelation": fit.autocorrelation, "noise_variance_inflation": fit.inflation,
+                "discrepancy": None if fit.discrepancy is None else {
+                    **fit.discrepancy.as_dict(),
+                    "error_bars": "sandwich covariance with the noise + model-discrepancy covariance "
+                                  "(flexcal.calibration.discrepancy)"},
                 "effective_parameters": fit.p_eff, "n_observations": fit.n_observations,
                 "base_parameters": result.base.as_dict()}}}
 
@@ -266,10 +270,11 @@ def _observability(release: np.ndarray) -> dict[str, str]:
 
 
 def _base_table(identification, space: ParameterSpace, presets: np.ndarray | None) -> dict[str, Any]:
-    """Each base parameter beta = C x [unit box]: estimate, standard error sqrt(C Sigma C^T) and,
-    with presets, the true beta and its z-score; ``z_rms`` over all of them."""
+    """Each base parameter beta = C x [unit box]: estimate, standard error sqrt(C Sigma C^T) (the
+    covariance of the sources' table: a source identified alone is its own row, with its own
+    error bar) and, with presets, the true beta and its z-score; ``z_rms`` over all of them."""
     base = identification.base
-    C = base.combinations(space.names)
+    C = base.reported_combinations(space.names)
     estimate = C @ identification.x_unit
     std = np.sqrt(np.einsum("kd,de,ke->k", C, identification.estimate.covariance, C))
     rows = [{"label": label, "estimate_unit": float(b), "std_unit": float(s)}

@@ -1,0 +1,170 @@
+"""Honest error bars and designed vs standard trajectories, pooled over seeds (issue #28).
+
+    .venv/bin/python benchmarks/bench_error_bars.py --out runs/bench-bars [--scenarios table1,paper]
+        [--seeds 1,2,3] [--designs table1=runs/design/trajectory.csv,paper=runs/design-paper/trajectory.csv]
+        [--provider fem] [--noise-urad 0.5] [--walk-seed 101]
+
+For every scenario x seed x trajectory (the standard one and, with --designs, the designed one)
+it runs what ``flexcal truth`` + ``flexcal verify`` (map) run: the virtual prototype's curve
+with the sensor noise, then ``identify_all``; and scores, against the scenario's true values:
+
+- z-scores (estimate - truth) / std of the sources identified alone and of the base parameters,
+  with the error bars of this code (``Estimate.covariance``: model discrepancy, sandwich) and
+  with the Gauss-Newton ones it replaced (``Estimate.gauss_newton_covariance``, the AR(1)-inflated
+  noise; base parameters over ``BaseParameters.combinations`` as before);
+- the width ratio new / old of the standard errors of the sources identified alone;
+- the absolute errors of the drive sources identified alone;
+- the RMS [urad] with which the identified model predicts a held-out random multi-actuator walk
+  (``bench_form_error.random_walk``: 60 points, stroke 0.8, seed [walk-seed, seed]) of the same
+  prototype, noise-free.
+
+Each case is appended to OUT/cases.jsonl as it finishes (a rerun skips the cases done); the
+pooled tables are printed at the end (RMS over every z-score of a scenario x trajectory).
+Not a test (minutes per case on the FEM prototype): the figures go into docs/calibration.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).parent))
+from bench_form_error import random_walk  # noqa: E402
+
+DRIVES = ("D1.x0", "D2.x0", "D3.x0", "D1.CL", "D2.CL", "D3.CL", "D1.mu", "D2.mu", "D3.mu")
+
+
+def _z(x, truth, covariance, C):
+    std = np.sqrt(np.einsum("kd,de,ke->k", C, covariance, C))
+    return (C @ (x - truth)) / std
+
+
+def run_case(scenario_name: str, seed: int, trajectory: str | None, provider, noise_urad: float,
+             walk_seed: int) -> dict:
+    from flexcal.calibration.pipeline import identify_all
+    from flexcal.model.trajectory import standard_trajectory
+    from flexcal.validation.measurements import read_trajectory
+    from flexcal.validation.prototype.scenario import load_scenario
+    from flexcal.validation.prototype.truth import make_truth
+    from flexcal.validation.runs.model_correction import model_space
+
+    scenario = load_scenario(scenario_name, seed=seed, noise_urad=noise_urad)
+    if trajectory:
+        inputs, leg = read_trajectory(trajectory)
+        scenario = dataclasses.replace(scenario, inputs=inputs, leg=leg)
+    measurement = make_truth(scenario, provider).measurement
+    space = model_space("fem", True, progress=False, mechanism=scenario.space.mechanism)
+    found = identify_all(space, measurement.inputs, measurement.angles, measurement.leg)
+    fit, base, names = found.estimate, found.base, list(space.names)
+    truth = space.to_unit(scenario.values[space.active_indices])
+    pure = list(base.pure())
+    E = np.eye(len(names))[[names.index(n) for n in pure]]
+    old = fit.gauss_newton_covariance if fit.gauss_newton_covariance is not None else fit.covariance
+    ranges = space.upper - space.lower
+    errors = {n: float(abs(fit.x[names.index(n)] - truth[names.index(n)]) * ranges[names.index(n)]) for n in pure}
+    walk_inputs = random_walk(standard_trajectory(scenario.space.mechanism).amplitudes, 60, 0.8, [walk_seed, seed])
+    walk = dataclasses.replace(scenario, inputs=walk_inputs, leg=np.ones(60, int), noise=np.zeros(3))
+    walk_angles = make_truth(walk, provider).measurement.angles
+    from flexcal.calibration.problem import CalibrationProblem
+
+    predicted = CalibrationProblem(space=space, inputs=walk_inputs, angles=walk_angles).residuals(fit.x[None])[0]
+    return {"scenario": scenario_name, "seed": seed, "trajectory": trajectory or "standard",
+            "n_points": int(measurement.n_points), "fit_rms_urad": fit.rms * 1e6, "pure": pure,
+            "z_sources_new": _z(fit.x, truth, fit.covariance, E).tolist(),
+            "z_sources_old": _z(fit.x, truth, old, E).tolist(),
+            "z_base_new": _z(fit.x, truth, fit.covariance, base.reported_combinations(names)).tolist(),
+            "z_base_old": _z(fit.x, truth, old, base.combinations(names)).tolist(),
+            "width_ratio": (np.sqrt(np.diag(E @ fit.covariance @ E.T)) / np.sqrt(np.diag(E @ old @ E.T))).tolist(),
+            "abs_errors_si": errors, "walk_rms_urad": float(np.sqrt(np.mean(predicted ** 2)) * 1e6),
+            "walk_seed": [walk_seed, seed],
+            "discrepancy": None if fit.discrepancy is None else fit.discrepancy.as_dict()}
+
+
+def _rms(values) -> float:
+    values = np.asarray(values, float)
+    return float(np.sqrt(np.mean(values ** 2))) if values.size else float("nan")
+
+
+def summarize(cases: list[dict]) -> None:
+    print("| mount | trajectory | seeds | z RMS sources old -> new (n) | z RMS base old -> new (n) | "
+          "width new/old (geo. mean) | fit RMS [urad] | walk RMS [urad] |")
+    print("|---|---|---|---|---|---:|---:|---:|")
+    groups: dict[tuple[str, str], list[dict]] = {}
+    for case in cases:
+        groups.setdefault((case["scenario"], "standard" if case["trajectory"] == "standard" else "designed"),
+                          []).append(case)
+    for (mount, kind), group in sorted(groups.items()):
+        cat = lambda key: sum((c[key] for c in group), [])  # noqa: E731
+        ratio = float(np.exp(np.mean(np.log(cat("width_ratio"))))) if cat("width_ratio") else float("nan")
+        print(f"| {mount} | {kind} | {','.join(str(c['seed']) for c in group)} | "
+              f"{_rms(cat('z_sources_old')):.3g} -> {_rms(cat('z_sources_new')):.3g} ({len(cat('z_sources_new'))}) | "
+              f"{_rms(cat('z_base_old')):.3g} -> {_rms(cat('z_base_new')):.3g} ({len(cat('z_base_new'))}) | "
+              f"{ratio:.3g} | {np.mean([c['fit_rms_urad'] for c in group]):.3g} | "
+              f"{np.mean([c['walk_rms_urad'] for c in group]):.3g} |")
+    print()
+    print("| mount | seed | drive sources both identify alone | largest error standard / designed (mu: not scored) | "
+          "n alone standard / designed | walk RMS standard / designed [urad] |")
+    print("|---|---|---|---|---|---|")
+    for case in cases:
+        if case["trajectory"] != "standard":
+            continue
+        other = [c for c in cases if c["scenario"] == case["scenario"] and c["seed"] == case["seed"]
+                 and c["trajectory"] != "standard"]
+        if not other:
+            continue
+        d = other[0]
+        both = [n for n in DRIVES if n in case["abs_errors_si"] and n in d["abs_errors_si"]]
+
+        def worst(c, symbol):  # [um] the largest error over the x0 or the CL both identify alone
+            return max((c["abs_errors_si"][n] * 1e6 for n in both if n.endswith(symbol)), default=float("nan"))
+
+        print(f"| {case['scenario']} | {case['seed']} | {', '.join(both)} | x0 {worst(case, 'x0'):.3g} / "
+              f"{worst(d, 'x0'):.3g} um, CL {worst(case, 'CL'):.3g} / {worst(d, 'CL'):.3g} um | "
+              f"{len(case['pure'])} / {len(d['pure'])} | "
+              f"{case['walk_rms_urad']:.3g} / {d['walk_rms_urad']:.3g} |")
+
+
+def main(argv=None) -> int:
+    from flexcal.validation.prototype.providers import stiffness_provider
+
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--out", required=True)
+    parser.add_argument("--scenarios", default="table1,paper")
+    parser.add_argument("--seeds", default="1,2,3")
+    parser.add_argument("--designs", default="", help="scenario=trajectory.csv,... (flexcal design's)")
+    parser.add_argument("--provider", default="fem", choices=("fem", "analytic"))
+    parser.add_argument("--noise-urad", type=float, default=0.5)
+    parser.add_argument("--walk-seed", type=int, default=101)
+    parser.add_argument("--summary-only", action="store_true")
+    args = parser.parse_args(argv)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    log = out / "cases.jsonl"
+    cases = [json.loads(line) for line in log.read_text().splitlines()] if log.exists() else []
+    designs = dict(item.split("=", 1) for item in args.designs.split(",") if item)
+    if not args.summary_only:
+        provider = stiffness_provider(args.provider, progress=False, workers=None)
+        for name in args.scenarios.split(","):
+            for seed in (int(s) for s in args.seeds.split(",")):
+                for trajectory in [None] + ([designs[name]] if name in designs else []):
+                    key = (name, seed, trajectory or "standard")
+                    if any((c["scenario"], c["seed"], c["trajectory"]) == key for c in cases):
+                        continue
+                    case = run_case(name, seed, trajectory, provider, args.noise_urad, args.walk_seed)
+                    cases.append(case)
+                    with log.open("a") as handle:
+                        handle.write(json.dumps(case) + "\n")
+                    print(f"{key}: z sources {np.round(case['z_sources_old'], 2)} -> "
+                          f"{np.round(case['z_sources_new'], 2)}, base RMS {_rms(case['z_base_old']):.3g} -> "
+                          f"{_rms(case['z_base_new']):.3g}, walk {case['walk_rms_urad']:.3g} urad", flush=True)
+    summarize(cases)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
