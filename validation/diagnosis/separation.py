@@ -1,0 +1,79 @@
+"""Is the winner separated from look-alikes outside the library? (issue #28, docs/diagnosis.md
+"Confidence: leave one effect out").
+
+No test can see an effect nobody wrote down, so the library's other effects stand in for
+the unknown ones: leave one effect E out and ask whether the diagnosis would still have
+named the winner W with high confidence had E been the true cause. For every library term
+E outside W's group: a signature of E's kind (its linearized columns at seeded random
+parameters, with the part the baseline mimics removed), scaled to the size of W's fitted
+signature in this file, plus white noise at the file's noise floor; W's held-out closure
+on that synthetic residual, with the same baseline, legs and folds as the real one. If W
+closes >= the confident closure of some E's signature, then a cause of E's kind outside
+the library would have been named W with high confidence: W is not separated, and the
+diagnosis says `low`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any, Sequence
+
+import numpy as np
+
+from .which import FitProblem, _closure, cross_validate, fit_terms
+
+__all__ = ["lookalike_closures", "separation", "LOOKALIKE_DRAWS"]
+
+LOOKALIKE_DRAWS = 2  # random shapes of each left-out effect (seeded): its typical shape, not the data's
+
+
+def _baseline_residualized(problem: FitProblem, signature: np.ndarray) -> np.ndarray:
+    """(n, 3) [rad] ``signature`` minus what the ridge baseline fits of it (whitened fit)."""
+    w = 1.0 / problem.sigma
+    J = (problem.baseline * w[None, :, None]).reshape(-1, problem.baseline.shape[-1])
+    augmented = np.vstack([J, np.diag(1.0 / problem.prior_sd)])
+    y = (signature * w).reshape(-1)
+    x = np.linalg.lstsq(augmented, np.concatenate([y, np.zeros(J.shape[1])]), rcond=None)[0]
+    return (y - J @ x).reshape(signature.shape) / w
+
+
+def lookalike_closures(problem: FitProblem, winner: str, others: Sequence[str], folds: Sequence[np.ndarray],
+                       size_rms: float, draws: int = LOOKALIKE_DRAWS, seed: int = 0) -> dict[str, float]:
+    """{E: the winner's largest held-out closure [-] over ``draws`` synthetic residuals of E's
+    kind} (module docstring). size_rms [-]: whitened RMS the synthetic signature is scaled to
+    (the winner's fitted signature in the file)."""
+    rng = np.random.default_rng(seed)
+    n = problem.residual.shape[0]
+    out = {}
+    for other in others:
+        columns = problem.columns[other]
+        best = -np.inf
+        for _ in range(draws):
+            signature = _baseline_residualized(problem, columns @ rng.normal(size=columns.shape[-1]))
+            rms = float(np.sqrt(np.mean((signature / problem.sigma) ** 2)))
+            if not rms > 0:
+                continue
+            noise = rng.normal(size=(n, 3)) * problem.sigma
+            synthetic = dataclasses.replace(problem, residual=signature * (size_rms / rms) + noise)
+            before = np.nanmean(cross_validate(synthetic, [], folds) ** 2, axis=0)
+            after = np.nanmean(cross_validate(synthetic, [winner], folds) ** 2, axis=0)
+            best = max(best, _closure(before, after, problem.sigma))
+        if np.isfinite(best):
+            out[other] = float(best)
+    return out
+
+
+def separation(problem: FitProblem, winner: str, group: Sequence[str], folds: Sequence[np.ndarray],
+               confident_closure: float) -> dict[str, Any]:
+    """{"separated": bool, "closest": E or None, "closure_on_closest": [-], "closures": {E: [-]},
+    "signature_rms_noise": [-]}: whether the winner would have closed < ``confident_closure``
+    of every left-out effect's signature of its size."""
+    fit = fit_terms(problem, [winner])
+    size = float(np.sqrt(np.mean((fit.terms_only / problem.sigma) ** 2)))
+    others = [t for t in problem.terms if t not in group]
+    closures = lookalike_closures(problem, winner, others, folds, size)
+    closest = max(closures, key=closures.get) if closures else None
+    worst = closures[closest] if closest else -np.inf
+    return {"separated": bool(worst < confident_closure), "closest": closest,
+            "closure_on_closest": None if closest is None else worst, "closures": closures,
+            "signature_rms_noise": size}
