@@ -185,9 +185,10 @@ def run_diagnosis(measurement: Measurement, *, baseline: Callable[..., BaselineF
         winner_closure = next((r["closure"] for r in first_ranking if r["effect"] == accepted[0]), 0.0) \
             if accepted else 0.0
         # the look-alike test only where it can change the answer (a winner closing enough for `high`)
-        separated = (separation(problem, accepted[0], groups[0], folds, settings.confident_closure)
-                     if accepted and winner_closure >= settings.confident_closure else None)
         collinear = _collinearity(problem, ids)
+        separated = (separation(problem, accepted[0], groups[0], folds, settings.confident_closure,
+                                collinear["max_principal_cosine"][accepted[0]])
+                     if accepted and winner_closure >= settings.confident_closure else None)
         cv_before = cross_validate(problem, [], folds)
         cv_after = cross_validate(problem, accepted, folds)
         final = fit_terms(problem, accepted)
