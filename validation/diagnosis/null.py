@@ -70,6 +70,7 @@ def measure_null(make_none: Callable[[int], Any], diagnose: Callable[[Any], Any]
 
 
 def write_null(path: str | Path, null: NullModel) -> None:
+    Path(path).parent.mkdir(parents=True, exist_ok=True)  # a new --out folder (the cases come later)
     Path(path).write_text(json.dumps(null.as_dict(), indent=1, sort_keys=True) + "\n")
 
 
