@@ -16,7 +16,7 @@ import numpy as np
 
 from .baseline import BaselineFit, calibrate_baseline
 from .null import NullModel
-from .separation import separation
+from .separation import RUNNER_UP_RATIO, runner_up, separation
 from .where import concentration, noise_floor, strata, structure_tests
 from .which import (CriterionSettings, Candidate, cross_validate, fit_terms, leg_folds, make_problem, principal_cosines, score_candidates)
 from ..measurements import Measurement
@@ -189,6 +189,11 @@ def run_diagnosis(measurement: Measurement, *, baseline: Callable[..., BaselineF
         separated = (separation(problem, accepted[0], groups[0], folds, settings.confident_closure,
                                 collinear["max_principal_cosine"][accepted[0]])
                      if accepted and winner_closure >= settings.confident_closure else None)
+        if separated is not None:
+            second = runner_up(first_ranking, accepted[0], groups[0])
+            close = second is not None and second["ratio"] >= RUNNER_UP_RATIO
+            separated = {**separated, "runner_up": second, "separated_from_lookalikes": separated["separated"],
+                         "separated": bool(separated["separated"] and not close)}
         cv_before = cross_validate(problem, [], folds)
         cv_after = cross_validate(problem, accepted, folds)
         final = fit_terms(problem, accepted)
