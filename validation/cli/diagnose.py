@@ -117,9 +117,11 @@ def _separation_lines(report) -> list[str]:
     separation = report.get("separation")
     if separation and separation.get("closest"):
         verdict = "separated" if separation["separated"] else "NOT separated: confidence lowered to low"
+        second = separation.get("runner_up")
         lines += [f"Look-alikes (leave one effect out): on a signature of `{separation['closest']}`'s kind of the "
-                  f"same size the winner would close {separation['closure_on_closest']:.2f} of the held-out gap "
-                  f"({verdict}).", ""]
+                  f"same size the winner would close {separation['closure_on_closest']:.2f} of the held-out gap"
+                  + (f"; on the data `{second['effect']}` closes {second['ratio']:.2f} of what the winner closes"
+                     if second else "") + f" ({verdict}).", ""]
     null = report.get("null")
     if null:
         raised = {k: v for k, v in null["min_gain"].items() if v > report["criteria"]["min_gain_noise"]}
