@@ -115,11 +115,14 @@ def _separation_lines(report) -> list[str]:
     """The look-alike test of the confidence and the null of the trajectory, in words."""
     lines = []
     separation = report.get("separation")
-    if separation and separation.get("closest"):
+    if separation:
         verdict = "separated" if separation["separated"] else "NOT separated: confidence lowered to low"
         second = separation.get("runner_up")
-        lines += [f"Look-alikes (leave one effect out): on a signature of `{separation['closest']}`'s kind of the "
-                  f"same size the winner would close {separation['closure_on_closest']:.2f} of the held-out gap"
+        closest = separation.get("closest")
+        lines += ["Look-alikes (leave one effect out): " +
+                  (f"on a signature of `{closest}`'s kind of the same size the winner would close "
+                   f"{separation['closure_on_closest']:.2f} of the held-out gap" if closest else
+                   "no other effect's signature space meets the winner's")
                   + (f"; on the data `{second['effect']}` closes {second['ratio']:.2f} of what the winner closes"
                      if second else "") + f" ({verdict}).", ""]
     null = report.get("null")
