@@ -125,3 +125,39 @@ def test_lookalike_out_of_the_library_is_not_claimed_with_high_confidence(provid
     assert report["top_effect"] != "none"  # something is claimed (the lag is 10x the noise)...
     assert report["confidence"] == "low", (report["top_effect"], report["separation"])  # ...but not with confidence
     assert report["separation"] is not None and not report["separation"]["separated"]
+
+
+def test_benchmark_command_measures_the_null_first_and_keeps_it(tmp_path, monkeypatch):
+    """diagnose-benchmark diagnoses the null's `none` files (seeds 100-102) before the cases,
+    keeps DIR/null.json, passes the null to every case's diagnosis and reuses the file on a
+    rerun. The diagnosis is a stub here (the real one: the designed-trajectory test above)."""
+    import json
+
+    import flexcal.validation.diagnosis.diagnose as diagnose
+    from flexcal.validation import cli
+
+    calls = []
+
+    class Stub:
+        def __init__(self, gain):
+            self.report = {"top_effect": "none", "top_group": [], "confidence": "none", "noise_floor_urad": 0.5,
+                           "how_far": {"closure": 0.0}, "where": {"concentrated": [], "structure": []},
+                           "ranking": [{"effect": "large_deflection", "gain_noise_variances": gain, "closure": 0.5,
+                                        "delta_bic": 0.0, "significant": False}],
+                           "collinearity": {"absorbed_by_baseline": {}}, "undetectable": []}
+
+    def stub(measurement, null=None, **_):
+        calls.append(null)
+        return Stub(float(len(calls)))  # gains 1, 2, 3 on the three null files
+
+    monkeypatch.setattr(diagnose, "run_diagnosis", stub)
+    out = tmp_path / "bench"
+    command = ["diagnose-benchmark", "--grid", "tiny", "--effects", "none", "--workers", "0", "-q", "--out", str(out)]
+    assert cli.main(command) == 0
+    assert calls[:3] == [None, None, None] and len(calls) == 4  # three null files without a null, then the case
+    null = json.loads((out / "null.json").read_text())
+    assert null["gain"] == {"large_deflection": 3.0} and null["n_files"] == 3
+    assert calls[3].min_gain("large_deflection", 1.0) == 9.0  # 3x the largest null gain
+    assert json.loads((out / "report.json").read_text())["null"]["gain"] == {"large_deflection": 3.0}
+    (out / "cases").rename(tmp_path / "old-cases")  # rerun the case: the null is read, not measured again
+    assert cli.main(command) == 0 and len(calls) == 5 and calls[4].gain == {"large_deflection": 3.0}
