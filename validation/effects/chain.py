@@ -28,7 +28,7 @@ __all__ = ["SensorSettling", "AirTurbulence", "settling_error", "ar1_series", "C
 TERM_SETTLING_TIME = 0.5  # [s] the settling term's time constant at zero log parameter (free: x exp(l))
 SETTLING_LOG_TAU_LIMIT = 4.0  # [-] |ln(tau / TERM_SETTLING_TIME)| clipped: tau in 0.01..27 s, no overflow
 REFERENCE_DWELL = 2.0  # [s] the scenarios' default dwell: the settling amplitude is the lag left after it
-TURBULENCE_MODES = 8  # cosine modes in time per channel of the turbulence term: periods >= 2 T / 8 of a run T
+TURBULENCE_MODES = 8  # cosine modes in time per channel of the turbulence term: periods 2 T / 9 .. T of a run T
 
 
 def settling_error(angles: np.ndarray, time: np.ndarray, time_constant, integration_time: float = 0.0
@@ -134,11 +134,13 @@ def _settling(p, data):  # lag fraction a_c left after the reference dwell (3) [
 
 def _turbulence(p, data):  # cosine amplitudes [rad] (3 x TURBULENCE_MODES): slow noise, smooth in time
     """Low-frequency part of the air path's noise: per channel a sum of cosines
-    cos(pi j (t - t0) / T), j = 1..TURBULENCE_MODES, T the run's length. A smooth function of
+    cos(pi j (t - t0) / T), j = 2..TURBULENCE_MODES + 1, T the run's length. A smooth function of
     time, not of the posture; held-out legs are predicted from the time around them."""
     t = np.asarray(data.time, dtype=float)
     span = max(t[-1] - t[0], 1e-9)
-    basis = np.cos(np.pi * np.outer((t - t[0]) / span, np.arange(1, TURBULENCE_MODES + 1)))  # (n, modes)
+    # from j = 2: the half cosine j = 1 holds 0.985 of a ramp in time, i.e. drift's rate, and with it the term
+    # out-closed drift on drift's own data (10x, standard trajectory x2): drift owns the ramp
+    basis = np.cos(np.pi * np.outer((t - t[0]) / span, np.arange(2, TURBULENCE_MODES + 2)))  # (n, modes)
     return basis @ p.reshape(3, TURBULENCE_MODES).T
 
 
@@ -147,6 +149,6 @@ CHAIN_TERMS = {t.id: t for t in (
     # ln(tau/0.5 s) at +-1 scale (the fit's extra starts) is tau = 0.18 s and 1.4 s: injectors draw 0.3-1.2 s
     _term("sensor_settling", [f"lag_{c}" for c in _XYZ] + ["log_time_constant"], ["-"] * 3 + ["ln(tau/0.5 s)"],
           [1e-3] * 3 + [1.0], _settling),
-    _term("air_turbulence", [f"cos{j}_{c}" for c in _XYZ for j in range(1, TURBULENCE_MODES + 1)],
+    _term("air_turbulence", [f"cos{j}_{c}" for c in _XYZ for j in range(2, TURBULENCE_MODES + 2)],
           ["rad"] * (3 * TURBULENCE_MODES), [1e-6] * (3 * TURBULENCE_MODES), _turbulence),
 )}
