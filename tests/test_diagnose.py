@@ -120,8 +120,9 @@ def test_benchmark_command_tiny_grid_survives_a_failed_case_and_resumes(tmp_path
     out = tmp_path / "bench"
     # --workers 0: the cases run in this process, where the monkeypatched failure applies
     # (the executor's worker processes are tested in tests/test_scale.py)
+    # --no-null: the trajectory's null (three more `none` diagnoses first) is tested in test_diagnose_chain
     command = ["diagnose-benchmark", "--grid", "tiny", "--effects", "drift,none,sensor_interpolation", "--out",
-               str(out), "--quiet", "--workers", "0"]
+               str(out), "--quiet", "--workers", "0", "--no-null"]
     measure = bench.benchmark_measurement
 
     def none_runs_out_of_memory(effect_id, *args, **kwargs):
@@ -190,7 +191,7 @@ def test_benchmark_measures_every_case_along_a_given_trajectory(tmp_path, monkey
 
     monkeypatch.setattr(diagnose, "run_diagnosis", stub)
     out = tmp_path / "bench"
-    command = ["diagnose-benchmark", "--grid", "tiny", "--effects", "drift,none", "--workers", "0", "-q"]
+    command = ["diagnose-benchmark", "--grid", "tiny", "--effects", "drift,none", "--workers", "0", "-q", "--no-null"]
     assert cli.main([*command, "--trajectory", str(trajectory), "--out", str(out)]) == 0
     expected_inputs, expected_leg = repeated_trajectory(2, (inputs, leg))
     assert len(seen) == 2 and expected_leg.max() == 2 * leg.max() == 8

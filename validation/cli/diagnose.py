@@ -46,6 +46,10 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--particles", type=int, help="PSO particles of each baseline start (default %(default)s)")
     parser.add_argument("--iterations", type=int, help="PSO iterations of each baseline start (default %(default)s)")
     add_model_options(parser)
+    parser.add_argument("--null", metavar="JSON",
+                        help="the null of the file's trajectory: each term's held-out gain on `none` files along it "
+                             "(DIR/null.json of flexcal diagnose-benchmark --trajectory ...); a term must gain 3x its "
+                             "own there as well (docs/diagnosis.md, Null of the trajectory)")
     add_out(parser, what="report.json, report.md, residual.png, strata.png, heldout.png")
 
 
@@ -61,6 +65,7 @@ def markdown(report) -> str:
              f"**Top effect: `{report['top_effect']}`** (confidence {report['confidence']}"
              + (f"; indistinguishable group: {', '.join(report['top_group'])}" if len(report["top_group"]) > 1 else "")
              + f"). Effects added in turn: {', '.join(report['accepted_effects']) or 'none'}.", "",
+             *_separation_lines(report),
              f"Noise floor {report['noise_floor_urad']:.3g} urad ({_fmt(report['noise_floor_per_angle_urad'])} per "
              f"angle; {report['noise_floor']['method']}).", "",
              f"Baseline: {report['baseline']['description']}; in-sample RMS {_fmt(report['baseline']['in_sample_rms_urad'])}"
@@ -106,6 +111,28 @@ def markdown(report) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _separation_lines(report) -> list[str]:
+    """The look-alike test of the confidence and the null of the trajectory, in words."""
+    lines = []
+    separation = report.get("separation")
+    if separation:
+        verdict = "separated" if separation["separated"] else "NOT separated: confidence lowered to low"
+        second = separation.get("runner_up")
+        closest = separation.get("closest")
+        lines += ["Look-alikes (leave one effect out): " +
+                  (f"on a signature of `{closest}`'s kind of the same size the winner would close "
+                   f"{separation['closure_on_closest']:.2f} of the held-out gap" if closest else
+                   "no other effect's signature space meets the winner's")
+                  + (f"; on the data `{second['effect']}` closes {second['ratio']:.2f} of what the winner closes"
+                     if second else "") + f" ({verdict}).", ""]
+    null = report.get("null")
+    if null:
+        raised = {k: v for k, v in null["min_gain"].items() if v > report["criteria"]["min_gain_noise"]}
+        lines += [f"Null of the trajectory ({null['n_files']} `none` files): gain thresholds raised for "
+                  + (", ".join(f"{k} {v:.2f}" for k, v in raised.items()) or "no term") + " [noise variances].", ""]
+    return lines
+
+
 def _form_floor(measurement, space, residual) -> dict:
     """The baseline model's form floor from the sidecar's presets (the diagnosis itself never
     reads the sidecar); residual (n, 3) [rad] measured - baseline."""
@@ -145,6 +172,9 @@ def run(args: argparse.Namespace) -> int:
 
     if args.particles < 2 or args.iterations < 1:
         raise ValueError("--particles must be >= 2 and --iterations >= 1")
+    from ..diagnosis.null import read_null
+
+    null = read_null(args.null) if args.null else None
     measurement = read_data(data_path(args), args)
     check_measurement(measurement)  # before the model's FEM correction (~30 s cold)
     from .options import executor_options
@@ -154,7 +184,7 @@ def run(args: argparse.Namespace) -> int:
                         mechanism=mechanism_from_metadata(measurement.metadata), **executor_options(args))
     baseline = partial(calibrate_baseline, space=space,
                        settings=BaselineSettings(particles=args.particles, iterations=args.iterations))
-    diagnosis = run_diagnosis(measurement, baseline=baseline, rng=args.seed, progress=show_progress(args))
+    diagnosis = run_diagnosis(measurement, baseline=baseline, rng=args.seed, progress=show_progress(args), null=null)
     report = diagnosis.report
     report["baseline"]["model_stiffness"] = args.model_stiffness
     report["baseline"]["second_order"] = bool(args.second_order)

@@ -31,6 +31,8 @@ import time
 
 import numpy as np
 
+from ..diagnosis.null import NULL_SEEDS
+
 __all__ = ["configure", "run", "EXAMPLES"]
 
 # --out holds the finished designs of an earlier run, which a rerun resumes (no --force)
@@ -61,6 +63,11 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="one as-built mount (table1 draws and noise) for every case (default: 1000 + the case "
                              "seed; a fixed one keeps the FEM cache warm)")
     add_seed(parser, what="the baseline optimizer of every diagnosis", default=0)
+    parser.add_argument("--no-null", action="store_true",
+                        help="no null of the trajectory: the fixed significance threshold alone (the diagnosis "
+                             "before issue 28); by default `none` files of scenario seeds 1100-1102 along the same "
+                             "trajectory are diagnosed first and each term must gain 3x its gain there "
+                             "(DIR/null.json)")
     from .options import add_executor_options
 
     add_executor_options(parser, what="the cases (and, with --provider fem, the FEM segment builds)")
@@ -78,7 +85,7 @@ def baseline_stiffness(provider_name: str) -> str:
 
 
 def case_spec(effect_id, magnitude, case_seed, *, provider_name, noise_urad, cycles, seed, scenario_seed,
-              trajectory: str | None = None) -> dict:
+              trajectory: str | None = None, null: bool = False) -> dict:
     """Everything that decides one case's row: its id (``design_id`` of this) keys the
     case store, so a rerun with other settings never reuses a row. trajectory: the
     ``trajectory_digest`` of a trajectory file, None for the standard trajectory (no key:
@@ -90,6 +97,8 @@ def case_spec(effect_id, magnitude, case_seed, *, provider_name, noise_urad, cyc
             "scenario_seed": scenario_seed}
     if trajectory is not None:
         spec["trajectory"] = trajectory
+    if null:
+        spec["null_seeds"] = list(NULL_SEEDS)
     return spec
 
 
@@ -108,7 +117,7 @@ def grid_cases(ids, grid) -> list[tuple[str, float, int]]:
     return cases
 
 
-def case_record(spec: dict, *, space=None, trajectory=None) -> dict:
+def case_record(spec: dict, *, space=None, trajectory=None, null=None) -> dict:
     """One case of ``case_spec`` run and scored (a pure function, run on a worker): the
     record {"id", "spec", "row", "answer"} the case store keeps; space: the baseline's model;
     trajectory: (inputs (k, 3) [m], leg (k,)) of one cycle, the one whose digest the spec
@@ -130,7 +139,7 @@ def case_record(spec: dict, *, space=None, trajectory=None) -> dict:
     case = benchmark_measurement(spec["effect"], spec["magnitude_noise"], spec["seed"], provider,
                                  cycles=spec["cycles"], noise_urad=spec["noise_urad"],
                                  scenario_seed=spec["scenario_seed"], trajectory=trajectory)
-    row = run_case(case, lambda m: run_diagnosis(m, rng=spec["baseline_seed"],
+    row = run_case(case, lambda m: run_diagnosis(m, rng=spec["baseline_seed"], null=null,
                                                  baseline=partial(calibrate_baseline, space=space)))
     row["wall_s"] = time.perf_counter() - start
     return {"id": design_id(spec), "spec": spec, "row": row, "answer": case.answer}
@@ -151,9 +160,36 @@ def case_slices(specs) -> list:
     return chain_slices(chains)
 
 
+def benchmark_null(*, provider_name, noise_urad, cycles, seed, space=None, trajectory=None, path=None, log=None):
+    """The ``NullModel`` of the benchmark's trajectory: `none` files of ``NULL_SEEDS`` (scenario
+    seeds 1100-1102, apart from every grid's cases) diagnosed without a null; read from / kept
+    in ``path`` (DIR/null.json) so that a resumed grid uses the same one."""
+    from functools import partial
+    from pathlib import Path
+
+    from ..diagnosis.baseline import calibrate_baseline
+    from ..diagnosis.benchmark import benchmark_measurement, trajectory_digest
+    from ..diagnosis.diagnose import run_diagnosis
+    from ..diagnosis.null import measure_null, read_null, write_null
+    from ..effects.library import NONE
+    from ..prototype.providers import stiffness_provider
+
+    if path is not None and Path(path).exists():
+        return read_null(path)
+    (log or (lambda text: None))(f"diagnose-benchmark: the null of the trajectory ({len(NULL_SEEDS)} none files)")
+    provider = stiffness_provider(provider_name, progress=False)
+    null = measure_null(lambda s: benchmark_measurement(NONE, 0.0, s, provider, cycles=cycles, noise_urad=noise_urad,
+                                                        trajectory=trajectory).measurement,
+                        lambda m: run_diagnosis(m, rng=seed, baseline=partial(calibrate_baseline, space=space)),
+                        NULL_SEEDS, "standard" if trajectory is None else trajectory_digest(*trajectory))
+    if path is not None:
+        write_null(path, null)
+    return null
+
+
 def run_benchmark(ids, grid, *, noise_urad, cycles, seed, progress, scenario_seed=None, space=None,
                   provider_name="analytic", store=None, log=None, workers: int | None = 0, scheduler=None,
-                  trajectory=None):
+                  trajectory=None, null=None):
     """(rows, answers, failures) of every case of the grid, rows in grid order; space: the
     baseline's model (default: the baseline's own default); trajectory: (inputs (k, 3) [m],
     leg (k,)) of one cycle every case is measured along (None: the standard trajectory);
@@ -175,7 +211,8 @@ def run_benchmark(ids, grid, *, noise_urad, cycles, seed, progress, scenario_see
     specs, labels = [], {}
     for effect_id, magnitude, case_seed in grid_cases(ids, grid):
         spec = case_spec(effect_id, magnitude, case_seed, provider_name=provider_name, noise_urad=noise_urad,
-                         cycles=cycles, seed=seed, scenario_seed=scenario_seed, trajectory=digest)
+                         cycles=cycles, seed=seed, scenario_seed=scenario_seed, trajectory=digest,
+                         null=null is not None)
         specs.append(spec)
         labels[design_id(spec)] = f"{effect_id} {magnitude:g}x seed {case_seed}"
     records = {} if store is None else {i: r for i in labels if (r := store.load(i)) is not None}
@@ -200,7 +237,7 @@ def run_benchmark(ids, grid, *, noise_urad, cycles, seed, progress, scenario_see
             bar.update(1)
 
         for identifier, text in run_jobs(pending, case_record, on_done, key=design_id, workers=n_workers,
-                                         scheduler=scheduler, job_options={"space": space, "trajectory": trajectory},
+                                         scheduler=scheduler, job_options={"space": space, "trajectory": trajectory, "null": null},
                                          task_prefix="case").items():
             failures[labels[identifier]] = text
             log(f"diagnose-benchmark: case {labels[identifier]} failed: {text}")
@@ -302,12 +339,15 @@ def run(args: argparse.Namespace) -> int:
     log = (lambda text: print(text, file=sys.stderr)) if progress else (lambda text: None)
     store = DesignStore(out_folder(args.out, resume=True) / "cases")
     executor = executor_options(args)
+    space = model_space(baseline_stiffness(args.provider), second_order=True, progress=progress, **executor)
     try:
+        null = None if args.no_null else benchmark_null(
+            provider_name=args.provider, noise_urad=args.noise_urad, cycles=args.cycles, seed=args.seed, space=space,
+            trajectory=trajectory, path=store.folder.parent / "null.json", log=log)
         rows, answers, failures = run_benchmark(
             ids, args.grid, noise_urad=args.noise_urad, cycles=args.cycles, seed=args.seed,
             progress=progress, scenario_seed=args.scenario_seed, provider_name=args.provider, store=store, log=log,
-            space=model_space(baseline_stiffness(args.provider), second_order=True, progress=progress, **executor),
-            trajectory=trajectory, **executor)
+            space=space, trajectory=trajectory, null=null, **executor)
     except KeyboardInterrupt:
         log(f"diagnose-benchmark: interrupted; finished cases are kept in {store.folder}, run the same command "
             f"again to resume")
@@ -318,7 +358,8 @@ def run(args: argparse.Namespace) -> int:
     report = {"grid": args.grid, "provider": args.provider, "scenario_seed": args.scenario_seed,
               "baseline_model": {"stiffness": baseline_stiffness(args.provider), "second_order": True},
               "noise_urad": args.noise_urad, "cycles": args.cycles, "trajectory": trajectory_report,
-              "out_of_library": list(OUT_OF_LIBRARY_IDS), "rows": rows, "failures": failures, "summary": summary,
+              "out_of_library": list(OUT_OF_LIBRARY_IDS), "null": None if null is None else null.as_dict(),
+              "rows": rows, "failures": failures, "summary": summary,
               "note": "answers.json holds what was injected; the diagnosis only received the measurement"}
     with staged_output(args.out, resume=True) as staging:
         write_json(staging / "answers.json", answers)

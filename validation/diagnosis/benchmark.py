@@ -131,6 +131,8 @@ def run_case(case: BenchmarkCase, diagnose: Callable[[Measurement], Any]) -> dic
            "achieved_magnitude_noise": case.answer.get("achieved_magnitude_noise"),
            "predicted": report["top_effect"], "group": group, "confidence": report["confidence"],
            "noise_floor_urad": report["noise_floor_urad"], "closure": report["how_far"]["closure"]}
+    separation = report.get("separation") or {}
+    row["separation"] = {k: separation.get(k) for k in ("separated", "closest", "closure_on_closest", "runner_up")}
     row["top3"] = [{k: r[k] for k in ("effect", "closure", "gain_noise_variances", "delta_bic", "significant")}
                    for r in report["ranking"][:3]]
     if in_library:

@@ -15,6 +15,8 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from .baseline import BaselineFit, calibrate_baseline
+from .null import NullModel
+from .separation import RUNNER_UP_RATIO, runner_up, separation
 from .where import concentration, noise_floor, strata, structure_tests
 from .which import (CriterionSettings, Candidate, cross_validate, fit_terms, leg_folds, make_problem, principal_cosines, score_candidates)
 from ..measurements import Measurement
@@ -127,12 +129,14 @@ def _row(c: Candidate, group: list[str] | None = None) -> dict[str, Any]:
 
 def run_diagnosis(measurement: Measurement, *, baseline: Callable[..., BaselineFit] = calibrate_baseline,
                   terms: Sequence | None = None, settings: CriterionSettings = CriterionSettings(),
-                  rng=None, progress: bool = False) -> Diagnosis:
+                  rng=None, progress: bool = False, null: NullModel | None = None) -> Diagnosis:
     """Diagnose the gap of ``measurement`` (module docstring).
 
     baseline(measurement, rng=, progress=) -> BaselineFit; terms: ``ModelTerm`` candidates
     (default: the effect library's, minus those whose extra column is missing); rng: seed of
-    the baseline's optimizer."""
+    the baseline's optimizer; null: the terms' gains on `none` files of the same trajectory
+    (``diagnosis.null``): each term must also gain ``NULL_FACTOR`` x its own (None: the
+    fixed threshold alone, as calibrated on the standard trajectory)."""
     from flexcal.model.trajectory import travel_directions
 
     from ..blas_threads import single_blas_thread
@@ -156,12 +160,14 @@ def run_diagnosis(measurement: Measurement, *, baseline: Callable[..., BaselineF
         Jw = (fit.jacobian / sigma[None, :, None]).reshape(-1, fit.jacobian.shape[-1])
         k_baseline = _effective_dof(Jw, fit.prior_sd)
         ids = [t.id for t in terms]
+        min_gain = {} if null is None else {i: null.min_gain(i, settings.min_gain_noise) for i in ids}
         stages, accepted, first_ranking, groups = [], [], None, []
         candidates = list(ids)
         for _ in range(MAX_STAGES):
             if not candidates:
                 break
-            ranked, ms0 = score_candidates(problem, accepted, candidates, folds, settings, k_baseline)
+            ranked, ms0 = score_candidates(problem, accepted, candidates, folds, settings, k_baseline,
+                                           min_gain)
             chi2_before = fit_terms(problem, accepted).chi2
             best = next((c for c in ranked if c.significant), None)
             group = _group(best, ranked, chi2_before, settings.group_ratio) if best else []
@@ -176,12 +182,27 @@ def run_diagnosis(measurement: Measurement, *, baseline: Callable[..., BaselineF
             groups.append(group)
             accepted.append(best.id)
             candidates = [c for c in candidates if c not in group]
+        winner_closure = next((r["closure"] for r in first_ranking if r["effect"] == accepted[0]), 0.0) \
+            if accepted else 0.0
+        # the look-alike test only where it can change the answer (a winner closing enough for `high`)
         collinear = _collinearity(problem, ids)
+        separated = (separation(problem, accepted[0], groups[0], folds, settings.confident_closure,
+                                collinear["max_principal_cosine"][accepted[0]])
+                     if accepted and winner_closure >= settings.confident_closure else None)
+        if separated is not None:
+            second = runner_up(first_ranking, accepted[0], groups[0])
+            close = second is not None and second["ratio"] >= RUNNER_UP_RATIO
+            separated = {**separated, "runner_up": second, "separated_from_lookalikes": separated["separated"],
+                         "separated": bool(separated["separated"] and not close)}
         cv_before = cross_validate(problem, [], folds)
         cv_after = cross_validate(problem, accepted, folds)
         final = fit_terms(problem, accepted)
     report = _report(measurement, fit, residual, floor, unit, folds, first_ranking, stages, groups, accepted,
                      collinear, cv_before, cv_after, final, skipped, settings, k_baseline)
+    report["separation"] = separated
+    report["null"] = None if null is None else {**null.as_dict(), "min_gain": min_gain}
+    if separated is not None and not separated["separated"]:
+        report["confidence"] = "low"  # a look-alike outside the library would have been named the same
     return Diagnosis(report=report, residual=residual, heldout_before=cv_before, heldout_after=cv_after,
                      baseline=fit, folds=tuple(folds), stages=tuple(accepted))
 

@@ -249,9 +249,12 @@ def _closure(before: np.ndarray, after: np.ndarray, sigma: np.ndarray) -> float:
 
 def score_candidates(problem: FitProblem, accepted: Sequence[str], candidates: Sequence[str],
                      folds: Sequence[np.ndarray], settings: CriterionSettings,
-                     k_baseline: float) -> tuple[list[Candidate], np.ndarray]:
+                     k_baseline: float, min_gain: dict | None = None) -> tuple[list[Candidate], np.ndarray]:
     """Score each candidate added to ``accepted``; returns (candidates best first by held-out
-    closure, held-out mean square (3,) [rad^2] of ``accepted`` alone)."""
+    closure, held-out mean square (3,) [rad^2] of ``accepted`` alone). min_gain {id: noise
+    variances}: a term's own gain threshold (the trajectory's null, ``diagnosis.null``),
+    ``settings.min_gain_noise`` for the others."""
+    min_gain = min_gain or {}
     n = problem.residual.size
     base_fit = fit_terms(problem, accepted)
     k0 = k_baseline + sum(problem.terms[i].n_params for i in accepted)
@@ -268,7 +271,7 @@ def score_candidates(problem: FitProblem, accepted: Sequence[str], candidates: S
         closure = _closure(ms0, ms, problem.sigma)
         gain = float(np.sum(ms0 - ms) / np.mean(problem.sigma**2))
         significant = bool(d_bic <= -settings.min_delta_bic and closure >= settings.min_closure
-                           and gain >= settings.min_gain_noise)
+                           and gain >= min_gain.get(cid, settings.min_gain_noise))
         out.append(Candidate(id=cid, n_params=k, chi2=fit.chi2, delta_aicc=float(d_aicc), delta_bic=float(d_bic),
                              heldout_ms_before=ms0, heldout_ms_after=ms, closure=closure, gain_noise=gain,
                              significant=significant))

@@ -18,6 +18,7 @@ from typing import Any, Callable
 import numpy as np
 
 from ..effects import injectors as inj
+from . import chain
 from .magnitude import estimate_magnitude, standard_setting
 from .terms import TERMS, ModelTerm, path_length
 
@@ -25,7 +26,8 @@ __all__ = ["EFFECT_IDS", "NONE", "OUT_OF_LIBRARY_IDS", "EffectEntry", "LIBRARY",
            "effects_from_scenario", "INJECTOR_TYPES"]
 
 EFFECT_IDS = ("drift", "sensor_crosstalk", "sensor_scale", "lead_error", "friction_hysteresis",
-              "coupling_windup", "large_deflection", "gravity_sag", "thermal", "creep", "step_loss")
+              "coupling_windup", "large_deflection", "gravity_sag", "thermal", "creep", "step_loss",
+              "sensor_settling", "air_turbulence")
 NONE = "none"
 OUT_OF_LIBRARY_IDS = ("sensor_interpolation",)
 INJECTOR_TYPES = {
@@ -34,6 +36,7 @@ INJECTOR_TYPES = {
     "coupling_windup": inj.CouplingWindup, "large_deflection": inj.LargeDeflection,
     "gravity_sag": inj.GravitySag, "thermal": inj.Thermal, "creep": inj.Creep, "step_loss": inj.StepLoss,
     "sensor_interpolation": inj.SensorInterpolation,
+    "sensor_settling": chain.SensorSettling, "air_turbulence": chain.AirTurbulence,
 }
 
 
@@ -94,6 +97,17 @@ def _shape(effect_id: str, rng: np.random.Generator):
         compliance = _signs(rng, 1) * rng.uniform(0.5, 1.5, 3) * 1e-9
         fraction, taus = rng.uniform(0.2, 0.5), (rng.uniform(5.0, 20.0), rng.uniform(30.0, 60.0))
         return lambda f: inj.Creep(compliance=f * compliance, fraction=fraction, time_constants=taus)
+    if effect_id == "sensor_settling":
+        # the lag left after the 2 s dwell, per channel: tau = 0.3-1.2 s (exp(-2/tau) = 0.001-0.19);
+        # the strength factor scales that remaining share, so the signature is ~linear in it
+        remaining = np.exp(-2.0 / rng.uniform(0.3, 1.2)) * rng.uniform(0.7, 1.0, 3)
+        window = rng.uniform(0.0, 0.5) * (rng.uniform() < 0.5)  # half the sensors average over 0-0.5 s
+        return lambda f: chain.SensorSettling(time_constant=-2.0 / np.log(np.clip(f * remaining, 1e-12, 0.9)),
+                                              integration_time=window)
+    if effect_id == "air_turbulence":
+        sd, seed = rng.uniform(0.5, 1.0, 3) * 1e-6, int(rng.integers(2**31))
+        correlation = rng.uniform(30.0, 120.0)  # [s] slow refraction drift of the air path
+        return lambda f: chain.AirTurbulence(sd=f * sd, correlation_time=correlation, seed=seed)
     if effect_id == "sensor_interpolation":
         amplitude, period = rng.uniform(0.5, 1.0, 3) * 1e-6, rng.uniform(0.2e-3, 0.6e-3)
         phase = rng.uniform(0, 2 * np.pi, 3)
@@ -199,10 +213,12 @@ _DESCRIPTIONS = {
     "thermal": "thermal expansion of the drives with the room temperature (column temperature_c)",
     "creep": "dwell-dependent creep of the drives under load",
     "step_loss": "lost motor steps: persistent whole-step offsets",
+    "sensor_settling": "first-order sensor dynamics: the reading lags the jump of each move (time stamps)",
+    "air_turbulence": "correlated (AR(1), low-frequency) air-turbulence noise on the angles",
     "sensor_interpolation": "OUT OF LIBRARY: sensor sub-division error periodic in the measured angle",
 }
 LIBRARY: dict[str, EffectEntry] = {
-    effect_id: EffectEntry(id=effect_id, description=_DESCRIPTIONS[effect_id], term=TERMS.get(effect_id),
+    effect_id: EffectEntry(id=effect_id, description=_DESCRIPTIONS[effect_id], term={**TERMS, **chain.CHAIN_TERMS}.get(effect_id),
                            make_injector=(lambda m, rng=None, _id=effect_id: make_injector(_id, m, rng)))
     for effect_id in EFFECT_IDS + OUT_OF_LIBRARY_IDS
 }
