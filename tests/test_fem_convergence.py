@@ -13,9 +13,9 @@ def test_recovers_rate_and_limit_of_a_power_law():
     values = limit + 0.3 * h[:, None, None] ** rate
     fit = richardson(h, values)
     # exact data: only the root finder's tolerance (xtol 1e-10 on p) and round-off remain
-    assert np.allclose(fit.rate, rate, rtol=1e-8)
-    assert np.allclose(fit.limit, limit, rtol=1e-10)
-    assert np.allclose(fit.error_estimate, 0.3 * h[-1] ** rate, rtol=1e-8)
+    assert np.allclose(fit.rate, rate, rtol=1e-8)  # the root finder's xtol 1e-10 on p, amplified by log h
+    assert np.allclose(fit.limit, limit, rtol=1e-10)  # exact data: round-off of the extrapolation only
+    assert np.allclose(fit.error_estimate, 0.3 * h[-1] ** rate, rtol=1e-8)  # follows the rate's 1e-8
 
 
 def test_non_monotone_entries_keep_the_finest_value():
