@@ -5,8 +5,10 @@ nothing else. ``read_mount(path)`` gives the ``MechanismParams`` of a file,
 ``mount_text(mechanism)`` the file of a ``MechanismParams`` (every key with a comment),
 ``mount_table`` / ``mount_from_table`` the same as a dict (the measurement sidecar carries
 it). ``flexcal mount --example`` prints the reference mount's file; docs/mount.md explains
-every key. Writing then reading gives back the same floats: each number is written as the
-shortest decimal that converts back to the SI value exactly (``_display``).
+every key. Each number is written as the display value that converts back to the SI value
+exactly when one exists (``_display``): the reference mount and any mount read from a file
+come back as the same floats; a value no double in mm converts back to exactly (the double
+grids of m and mm do not line up everywhere) comes back within one unit in the last place.
 
 The family is the paper's: three load chains L1-L3 forming the remote centre and three
 drives D1-D3, each chain two leaf flexures turned 90 deg at each end of a strut
