@@ -263,12 +263,12 @@ def scenario_trajectory(spec: dict[str, Any], space: ParameterSpace, base: Path)
 
 
 def _from_table(table: dict[str, Any], *, base: Path, seed: int | None, noise_urad: float | None,
-                space: ParameterSpace, source: str, mount=None) -> Scenario:
+                space: ParameterSpace, source: str, mount=None, keep_space: bool = False) -> Scenario:
     typed = convert(table, ScenarioFile, source=source)
     seed = typed.seed if seed is None else int(seed)
     if mount is not None:
         space = parameter_space(mount)
-    elif typed.mount is not None:
+    elif typed.mount is not None and not keep_space:
         from flexcal.geometry.mount import read_mount
 
         space = parameter_space(read_mount((base / typed.mount).resolve()))
@@ -306,14 +306,17 @@ def load_scenario(name_or_path: str, *, seed: int | None = None, noise_urad: flo
     """A built-in scenario by name (``table1``, ``nominal``, ``paper``) or a TOML file.
 
     ``seed`` and ``noise_urad`` override the file's values (command-line options), ``mount``
-    (``MechanismParams``, ``--mount FILE``) the scenario's mount. A file
+    (``MechanismParams``, ``--mount FILE``) the scenario's mount; a ``space`` given (a
+    sweep's design, ``flexcal design``'s scenario space) does too, unless ``mount`` is. A file
     is checked against ``ScenarioFile`` (bounded size, UTF-8, known keys of the right
     types); every refusal is a ValueError of one line naming the file.
     """
+    keep_space = space is not None
     space = space or parameter_space()
     if name_or_path in BUILTIN_SCENARIOS:
         return _from_table(BUILTIN_SCENARIOS[name_or_path], base=Path.cwd(), seed=seed, noise_urad=noise_urad,
-                           space=space, source=f"built-in scenario {name_or_path!r}", mount=mount)
+                           space=space, source=f"built-in scenario {name_or_path!r}", mount=mount,
+                           keep_space=keep_space)
     path = Path(name_or_path)
     if not path.is_file():
         raise FileNotFoundError(f"scenario {name_or_path!r} is neither a built-in ({', '.join(BUILTIN_SCENARIOS)}) "
@@ -321,7 +324,7 @@ def load_scenario(name_or_path: str, *, seed: int | None = None, noise_urad: flo
     table = read_toml(path, what="scenario file")
     try:
         return _from_table(table, base=path.parent, seed=seed, noise_urad=noise_urad, space=space, source=str(path),
-                           mount=mount)
+                           mount=mount, keep_space=keep_space)
     except (ValueError, FileNotFoundError) as error:  # checks after the schema name the key, not always the file
         if str(path) in str(error):
             raise
