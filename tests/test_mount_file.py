@@ -178,3 +178,32 @@ def test_chain_reference_takes_any_chain_of_the_mount(tmp_path):
         "length_mm", "hinge_length_mm", "width_mm", "fillet_mm", "t1_mm", "t2_mm", "section_mm")})
     chain, params = build_chain(args)
     assert chain.thickness_2 == 5e-3 and params["t2"] == 5.0
+
+
+def test_sweep_identification_runs_on_the_mount_of_the_file():
+    from flexcal.validation.sweep.identify import mount_with_design
+    from flexcal.validation.sweep.space import build_part_params, designs_from_config
+
+    mirror = read_mount(EXAMPLES / "mirror600.mount.toml")
+    table = mount_table(mirror)
+    chain = {"length_mm": [120.0], "hinge_length_mm": [15.0], "width_mm": [32.0], "fillet_mm": [4.0], "t1_mm": [3.0],
+             "t2_mm": [3.0], "section_mm": [40.0], "connector_mm": [8.0], "end_block_mm": [8.0]}  # fits 120 mm drives
+    config = {"sweep": {"kind": "chain", "method": "grid"}, "chain": chain, "identification": {"enabled": True}}
+    designs = designs_from_config(config, mount=table)
+    assert designs and all(d["identification"]["mount"] == table for d in designs)
+    mechanism = mount_with_design(build_part_params(designs[0]), designs[0]["identification"]["mount"])
+    assert [c.point_b for c in mechanism.chains] == [c.point_b for c in mirror.chains]
+    assert mechanism.payload_mass == 80.0 and {c.chain.width for c in mechanism.chains} == {0.032}  # the design's w
+    with pytest.raises(ValueError, match="enable it"):
+        designs_from_config({"sweep": {"kind": "chain"}}, mount=table)
+
+
+def test_structure_takes_the_payload_inertia_of_the_mount():
+    from flexcal.fem.mass import box_inertia
+    from flexcal.validation.structure.mount import payload_mass_matrix
+
+    at_centre = dataclasses.replace(reference_mechanism(), centre_of_gravity=(0.0, 0.0, 0.0))  # no parallel-axis part
+    box = box_inertia(300.0, np.array(at_centre.payload_box))
+    assert np.allclose(payload_mass_matrix(at_centre)[3:, 3:], box, rtol=1e-12)  # the file's box
+    given = dataclasses.replace(at_centre, payload_inertia=(10.0, 20.0, 30.0))
+    assert np.allclose(payload_mass_matrix(given)[3:, 3:], np.diag([10.0, 20.0, 30.0]), rtol=1e-12)
