@@ -14,7 +14,7 @@ from flexcal.geometry.mount import mount_from_table, read_mount
 from flexcal.validation import cli
 
 MIRROR = Path(__file__).resolve().parents[1] / "examples" / "mirror600.mount.toml"
-QUICK = ["--model-stiffness", "closed-form", "--particles", "20", "--iterations", "10"]
+QUICK = ["--model-stiffness", "closed-form", "--particles", "40", "--iterations", "10"]  # PSO: > 36 particles
 
 
 @pytest.mark.slow

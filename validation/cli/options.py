@@ -57,7 +57,17 @@ def add_mount(parser: argparse.ArgumentParser, *, what: str = "the scenario's mo
                              f"{what}; checked before any computation")
 
 
-_MOUNTS: dict[str, object] = {}  # path -> its checked MechanismParams (read and warned about once per run)
+_MOUNTS: dict[tuple, object] = {}  # (path, size, mtime) -> its checked MechanismParams (read and warned about once)
+
+
+def _file_key(path: str) -> tuple:
+    import os
+
+    try:
+        stat = os.stat(path)
+    except OSError:
+        return (path,)  # read_mount says what is wrong
+    return (path, stat.st_size, stat.st_mtime_ns)
 
 
 def mount_option(args: argparse.Namespace):
@@ -65,11 +75,12 @@ def mount_option(args: argparse.Namespace):
     path = getattr(args, "mount", None)
     if path is None:
         return None
-    if path not in _MOUNTS:
+    key = _file_key(path)
+    if key not in _MOUNTS:
         from ..mount_checks import read_checked_mount
 
-        _MOUNTS[path] = read_checked_mount(path)
-    return _MOUNTS[path]
+        _MOUNTS[key] = read_checked_mount(path)
+    return _MOUNTS[key]
 
 
 def data_mechanism(metadata: dict, args: argparse.Namespace):
@@ -87,7 +98,7 @@ def data_mechanism(metadata: dict, args: argparse.Namespace):
     if mount is None:
         return data
     differences = mount_differences(data, mount)
-    key = ("differences", args.mount)
+    key = ("differences", *_file_key(args.mount), id(metadata))
     if differences and key not in _MOUNTS:
         _MOUNTS[key] = True
         logging.getLogger("flexcal.mount").warning(
