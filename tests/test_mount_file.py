@@ -109,9 +109,10 @@ def test_impossible_mounts_are_refused_in_one_line(tmp_path, capsys, change, wor
 
 
 def test_a_free_direction_is_named(tmp_path, capsys):
-    # D3 pushing vertically through the x axis: all six chain axes meet the x axis, so nothing resists theta_x
+    # D3 pushing vertically through the x axis (clear of L1-L3): all six chain axes meet the x axis (D1, D2 at
+    # infinity), so nothing resists theta_x
     table = example_table()
-    table["chains"][5].update(point_a_mm=[200.0, 0.0, 150.0], point_b_mm=[200.0, 0.0, 0.0])
+    table["chains"][5].update(point_a_mm=[300.0, 0.0, -300.0], point_b_mm=[300.0, 0.0, -150.0])
     path = write(tmp_path, table)
     with pytest.raises(ValueError, match=r"not held in rotation about x \(theta_x\)"):
         read_checked_mount(path)
@@ -207,3 +208,13 @@ def test_structure_takes_the_payload_inertia_of_the_mount():
     assert np.allclose(payload_mass_matrix(at_centre)[3:, 3:], box, rtol=1e-12)  # the file's box
     given = dataclasses.replace(at_centre, payload_inertia=(10.0, 20.0, 30.0))
     assert np.allclose(payload_mass_matrix(given)[3:, 3:], np.diag([10.0, 20.0, 30.0]), rtol=1e-12)
+
+
+def test_chains_that_collide_are_refused(tmp_path, capsys):
+    table = example_table()
+    table["chains"][4].update(point_a_mm=[50.0, 620.0, -150.0], point_b_mm=[200.0, 620.0, -150.0])  # D2 20 mm from D1
+    path = write(tmp_path, table)
+    with pytest.raises(ValueError, match=r"chains D1 and D2 collide: their axes pass 20 mm apart"):
+        read_checked_mount(path)
+    assert cli.main(["mount", str(path)]) == 2
+    assert len(capsys.readouterr().err.strip().splitlines()) == 1

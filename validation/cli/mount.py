@@ -5,9 +5,9 @@
 
 A mount file (docs/mount.md) describes the whole mount in display units; every command that
 models a mount takes it as ``--mount FILE``. The checks here are the ones ``--mount`` runs
-before any computation: impossible dimensions, a direction the chains' axes do not hold, a
-workspace the stroke cannot reach (each one line, exit 2), and a warning when the load
-chains' axes miss one remote centre.
+before any computation: impossible dimensions, chains that collide, a direction the chains'
+axes do not hold, a workspace the stroke cannot reach (each one line, exit 2), and a warning
+when the load chains' axes miss one remote centre.
 """
 
 from __future__ import annotations
