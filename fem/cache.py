@@ -73,10 +73,10 @@ CACHE_ENV = "FLEXCAL_CACHE_DIR"
 # cache itself). Editing any other one changes the code version and therefore every key;
 # new numerics modules (the mesher's helpers) are included automatically.
 _NOT_NUMERICS = frozenset({"__init__.py", "cache.py", "results.py"})
-# geometry modules no solid or mesh depends on: the typed input layer (files -> params; the
-# params themselves are in every key) and the STEP writer. Leaving one out that does matter
-# would serve stale results, so this lists only modules that cannot: keep it short.
-_GEOMETRY_NOT_SOLIDS = frozenset({"__init__.py", "schema.py", "export.py"})
+# geometry modules no solid or mesh depends on: the typed input layer and the mount file reader
+# (files -> params; the params themselves are in every key) and the STEP writer. Leaving one
+# out that does matter would serve stale results, so this lists only modules that cannot.
+_GEOMETRY_NOT_SOLIDS = frozenset({"__init__.py", "schema.py", "mount.py", "export.py"})
 # dataclass fields no FEM result depends on, left out of the key so that changing them keeps
 # the cached entries: a material's yield strength only judges stresses (flexcal structure),
 # stiffness, mass and stress fields per unit motion do not depend on it

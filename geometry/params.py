@@ -39,6 +39,7 @@ __all__ = [
     "FlexureChain",
     "ChainSegment",
     "ChainPlacement",
+    "ErrorRanges",
     "MechanismParams",
     "reference_mechanism",
 ]
@@ -266,13 +267,51 @@ def _default_chains() -> tuple[ChainPlacement, ...]:
 
 
 @dataclass(frozen=True, kw_only=True)
+class ErrorRanges:
+    """The ranges of the error sources (paper Sec. 3.1, Eq. 9; ``flexcal.model.parameters``).
+
+    dimension_tolerance [-]: every leaf dimension (w, a, l, t1, t2) varies by +- this
+    fraction of its nominal (paper: 10 %); offset_radius [m]: a load chain's base end A
+    sits anywhere inside a circle of this radius (paper: 2 mm); hysteresis (low, high) [-]:
+    range of the drives' hysteresis coefficient mu (paper: 0.75-1, nominal 1);
+    clearance (low, high) [m]: range of the drives' equivalent clearance CL (paper: 0-0.5 mm,
+    nominal 0); initial_position (low, high) [m]: range of the drives' unknown initial
+    position x0 (nominal 0).
+    """
+
+    dimension_tolerance: float = 0.10
+    offset_radius: float = 2e-3
+    hysteresis: tuple[float, float] = (0.75, 1.0)
+    clearance: tuple[float, float] = (0.0, 0.5e-3)
+    initial_position: tuple[float, float] = (-0.5e-3, 0.5e-3)
+
+    def __post_init__(self) -> None:
+        _require(0 < self.dimension_tolerance < 1, "dimension_tolerance", self.dimension_tolerance, "in (0, 1)",
+                 unit="")
+        _require(self.offset_radius > 0, "offset_radius", self.offset_radius, "> 0 mm")
+        for name, nominal, floor, ceiling in (("hysteresis", 1.0, 0.0, 1.0), ("clearance", 0.0, 0.0, math.inf),
+                                              ("initial_position", 0.0, -math.inf, math.inf)):
+            low, high = getattr(self, name)
+            _finite(f"{name}[0]", low)
+            _finite(f"{name}[1]", high)
+            if not (floor <= low <= nominal <= high <= ceiling and low < high):
+                raise ValueError(f"{name} range ({low:.6g}, {high:.6g}) must hold its nominal {nominal:g} with "
+                                 f"low < high, inside [{floor:g}, {ceiling:g}] (SI)")
+
+
+@dataclass(frozen=True, kw_only=True)
 class MechanismParams:
     """The six-chain remote-centre mount of DESIGN.md.
 
     chains: six ``ChainPlacement`` (L1-L3 then D1-D3); payload_mass [kg];
     centre_of_gravity [m] in the mechanism frame; gravity [m/s^2] vector;
     material; actuator_stiffness [N/m]: axial stiffness of ball screw + coupling in
-    series with each driving chain.
+    series with each driving chain; payload_box (x, y, z) [m]: the box the payload fills
+    (its inertia about the centre of gravity, unless payload_inertia gives the principal
+    moments (Ixx, Iyy, Izz) [kg m^2] along the mechanism axes); actuator_half_stroke [m]:
+    travel of each actuator either side of its zero; workspace (theta_x, theta_y, theta_z)
+    [rad]: half-ranges of the pose (paper Sec. 4.2); errors: the error sources' ranges.
+    A mount file (``flexcal.geometry.mount``) holds all of it in display units.
     """
 
     chains: tuple[ChainPlacement, ...] = field(default_factory=_default_chains)
@@ -281,6 +320,11 @@ class MechanismParams:
     gravity: tuple[float, float, float] = (0.0, 0.0, -9.81)
     material: Material = STEEL
     actuator_stiffness: float = 2.0e8
+    payload_box: tuple[float, float, float] = (0.200, 1.400, 0.420)
+    payload_inertia: tuple[float, float, float] | None = None
+    actuator_half_stroke: float = 5e-3
+    workspace: tuple[float, float, float] = (1e-3, 5e-3, 3e-3)
+    errors: ErrorRanges = ErrorRanges()
 
     def __post_init__(self) -> None:
         names = [c.name for c in self.chains]
@@ -288,6 +332,13 @@ class MechanismParams:
             raise ValueError(f"chains must be L1, L2, L3, D1, D2, D3 in that order, got {names}")
         _require(self.payload_mass >= 0, "payload_mass", self.payload_mass, ">= 0 kg", unit="kg")
         _require(self.actuator_stiffness > 0, "actuator_stiffness", self.actuator_stiffness, "> 0 N/m", unit="N/m")
+        for i, side in enumerate(self.payload_box):
+            _require(side > 0, f"payload_box[{i}]", side, "> 0 mm")
+        for i, moment in enumerate(self.payload_inertia or ()):
+            _require(moment > 0, f"payload_inertia[{i}]", moment, "> 0 kg m^2", unit="kg m^2")
+        _require(self.actuator_half_stroke > 0, "actuator_half_stroke", self.actuator_half_stroke, "> 0 mm")
+        for i, half_range in enumerate(self.workspace):
+            _require(half_range > 0, f"workspace[{i}]", half_range, "> 0 rad", unit="rad")
 
     @property
     def load_chains(self) -> tuple[ChainPlacement, ...]:

@@ -82,25 +82,31 @@ class Parameter:
 
 
 def _build_parameters(mech: MechanismParams) -> tuple[Parameter, ...]:
+    """The 45 sources of ``mech``, their ranges from ``mech.errors`` (the paper's by default)."""
+    ranges = mech.errors
     out = []
     for placement in mech.chains:
         for symbol in DIMENSION_SYMBOLS:
             p0 = float(getattr(placement.chain, _DIMENSION_FIELDS[symbol]))
             out.append(Parameter(name=f"{placement.name}.{symbol}", nominal=p0,
-                                 lower=p0 * (1.0 - DIMENSION_TOLERANCE), upper=p0 * (1.0 + DIMENSION_TOLERANCE),
+                                 lower=p0 * (1.0 - ranges.dimension_tolerance),
+                                 upper=p0 * (1.0 + ranges.dimension_tolerance),
                                  unit="m", display_unit="mm", display_scale=1e3, description=_DESCRIPTIONS[symbol]))
     for placement in mech.load_chains:
-        out.append(Parameter(name=f"{placement.name}.d", nominal=0.0, lower=0.0, upper=2e-3, unit="m",
-                             display_unit="mm", display_scale=1e3, description=_DESCRIPTIONS["d"]))
+        out.append(Parameter(name=f"{placement.name}.d", nominal=0.0, lower=0.0, upper=ranges.offset_radius,
+                             unit="m", display_unit="mm", display_scale=1e3, description=_DESCRIPTIONS["d"]))
         out.append(Parameter(name=f"{placement.name}.phi", nominal=0.0, lower=0.0, upper=2.0 * math.pi, unit="rad",
                              display_unit="rad", display_scale=1.0, description=_DESCRIPTIONS["phi"]))
     for placement in mech.driving_chains:
-        out.append(Parameter(name=f"{placement.name}.mu", nominal=1.0, lower=0.75, upper=1.0, unit="-",
-                             display_unit="-", display_scale=1.0, description=_DESCRIPTIONS["mu"]))
-        out.append(Parameter(name=f"{placement.name}.CL", nominal=0.0, lower=0.0, upper=0.5e-3, unit="m",
-                             display_unit="mm", display_scale=1e3, description=_DESCRIPTIONS["CL"]))
-        out.append(Parameter(name=f"{placement.name}.x0", nominal=0.0, lower=-0.5e-3, upper=0.5e-3, unit="m",
-                             display_unit="mm", display_scale=1e3, description=_DESCRIPTIONS["x0"]))
+        out.append(Parameter(name=f"{placement.name}.mu", nominal=1.0, lower=ranges.hysteresis[0],
+                             upper=ranges.hysteresis[1], unit="-", display_unit="-", display_scale=1.0,
+                             description=_DESCRIPTIONS["mu"]))
+        out.append(Parameter(name=f"{placement.name}.CL", nominal=0.0, lower=ranges.clearance[0],
+                             upper=ranges.clearance[1], unit="m", display_unit="mm", display_scale=1e3,
+                             description=_DESCRIPTIONS["CL"]))
+        out.append(Parameter(name=f"{placement.name}.x0", nominal=0.0, lower=ranges.initial_position[0],
+                             upper=ranges.initial_position[1], unit="m", display_unit="mm", display_scale=1e3,
+                             description=_DESCRIPTIONS["x0"]))
     return tuple(out)
 
 

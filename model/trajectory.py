@@ -74,7 +74,7 @@ def standard_trajectory(mech: MechanismParams | None = None, n_points: int = 77)
     matrices = mechanism_matrices(space.nominal_full, space)
     angle_gain = matrices.input_gain[0, 3:, 3:]  # d theta / d x_i [rad/m], (3 angles, 3 actuators)
     with np.errstate(divide="ignore"):
-        amplitudes = np.min(WORKSPACE[:, None] / np.abs(angle_gain), axis=0)
+        amplitudes = np.min(np.asarray(space.mechanism.workspace, dtype=float)[:, None] / np.abs(angle_gain), axis=0)
     sizes = _leg_sizes(n_points)
     inputs = [np.zeros((1, 3))]
     legs = [np.zeros(1, dtype=int)]

@@ -38,7 +38,7 @@ def test_code_version_enters_the_key(monkeypatch):
 
 @pytest.mark.parametrize("edited, changes", [("geometry/solids.py", True), ("fem/mesh.py", True),
                                               ("geometry/profiles/leaf.py", True), ("geometry/schema.py", False),
-                                              ("geometry/export.py", False)])
+                                              ("geometry/export.py", False), ("geometry/mount.py", False)])
 def test_code_version_follows_the_sources_of_solids_and_meshes(monkeypatch, edited, changes):
     """An edit of a module that makes solids or meshes is a new code version (every key new);
     an edit of the input layer or the STEP writer is not (it used to be: a cold rebuild)."""

@@ -225,4 +225,4 @@ def test_sidecar_written_by_truth_reads_back(tmp_path):
     assert cli.main(["truth", "--scenario", str(path), "--provider", "analytic", "--out", str(out), "-q"]) == 0
     metadata = read_measurement(out / "curves.csv").metadata
     assert metadata == json.loads((out / "curves.json").read_text())
-    assert metadata["n_points"] == 13 and metadata["mechanism"] == {"centre_of_gravity_mm": [0, 0, 0]}
+    assert metadata["n_points"] == 13 and metadata["mount"]["payload"]["centre_of_gravity_mm"] == [0, 0, 0]

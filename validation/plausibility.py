@@ -92,13 +92,13 @@ def mount_scale(mechanism=None) -> MountScale:
     """The ``MountScale`` of ``mechanism`` (``MechanismParams``; the reference mount by default)."""
     from flexcal.model.assembly import mechanism_matrices
     from flexcal.model.parameters import parameter_space
-    from flexcal.model.trajectory import WORKSPACE
 
     space = parameter_space(mechanism)
+    workspace = np.asarray(space.mechanism.workspace, dtype=float)  # the mount's own (MechanismParams.workspace)
     gain = mechanism_matrices(space.nominal_full, space).input_gain[0, 3:, 3:]
     with np.errstate(divide="ignore"):
-        stroke = np.min(WORKSPACE[:, None] / np.abs(gain), axis=0)  # as model.trajectory.standard_trajectory
-    return MountScale(gain=gain, stroke=stroke, workspace=np.array(WORKSPACE, dtype=float))
+        stroke = np.min(workspace[:, None] / np.abs(gain), axis=0)  # as model.trajectory.standard_trajectory
+    return MountScale(gain=gain, stroke=stroke, workspace=workspace)
 
 
 def _ratio_fit(design: np.ndarray, target: np.ndarray, dof: int) -> tuple[np.ndarray, np.ndarray]:

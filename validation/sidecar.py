@@ -6,9 +6,11 @@ key, or a value of the wrong type, is refused with one line naming the file, the
 was expected and the value given (``flexcal.geometry.schema``). Display units, as
 written: mm, µrad, N, kg.
 
-The ``mechanism`` entry is the scenario's ``[mechanism]`` table (``MechanismOverrides``,
-shared with ``validation/prototype/scenario.py``): where the mount the data came from
-differs from the reference one. The commands that model the data use that mount.
+The ``mount`` entry is the whole mount the data came from, as the mount file's table
+(``flexcal.geometry.mount.MountFile``, docs/mount.md); the commands that model the data use
+that mount (``--mount FILE`` replaces it and lists the differences). An older sidecar's
+``mechanism`` entry (``MechanismOverrides``: centre of gravity, payload mass) changes the
+reference mount instead.
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ from typing import Annotated, Any
 
 import msgspec
 
+from flexcal.geometry.mount import MountFile
 from flexcal.geometry.schema import FINITE, load_json
 
 __all__ = ["Sidecar", "MechanismOverrides", "PresetError", "read_sidecar"]
@@ -80,6 +83,7 @@ class Sidecar(msgspec.Struct, **_STRICT):
     effects: list[dict[str, Any]] | None = None
     n_points: Annotated[int, msgspec.Meta(ge=1)] | None = None
     mechanism: MechanismOverrides | None = None
+    mount: MountFile | None = None
     injected_effects: list[Any] | None = None
     prototype: PrototypeRun | None = None
     notes: dict[str, Any] | None = None

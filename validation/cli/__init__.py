@@ -52,6 +52,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "sweep": ("sweep", "FEM vs closed form over a grid or Latin hypercube of hinge/chain dimensions, locally or on Dask"),
     "report": ("report", "turn a run folder into one self-contained HTML page"),
     "structure": ("structure", "the mount as a structure: modes, support stiffness, stress vs yield, buckling"),
+    "mount": ("mount", "print an example mount file, or check one (--mount FILE of the other commands)"),
 }
 
 

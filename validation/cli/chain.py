@@ -18,14 +18,19 @@ __all__ = ["configure", "run", "EXAMPLES", "DEFAULT_CONFIG"]
 EXAMPLES = (
     "flexcal chain --reference D1 --out runs/chain-d1          # ~1 min",
     "flexcal chain --length-mm 150 --t1-mm 3 --out runs/chain",
+    "flexcal chain --mount my.mount.toml --reference L2 --out runs/chain-l2   # a chain of your mount",
     "flexcal report runs/chain-d1",
 )
 DEFAULT_CONFIG = {"elements_through": 6.0, "mesher": "mapped"}
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--reference", choices=("L1", "L2", "L3", "D1", "D2", "D3"),
-                        help="start from a chain of the reference mechanism (options below override it)")
+    parser.add_argument("--reference", metavar="CHAIN",
+                        help="start from chain CHAIN (L1-L3, D1-D3) of the mount (--mount FILE, else the reference "
+                             "mechanism); the options below override it")
+    from .options import add_mount
+
+    add_mount(parser, what="the reference mechanism, for --reference")
     parser.add_argument("--length-mm", type=float, help="distance between the end faces A and B [mm]")
     parser.add_argument("--hinge-length-mm", type=float, help="leaf segment length l [mm] (default 20)")
     parser.add_argument("--width-mm", type=float, help="leaf width w [mm] (default 40)")
@@ -56,8 +61,18 @@ def build_chain(args: argparse.Namespace):
         check_length_mm("--" + option.replace("_", "-"), getattr(args, option), allow_zero=option == "fillet_mm")
     changes = {field: getattr(args, option) * 1e-3 for option, field in _FIELDS.items()
                if getattr(args, option) is not None}
+    from .options import mount_option
+
+    mount = mount_option(args)
+    if mount is not None and args.reference is None:
+        raise ValueError(f"--mount {args.mount} needs --reference CHAIN: which of its chains "
+                         f"({', '.join(c.name for c in mount.chains)})")
     if args.reference is not None:
-        placement = {c.name: c for c in reference_mechanism().chains}[args.reference]
+        chains = {c.name: c for c in (mount or reference_mechanism()).chains}
+        if args.reference not in chains:
+            raise ValueError(f"--reference {args.reference!r} is no chain of the mount; choose one of "
+                             f"{', '.join(chains)}")
+        placement = chains[args.reference]
         chain = dataclasses.replace(placement.chain, **changes)
     else:
         if "length" not in changes:

@@ -49,6 +49,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
     from .options import add_unit_check_option
 
     add_unit_check_option(parser)
+    from .options import add_mount
+
+    add_mount(parser, what="the data's mount (the sidecar's; the differences are listed)")
     parser.add_argument("--targets", metavar="CSV", help="relative targets (theta_x_urad, theta_y_urad, theta_z_urad "
                                                          "from the zero posture); default: 30 points over the workspace")
     add_seed(parser, what="the bench's sensor noise during compensation (default: the sidecar's seed)")
@@ -129,12 +132,17 @@ def run(args: argparse.Namespace) -> int:
     measurement = read_data(args.data, args)
     targets = read_targets(args.targets) if args.targets else default_targets()
     from .options import executor_options
-    from ..prototype.scenario import mechanism_from_metadata
+    from .options import data_mechanism
 
     space = model_space(args.model_stiffness, args.second_order, progress=not quiet,
-                        mechanism=mechanism_from_metadata(measurement.metadata), **executor_options(args))
+                        mechanism=data_mechanism(measurement.metadata, args), **executor_options(args))
     dwell = float(np.median(np.diff(measurement.time))) if measurement.n_points > 1 else 2.0
-    bench = bench_from_metadata(measurement.metadata, space, n_readings=args.readings, seed=args.seed,
+    from flexcal.model.parameters import parameter_space
+
+    from ..prototype.scenario import mechanism_from_metadata
+
+    bench_space = parameter_space(mechanism_from_metadata(measurement.metadata))  # the bench is the data's mount
+    bench = bench_from_metadata(measurement.metadata, bench_space, n_readings=args.readings, seed=args.seed,
                                 dwell=dwell if dwell > 0 else 2.0, end_time=float(measurement.time[-1]),
                                 progress=not quiet, **executor_options(args))
     from ..runs.form_floor import truth_from_measurement

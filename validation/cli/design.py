@@ -44,10 +44,14 @@ def configure(parser: argparse.ArgumentParser) -> None:
     from .options import add_model_options
 
     add_scenario(parser, required=False)
+    from .options import add_mount
+
+    add_mount(parser)
     parser.add_argument("--points", type=int, metavar="N", help="postures to measure, the zero posture included "
                                                                  "(default %(default)s)")
     parser.add_argument("--candidates", type=int, metavar="N",
-                        help="candidate postures drawn inside the +-1/+-5/+-3 mrad workspace (default %(default)s)")
+                        help="candidate postures drawn inside the mount's workspace (reference: +-1/+-5/+-3 mrad; default "
+                             "%(default)s)")
     parser.add_argument("--noise-urad", type=float, metavar="S", help="sensor noise per channel [urad] (default "
                                                                        "%(default)s)")
     parser.add_argument("--prior-scale", type=float, metavar="S",
@@ -127,7 +131,7 @@ def run(args: argparse.Namespace) -> int:
     from flexcal.calibration.polish import batched_jacobian_fd
     from flexcal.calibration.problem import CalibrationProblem
     from flexcal.model.assembly import mechanism_matrices
-    from flexcal.model.trajectory import WORKSPACE, standard_trajectory
+    from flexcal.model.trajectory import standard_trajectory
 
     from .common import show_progress
     from ..runs.model_correction import model_space
@@ -138,7 +142,9 @@ def run(args: argparse.Namespace) -> int:
     _check(args)
     progress = show_progress(args)
     start = time.perf_counter()
-    scenario = load_scenario(args.scenario)
+    from .options import mount_option
+
+    scenario = load_scenario(args.scenario, mount=mount_option(args))
     space = model_space(args.model_stiffness, args.second_order, progress=progress,
                         mechanism=scenario.space.mechanism, **executor_options(args))
     prior = uniform_prior(space.n_params, args.prior_scale)
@@ -157,7 +163,7 @@ def run(args: argparse.Namespace) -> int:
     # largest, 15.6 urad on table1 at one stroke end, left all but 7 of 2000 candidates in)
     limit = None if inadequacy is None else float(np.quantile(np.max(inadequacy(reference), axis=1),
                                                               MODEL_ERROR_QUANTILE))
-    design = design_trajectory(jacobian, gain, WORKSPACE, reference, n_points=args.points,
+    design = design_trajectory(jacobian, gain, np.asarray(space.mechanism.workspace), reference, n_points=args.points,
                                n_candidates=args.candidates, noise=args.noise_urad * 1e-6,
                                prior_precision=prior.precision, prior_scale=args.prior_scale,
                                points_per_leg=args.points_per_leg, rng=args.design_seed, progress=say,

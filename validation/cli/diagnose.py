@@ -42,6 +42,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
     from .options import add_unit_check_option
 
     add_unit_check_option(parser)
+    from .options import add_mount
+
+    add_mount(parser, what="the data's mount (the sidecar's; the differences are listed)")
     add_seed(parser, what="the baseline calibration's optimizer", default=0)
     parser.add_argument("--particles", type=int, help="PSO particles of each baseline start (default %(default)s)")
     parser.add_argument("--iterations", type=int, help="PSO iterations of each baseline start (default %(default)s)")
@@ -178,10 +181,10 @@ def run(args: argparse.Namespace) -> int:
     measurement = read_data(data_path(args), args)
     check_measurement(measurement)  # before the model's FEM correction (~30 s cold)
     from .options import executor_options
-    from ..prototype.scenario import mechanism_from_metadata
+    from .options import data_mechanism
 
     space = model_space(args.model_stiffness, args.second_order, progress=show_progress(args),
-                        mechanism=mechanism_from_metadata(measurement.metadata), **executor_options(args))
+                        mechanism=data_mechanism(measurement.metadata, args), **executor_options(args))
     baseline = partial(calibrate_baseline, space=space,
                        settings=BaselineSettings(particles=args.particles, iterations=args.iterations))
     diagnosis = run_diagnosis(measurement, baseline=baseline, rng=args.seed, progress=show_progress(args), null=null)

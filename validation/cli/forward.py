@@ -49,12 +49,13 @@ def parse_directions(text: str | None) -> np.ndarray | None:
     return values
 
 
-def load_values(path: str | None):
-    """(space, (45,) SI values, overrides in display units) from ``--params``."""
+def load_values(path: str | None, mount=None):
+    """(space, (45,) SI values, overrides in display units) from ``--params`` on ``mount``
+    (``MechanismParams``, ``--mount``; the reference mount without)."""
     from flexcal.model.param_file import read_parameter_file
     from flexcal.model.parameters import parameter_space
 
-    space = parameter_space()
+    space = parameter_space(mount)
     overrides = read_parameter_file(path) if path else {}
     return space, space.build_values(overrides, display_units=True), overrides
 
@@ -153,7 +154,9 @@ def run(args: argparse.Namespace) -> int:
 
     inputs = parse_triple(args.inputs_mm, "--inputs-mm") * 1e-3
     directions = parse_directions(args.directions)
-    space, values, overrides = load_values(args.params)
+    from .options import mount_option
+
+    space, values, overrides = load_values(args.params, mount_option(args))
     try:
         result = forward(values, inputs[None, :], None if directions is None else directions[None, :], space=space,
                          parasitic=not args.no_parasitic, clearance=not args.no_clearance,

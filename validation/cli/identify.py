@@ -68,7 +68,7 @@ def run(args: argparse.Namespace) -> int:
     from flexcal.model.parameters import parameter_space
 
     from ..output import staged_output, write_report
-    from ..prototype.scenario import mechanism_from_metadata
+    from .options import data_mechanism
     from ..reports.form_floor import form_floor_line, form_floor_markdown
     from ..reports.plots import plot_misalignment_curves
     from ..runs.model_correction import model_space
@@ -90,7 +90,7 @@ def run(args: argparse.Namespace) -> int:
 
     check_determined(measurement.n_points, len(selected))
     space = model_space(args.model_stiffness, args.second_order, progress=progress,
-                        mechanism=mechanism_from_metadata(measurement.metadata), **executor_options(args))
+                        mechanism=data_mechanism(measurement.metadata, args), **executor_options(args))
     start = time.perf_counter()
     # bars on stderr for the long loops (PSO iterations, least-squares fits); identify prints its own summary
     result = run_verify(measurement, space, settings, presets=presets, truth=truth, progress=progress,

@@ -37,7 +37,9 @@ def run(args: argparse.Namespace) -> int:
 
     target = parse_triple(args.target_urad, "--target-urad") * 1e-6
     directions = parse_directions(args.directions)
-    space, values, overrides = load_values(args.params)
+    from .options import mount_option
+
+    space, values, overrides = load_values(args.params, mount_option(args))
     try:
         result = inverse(target[None, :], None if directions is None else directions[None, :], space_values=values,
                          space=space, parasitic=not args.no_parasitic, clearance=not args.no_clearance,

@@ -13,7 +13,8 @@ from typing import Any
 
 from ..prototype.providers import PROVIDERS
 
-__all__ = ["add_out", "add_seed", "add_scenario", "add_trajectory", "load_scenario_with_trajectory",
+__all__ = ["add_out", "add_seed", "add_scenario", "add_trajectory", "load_scenario_with_trajectory", "add_mount",
+           "mount_option", "data_mechanism",
            "add_executor_options", "executor_options", "worker_count", "scheduler_address", "MODEL_DEFAULTS",
            "CALIBRATION_DEFAULTS", "calibration_defaults", "add_model_options",
            "add_identification_options", "add_method_options", "prior_scale_option", "add_calibration_options",
@@ -49,11 +50,69 @@ def add_trajectory(parser: argparse.ArgumentParser) -> None:
                              "xa1_mm, xa2_mm, xa3_mm[, leg]) instead of the scenario's own")
 
 
+def add_mount(parser: argparse.ArgumentParser, *, what: str = "the scenario's mount") -> None:
+    """``--mount FILE``: the user's mount file (docs/mount.md) instead of ``what``."""
+    parser.add_argument("--mount", metavar="FILE",
+                        help=f"mount file (TOML, docs/mount.md; 'flexcal mount --example' prints one) instead of "
+                             f"{what}; checked before any computation")
+
+
+_MOUNTS: dict[tuple, object] = {}  # (path, size, mtime) -> its checked MechanismParams (read and warned about once)
+
+
+def _file_key(path: str) -> tuple:
+    import os
+
+    try:
+        stat = os.stat(path)
+    except OSError:
+        return (path,)  # read_mount says what is wrong
+    return (path, stat.st_size, stat.st_mtime_ns)
+
+
+def mount_option(args: argparse.Namespace):
+    """The checked ``MechanismParams`` of ``--mount FILE``, or None without it."""
+    path = getattr(args, "mount", None)
+    if path is None:
+        return None
+    key = _file_key(path)
+    if key not in _MOUNTS:
+        from ..mount_checks import read_checked_mount
+
+        _MOUNTS[key] = read_checked_mount(path)
+    return _MOUNTS[key]
+
+
+def data_mechanism(metadata: dict, args: argparse.Namespace):
+    """The mount that models a measurement: ``--mount FILE`` if given, else its sidecar's
+    (the reference mount without one). Where ``--mount`` differs from the sidecar's mount,
+    one warning lists the differences key by key (once per run)."""
+    import logging
+
+    from flexcal.geometry.mount import mount_differences
+
+    from ..prototype.scenario import mechanism_from_metadata
+
+    data = mechanism_from_metadata(metadata)
+    mount = mount_option(args)
+    if mount is None:
+        return data
+    differences = mount_differences(data, mount)
+    key = ("differences", *_file_key(args.mount), id(metadata))
+    if differences and key not in _MOUNTS:
+        _MOUNTS[key] = True
+        logging.getLogger("flexcal.mount").warning(
+            "--mount %s replaces the data's mount (the sidecar's); %d differences: %s", args.mount, len(differences),
+            "; ".join(differences))
+    return mount
+
+
 def load_scenario_with_trajectory(args: argparse.Namespace):
-    """The scenario of ``--scenario``/``--seed``/``--noise-urad``, along ``--trajectory`` if given."""
+    """The scenario of ``--scenario``/``--seed``/``--noise-urad``/``--mount``, along
+    ``--trajectory`` if given."""
     from ..prototype.scenario import load_scenario
 
-    scenario = load_scenario(args.scenario, seed=args.seed, noise_urad=args.noise_urad)
+    scenario = load_scenario(args.scenario, seed=args.seed, noise_urad=args.noise_urad, mount=mount_option(args))
     trajectory = getattr(args, "trajectory", None)
     return scenario.with_trajectory(trajectory) if trajectory else scenario
 
@@ -204,6 +263,7 @@ def add_source_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--provider", choices=PROVIDERS,
                         help="prototype segment stiffness for --scenario (default %(default)s)")
     add_trajectory(parser)
+    add_mount(parser, what="the scenario's or the data's (sidecar's) mount; with --data the differences are listed")
     add_unit_check_option(parser)
 
 
@@ -221,7 +281,6 @@ def read_data(path, args: argparse.Namespace):
     the reference mount): ``flexcal.validation.plausibility``."""
     from ..measurements import read_measurement
     from ..plausibility import mount_scale, unit_evidence, unit_problem
-    from ..prototype.scenario import mechanism_from_metadata
 
     try:
         measurement = read_measurement(path)
@@ -230,7 +289,7 @@ def read_data(path, args: argparse.Namespace):
             raise
         raise ValueError(f"{path}: {error}") from None
     if not getattr(args, "skip_unit_check", False):
-        scale = mount_scale(mechanism_from_metadata(measurement.metadata))
+        scale = mount_scale(data_mechanism(measurement.metadata, args))
         problem = unit_problem(unit_evidence(measurement.inputs, measurement.angles, scale))
         if problem:
             raise ValueError(f"{path}: {problem}")
@@ -262,6 +321,9 @@ def load_source_with_truth(args: argparse.Namespace, space, *, progress: bool):
     if getattr(args, "trajectory", None):
         raise ValueError("--trajectory drives a --scenario; a --data file already holds its own trajectory")
     measurement = read_data(args.data, args)
+    from flexcal.model.parameters import parameter_space
+
+    space = parameter_space(data_mechanism(measurement.metadata, args))  # the presets' ranges are the data's mount's
     found = measurement.metadata.get("preset_errors")
     presets = space.build_values({e["name"]: e["value"] for e in found}, display_units=True) if found else None
     return measurement, presets, truth_from_measurement(measurement, space)
@@ -290,3 +352,4 @@ def add_point_model_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true", help="print one JSON object instead of text")
     parser.add_argument("--out", metavar="DIR",
                         help="also write the point as DIR/report.json and DIR/report.md (optional)")
+    add_mount(parser, what="the reference mount")

@@ -64,11 +64,11 @@ def run(args: argparse.Namespace) -> int:
     check_sobol_options(args)
     progress = show_progress(args)
     measurement, _ = load_source(args, parameter_space(), progress=progress)
-    from ..prototype.scenario import mechanism_from_metadata
+    from .options import data_mechanism
     from .options import executor_options
 
     space = model_space(args.model_stiffness, args.second_order, progress=progress,
-                        mechanism=mechanism_from_metadata(measurement.metadata), **executor_options(args))
+                        mechanism=data_mechanism(measurement.metadata, args), **executor_options(args))
     sobol = screen(measurement, space, n_base=args.sobol_n, seed=args.calibration_seed, progress=progress)
     selected = select_parameters(sobol, threshold=args.sobol_threshold, always=DRIVE_SOURCE_NAMES)
     report = {

@@ -36,6 +36,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--trajectory-points", type=int, default=77,
                         help="points of the standard trajectory the stresses are taken over (1 + a multiple of 4, >= 13; 0: nominal only; "
                              "default %(default)s)")
+    from .options import add_mount
+
+    add_mount(parser, what="the reference mount")
     add_out(parser, what="report.json, timings.json, report.md, mode_*.png, modes.vtu")
 
 
@@ -56,7 +59,9 @@ def run(args: argparse.Namespace) -> int:
     if args.trajectory_points < 0:
         raise ValueError(f"--trajectory-points {args.trajectory_points} must be >= 0")
     with staged_output(args.out, replace=args.force) as staging:
-        report = structure_report(reference_mechanism(), segments=args.segments,
+        from .options import mount_option
+
+        report = structure_report(mount_option(args) or reference_mechanism(), segments=args.segments,
                                   elements_through=args.elements_through, n_modes=args.modes,
                                   trajectory_points=args.trajectory_points, refine=args.refine, figures=staging,
                                   progress=show_progress(args))

@@ -42,6 +42,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="seed of the Latin-hypercube sample (overrides [sweep] seed)")
     parser.add_argument("--cache-dir", metavar="DIR", default=None,
                         help="FEM cache folder (default $FLEXCAL_CACHE_DIR or ~/.cache/flexcal)")
+    from .options import add_mount
+
+    add_mount(parser, what="the reference mount in the identification column ([identification] enabled = true)")
     # --config FILE and --print-config come from cli.py (this module has DEFAULT_CONFIG)
 
 
@@ -62,8 +65,15 @@ def run(args: argparse.Namespace) -> int:
 
     if args.workers is not None and args.workers < 0:
         raise ValueError(f"--workers={args.workers} must be >= 0 (0: run in this process)")
+    from .options import mount_option
+
+    mount = mount_option(args)
+    if mount is not None:
+        from flexcal.geometry.mount import mount_table
+
+        mount = mount_table(mount)  # the content, not the path, goes into each design (and its id)
     result = run_sweep(_config(args), args.out, workers=args.workers, scheduler=args.scheduler, seed=args.seed,
-                       cache_directory=args.cache_dir, progress=not getattr(args, "quiet", False))
+                       cache_directory=args.cache_dir, progress=not getattr(args, "quiet", False), mount=mount)
     n_done = sum(r is not None for r in result.records)
     print(f"flexcal sweep: {n_done}/{len(result.records)} designs finished ({len(result.computed)} computed now), "
           f"{result.wall_s:.1f} s; wrote {args.out}/sweep.csv, report.json, discrepancy.png, stress.png")

@@ -14,7 +14,7 @@ import argparse
 import numpy as np
 
 from ..prototype.providers import PROVIDERS
-from .options import add_out, add_scenario, add_seed, add_trajectory
+from .options import add_mount, add_out, add_scenario, add_seed, add_trajectory
 
 __all__ = ["configure", "run", "EXAMPLES", "DEFAULT_CONFIG"]
 
@@ -23,6 +23,7 @@ EXAMPLES = (
     "flexcal truth --scenario table1 --provider analytic --seed 3 --out runs/quick",
     "flexcal truth --scenario my-mount.toml --noise-urad 0.5 --out runs/noisy",
     "flexcal truth --scenario paper --trajectory runs/design/trajectory.csv --noise-urad 0.5 --out runs/paper",
+    "flexcal truth --scenario table1 --mount my.mount.toml --out runs/mine   # the Table 1 presets on your mount",
 )
 DEFAULT_CONFIG = {"provider": "fem"}
 
@@ -37,6 +38,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
                              "(default), the same on fTetWild meshes (fem-tetwild) or the closed-form compliance "
                              "(fast, for checks only: then truth shares the model's hinge formulas)")
     add_trajectory(parser)
+    add_mount(parser)
     from .options import add_executor_options
 
     add_executor_options(parser, what="the FEM segment builds (cold cache only)")

@@ -214,12 +214,12 @@ def run(args: argparse.Namespace) -> int:
                               noise_urad=args.noise_urad if args.noise_urad else None,
                               pso=dataclasses.replace(PSOSettings(), n_particles=args.particles,
                                                       max_iterations=args.iterations))
-    from ..prototype.scenario import mechanism_from_metadata
+    from .options import data_mechanism
 
     space = parameter_space()
     measurement, presets, truth = load_source_with_truth(args, space, progress=not args.quiet)
     space = model_space(args.model_stiffness, args.second_order, progress=not args.quiet,
-                        mechanism=mechanism_from_metadata(measurement.metadata), **executor_options(args))
+                        mechanism=data_mechanism(measurement.metadata, args), **executor_options(args))
     result = run_verify(measurement, space, settings, presets=presets, truth=truth, progress=not args.quiet)
     result.report["model_stiffness"] = ("closed-form chains scaled by FEM factors at the nominal design "
                                         "(docs/model.md 7)" if space.compliance_factors else "closed-form (paper Eq. 1)")

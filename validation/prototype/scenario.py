@@ -13,7 +13,8 @@ A scenario file::
     offset_urad = [0, 0, 0]
     [transmission]
     breakaway_force_n = 2.0
-    [mechanism]                # the mount itself, where it differs from the reference one
+    mount = "my.mount.toml"    # the mount file (docs/mount.md), relative to this file; default: the reference
+    [mechanism]                # optional changes to that mount
     centre_of_gravity_mm = [150, 0, 0]
     payload_mass_kg = 300
     [trajectory]
@@ -33,6 +34,11 @@ a value of another type (``seed = 1.7``, ``draw_unset = "no"``) or a key not lis
 is refused with one line naming the file, the key, the expected type and the value
 (``flexcal.geometry.schema``); ``n_points`` is at most ``measurements.MAX_POINTS``.
 
+The built-in scenarios read their mount from ``examples/`` (``table1.mount.toml``, the
+reference mount of DESIGN.md, for ``table1`` and ``nominal``; ``paper.mount.toml`` for
+``paper``) through ``flexcal.geometry.mount.read_mount``, like any scenario's ``mount``.
+A ``mount`` argument of ``load_scenario`` (``--mount FILE``) replaces the scenario's.
+
 The built-in scenario ``table1`` uses the paper's Table 1 presets (initial positions
 −0.20, 0.32, 0.40 mm; CL 0.42, 0.25, 0.10 mm; μ 0.83, 0.87, 0.93) and draws every other
 source within its range from the seed. Like the paper's simulation it is noise-free
@@ -42,9 +48,10 @@ The built-in scenario ``paper`` is the same mount and presets with the payload's
 gravity at the remote centre O_C instead of 150 mm behind it: the weight then no longer
 preloads the tip/tilt drives D1 and D2, and all three drives pass through their clearance
 on the backward moves, as in the paper's Fig. 12 (chains 1 and 2 enter the clearance
-zone), so every Table 1 drive row can show (docs/verification-table1.md). The mechanism
-of a scenario travels in the measurement's sidecar (``provenance()["mechanism"]``), and
-``mechanism_from_metadata`` gives it back to the commands that model the data.
+zone), so every Table 1 drive row can show (docs/verification-table1.md). The mount of a
+scenario travels whole in the measurement's sidecar (``provenance()["mount"]``, the mount
+file's table), and ``mechanism_from_metadata`` gives it back to the commands that model
+the data (an older sidecar's ``mechanism`` overrides apply to the reference mount).
 """
 
 from __future__ import annotations
@@ -73,11 +80,14 @@ TABLE1_PRESETS = {  # paper Table 1, display units (mm, -)
     "D1.CL": 0.42, "D2.CL": 0.25, "D3.CL": 0.10,
     "D1.mu": 0.83, "D2.mu": 0.87, "D3.mu": 0.93,
 }
+EXAMPLES_DIR = Path(__file__).resolve().parents[2] / "examples"  # the mount files of the built-in scenarios
 BUILTIN_SCENARIOS: dict[str, dict[str, Any]] = {
-    "table1": {"name": "table1", "seed": 1, "draw_unset": True, "errors": TABLE1_PRESETS},
-    "nominal": {"name": "nominal", "seed": 0, "draw_unset": False, "errors": {}},
+    "table1": {"name": "table1", "seed": 1, "draw_unset": True, "errors": TABLE1_PRESETS,
+               "mount": str(EXAMPLES_DIR / "table1.mount.toml")},
+    "nominal": {"name": "nominal", "seed": 0, "draw_unset": False, "errors": {},
+                "mount": str(EXAMPLES_DIR / "table1.mount.toml")},
     "paper": {"name": "paper", "seed": 1, "draw_unset": True, "errors": TABLE1_PRESETS,
-              "mechanism": {"centre_of_gravity_mm": [0.0, 0.0, 0.0]}},
+              "mount": str(EXAMPLES_DIR / "paper.mount.toml")},
 }
 _STRICT = {"frozen": True, "forbid_unknown_fields": True, "kw_only": True}
 NONNEGATIVE = Annotated[float, msgspec.Meta(ge=0.0, le=sys.float_info.max)]
@@ -122,6 +132,7 @@ class ScenarioFile(msgspec.Struct, **_STRICT):
     name: str = "scenario"
     seed: Annotated[int, msgspec.Meta(ge=0)] = 0
     draw_unset: bool = True
+    mount: str | None = None
     errors: dict[str, FINITE] = {}
     sensors: SensorsTable = SensorsTable()
     transmission: TransmissionTable = TransmissionTable()
@@ -143,12 +154,16 @@ def mechanism_overrides(table: dict[str, Any], *, source: str = "[mechanism]") -
 
 
 def mechanism_from_metadata(metadata: dict[str, Any]):
-    """The reference mechanism with a measurement sidecar's ``mechanism`` overrides (if
-    any); where they change the mount, one warning says which mount models the data."""
+    """The mount of a measurement's sidecar: its ``mount`` table (``flexcal.geometry.mount``),
+    else the reference mount with an older sidecar's ``mechanism`` overrides (if any); where
+    those change the mount, one warning says which mount models the data."""
     import dataclasses
 
+    from flexcal.geometry.mount import mount_from_table
     from flexcal.geometry.params import reference_mechanism
 
+    if metadata.get("mount") is not None:
+        return mount_from_table(metadata["mount"], source="the sidecar's mount")
     reference = reference_mechanism()
     table = dict(metadata.get("mechanism") or {})
     mechanism = dataclasses.replace(reference, **mechanism_overrides(table, source="the sidecar's mechanism"))
@@ -172,7 +187,8 @@ class Scenario:
     values (45,) [SI] all error sources (explicit presets and drawn ones); preset_names:
     the ones the scenario set explicitly; noise (3,) [rad] sensor noise standard deviation
     per channel; offset (3,) [rad] sensor offsets; breakaway_force [N]; inputs (n, 3) [m]
-    and leg (n,) the trajectory; dwell [s] between points; effects: ({"name": ..., params}).
+    and leg (n,) the trajectory; dwell [s] between points; effects: ({"name": ..., params});
+    space: the error sources of the mount (``space.mechanism``: the mount, SI).
     """
 
     name: str
@@ -187,7 +203,6 @@ class Scenario:
     dwell: float
     effects: tuple[dict[str, Any], ...] = ()
     space: ParameterSpace = field(default_factory=parameter_space)
-    mechanism: dict[str, Any] = field(default_factory=dict)
 
     def with_trajectory(self, path: str | Path) -> "Scenario":
         """The scenario driven along the trajectory file ``path`` (``flexcal design``'s
@@ -198,7 +213,10 @@ class Scenario:
         return dataclasses.replace(self, inputs=inputs, leg=leg)
 
     def provenance(self) -> dict[str, Any]:
-        """The scenario as JSON-ready data (display units), for the sidecar."""
+        """The scenario as JSON-ready data (display units), for the sidecar; ``mount``: the
+        mount file's table (``flexcal.geometry.mount.mount_table``)."""
+        from flexcal.geometry.mount import mount_table
+
         display = self.space.to_display(self.values)
         return {
             "scenario": self.name,
@@ -211,7 +229,7 @@ class Scenario:
             "transmission": {"breakaway_force_n": self.breakaway_force},
             "effects": list(self.effects),
             "n_points": int(self.inputs.shape[0]),
-            "mechanism": dict(self.mechanism),
+            "mount": mount_table(self.space.mechanism, name=self.name),
         }
 
 
@@ -245,9 +263,15 @@ def scenario_trajectory(spec: dict[str, Any], space: ParameterSpace, base: Path)
 
 
 def _from_table(table: dict[str, Any], *, base: Path, seed: int | None, noise_urad: float | None,
-                space: ParameterSpace, source: str) -> Scenario:
+                space: ParameterSpace, source: str, mount=None, keep_space: bool = False) -> Scenario:
     typed = convert(table, ScenarioFile, source=source)
     seed = typed.seed if seed is None else int(seed)
+    if mount is not None:
+        space = parameter_space(mount)
+    elif typed.mount is not None and not keep_space:
+        from flexcal.geometry.mount import read_mount
+
+        space = parameter_space(read_mount((base / typed.mount).resolve()))
     mechanism_table = dict(table.get("mechanism", {}))
     if mechanism_table:
         import dataclasses
@@ -274,28 +298,33 @@ def _from_table(table: dict[str, Any], *, base: Path, seed: int | None, noise_ur
     effects_from_scenario(effects)  # the injectors' own fields: refused now, not after the first FEM build
     return Scenario(name=typed.name, seed=seed, values=values, preset_names=tuple(errors),
                     noise=noise, offset=offset, breakaway_force=typed.transmission.breakaway_force_n, inputs=inputs,
-                    leg=leg, dwell=typed.trajectory.dwell_s, effects=effects, space=space, mechanism=mechanism_table)
+                    leg=leg, dwell=typed.trajectory.dwell_s, effects=effects, space=space)
 
 
 def load_scenario(name_or_path: str, *, seed: int | None = None, noise_urad: float | None = None,
-                  space: ParameterSpace | None = None) -> Scenario:
+                  space: ParameterSpace | None = None, mount=None) -> Scenario:
     """A built-in scenario by name (``table1``, ``nominal``, ``paper``) or a TOML file.
 
-    ``seed`` and ``noise_urad`` override the file's values (command-line options). A file
+    ``seed`` and ``noise_urad`` override the file's values (command-line options), ``mount``
+    (``MechanismParams``, ``--mount FILE``) the scenario's mount; a ``space`` given (a
+    sweep's design, ``flexcal design``'s scenario space) does too, unless ``mount`` is. A file
     is checked against ``ScenarioFile`` (bounded size, UTF-8, known keys of the right
     types); every refusal is a ValueError of one line naming the file.
     """
+    keep_space = space is not None
     space = space or parameter_space()
     if name_or_path in BUILTIN_SCENARIOS:
         return _from_table(BUILTIN_SCENARIOS[name_or_path], base=Path.cwd(), seed=seed, noise_urad=noise_urad,
-                           space=space, source=f"built-in scenario {name_or_path!r}")
+                           space=space, source=f"built-in scenario {name_or_path!r}", mount=mount,
+                           keep_space=keep_space)
     path = Path(name_or_path)
     if not path.is_file():
         raise FileNotFoundError(f"scenario {name_or_path!r} is neither a built-in ({', '.join(BUILTIN_SCENARIOS)}) "
                                 f"nor an existing TOML file")
     table = read_toml(path, what="scenario file")
     try:
-        return _from_table(table, base=path.parent, seed=seed, noise_urad=noise_urad, space=space, source=str(path))
+        return _from_table(table, base=path.parent, seed=seed, noise_urad=noise_urad, space=space, source=str(path),
+                           mount=mount, keep_space=keep_space)
     except (ValueError, FileNotFoundError) as error:  # checks after the schema name the key, not always the file
         if str(path) in str(error):
             raise

@@ -4,7 +4,7 @@ section nodes and the payload as its box, undeformed and displaced by a mode.
 A mode phi (n_dofs) moves each body b by the body-frame twist (v, w) = S_b phi_b
 (translations then rotations, ``prototype.equilibrium``); a point at o in the body's
 frame moves by R_b (v + w x o) in the world (mechanism axes). The chain points are the
-section nodes (ground nodes stay), the payload box (``mount.PAYLOAD_BOX`` about the
+section nodes (ground nodes stay), the payload box (``MechanismParams.payload_box`` about the
 centre of gravity) moves with the frame. Shapes are drawn with the largest point motion
 scaled to ``SHAPE_SCALE`` of the mount's size; the VTU holds the unscaled motion of each
 mode (M-normalized phi: m/sqrt(kg)) as point data "mode_k".
@@ -18,7 +18,6 @@ from pathlib import Path
 import numpy as np
 
 from ..prototype.mechanism import FRAME_BODY, N_CHAINS, Prototype
-from .mount import PAYLOAD_BOX
 
 __all__ = ["SHAPE_SCALE", "mode_points", "point_motion", "write_mode_pngs", "write_modes_vtu"]
 
@@ -38,7 +37,7 @@ def mode_points(prototype: Prototype, poses: np.ndarray) -> tuple[np.ndarray, np
     centre = np.asarray(prototype.mechanism.centre_of_gravity, float)
     for signs in itertools.product((-0.5, 0.5), repeat=3):
         bodies.append(FRAME_BODY)
-        offsets.append(centre + np.array(signs) * np.array(PAYLOAD_BOX))
+        offsets.append(centre + np.array(signs) * np.array(prototype.mechanism.payload_box))
     bodies, offsets = np.array(bodies), np.array(offsets)
     points = np.einsum("nij,nj->ni", poses[bodies, :3, :3], offsets) + poses[bodies, :3, 3]
     return points, bodies, offsets

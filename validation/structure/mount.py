@@ -48,7 +48,7 @@ __all__ = ["PAYLOAD_BOX", "NominalState", "nominal_state", "payload_mass_matrix"
            "mount_mass", "rigid_influence", "support_stiffness", "mount_modes", "MountModes",
            "mount_buckling_factor", "chain_buckling_factors", "chain_end_reduction"]
 
-PAYLOAD_BOX = (0.200, 1.400, 0.420)
+PAYLOAD_BOX = (0.200, 1.400, 0.420)  # the reference mount's (MechanismParams.payload_box, a mount file's box_mm)
 """Sides [m] of the box the 300 kg payload fills (x along the grating normal, y along the
 1400 mm side, z along the 420 mm side; DESIGN.md), centred on its centre of gravity."""
 
@@ -92,12 +92,16 @@ def nominal_state(prototype: Prototype, weight_factor: float = 1.0, *, commands:
                         weight_factor=float(weight_factor), commands=commands.copy())
 
 
-def payload_mass_matrix(mechanism: MechanismParams, box: tuple[float, float, float] = PAYLOAD_BOX) -> np.ndarray:
+def payload_mass_matrix(mechanism: MechanismParams, box: tuple[float, float, float] | None = None) -> np.ndarray:
     """6 x 6 rigid-body mass [kg, kg m, kg m^2] of the payload at O_C, frame axes: its mass
-    filling ``box`` (sides [m]) centred on its centre of gravity."""
+    filling ``box`` (sides [m]; default ``mechanism.payload_box``) centred on its centre of
+    gravity, or with ``mechanism.payload_inertia`` (principal moments [kg m^2]) when given."""
     m = mechanism.payload_mass
-    return rigid_body_mass(m, box_inertia(m, np.asarray(box, float)), np.asarray(mechanism.centre_of_gravity, float),
-                           np.zeros(3))
+    if box is None and mechanism.payload_inertia is not None:
+        inertia = np.diag(np.asarray(mechanism.payload_inertia, float))
+    else:
+        inertia = box_inertia(m, np.asarray(mechanism.payload_box if box is None else box, float))
+    return rigid_body_mass(m, inertia, np.asarray(mechanism.centre_of_gravity, float), np.zeros(3))
 
 
 def assemble_segment_matrices(prototype: Prototype, matrices: np.ndarray) -> np.ndarray:

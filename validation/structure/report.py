@@ -146,7 +146,7 @@ def structure_report(mechanism: MechanismParams, *, segments: str = "analytic", 
         "segments": segments,
         "provider": prototype.provider_description,
         "material": dataclasses.asdict(mechanism.material),
-        "payload": {"mass_kg": mechanism.payload_mass, "box_mm": [1e3 * s for s in _payload_box()],
+        "payload": {"mass_kg": mechanism.payload_mass, "box_mm": [1e3 * s for s in mechanism.payload_box],
                     "centre_of_gravity_mm": [1e3 * v for v in mechanism.centre_of_gravity]},
         "chain_mass_kg": {c.name: chain_mass(c.chain, mechanism.material) for c in mechanism.chains},
         "chain_guyan_ends": {
@@ -193,10 +193,6 @@ def structure_report(mechanism: MechanismParams, *, segments: str = "analytic", 
     return report
 
 
-def _payload_box():
-    from .mount import PAYLOAD_BOX
-
-    return PAYLOAD_BOX
 
 
 def _fmt(value, digits: int = 3) -> str:

@@ -42,9 +42,11 @@ ANGLE_TOL = 1e-8
 changes a stress figure; each iteration step gains ~40x, so ~4 steps)."""
 
 
-def workspace_corners() -> np.ndarray:
-    """(8, 3) [rad] the corners (+-1, +-5, +-3) mrad of the workspace, theta_x slowest."""
-    return np.array(list(itertools.product(*[(-w, w) for w in WORKSPACE])))
+def workspace_corners(mechanism=None) -> np.ndarray:
+    """(8, 3) [rad] the corners of ``mechanism``'s workspace (``MechanismParams.workspace``;
+    the reference mount's (+-1, +-5, +-3) mrad by default), theta_x slowest."""
+    half_ranges = WORKSPACE if mechanism is None else mechanism.workspace
+    return np.array(list(itertools.product(*[(-w, w) for w in half_ranges])))
 
 
 def frame_angles(state: NominalState) -> np.ndarray:

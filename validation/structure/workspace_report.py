@@ -79,7 +79,7 @@ def workspace_section(prototype: Prototype, *, fem=None, fem_fine=None, trajecto
 
     names = [c.name for c in prototype.mechanism.chains]
     yield_strength = prototype.mechanism.material.yield_strength
-    corners = workspace_corners()
+    corners = workspace_corners(prototype.mechanism)
     commands, states = commands_for_angles(prototype, corners)
     theta0 = frame_angles(nominal_state(prototype))
     corner_rows = []

@@ -1,6 +1,7 @@
 """Identification accuracy of a design (optional sweep column, off by default).
 
-The design's flexure dimensions are given to all six chains of the reference mount
+The design's flexure dimensions are given to all six chains of the reference mount (or
+the mount of ``settings["mount"]``, a mount file's table: ``flexcal sweep --mount FILE``)
 (each chain keeps its length and placement): a leaf design sets every leaf's l, t, w, a
 (t1 = t2 = t); a chain design sets every chain's cross-section dimensions. The table1
 scenario (or the one named) is built into the virtual prototype of that mount, measured
@@ -20,11 +21,13 @@ from typing import Any
 __all__ = ["mount_with_design", "identification_accuracy"]
 
 
-def mount_with_design(params):
-    """The reference mechanism with the design's flexure dimensions in every chain."""
+def mount_with_design(params, mount: dict[str, Any] | None = None):
+    """The reference mechanism (or the mount of the mount-file table ``mount``) with the
+    design's flexure dimensions in every chain."""
+    from flexcal.geometry.mount import mount_from_table
     from flexcal.geometry.params import FlexureChain, reference_mechanism
 
-    mechanism = reference_mechanism()
+    mechanism = reference_mechanism() if mount is None else mount_from_table(mount, source="the sweep's --mount")
     if isinstance(params, FlexureChain):
         changes = {f.name: getattr(params, f.name) for f in dataclasses.fields(params) if f.name != "length"}
     else:  # a hinge: its profile says which chain fields it sets (only a leaf fits the mount's chains)
@@ -56,7 +59,7 @@ def identification_accuracy(params, settings: dict[str, Any], *, cache_directory
     from ..runs.verify import VerifySettings, run_verify
 
     start = time.perf_counter()
-    space = parameter_space(mount_with_design(params))
+    space = parameter_space(mount_with_design(params, settings.get("mount")))
     scenario = load_scenario(settings["scenario"], space=space)
     if settings["provider"] == "fem":
         from ..prototype.fem_provider import fem_provider

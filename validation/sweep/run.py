@@ -76,19 +76,22 @@ def execute(designs: list[dict[str, Any]], job: Callable[..., dict[str, Any]], o
 
 def run_sweep(config: dict[str, Any], out: str | os.PathLike, *, workers: int | None = None,
               scheduler: str | None = None, seed: int | None = None, cache_directory: str | None = None,
-              progress: bool = True, job: Callable[..., dict[str, Any]] | None = None) -> SweepResult:
+              progress: bool = True, job: Callable[..., dict[str, Any]] | None = None,
+              mount: dict[str, Any] | None = None) -> SweepResult:
     """Evaluate the config's designs not yet in OUT/designs, then write the table and plots.
 
     workers: LocalCluster size (default: min(cores, designs to compute); 0 runs in this
     process); scheduler: address of a Dask scheduler (then ``workers`` is ignored);
-    seed: overrides [sweep] seed; cache_directory: FEM cache (default ``~/.cache/flexcal``).
+    seed: overrides [sweep] seed; cache_directory: FEM cache (default ``~/.cache/flexcal``);
+    mount: a mount file's table (``flexcal.geometry.mount.mount_table``) the identification
+    column runs on instead of the reference mount (``--mount FILE``).
     """
     from .job import evaluate_design
     from .table import write_tables
 
     start = time.perf_counter()
     log = (lambda text: print(text, file=sys.stderr)) if progress else (lambda text: None)
-    designs = designs_from_config(config, seed=seed)
+    designs = designs_from_config(config, seed=seed, mount=mount)
     out = out_folder(out, resume=True)  # finished designs of an earlier run are kept and reused
     store = DesignStore(out / "designs")
     ids = [design_id(d) for d in designs]

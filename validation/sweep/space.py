@@ -117,9 +117,11 @@ def _samples(dimensions: dict[str, list[float]], method: str, n_samples: int, se
     raise ValueError(f"[sweep] method = {method!r} must be 'grid' or 'lhs'")
 
 
-def designs_from_config(config: dict[str, Any], *, seed: int | None = None) -> list[dict[str, Any]]:
+def designs_from_config(config: dict[str, Any], *, seed: int | None = None,
+                        mount: dict[str, Any] | None = None) -> list[dict[str, Any]]:
     """The designs of a sweep config (see the module docstring; missing keys take
-    ``DEFAULT_CONFIG``); ``seed`` overrides ``[sweep] seed``. Each design is validated (its
+    ``DEFAULT_CONFIG``); ``seed`` overrides ``[sweep] seed``; ``mount`` (a mount file's
+    table, ``--mount``) is the identification's mount, part of each design (and its id). Each design is validated (its
     hinge or chain is built), so a bad config fails here, before any worker starts."""
     config = resolve_config(config)
     sweep = config["sweep"]
@@ -130,6 +132,11 @@ def designs_from_config(config: dict[str, Any], *, seed: int | None = None) -> l
     if elements < 1:
         raise ValueError(f"[sweep] elements_through = {elements} must be >= 1")
     identification = _identification(config["identification"])
+    if mount is not None:
+        if not identification["enabled"]:
+            raise ValueError("--mount sets the mount of the identification column: enable it ([identification] "
+                             "enabled = true); the FEM-vs-closed-form columns are of the hinge or chain alone")
+        identification = {**identification, "mount": mount}
     designs = []
     for sample in _samples(config[kind], sweep["method"], sweep["n_samples"],
                            sweep["seed"] if seed is None else seed, kind):
