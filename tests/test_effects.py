@@ -62,8 +62,11 @@ def test_every_injector_changes_the_prototype_finitely(prototype, baseline, effe
     # grow with time and these points last 32 s of the standard 152 s: 10 x 32/152 = 2.1),
     # every other effect 8.6-31 urad (the estimate is linear at the nominal model and misses
     # table1's clearances: up to 3x, lead_error). Windows: those ranges widened by 1.3-1.7x.
+    # sensor_settling: the lag error follows the angles' rate, and these points are 2 s apart
+    # against the standard trajectory's dwell: measured 46.0-47.0 urad at seeds 0-5, window 1.7x.
     rms = np.sqrt(np.mean(change ** 2))
-    low, high = (1e-6, 5e-6) if effect_id in GROWING_WITH_TIME else (5e-6, 40e-6)
+    low, high = ((1e-6, 5e-6) if effect_id in GROWING_WITH_TIME else (27e-6, 80e-6) if effect_id == "sensor_settling"
+                 else (5e-6, 40e-6))
     assert low < rms < high, rms
     assert run.provenance["effects"][0]["name"] == effect_id
 
@@ -124,7 +127,9 @@ def test_lead_error_is_periodic_in_the_screw_revolution():
 def test_model_terms_are_zero_at_zero_and_have_the_right_shape(effect_id):
     data = standard_setting().data
     term = model_term(effect_id)
-    assert term.n_params == len(term.parameter_units) == term.scale.shape[0] and 1 <= term.n_params <= 9
+    # at most 9 a term, but air_turbulence: 8 slow cosines per angle (24), its process has no fewer shapes
+    most = 24 if effect_id == "air_turbulence" else 9
+    assert term.n_params == len(term.parameter_units) == term.scale.shape[0] and 1 <= term.n_params <= most
     assert set(term.requires) <= set(data.extras)
     zero = term.evaluate(np.zeros(term.n_params), data)
     assert zero.shape == (len(data.time), 3) and np.all(zero == 0.0)

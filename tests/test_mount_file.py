@@ -205,8 +205,9 @@ def test_structure_takes_the_payload_inertia_of_the_mount():
 
     at_centre = dataclasses.replace(reference_mechanism(), centre_of_gravity=(0.0, 0.0, 0.0))  # no parallel-axis part
     box = box_inertia(300.0, np.array(at_centre.payload_box))
-    assert np.allclose(payload_mass_matrix(at_centre)[3:, 3:], box, rtol=1e-12)  # the file's box
+    assert np.allclose(payload_mass_matrix(at_centre)[3:, 3:], box, rtol=1e-12)  # the file's box; round-off only
     given = dataclasses.replace(at_centre, payload_inertia=(10.0, 20.0, 30.0))
+    # the given inertia passed through as is: round-off only
     assert np.allclose(payload_mass_matrix(given)[3:, 3:], np.diag([10.0, 20.0, 30.0]), rtol=1e-12)
 
 
