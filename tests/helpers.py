@@ -53,3 +53,35 @@ def well_shaped_p2_tets(rng: np.random.Generator, n: int, curved: bool) -> np.nd
         k += 1
     assert (element_volumes(out) > 0).all()
     return out
+
+
+def quad_hinge_entries(thickness, free_end, breaks, width, material):
+    """A hinge's compliance entries as the Euler-Bernoulli/Timoshenko integrals of
+    model/hinge.py's docstring over the thickness profile ``thickness(x)`` [m], by adaptive
+    quad on the intervals between ``breaks`` [m] (the profile's kinks and the points where
+    the torsion formula switches sides, t(x) = width), moments taken about ``free_end`` [m].
+    Written here from the formulas, independently of model/hinge.py's quadrature."""
+    from scipy.integrate import quad
+
+    from flexcal.model import hinge
+
+    e, g = material.youngs_modulus, material.shear_modulus
+    kappa = float(hinge.shear_coefficient(material.poisson_ratio))
+    w = width
+
+    def integral(f):
+        return sum(quad(f, lo, hi, epsabs=0.0, epsrel=1e-13, limit=200)[0] for lo, hi in zip(breaks[:-1], breaks[1:]))
+
+    def xi(x):  # distance from the free end
+        return free_end - x
+
+    return {
+        "ux_Fx": integral(lambda x: 1 / (e * w * thickness(x))),
+        "uy_Fy": integral(lambda x: 12 * xi(x) ** 2 / (e * w * thickness(x) ** 3) + 1 / (kappa * g * w * thickness(x))),
+        "uy_Mz": integral(lambda x: 12 * xi(x) / (e * w * thickness(x) ** 3)),
+        "rz_Mz": integral(lambda x: 12 / (e * w * thickness(x) ** 3)),
+        "uz_Fz": integral(lambda x: 12 * xi(x) ** 2 / (e * w**3 * thickness(x)) + 1 / (kappa * g * w * thickness(x))),
+        "uz_My": -integral(lambda x: 12 * xi(x) / (e * w**3 * thickness(x))),
+        "ry_My": integral(lambda x: 12 / (e * w**3 * thickness(x))),
+        "rx_Mx": integral(lambda x: 1 / (g * float(hinge.torsion_constant(thickness(x), w)))),
+    }

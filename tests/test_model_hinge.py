@@ -5,17 +5,16 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from scipy.integrate import quad
 
 from flexcal.geometry.frames import twist_transform
 from flexcal.geometry.params import STEEL, CircularNotchHinge, LeafHinge, Material
 from flexcal.model import hinge
 
+from helpers import quad_hinge_entries
+
 
 def quad_entries(flat_half, fillet, thickness, width, material=STEEL):
     """The Euler-Bernoulli/Timoshenko integrals of the module docstring, by adaptive quad."""
-    e, g = material.youngs_modulus, material.shear_modulus
-    kappa = hinge.shear_coefficient(material.poisson_ratio)
     half = flat_half + fillet
 
     def t(x):
@@ -26,22 +25,7 @@ def quad_entries(flat_half, fillet, thickness, width, material=STEEL):
     if fillet > 0 and thickness < width < thickness + 2 * fillet:
         u = np.sqrt(fillet**2 - (fillet - (width - thickness) / 2) ** 2)
         breaks = sorted(set(breaks) | {-(flat_half + u), flat_half + u})
-
-    def integral(f):
-        return sum(quad(f, a, b, epsabs=0.0, epsrel=1e-13, limit=200)[0] for a, b in zip(breaks[:-1], breaks[1:]))
-
-    xi = lambda x: half - x  # noqa: E731 - distance from the free end
-    w = width
-    return {
-        "ux_Fx": integral(lambda x: 1 / (e * w * t(x))),
-        "uy_Fy": integral(lambda x: 12 * xi(x) ** 2 / (e * w * t(x) ** 3) + 1 / (kappa * g * w * t(x))),
-        "uy_Mz": integral(lambda x: 12 * xi(x) / (e * w * t(x) ** 3)),
-        "rz_Mz": integral(lambda x: 12 / (e * w * t(x) ** 3)),
-        "uz_Fz": integral(lambda x: 12 * xi(x) ** 2 / (e * w**3 * t(x)) + 1 / (kappa * g * w * t(x))),
-        "uz_My": -integral(lambda x: 12 * xi(x) / (e * w**3 * t(x))),
-        "ry_My": integral(lambda x: 12 / (e * w**3 * t(x))),
-        "rx_Mx": integral(lambda x: 1 / (g * float(hinge.torsion_constant(t(x), w)))),
-    }
+    return quad_hinge_entries(t, half, breaks, width, material)
 
 
 CASES = [  # (flat half-length c, fillet rho, thickness t, width w) [m]

@@ -15,6 +15,8 @@ from flexcal.model import hinge as model_hinge
 from flexcal.model.profiles import closed_form_of
 from flexcal.model.profiles.elliptical import elliptical_notch_compliance
 
+from helpers import quad_hinge_entries
+
 MM = 1e-3
 REFERENCE = EllipticalNotchHinge(semi_axis_x=10 * MM, semi_axis_y=5 * MM, thickness=1 * MM, width=10 * MM,
                                  block_length=5 * MM)
@@ -23,8 +25,6 @@ REFERENCE = EllipticalNotchHinge(semi_axis_x=10 * MM, semi_axis_y=5 * MM, thickn
 def quad_matrix(hinge, material=STEEL):
     """Euler-Bernoulli/Timoshenko integrals (model/hinge.py docstring) over the geometry's
     own t(x) (``thin_piece().local_thickness``), by adaptive quad, as a 6 x 6."""
-    e, g = material.youngs_modulus, material.shear_modulus
-    kappa = float(model_hinge.shear_coefficient(material.poisson_ratio))
     piece = hinge.thin_piece()
     a, w = hinge.semi_axis_x, hinge.width
 
@@ -37,22 +37,7 @@ def quad_matrix(hinge, material=STEEL):
         q = 1.0 - (w - hinge.thickness) / (2 * hinge.semi_axis_y)
         u = a * math.sqrt(1.0 - q * q)
         breaks = sorted(breaks + [-u, u])
-
-    def integral(f):
-        return sum(quad(f, lo, hi, epsabs=0.0, epsrel=1e-13, limit=200)[0] for lo, hi in zip(breaks[:-1], breaks[1:]))
-
-    xi = lambda x: a - x  # noqa: E731 - distance from the free end
-    entries = {
-        "ux_Fx": integral(lambda x: 1 / (e * w * t(x))),
-        "uy_Fy": integral(lambda x: 12 * xi(x) ** 2 / (e * w * t(x) ** 3) + 1 / (kappa * g * w * t(x))),
-        "uy_Mz": integral(lambda x: 12 * xi(x) / (e * w * t(x) ** 3)),
-        "rz_Mz": integral(lambda x: 12 / (e * w * t(x) ** 3)),
-        "uz_Fz": integral(lambda x: 12 * xi(x) ** 2 / (e * w**3 * t(x)) + 1 / (kappa * g * w * t(x))),
-        "uz_My": -integral(lambda x: 12 * xi(x) / (e * w**3 * t(x))),
-        "ry_My": integral(lambda x: 12 / (e * w**3 * t(x))),
-        "rx_Mx": integral(lambda x: 1 / (g * float(model_hinge.torsion_constant(t(x), w)))),
-    }
-    return model_hinge.entries_to_matrix(entries)
+    return model_hinge.entries_to_matrix(quad_hinge_entries(t, a, breaks, w, material))
 
 
 CASES = [  # (a, b, t, w) [mm]
