@@ -25,8 +25,8 @@ leaf; K_t ~ 1.1-1.2): 1.4 x 1.2-1.3 ~ 1.8, rounded up to 2."""
 
 REFINED_CHAINS = (3, 4, 5)
 """The chains whose FEM stresses are refined: the driving chains D1-D3, which govern the
-safety (their leaf segments at 3 tets through took ~10 min each on the shared machine;
-the load chains' would double that)."""
+safety (one refinement of the mapped mesh, 8 cells through, is ~140k DOF per leaf
+segment; the load chains' would double the builds)."""
 
 
 def _mpa(names, values):
