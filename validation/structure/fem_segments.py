@@ -37,7 +37,8 @@ from ..prototype.mechanism import N_CHAINS, N_SEGMENTS, Prototype
 from ..prototype.superelement import relative_pose, segment_deformation
 
 __all__ = ["DEFAULT_ELEMENTS_THROUGH", "DEFAULT_MESHER", "MESHERS", "REFINE_STEP", "segment_structure", "mirror_map",
-           "FemSegments", "chain_peak_stress_fem", "stress_from_unit_fields"]
+           "FemSegments", "chain_peak_stress_fem",
+           "peak_von_mises_of", "von_mises_quadratic_form", "VON_MISES_FORM"]
 
 MESHERS = ("mapped", "tetwild")
 DEFAULT_MESHER = "mapped"
@@ -151,14 +152,6 @@ def _build_job(segment: ChainSegment, *, material: Material, elements_through: f
     return {"n_dof": int(arrays["n_dof"]), "wall_s": time.perf_counter() - start}
 
 
-def stress_from_unit_fields(unit_stress: np.ndarray, motion: np.ndarray) -> np.ndarray:
-    """Nodal stress (n_nodes, 6) [Pa] under node motions (12,) [m, rad], by linearity from
-    the stresses of the 12 unit motions, (12, n_nodes, 6) or flattened (12, 6 n_nodes)
-    [Pa per m or rad]."""
-    flat = np.asarray(unit_stress).reshape(12, -1)
-    return (np.asarray(motion, flat.dtype) @ flat).reshape(-1, 6)
-
-
 class FemSegments:
     """The FEM segments of a mechanism's chains, as a stiffness provider for
     ``build_prototype`` (``provider(chain, x_start, x_end) -> (12, 12)``, with a
@@ -179,7 +172,8 @@ class FemSegments:
         self.description = (f"FEM segments (Guyan K and M), {mesher} mesh, {self.elements_through:g} elements through "
                             "the thinnest leaf")
         self._memo: dict = {}  # slice -> (arrays, mirrored): asked for at every state
-        self._flat: dict = {}  # slice -> unit stress (12, 6 n_nodes) float64, once: each state is one product
+        self._arrays: dict = {}  # canonical segment -> its arrays
+        self._flat: dict = {}  # canonical segment -> (unit stress float64, its von Mises forms), once
 
     def refined(self) -> "FemSegments":
         """The same segments one mesh refinement finer (``REFINE_STEP``)."""
@@ -237,20 +231,34 @@ class FemSegments:
     def _get(self, chain: FlexureChain, x_start: float, x_end: float):
         key = (chain, float(x_start), float(x_end))
         if key not in self._memo:
-            start = time.perf_counter()
-            arrays, mirrored = segment_structure(chain, x_start, x_end, self.material,
-                                                 elements_through=self.elements_through, mesher=self.mesher,
-                                                 cache_directory=self.cache_directory)
-            if time.perf_counter() - start > 1.0:
-                self._log(f"  segment [{x_start * 1e3:.4g}, {x_end * 1e3:.4g}] mm of a {chain.length * 1e3:.4g} mm "
-                          f"chain: {int(arrays['n_dof'])} DOF, {time.perf_counter() - start:.1f} s")
-            self._memo[key] = (arrays, mirrored)
+            segment, mirrored = _canonical(chain, float(x_start), float(x_end))
+            if segment not in self._arrays:  # read once for a segment and its mirror image
+                start = time.perf_counter()
+                arrays, _ = segment_structure(chain, x_start, x_end, self.material,
+                                              elements_through=self.elements_through, mesher=self.mesher,
+                                              cache_directory=self.cache_directory)
+                if time.perf_counter() - start > 1.0:
+                    self._log(f"  segment [{x_start * 1e3:.4g}, {x_end * 1e3:.4g}] mm of a {chain.length * 1e3:.4g} "
+                              f"mm chain: {int(arrays['n_dof'])} DOF, {time.perf_counter() - start:.1f} s")
+                self._arrays[segment] = arrays
+            self._memo[key] = (self._arrays[segment], mirrored)
         return self._memo[key]
 
-    def _unit_stress(self, chain: FlexureChain, x_start: float, x_end: float) -> np.ndarray:
-        key = (chain, float(x_start), float(x_end))
+    def _unit_stress(self, chain: FlexureChain, x_start: float, x_end: float):
+        """(unit stress (12, n_nodes, 6) float64 [Pa per unit motion], form_of(h) -> the
+        von Mises form of node h's motions (``von_mises_quadratic_form``)) of the slice's
+        canonical segment, each computed once (a segment and its mirror image share them)."""
+        key = _canonical(chain, float(x_start), float(x_end))[0]
         if key not in self._flat:
-            self._flat[key] = np.asarray(self._get(chain, x_start, x_end)[0]["unit_stress"], float).reshape(12, -1)
+            unit = np.asarray(self._get(chain, x_start, x_end)[0]["unit_stress"], float)
+            forms: dict[int, np.ndarray] = {}
+
+            def form_of(h: int) -> np.ndarray:
+                if h not in forms:
+                    forms[h] = von_mises_quadratic_form(unit[6 * h:6 * h + 6])
+                return forms[h]
+
+            self._flat[key] = (unit, form_of)
         return self._flat[key]
 
     def _matrix(self, name: str, chain: FlexureChain, x_start: float, x_end: float) -> np.ndarray:
@@ -274,16 +282,57 @@ class FemSegments:
         """(largest nodal von Mises stress [Pa], where (3,) [m]: that node in chain axes)
         of the slice under node motions (12,) [m, rad]; a mirrored slice's node is turned
         back into place (x -> L - x, y -> -y)."""
-        from flexcal.fem.results import von_mises
-
         arrays, mirrored = self._get(chain, x_start, x_end)
         u = mirror_map().T @ motion if mirrored else np.asarray(motion, float)
-        values = von_mises(stress_from_unit_fields(self._unit_stress(chain, x_start, x_end), u))
-        k = int(np.argmax(values))
+        unit, form_of = self._unit_stress(chain, x_start, x_end)
+        value, k = peak_von_mises_of(unit, u, form_of)
         where = np.array(arrays["nodes"][k], float)
         if mirrored:
             where = _TURN_Z @ where + np.array([chain.length, 0.0, 0.0])
-        return float(values[k]), where
+        return value, where
+
+
+# von Mises squared as a quadratic form of the Voigt stress (xx, yy, zz, yz, xz, xy):
+# sxx^2 + syy^2 + szz^2 - sxx syy - syy szz - szz sxx + 3 (syz^2 + sxz^2 + sxy^2)
+VON_MISES_FORM = np.block([[np.full((3, 3), -0.5) + 1.5 * np.eye(3), np.zeros((3, 3))],
+                           [np.zeros((3, 3)), 3.0 * np.eye(3)]])
+_UPPER = np.triu_indices(6)
+
+
+def von_mises_quadratic_form(unit_stress: np.ndarray) -> np.ndarray:
+    """Q (n_nodes, 21) [Pa^2 per unit^2] of the stresses (6, n_nodes, 6) of one node's six
+    unit motions: the von Mises stress at each node under motions v (6,) is
+    sqrt(Q @ w), w the products v_i v_j (i <= j, row-major ``np.triu_indices``)."""
+    S = np.asarray(unit_stress, float)
+    full = np.einsum("kna,ab,lnb->nkl", S, VON_MISES_FORM, S)
+    return full[:, _UPPER[0], _UPPER[1]] * np.where(_UPPER[0] == _UPPER[1], 1.0, 2.0)
+
+
+def peak_von_mises_of(unit_stress: np.ndarray, motion: np.ndarray, form_of=None) -> tuple[float, int]:
+    """(largest nodal von Mises stress [Pa], its node) under node motions (12,) [m, rad],
+    for the stresses (12, n_nodes, 6) of the 12 unit motions [Pa per unit].
+
+    A segment's motions at a prototype state move one of its nodes only (``(0, xi)``,
+    or ``(xi', 0)`` mirrored): then the node is found from von Mises squared as a
+    quadratic form of that node's six motions (``von_mises_quadratic_form``: 21 numbers a
+    node against the whole field's 72, the product that dominated a warm run), and the
+    value is the stress at that node (``flexcal.fem.results.von_mises``). ``form_of(h)``
+    gives Q of the unit motions 6h..6h+5 (cached by the caller; None: computed here).
+    Motions of both nodes take the whole field. The node is the whole field's argmax
+    unless two nodes' peaks agree to round-off (~1e-13)."""
+    from flexcal.fem.results import von_mises
+
+    u = np.asarray(motion, float)
+    moving = [h for h in (0, 1) if np.any(u[6 * h:6 * h + 6])]
+    if len(moving) != 1:
+        values = von_mises(np.einsum("k,kni->ni", u, unit_stress))
+        k = int(np.argmax(values))
+        return float(values[k]), k
+    h = moving[0]
+    v = u[6 * h:6 * h + 6]
+    Q = form_of(h) if form_of is not None else von_mises_quadratic_form(unit_stress[6 * h:6 * h + 6])
+    k = int(np.argmax(Q @ np.outer(v, v)[_UPPER]))
+    return float(von_mises(v @ unit_stress[6 * h:6 * h + 6, k])), k
 
 
 def chain_peak_stress_fem(prototype: Prototype, poses: np.ndarray, segments: FemSegments) -> np.ndarray:
