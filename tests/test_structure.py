@@ -174,6 +174,8 @@ def test_structure_command_writes_its_report(tmp_path, capsys):
     assert len(report["modes"]["frequencies_without_preload_Hz"]) == 8
     assert len(report["workspace"]["corners"]) == 8
     assert cli.main(["structure", "--modes", "0", "--out", str(tmp_path / "bad")]) == 2
+    # a mesh option without meshed segments is refused, not ignored
+    assert cli.main(["structure", "--mesher", "tetwild", "--out", str(tmp_path / "bad")]) == 2
 
 
 def test_chain_reduced_to_its_ends_keeps_its_rigid_body_mass(mount):
