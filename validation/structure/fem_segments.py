@@ -46,8 +46,10 @@ DEFAULT_ELEMENTS_THROUGH = {"mapped": 6.0, "tetwild": 2.0}
 """Cells through the thinnest leaf by mesher. mapped: 6 cells through the neck, the
 prototype's default (docs/meshing.md: the D-chain leaf segments' dominant stiffness
 entries within 0.51 % of their Richardson limit, the L chain's within 1.1 %); on the
-mount's figures 6 is within 0.5 % of the converged support stiffness and frequencies
-(docs/structure.md, "Mapped segments: mesh density"). tetwild: 2 quadratic tets through
+mount's figures n = 6 is 0.07-0.11 % stiffer than n = 8, i.e. ~0.2-0.3 % above the
+converged support stiffness at the segments' rate 2 (<= 0.7 % with the slowest rate fitted
+to n = 4, 6, 8), the payload modes within 0.13 % (docs/structure.md, "Mapped segments:
+mesh density"). tetwild: 2 quadratic tets through
 the leaf, ~1 % of the converged compliance (docs/meshing.md), half the DOFs of 3."""
 REFINE_STEP = {"mapped": 2.0, "tetwild": 1.0}
 """One refinement (``--refine``): mapped 6 -> 8 cells through the neck (every cell of the
