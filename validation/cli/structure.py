@@ -19,7 +19,8 @@ __all__ = ["configure", "run", "EXAMPLES"]
 
 EXAMPLES = (
     "flexcal structure --out runs/structure                  # beam-theory segments, ~7 s of CPU",
-    "flexcal structure --segments fem --out runs/structure-fem  # meshed segments, ~10 min cold, cached",
+    "flexcal structure --segments fem --out runs/structure-fem  # meshed segments (mapped), ~1 min of CPU cold, cached",
+    "flexcal structure --segments fem --mesher tetwild --out runs/structure-tw  # fTetWild segments, ~5 min cold",
 )
 
 
@@ -27,11 +28,19 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--segments", choices=("analytic", "fem"), default="analytic",
                         help="chain segments from beam theory (default, seconds) or meshed and Guyan-reduced "
                              "(minutes the first time, then from the FEM cache)")
+    parser.add_argument("--mesher", choices=("mapped", "tetwild"), default="mapped",
+                        help="FEM segments: the deterministic mapped multi-block mesh (default) or fTetWild on the "
+                             "CAD solid")
     parser.add_argument("--elements-through", type=float,
-                        help="FEM segments: quadratic tets through the thinnest leaf (default 2)")
+                        help="FEM segments: cells through the thinnest leaf (default: mapped 6, tetwild 2)")
     parser.add_argument("--refine", action="store_true",
-                        help="FEM segments: the driving chains' workspace stresses again with one more element through "
-                             "the leaves (their segments built once, ~10 min each on a loaded machine, then cached)")
+                        help="FEM segments: the driving chains' workspace stresses again one mesh refinement finer "
+                             "(mapped: 2 more cells through the leaves, tetwild: 1 more; built once, then cached)")
+    from .options import worker_count
+
+    parser.add_argument("--workers", type=worker_count, metavar="N", default=None,
+                        help="FEM segments: build threads (default: one per usable core, memory permitting; 0: one "
+                             "after the other in this process)")
     parser.add_argument("--modes", type=int, default=12, help="number of mount modes (default %(default)s)")
     parser.add_argument("--trajectory-points", type=int, default=77,
                         help="points of the standard trajectory the stresses are taken over (1 + a multiple of 4, >= 13; 0: nominal only; "
@@ -52,6 +61,8 @@ def run(args: argparse.Namespace) -> int:
 
     if args.elements_through is not None:
         check_elements_through(args.elements_through)
+    if args.segments != "fem" and (args.mesher != "mapped" or args.elements_through is not None):
+        raise ValueError("--mesher and --elements-through need --segments fem (beam-theory segments have no mesh)")
     if args.refine and args.segments != "fem":
         raise ValueError("--refine needs --segments fem (beam-theory stresses have no mesh to refine)")
     if args.modes < 1:
@@ -62,9 +73,9 @@ def run(args: argparse.Namespace) -> int:
         from .options import mount_option
 
         report = structure_report(mount_option(args) or reference_mechanism(), segments=args.segments,
-                                  elements_through=args.elements_through, n_modes=args.modes,
+                                  elements_through=args.elements_through, mesher=args.mesher, n_modes=args.modes,
                                   trajectory_points=args.trajectory_points, refine=args.refine, figures=staging,
-                                  progress=show_progress(args))
+                                  progress=show_progress(args), workers=args.workers)
         write_report(staging, report)
         write_text(staging / "report.md", markdown(report))
     f = report["modes"]["frequencies_Hz"]

@@ -94,7 +94,8 @@ def write_mode_pngs(folder: Path, prototype: Prototype, poses: np.ndarray, modes
             ax.grid(alpha=0.3)
         fig.suptitle(f"mode {k + 1}: {frequencies[k]:.1f} Hz (grey: undeformed; motion scaled to "
                      f"{100 * SHAPE_SCALE:g} % of the mount's size)")
-        fig.tight_layout()
+        # fixed margins: tight_layout measured every tick label and took half of the pictures' CPU
+        fig.subplots_adjust(left=0.06, right=0.99, bottom=0.11, top=0.88, wspace=0.32)
         name = f"mode_{k + 1}.png"
         fig.savefig(folder / name, dpi=90)
         plt.close(fig)

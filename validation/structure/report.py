@@ -38,21 +38,22 @@ def _segment_masses(prototype, source) -> np.ndarray:
 
 
 def structure_report(mechanism: MechanismParams, *, segments: str = "analytic", elements_through: float | None = None,
-                     n_modes: int = N_MODES, trajectory_points: int = 77, refine: bool = False,
-                     figures=None, progress: bool = False) -> dict[str, Any]:
+                     mesher: str = "mapped", n_modes: int = N_MODES, trajectory_points: int = 77, refine: bool = False,
+                     figures=None, progress: bool = False, workers: int | None = None) -> dict[str, Any]:
     """The structural report of ``mechanism`` (module docstring); ``segments`` "analytic"
-    or "fem"; ``elements_through``: FEM mesh setting (default
-    ``fem_segments.DEFAULT_ELEMENTS_THROUGH``); ``trajectory_points``: points of the
+    or "fem"; ``mesher`` ("mapped" or "tetwild") and ``elements_through`` (None: the
+    mesher's default, ``fem_segments.DEFAULT_ELEMENTS_THROUGH``): the FEM mesh;
+    ``workers``: FEM segment build threads (``FemSegments``); ``trajectory_points``: points of the
     standard trajectory the stresses are taken over (0: nominal only); ``refine`` (FEM
-    segments only): the workspace stresses of the driving chains again with one more
-    element through the leaves (``workspace_report.REFINED_CHAINS``; same states,
+    segments only): the workspace stresses of the driving chains again one mesh
+    refinement finer (``fem_segments.REFINE_STEP``; ``workspace_report.REFINED_CHAINS``; same states,
     segments built or read from the cache); ``figures``: a folder
     to write mode_1.png .. mode_6.png and modes.vtu into (``mode_shapes``), or None."""
     from ..blas_threads import single_blas_thread
     from ..prototype.mechanism import build_prototype
     from ..prototype.segments import analytic_provider
     from ..prototype.transmission import ActuatorTransmission
-    from .fem_segments import DEFAULT_ELEMENTS_THROUGH, FemSegments, chain_peak_stress_fem
+    from .fem_segments import FemSegments, chain_peak_stress_fem
     from .mount import (chain_buckling_factors, chain_end_reduction, mount_buckling_factor, mount_mass, mount_modes, nominal_state,
                         payload_mass_matrix, support_stiffness)
     from .buckling_check import newton_buckling_scan
@@ -72,13 +73,16 @@ def structure_report(mechanism: MechanismParams, *, segments: str = "analytic", 
     t0 = time.perf_counter()
     fem = None
     if segments == "fem":
-        fem = FemSegments(mechanism.material, elements_through=elements_through or DEFAULT_ELEMENTS_THROUGH,
-                          progress=progress)
-    fem_fine = None
-    if refine:
-        fem_fine = FemSegments(mechanism.material, elements_through=fem.elements_through + 1.0, progress=progress)
+        fem = FemSegments(mechanism.material, elements_through=elements_through, mesher=mesher, progress=progress,
+                          workers=workers)
+    fem_fine = fem.refined() if refine else None
     provider = fem if fem is not None else analytic_provider(mechanism.material)
     prototype = build_prototype(mechanism, [ActuatorTransmission()] * 3, provider)
+    if fem_fine is not None:  # the refined driving chains built side by side now, not one by one later
+        from ..prototype.segments import chain_slices
+        from .workspace_report import REFINED_CHAINS
+
+        fem_fine.prepare(chain_slices(mechanism.chains[c].chain for c in REFINED_CHAINS))
     seg_mass = _segment_masses(prototype, fem)
     timings["segments_s"] = time.perf_counter() - t0
     with single_blas_thread():
