@@ -266,6 +266,7 @@ def mechanism_matrices(values, space: ParameterSpace, *, candidate_offset: int =
         breakaway_band=(np.full((n_c, 3), -1.0) if space.breakaway_force is None
                         else float(space.breakaway_force) / nut),
         shortening=(np.zeros((n_c, N_CHAINS, 6, 6)) if not space.chain_shortening else shortening_matrices(
-            np.reshape(space.chain_shortening, (N_CHAINS, 6, 6)), end_block, l, connector, length)),
+            np.reshape(space.chain_shortening, (N_CHAINS, 6, 6)), length, l, w, a, t1, t2, section=section,
+            connector_length=connector, end_block_length=end_block, material=mech.material)),
         consistent=np.full(n_c, bool(space.chain_shortening)),
     )

@@ -10,11 +10,14 @@ the rigid second-order part ``R_j^T 1/2 theta x (theta x p_j)``):
     axial load    N_j = g_j^T X - k_j u_j + K_j[0, :3] R_j^T ext_j
     frame         K_CC X = F_C + sum_j g_j u_j - sum_j (2 N_j J_j^T S_j D_j + J_j^T K_j [ext_j; 0])
 
-``S_j`` (6 x 6, chain frame at B) is Eq. 4-5's pivot form ``dy^2/(2 L_y) + dz^2/(2 L_z)`` of the
-candidate's chain plus a correction measured once at the nominal chains
-(``ParameterSpace.chain_shortening``: ``S_measured(P0) - S_pivot(P0)``; the calibration layer
+``S_j`` (6 x 6, chain frame at B) is the candidate's own chain's shortening form from its
+elements (``model.shortening.chain_shortening_form``: the flexible chain with exact kinematics
+at its element joints) plus a correction measured once at the nominal chains
+(``ParameterSpace.chain_shortening``: ``S_measured(P0) - S_elements(P0)``; the calibration layer
 measures it on the virtual prototype's chains, ``validation/runs/chain_kinematics.py``), so a
-dimension error still acts through the pivot distances. Energy-consistent: the P-delta is the
+dimension error acts through the element compliances. (Eq. 4-5's pivot form,
+``pivot_shortening``, was the base before: it does not follow the leaf thicknesses, and the
+true values' dimension errors left a gain error of a few 1e-4, docs/model.md 10.) Energy-consistent: the P-delta is the
 gradient of N r, so the parasitic shortening and the geometric stiffness come from one S.
 """
 
@@ -41,9 +44,16 @@ def pivot_shortening(end_block, hinge_length, connector, length) -> np.ndarray:
             + row_z[..., :, None] * row_z[..., None, :] / (2.0 * span_z)[..., None, None])
 
 
-def shortening_matrices(correction, end_block, hinge_length, connector, length) -> np.ndarray:
-    """S_j (n_c, 6, 6, 6) = pivot form of each candidate's chains + the measured correction (6, 6, 6)."""
-    return pivot_shortening(end_block, hinge_length, connector, length) + np.asarray(correction, dtype=float)
+def shortening_matrices(correction, length, hinge_length, width, fillet, thickness_1, thickness_2, *, section,
+                        connector_length, end_block_length, material) -> np.ndarray:
+    """S_j (n_c, 6, 6, 6) = each candidate's chains' own shortening form
+    (``shortening.chain_shortening_form``, dimensions (n_c, 6) [m]) + the measured correction (6, 6, 6)."""
+    from .shortening import chain_shortening_form
+
+    own = chain_shortening_form(length, hinge_length, width, fillet, thickness_1, thickness_2, section=section,
+                                connector_length=connector_length, end_block_length=end_block_length,
+                                material=material)
+    return own + np.asarray(correction, dtype=float)
 
 
 def solve_points_consistent(matrices, inputs: np.ndarray, *, clearance: bool, tol: float, max_iter: int,

@@ -23,7 +23,7 @@ import dataclasses
 import numpy as np
 
 from flexcal.geometry.params import FlexureChain
-from flexcal.model.consistent import pivot_shortening
+from flexcal.model.shortening import chain_shortening_form
 from flexcal.model.parameters import ParameterSpace
 
 from ..prototype.equilibrium import Loads, SolverSettings, build_assembly, solve_equilibrium
@@ -85,7 +85,8 @@ def chain_shortening(chain: FlexureChain, provider: StiffnessProvider) -> tuple[
 
 
 def shortening_corrections(space: ParameterSpace, provider: StiffnessProvider) -> np.ndarray:
-    """(n_chains, 6, 6): measured S minus Eq. 4-5's pivot form at the nominal chains of ``space``."""
+    """(n_chains, 6, 6): measured S minus the model's own shortening form
+    (``flexcal.model.shortening.chain_shortening_form``) at the nominal chains of ``space``."""
     mech = space.mechanism
     prepare_provider(provider, chain_slices(p.chain for p in mech.chains))
     done, rows = {}, []
@@ -93,8 +94,10 @@ def shortening_corrections(space: ParameterSpace, provider: StiffnessProvider) -
         key = placement.chain
         if key not in done:  # identical chains share their probe
             measured, _ = chain_shortening(key, provider)
-            done[key] = measured - pivot_shortening(key.end_block_length, key.hinge_length, key.connector_length,
-                                                    key.length)
+            done[key] = measured - chain_shortening_form(
+                key.length, key.hinge_length, key.width, key.fillet, key.thickness_1, key.thickness_2,
+                section=key.section, connector_length=key.connector_length, end_block_length=key.end_block_length,
+                material=mech.material)
         rows.append(done[key])
     return np.array(rows)
 
