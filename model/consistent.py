@@ -63,7 +63,6 @@ def solve_points_consistent(matrices, inputs: np.ndarray, *, clearance: bool, to
     import numba
 
     from . import _numba_consistent
-    from .clearance import clearance_coupling
     from .kernel import _FACES
     from .parameters import DRIVING
 
@@ -81,8 +80,7 @@ def solve_points_consistent(matrices, inputs: np.ndarray, *, clearance: bool, to
     arguments = (
         c(compliance), c(wrench), c(m.axial_gain), c(m.axial_stiffness), c(m.frame_transform), c(m.shortening),
         c(m.rotation), c(m.point_b), c(m.chain_stiffness[:, :, 0, :3]), c(to_wrench),
-        c(m.load_gain[:, DRIVING][:, :, DRIVING]), c(m.mu / m.nut_stiffness),
-        c(clearance_coupling(m.coupling[:, DRIVING, DRIVING], m.nut_stiffness, m.mu)), c(m.clearance),
+        c(m.coupling[:, DRIVING][:, :, DRIVING]), c(m.mu), c(m.clearance),
         c(m.initial_position), c(m.nut_stiffness), c(np.maximum(m.breakaway_band, 0.0)),
         bool(clearance and np.all(m.breakaway_band >= 0)), c(inputs, dtype=float), bool(clearance), float(tol),
         int(max_iter), float(divergence), _FACES, float(state_tolerance), out["pose"], out["loads"], out["clearance"],
