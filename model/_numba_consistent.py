@@ -1,15 +1,17 @@
 """numba kernel of ``consistent.py``: the per-point equilibrium with the chains' second-order
-shortening, the P-delta and the rigid second-order frame kinematics, and the clearance (with its
-play state) by Newton steps on the nut offsets. See ``consistent.py``.
+shortening, the P-delta, the rigid second-order frame kinematics and the turning lever arms of
+the chain forces, and the clearance (with its play state) by Newton steps on the nut offsets.
+See ``consistent.py``.
 
 Per point: the pose X is the fixed point of ``X = K^-1 (F_C + sum_j g_j u_j - f2(X))`` at given
-nut offsets C (``_equilibrium``, contracts by ~1e-2 per step); the offsets solve
-``C = clip(play(C_prev, mu rho(C), band), 0, CL)`` with the release ``rho = C + N_D(X(C), C) / s``.
-Each Newton step linearises rho about the current C with its tangent measured on the
-equilibrium itself (one equilibrium per drive that can leave its flank, C_k + h), and solves
-the linearised box/play problem exactly (``solve_box`` / ``solve_play``). The linear model's
-tangent (what the plain fixed point used) misses the second-order load change, which the nut
-amplifies by mu / (1 - mu): with it the iteration locked into 2-cycles on random candidates.
+nut offsets C (``_equilibrium``, contracts by ~1e-2 per step); the offsets solve Eq. 6-7,
+``C = clip(play(C_prev, mu rho, band / k), 0, CL)``, with the release ``rho = C + N_D / k`` and
+``k_i = -dN_i/dC_i`` the nut's stiffness at this equilibrium (the mechanism re-equilibrating;
+the linear model's Schur complement s_i misses the second-order load change, 2-5 % here, which
+the nut amplifies by mu / (1 - mu)). Each Newton step measures dN/dC on the equilibrium itself
+(one more equilibrium per nut off its flank, C_k + h), linearises rho and solves the linearised
+box/play problem exactly (``solve_box`` / ``solve_play``). With the linear model's tangent (the
+plain fixed point of before) the iteration locked into 2-cycles on random candidates.
 """
 
 import numpy as np
@@ -24,14 +26,15 @@ MAX_NEWTON = 40  # Newton steps on the offsets per point (2-4 where a nut leaves
 # the pose is iterated 100x tighter than the offsets' tolerance: near two free nuts with
 # coupling ~0.9, (I - B)^-1 amplifies the pose's rounding by up to ~100 in the offsets
 INNER_SHARE = 1e-2
-MIN_PIVOT = 0.05  # 1 - mu d(rho_i)/dC_i below this: the nut's own row uses the linear model's tangent
+MIN_STIFFNESS = 0.2  # a measured nut stiffness below this share of the linear one is not trusted (linear used)
 
 
 @njit(cache=True, nogil=True, fastmath=_FAST)
 def _terms(cand, x, c, command, x0, gain, axial, transform, shortening, rotation, point_b, axial_row, to_wrench,
-           r, u, n, force, d, sd, ext, ext_c):
+           lateral_rows, r, u, n, force, d, sd, ext, ext_c):
     """At pose x (6,) and offsets c (3,): shortening r, axial inputs u, loads n (6,) and the
-    second-order wrench ``force`` (P-delta 2 N J^T S D and the rigid term), all in place."""
+    second-order wrench ``force`` (P-delta 2 N J^T S D, the rigid term and the turning lever
+    arms of the chain forces), all in place."""
     t0, t1, t2 = x[3], x[4], x[5]
     tt = t0 * t0 + t1 * t1 + t2 * t2
     for k in range(6):
@@ -72,16 +75,31 @@ def _terms(cand, x, c, command, x0, gain, axial, transform, shortening, rotation
             force[k] += 2.0 * load * acc
             force[k] += (to_wrench[cand, j, k, 0] * ext[0] + to_wrench[cand, j, k, 1] * ext[1]
                          + to_wrench[cand, j, k, 2] * ext[2])
+        # the chain force F (tension n_j along the axis, lateral K D) works through the second-order
+        # displacement of B: d ext / d theta^T F = 1/2 (p (theta.F) + (theta.p) F - 2 theta (p.F))
+        f1 = 0.0
+        f2 = 0.0
+        for a_ in range(6):
+            f1 += lateral_rows[cand, j, 0, a_] * d[a_]
+            f2 += lateral_rows[cand, j, 1, a_] * d[a_]
+        g0 = rotation[cand, j, 0, 0] * load + rotation[cand, j, 0, 1] * f1 + rotation[cand, j, 0, 2] * f2
+        g1 = rotation[cand, j, 1, 0] * load + rotation[cand, j, 1, 1] * f1 + rotation[cand, j, 1, 2] * f2
+        g2 = rotation[cand, j, 2, 0] * load + rotation[cand, j, 2, 1] * f1 + rotation[cand, j, 2, 2] * f2
+        tf = t0 * g0 + t1 * g1 + t2 * g2
+        pf = pb0 * g0 + pb1 * g1 + pb2 * g2
+        force[3] += 0.5 * (pb0 * tf + tp * g0 - 2.0 * t0 * pf)
+        force[4] += 0.5 * (pb1 * tf + tp * g1 - 2.0 * t1 * pf)
+        force[5] += 0.5 * (pb2 * tf + tp * g2 - 2.0 * t2 * pf)
 
 
 @njit(cache=True, nogil=True, fastmath=_FAST)
 def _equilibrium(cand, x, c, command, compliance, wrench, x0, gain, axial, transform, shortening, rotation, point_b,
-                 axial_row, to_wrench, tol, max_iter, divergence, r, u, n, force, d, sd, ext, ext_c, x_new):
+                 axial_row, to_wrench, lateral_rows, tol, max_iter, divergence, r, u, n, force, d, sd, ext, ext_c, x_new):
     """Iterate the pose x in place to ``tol`` at fixed offsets c; then r, u, n, force are those of
     the final x. Returns (status code, iterations)."""
     for it in range(max_iter):
         _terms(cand, x, c, command, x0, gain, axial, transform, shortening, rotation, point_b, axial_row, to_wrench,
-               r, u, n, force, d, sd, ext, ext_c)
+               lateral_rows, r, u, n, force, d, sd, ext, ext_c)
         change = 0.0
         for k in range(6):
             acc = 0.0
@@ -101,14 +119,14 @@ def _equilibrium(cand, x, c, command, compliance, wrench, x0, gain, axial, trans
             return DIVERGED, it + 1
         if change <= tol:
             _terms(cand, x, c, command, x0, gain, axial, transform, shortening, rotation, point_b, axial_row,
-                   to_wrench, r, u, n, force, d, sd, ext, ext_c)
+                   to_wrench, lateral_rows, r, u, n, force, d, sd, ext, ext_c)
             return OK, it + 1
     return NOT_CONVERGED, max_iter
 
 
 @njit(cache=True, nogil=True, parallel=True, fastmath=_FAST)
 def solve(compliance, wrench, gain, axial, transform, shortening, rotation, point_b, axial_row, to_wrench,
-          coupling, mu, limit, x0, nut, band, play, inputs, clearance, tol, max_iter, divergence, faces, state_tol,
+          lateral_rows, coupling, mu, limit, x0, nut, band, play, inputs, clearance, tol, max_iter, divergence, faces, state_tol,
           pose_out, load_out, c_out, release_out, r_out, state_out, class_out, code_out, iter_out):
     n_c = compliance.shape[0]
     n_p = inputs.shape[0]
@@ -125,8 +143,8 @@ def solve(compliance, wrench, gain, axial, transform, shortening, rotation, poin
         c_new = np.zeros(3)
         c_probe = np.zeros(3)
         c_prev = np.zeros(3)
-        rho = np.zeros(3)
-        tangent = np.zeros((3, 3))
+        rate = np.zeros((3, 3))
+        stiff = np.zeros(3)
         b = np.zeros((3, 3))
         a = np.zeros(3)
         lo = np.zeros(3)
@@ -153,23 +171,23 @@ def solve(compliance, wrench, gain, axial, transform, shortening, rotation, poin
             hi[i] = max(limit[cand, i], 0.0)
         for p in range(n_p):
             command = inputs[p]
+            for i in range(3):
+                stiff[i] = nut[cand, i]
             code = NOT_CONVERGED
             iterations = 0
             for step in range(MAX_NEWTON if use_clearance else 1):
                 code, its = _equilibrium(cand, x, c, command, compliance, wrench, x0, gain, axial, transform,
-                                         shortening, rotation, point_b, axial_row, to_wrench, inner_tol, max_iter,
+                                         shortening, rotation, point_b, axial_row, to_wrench, lateral_rows, inner_tol, max_iter,
                                          divergence, r, u, n, force, d, sd, ext, ext_c, x_new)
                 iterations += its
                 if code != OK or not use_clearance:
                     break
-                for i in range(3):
-                    rho[i] = c[i] + n[3 + i] / nut[cand, i]
-                # tangent d rho / d C: measured on the equilibrium for the nuts inside their
-                # gap, the linear model's column (coupling / s) for the others (a nut that stays
-                # on its flank or wall does not use its column; one that leaves it is measured
-                # at the next step)
+                # load rates dN_i / dC_k: measured on the equilibrium for the nuts off their
+                # flank (in the gap or at the far wall), the linear model's (coupling, -s on the
+                # diagonal) for the others (an engaged nut needs only the sign of its load; one
+                # that leaves its flank is measured at the next step)
                 for k in range(3):
-                    if mu[cand, k] > 0 and state_tol < c[k] < hi[k] - state_tol:
+                    if mu[cand, k] > 0 and c[k] > state_tol:
                         for m in range(6):
                             x_probe[m] = x[m]
                         for i in range(3):
@@ -177,33 +195,30 @@ def solve(compliance, wrench, gain, axial, transform, shortening, rotation, poin
                         c_probe[k] += TANGENT_STEP
                         code, its = _equilibrium(cand, x_probe, c_probe, command, compliance, wrench, x0, gain,
                                                  axial, transform, shortening, rotation, point_b, axial_row,
-                                                 to_wrench, inner_tol, max_iter, divergence, r, u, n_probe, force, d, sd,
-                                                 ext, ext_c, x_new)
+                                                 to_wrench, lateral_rows, inner_tol, max_iter, divergence, r, u,
+                                                 n_probe, force, d, sd, ext, ext_c, x_new)
                         iterations += its
                         if code != OK:
                             break
                         for i in range(3):
-                            tangent[i, k] = (c_probe[i] + n_probe[3 + i] / nut[cand, i] - rho[i]) / TANGENT_STEP
+                            rate[i, k] = (n_probe[3 + i] - n[3 + i]) / TANGENT_STEP
                     else:
                         for i in range(3):
-                            tangent[i, k] = coupling[cand, i, k] / nut[cand, i] if i != k else 0.0
+                            rate[i, k] = coupling[cand, i, k] - (axial[cand, 3 + i] if i == k else 0.0)
                 if code != OK:
                     break
-                # the linearised condition C = clip(play(C_prev, a + B C, band)) with
-                # B = mu J, a = mu (rho - J C), each row divided by 1 - B_ii (its own term)
+                # Eq. 6-7 with the nut's own stiffness k_i = -dN_i/dC_i at this equilibrium:
+                # release rho = C + N / k, linearised rho(C') = rho + (I + diag(1/k) dN/dC)(C' - C),
+                # whose diagonal vanishes: C' = clip(play(C_prev, a + B C', band / k))
                 for i in range(3):
-                    own = mu[cand, i] * tangent[i, i]
-                    if 1.0 - own < MIN_PIVOT:
-                        own = 0.0
-                        for k in range(3):
-                            tangent[i, k] = coupling[cand, i, k] / nut[cand, i] if i != k else 0.0
-                    pivot = 1.0 - own
-                    acc = rho[i]
+                    stiff[i] = -rate[i, i] if -rate[i, i] > MIN_STIFFNESS * nut[cand, i] else nut[cand, i]
+                    acc = c[i] + n[3 + i] / stiff[i]
                     for k in range(3):
-                        acc -= tangent[i, k] * c[k]
-                        b[i, k] = mu[cand, i] * tangent[i, k] / pivot if i != k else 0.0
-                    a[i] = (mu[cand, i] * acc) / pivot
-                    band_n[i] = band[cand, i] / pivot
+                        b[i, k] = mu[cand, i] * rate[i, k] / stiff[i] if i != k else 0.0
+                        if i != k:
+                            acc -= rate[i, k] / stiff[i] * c[k]
+                    a[i] = mu[cand, i] * acc
+                    band_n[i] = band[cand, i] * nut[cand, i] / stiff[i]
                 amax = 0.0
                 for i in range(3):
                     amax = max(amax, abs(a[i]))
@@ -226,7 +241,7 @@ def solve(compliance, wrench, gain, axial, transform, shortening, rotation, poin
                     break
                 if change <= tol:  # the offsets moved by <= tol: one more equilibrium settles the pose
                     code, its = _equilibrium(cand, x, c, command, compliance, wrench, x0, gain, axial, transform,
-                                             shortening, rotation, point_b, axial_row, to_wrench, inner_tol, max_iter,
+                                             shortening, rotation, point_b, axial_row, to_wrench, lateral_rows, inner_tol, max_iter,
                                              divergence, r, u, n, force, d, sd, ext, ext_c, x_new)
                     iterations += its
                     break
@@ -240,7 +255,7 @@ def solve(compliance, wrench, gain, axial, transform, shortening, rotation, poin
             compressed = True
             for i in range(3):
                 c_out[cand, p, i] = c[i]
-                release_out[cand, p, i] = (n[3 + i] + nut[cand, i] * c[i]) / nut[cand, i]
+                release_out[cand, p, i] = c[i] + n[3 + i] / (stiff[i] if use_clearance else nut[cand, i])
                 size = abs(c[i])
                 if size <= state_tol:
                     state_out[cand, p, i] = 0

@@ -35,7 +35,7 @@ from . import kernel
 from .chain import chain_compliance_entries, stiffness_from_entries
 from .consistent import shortening_matrices
 from .second_order import preload_geometric_stiffness
-from .parameters import CHAIN_NAMES, DRIVING, LOAD, N_CHAINS, ParameterSpace
+from .parameters import CHAIN_NAMES, DIMENSION_SYMBOLS, DRIVING, LOAD, N_CHAINS, ParameterSpace
 
 __all__ = ["MechanismMatrices", "mechanism_matrices", "payload_wrench"]
 
@@ -199,7 +199,16 @@ def mechanism_matrices(values, space: ParameterSpace, *, candidate_offset: int =
                                           end_block_length=end_block, material=mech.material)
     if space.compliance_factors:  # measured correction of the closed-form chains (docs/model.md 7)
         factors = np.asarray(space.compliance_factors, dtype=float)
-        compliance = {key: entry * factors[:, i] for i, (key, entry) in enumerate(compliance.items())}
+        if space.compliance_slopes:  # the factors follow the dimensions (slopes measured at nominal)
+            nominal = np.asarray(space.nominal_vector)[space.chain_indices(*DIMENSION_SYMBOLS)]  # (chains, 5)
+            relative = np.stack([w, a, l, t1, t2], axis=-1) / nominal - 1.0
+            slopes = np.reshape(space.compliance_slopes, (N_CHAINS, len(DIMENSION_SYMBOLS), 8))
+            factors = factors + np.einsum("cjk,jke->cje", relative, slopes)
+            if np.any(factors <= 0):
+                cand = int(np.argwhere(factors <= 0)[0, 0])
+                raise ValueError(f"candidate {cand + candidate_offset}: a chain-compliance factor came out <= 0 from "
+                                 "compliance_slopes; the dimensions are too far from nominal for the linear correction")
+        compliance = {key: entry * factors[..., i] for i, (key, entry) in enumerate(compliance.items())}
     compliance["ux_Fx"] = compliance["ux_Fx"] + 1.0 / actuator  # actuator spring in series (1/inf = 0 for loads)
     stiffness = stiffness_from_entries(compliance)
     # (the compiled kernel also returns parasitic rows of one centre point; they are

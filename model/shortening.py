@@ -36,7 +36,7 @@ from flexcal.geometry.params import Material
 
 from .chain import chain_elements
 
-__all__ = ["twist_bracket_tensor", "chain_shortening_form"]
+__all__ = ["twist_bracket_tensor", "chain_defect_tensor", "chain_shortening_form"]
 
 
 def _levi_civita() -> np.ndarray:
@@ -69,10 +69,12 @@ _BRACKET = twist_bracket_tensor()
 _PHI_CROSS_D = _rotation_cross_translation()
 
 
-def chain_shortening_form(length, hinge_length, width, fillet, thickness_1, thickness_2, *, section: float,
-                          connector_length: float, end_block_length: float, material: Material) -> np.ndarray:
-    """S (..., 6, 6) [1/m, 1, m] of chains (module docstring): ``N = k (D_x + D^T S D)`` for an end
-    displacement D (chain frame at B, A clamped, no actuator). Dimensions as in
+def chain_defect_tensor(length, hinge_length, width, fillet, thickness_1, thickness_2, *, section: float,
+                        connector_length: float, end_block_length: float, material: Material
+                        ) -> tuple[np.ndarray, np.ndarray]:
+    """(M (..., 6, 6, 6), K_B (..., 6, 6)): the quadratic compatibility defect
+    ``m_c(D) = D^T M[c] D`` of the chain's end (module docstring; M symmetric in its last two
+    axes) and the chain stiffness at B (chain frame, A clamped, no actuator). Dimensions as in
     ``chain.chain_elements`` (batch-broadcast, [m])."""
     compliance, rotation, points = chain_elements(length, hinge_length, width, fillet, thickness_1, thickness_2,
                                                   section=section, connector_length=connector_length,
@@ -89,6 +91,17 @@ def chain_shortening_form(length, hinge_length, width, fillet, thickness_1, thic
     q = 0.5 * (q + np.swapaxes(q, -1, -2))
     m = -q
     m[..., :3, :, :] -= 0.5 * _PHI_CROSS_D
+    return m, stiffness
+
+
+def chain_shortening_form(length, hinge_length, width, fillet, thickness_1, thickness_2, *, section: float,
+                          connector_length: float, end_block_length: float, material: Material) -> np.ndarray:
+    """S (..., 6, 6) [1/m, 1, m] of chains (module docstring): ``N = k (D_x + D^T S D)`` for an end
+    displacement D (chain frame at B, A clamped, no actuator). Dimensions as in
+    ``chain.chain_elements`` (batch-broadcast, [m])."""
+    m, stiffness = chain_defect_tensor(length, hinge_length, width, fillet, thickness_1, thickness_2,
+                                       section=section, connector_length=connector_length,
+                                       end_block_length=end_block_length, material=material)
     k = stiffness[..., 0, 0]
     form = k[..., None, None] * m[..., 0, :, :] + 2.0 * np.einsum("...ca,...cb->...ab", stiffness, m[..., :, 0, :])
     form = 0.5 * (form + np.swapaxes(form, -1, -2)) / k[..., None, None]
