@@ -10,8 +10,10 @@ each step adding one thing: the paper's (Eq. 1-8 as written: closed-form chains,
 order), + FEM-informed chain compliance (docs/model.md 7), + second-order geometric terms
 (docs/model.md 8; the calibration's default), + the clearance's play state with the
 prototype's breakaway force given (docs/model.md 9), + the consistent second-order model:
-the chains' second-order shortening measured on the prototype's chains at the nominal design
-and the second-order terms solved inside the fixed point (docs/model.md 10). The prototype's breakaway force is
+each chain's second-order shortening from its own elements (exact joint kinematics) plus the
+correction measured on the prototype's chains at the nominal design, the chain forces' and the
+weight's turning lever arms, Eq. 6-7 with the nut's own tangent stiffness, all solved inside
+the per-point equilibrium with Newton steps on the clearance (docs/model.md 10). The prototype's breakaway force is
 ``--breakaway`` (comma-separated values: one table per value; the prototype's default is
 2 N); ``--trajectory NAME=FILE`` adds a trajectory file (e.g. ``flexcal design``'s
 trajectory.csv) for scenario NAME. Each is evaluated at the scenario's true values
@@ -109,7 +111,8 @@ def _table(scenario_name, provider, args, strokes, force, trajectory_file) -> No
     consistent = dataclasses.replace(consistent_space(fem, provider), breakaway_force=force)
     models = (("paper's model", paper), ("+ FEM-informed compliance", fem), ("+ second order (default)", second),
               (f"+ play state (F_b {force:g} N given)", dataclasses.replace(second, breakaway_force=force)),
-              ("+ consistent second order, measured chain S", consistent))
+              ("+ consistent: chain kinematics from its elements (S corrected at nominal), lever arms, "
+               "nut tangent, solved with the clearance", consistent))
     amplitudes = standard_trajectory(scenario.space.mechanism).amplitudes
     trajectories = [("standard (77 points)", scenario.inputs, scenario.leg)]
     if trajectory_file:

@@ -31,7 +31,7 @@ MIN_STIFFNESS = 0.2  # a measured nut stiffness below this share of the linear o
 
 @njit(cache=True, nogil=True, fastmath=_FAST)
 def _terms(cand, x, c, command, x0, gain, axial, transform, shortening, rotation, point_b, axial_row, to_wrench,
-           lateral_rows, r, u, n, force, d, sd, ext, ext_c):
+           lateral_rows, weight, r, u, n, force, d, sd, ext, ext_c):
     """At pose x (6,) and offsets c (3,): shortening r, axial inputs u, loads n (6,) and the
     second-order wrench ``force`` (P-delta 2 N J^T S D, the rigid term and the turning lever
     arms of the chain forces), all in place."""
@@ -39,6 +39,14 @@ def _terms(cand, x, c, command, x0, gain, axial, transform, shortening, rotation
     tt = t0 * t0 + t1 * t1 + t2 * t2
     for k in range(6):
         force[k] = 0.0
+    # the weight W at the centre of gravity r turns with the frame: -d ext_r / d theta^T W
+    w0, w1, w2, r0, r1, r2 = weight[cand, 0], weight[cand, 1], weight[cand, 2], weight[cand, 3], weight[cand, 4], weight[cand, 5]
+    tw = t0 * w0 + t1 * w1 + t2 * w2
+    tr = t0 * r0 + t1 * r1 + t2 * r2
+    rw = r0 * w0 + r1 * w1 + r2 * w2
+    force[3] -= 0.5 * (r0 * tw + tr * w0 - 2.0 * t0 * rw)
+    force[4] -= 0.5 * (r1 * tw + tr * w1 - 2.0 * t1 * rw)
+    force[5] -= 0.5 * (r2 * tw + tr * w2 - 2.0 * t2 * rw)
     for j in range(6):
         pb0, pb1, pb2 = point_b[cand, j, 0], point_b[cand, j, 1], point_b[cand, j, 2]
         tp = t0 * pb0 + t1 * pb1 + t2 * pb2
@@ -94,12 +102,12 @@ def _terms(cand, x, c, command, x0, gain, axial, transform, shortening, rotation
 
 @njit(cache=True, nogil=True, fastmath=_FAST)
 def _equilibrium(cand, x, c, command, compliance, wrench, x0, gain, axial, transform, shortening, rotation, point_b,
-                 axial_row, to_wrench, lateral_rows, tol, max_iter, divergence, r, u, n, force, d, sd, ext, ext_c, x_new):
+                 axial_row, to_wrench, lateral_rows, weight, tol, max_iter, divergence, r, u, n, force, d, sd, ext, ext_c, x_new):
     """Iterate the pose x in place to ``tol`` at fixed offsets c; then r, u, n, force are those of
     the final x. Returns (status code, iterations)."""
     for it in range(max_iter):
         _terms(cand, x, c, command, x0, gain, axial, transform, shortening, rotation, point_b, axial_row, to_wrench,
-               lateral_rows, r, u, n, force, d, sd, ext, ext_c)
+               lateral_rows, weight, r, u, n, force, d, sd, ext, ext_c)
         change = 0.0
         for k in range(6):
             acc = 0.0
@@ -119,14 +127,14 @@ def _equilibrium(cand, x, c, command, compliance, wrench, x0, gain, axial, trans
             return DIVERGED, it + 1
         if change <= tol:
             _terms(cand, x, c, command, x0, gain, axial, transform, shortening, rotation, point_b, axial_row,
-                   to_wrench, lateral_rows, r, u, n, force, d, sd, ext, ext_c)
+                   to_wrench, lateral_rows, weight, r, u, n, force, d, sd, ext, ext_c)
             return OK, it + 1
     return NOT_CONVERGED, max_iter
 
 
 @njit(cache=True, nogil=True, parallel=True, fastmath=_FAST)
 def solve(compliance, wrench, gain, axial, transform, shortening, rotation, point_b, axial_row, to_wrench,
-          lateral_rows, coupling, mu, limit, x0, nut, band, play, inputs, clearance, tol, max_iter, divergence, faces, state_tol,
+          lateral_rows, weight, coupling, mu, limit, x0, nut, band, play, inputs, clearance, tol, max_iter, divergence, faces, state_tol,
           pose_out, load_out, c_out, release_out, r_out, state_out, class_out, code_out, iter_out):
     n_c = compliance.shape[0]
     n_p = inputs.shape[0]
@@ -177,7 +185,7 @@ def solve(compliance, wrench, gain, axial, transform, shortening, rotation, poin
             iterations = 0
             for step in range(MAX_NEWTON if use_clearance else 1):
                 code, its = _equilibrium(cand, x, c, command, compliance, wrench, x0, gain, axial, transform,
-                                         shortening, rotation, point_b, axial_row, to_wrench, lateral_rows, inner_tol, max_iter,
+                                         shortening, rotation, point_b, axial_row, to_wrench, lateral_rows, weight, inner_tol, max_iter,
                                          divergence, r, u, n, force, d, sd, ext, ext_c, x_new)
                 iterations += its
                 if code != OK or not use_clearance:
@@ -195,7 +203,7 @@ def solve(compliance, wrench, gain, axial, transform, shortening, rotation, poin
                         c_probe[k] += TANGENT_STEP
                         code, its = _equilibrium(cand, x_probe, c_probe, command, compliance, wrench, x0, gain,
                                                  axial, transform, shortening, rotation, point_b, axial_row,
-                                                 to_wrench, lateral_rows, inner_tol, max_iter, divergence, r, u,
+                                                 to_wrench, lateral_rows, weight, inner_tol, max_iter, divergence, r, u,
                                                  n_probe, force, d, sd, ext, ext_c, x_new)
                         iterations += its
                         if code != OK:
@@ -241,7 +249,7 @@ def solve(compliance, wrench, gain, axial, transform, shortening, rotation, poin
                     break
                 if change <= tol:  # the offsets moved by <= tol: one more equilibrium settles the pose
                     code, its = _equilibrium(cand, x, c, command, compliance, wrench, x0, gain, axial, transform,
-                                             shortening, rotation, point_b, axial_row, to_wrench, lateral_rows, inner_tol, max_iter,
+                                             shortening, rotation, point_b, axial_row, to_wrench, lateral_rows, weight, inner_tol, max_iter,
                                              divergence, r, u, n, force, d, sd, ext, ext_c, x_new)
                     iterations += its
                     break

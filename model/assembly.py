@@ -64,7 +64,8 @@ class MechanismMatrices:
     band F_b / s_i of each nut (``ParameterSpace.breakaway_force``), -1 without play state;
     shortening S_j (n_c, 6, 6, 6) the chains' second-order shortening forms and consistent
     (n_c,) bool: solve with ``model.consistent`` (``ParameterSpace.chain_shortening``; the
-    frame stiffness is then the linear one, the P-delta is in the fixed point).
+    frame stiffness is then the linear one, the P-delta is in the fixed point); payload
+    (n_c, 6) the weight [N] and its centre of gravity [m] (mechanism frame).
     """
 
     chain_stiffness: np.ndarray
@@ -92,6 +93,7 @@ class MechanismMatrices:
     breakaway_band: np.ndarray
     shortening: np.ndarray
     consistent: np.ndarray
+    payload: np.ndarray
 
     @property
     def n_candidates(self) -> int:
@@ -278,4 +280,6 @@ def mechanism_matrices(values, space: ParameterSpace, *, candidate_offset: int =
             np.reshape(space.chain_shortening, (N_CHAINS, 6, 6)), length, l, w, a, t1, t2, section=section,
             connector_length=connector, end_block_length=end_block, material=mech.material)),
         consistent=np.full(n_c, bool(space.chain_shortening)),
+        payload=np.broadcast_to(np.r_[mech.payload_mass * np.asarray(mech.gravity, dtype=float),
+                                      np.asarray(mech.centre_of_gravity, dtype=float)], (n_c, 6)).copy(),
     )

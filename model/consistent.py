@@ -79,7 +79,7 @@ def solve_points_consistent(matrices, inputs: np.ndarray, *, clearance: bool, to
                           optimize=True)  # J^T K[:, :3] R^T (n_c, 6 chains, 6, 3)
     arguments = (
         c(compliance), c(wrench), c(m.axial_gain), c(m.axial_stiffness), c(m.frame_transform), c(m.shortening),
-        c(m.rotation), c(m.point_b), c(m.chain_stiffness[:, :, 0, :3]), c(to_wrench), c(m.chain_stiffness[:, :, 1:3, :]),
+        c(m.rotation), c(m.point_b), c(m.chain_stiffness[:, :, 0, :3]), c(to_wrench), c(m.chain_stiffness[:, :, 1:3, :]), c(m.payload),
         c(m.coupling[:, DRIVING][:, :, DRIVING]), c(m.mu), c(m.clearance),
         c(m.initial_position), c(m.nut_stiffness), c(np.maximum(m.breakaway_band, 0.0)),
         bool(clearance and np.all(m.breakaway_band >= 0)), c(inputs, dtype=float), bool(clearance), float(tol),
