@@ -26,6 +26,7 @@ MAX_NEWTON = 40  # Newton steps on the offsets per point (2-4 where a nut leaves
 # the pose is iterated 100x tighter than the offsets' tolerance: near two free nuts with
 # coupling ~0.9, (I - B)^-1 amplifies the pose's rounding by up to ~100 in the offsets
 INNER_SHARE = 1e-2
+PROBE_TOL = 1e-12  # [m, rad] a probe's pose: its rate error ~ 1e-12 / TANGENT_STEP x 1e8 N/m, 5e-5 relative
 MIN_STIFFNESS = 0.2  # a measured nut stiffness below this share of the linear one is not trusted (linear used)
 
 
@@ -203,8 +204,8 @@ def solve(compliance, wrench, gain, axial, transform, shortening, rotation, poin
                         c_probe[k] += TANGENT_STEP
                         code, its = _equilibrium(cand, x_probe, c_probe, command, compliance, wrench, x0, gain,
                                                  axial, transform, shortening, rotation, point_b, axial_row,
-                                                 to_wrench, lateral_rows, weight, inner_tol, max_iter, divergence, r, u,
-                                                 n_probe, force, d, sd, ext, ext_c, x_new)
+                                                 to_wrench, lateral_rows, weight, PROBE_TOL, max_iter, divergence,
+                                                 r, u, n_probe, force, d, sd, ext, ext_c, x_new)
                         iterations += its
                         if code != OK:
                             break

@@ -87,7 +87,8 @@ def chain_defect_tensor(length, hinge_length, width, fillet, thickness_1, thickn
     gain = transported @ stiffness[..., None, :, :]  # G_e (..., 9, 6, 6)
     before = np.cumsum(gain, axis=-3) - gain  # sum_{e<f} G_e
     # q(D) = 1/2 sum_{e<f} [G_e D, G_f D]: Q[c] = 1/2 sum_f (sum_{e<f} G_e)^T A_c G_f, symmetrised
-    q = 0.5 * np.einsum("...fpa,cpr,...frb->...cab", before, _BRACKET, gain)
+    bracket_gain = np.einsum("cpr,...frb->...fcpb", _BRACKET, gain)  # A_c G_f
+    q = 0.5 * np.sum(np.swapaxes(before, -1, -2)[..., None, :, :] @ bracket_gain, axis=-4)
     q = 0.5 * (q + np.swapaxes(q, -1, -2))
     m = -q
     m[..., :3, :, :] -= 0.5 * _PHI_CROSS_D
