@@ -41,7 +41,8 @@ def _terms(cand, x, c, command, x0, gain, axial, transform, shortening, rotation
     for k in range(6):
         force[k] = 0.0
     # the weight W at the centre of gravity r turns with the frame: -d ext_r / d theta^T W
-    w0, w1, w2, r0, r1, r2 = weight[cand, 0], weight[cand, 1], weight[cand, 2], weight[cand, 3], weight[cand, 4], weight[cand, 5]
+    w0, w1, w2 = weight[cand, 0], weight[cand, 1], weight[cand, 2]
+    r0, r1, r2 = weight[cand, 3], weight[cand, 4], weight[cand, 5]
     tw = t0 * w0 + t1 * w1 + t2 * w2
     tr = t0 * r0 + t1 * r1 + t2 * r2
     rw = r0 * w0 + r1 * w1 + r2 * w2
@@ -103,7 +104,8 @@ def _terms(cand, x, c, command, x0, gain, axial, transform, shortening, rotation
 
 @njit(cache=True, nogil=True, fastmath=_FAST)
 def _equilibrium(cand, x, c, command, compliance, wrench, x0, gain, axial, transform, shortening, rotation, point_b,
-                 axial_row, to_wrench, lateral_rows, weight, tol, max_iter, divergence, r, u, n, force, d, sd, ext, ext_c, x_new):
+                 axial_row, to_wrench, lateral_rows, weight, tol, max_iter, divergence, r, u, n, force, d, sd, ext,
+                 ext_c, x_new):
     """Iterate the pose x in place to ``tol`` at fixed offsets c; then r, u, n, force are those of
     the final x. Returns (status code, iterations)."""
     for it in range(max_iter):
@@ -135,7 +137,8 @@ def _equilibrium(cand, x, c, command, compliance, wrench, x0, gain, axial, trans
 
 @njit(cache=True, nogil=True, parallel=True, fastmath=_FAST)
 def solve(compliance, wrench, gain, axial, transform, shortening, rotation, point_b, axial_row, to_wrench,
-          lateral_rows, weight, coupling, mu, limit, x0, nut, band, play, inputs, clearance, tol, max_iter, divergence, faces, state_tol,
+          lateral_rows, weight, coupling, mu, limit, x0, nut, band, play, inputs, clearance, tol, max_iter, divergence,
+          faces, state_tol,
           pose_out, load_out, c_out, release_out, r_out, state_out, class_out, code_out, iter_out):
     n_c = compliance.shape[0]
     n_p = inputs.shape[0]
@@ -186,7 +189,8 @@ def solve(compliance, wrench, gain, axial, transform, shortening, rotation, poin
             iterations = 0
             for step in range(MAX_NEWTON if use_clearance else 1):
                 code, its = _equilibrium(cand, x, c, command, compliance, wrench, x0, gain, axial, transform,
-                                         shortening, rotation, point_b, axial_row, to_wrench, lateral_rows, weight, inner_tol, max_iter,
+                                         shortening, rotation, point_b, axial_row, to_wrench, lateral_rows, weight,
+                                         inner_tol, max_iter,
                                          divergence, r, u, n, force, d, sd, ext, ext_c, x_new)
                 iterations += its
                 if code != OK or not use_clearance:
@@ -250,7 +254,8 @@ def solve(compliance, wrench, gain, axial, transform, shortening, rotation, poin
                     break
                 if change <= tol:  # the offsets moved by <= tol: one more equilibrium settles the pose
                     code, its = _equilibrium(cand, x, c, command, compliance, wrench, x0, gain, axial, transform,
-                                             shortening, rotation, point_b, axial_row, to_wrench, lateral_rows, weight, inner_tol, max_iter,
+                                             shortening, rotation, point_b, axial_row, to_wrench, lateral_rows, weight,
+                                         inner_tol, max_iter,
                                              divergence, r, u, n, force, d, sd, ext, ext_c, x_new)
                     iterations += its
                     break

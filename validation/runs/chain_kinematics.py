@@ -6,8 +6,9 @@ end A clamped and end B moved by D (6-vector in the chain frame: translation, ro
 vector); the interior nodes find their equilibrium. The axial force at A is
 ``N(D) = k (D_x + D^T S D) + O(D^3)``: its even part at +-h along each pair of directions
 gives S, its odd part along x the axial stiffness k. The model then uses
-``S_pivot(P) + (S(P0) - S_pivot(P0))``: Eq. 4-5's pivot form of the candidate's own chain plus
-the measured correction, like the FEM compliance factors (``model_correction``).
+``S_elements(P) + (S(P0) - S_elements(P0))``: the shortening form of the candidate's own chain
+from its elements (``flexcal.model.shortening``, equal to this probe on analytic segments to
+4 digits) plus the measured correction, like the FEM compliance factors (``model_correction``).
 
 Measured (analytic and FEM segments agree to 1 %): the driving chains' S_zz is 0.93 of
 Eq. 4-5's 1/(2 L_z), their rotation entries S_ry,ry and S_rz,rz 1.8x and 6x; the load
