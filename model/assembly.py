@@ -202,7 +202,7 @@ def mechanism_matrices(values, space: ParameterSpace, *, candidate_offset: int =
     if space.compliance_factors:  # measured correction of the closed-form chains (docs/model.md 7)
         factors = np.asarray(space.compliance_factors, dtype=float)
         if space.compliance_slopes:  # the factors follow the dimensions (slopes measured at nominal)
-            nominal = np.asarray(space.nominal_vector)[space.chain_indices(*DIMENSION_SYMBOLS)]  # (chains, 5)
+            nominal = space.nominal_full[space.chain_indices(*DIMENSION_SYMBOLS)]  # (chains, 5)
             relative = np.stack([w, a, l, t1, t2], axis=-1) / nominal - 1.0
             slopes = np.reshape(space.compliance_slopes, (N_CHAINS, len(DIMENSION_SYMBOLS), 8))
             factors = factors + np.einsum("cjk,jke->cje", relative, slopes)

@@ -105,6 +105,10 @@ def test_slopes_move_the_factors_linearly_with_the_dimensions():
     # 1e-12 relative: the same closed forms scaled by the same numbers in another order
     np.testing.assert_allclose(mechanism_matrices(values, sloped).chain_stiffness,
                                mechanism_matrices(values, constant).chain_stiffness, rtol=1e-12)
+    # a space that identifies a subset (its nominal vector is over the active parameters only)
+    subset = dataclasses.replace(sloped, active=("D1.mu", "D1.CL"))
+    np.testing.assert_allclose(mechanism_matrices(values, subset).chain_stiffness,
+                               mechanism_matrices(values, constant).chain_stiffness, rtol=1e-12)  # as above
     at_nominal = dataclasses.replace(space, compliance_factors=tuple(map(tuple, factors)))
     np.testing.assert_allclose(mechanism_matrices(space.nominal_full, sloped).chain_stiffness,
                                mechanism_matrices(space.nominal_full, at_nominal).chain_stiffness, rtol=1e-14)
