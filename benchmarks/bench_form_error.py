@@ -1,7 +1,7 @@
 """The model-form error budget: each model at the true values against the FEM prototype.
 
     .venv/bin/python benchmarks/bench_form_error.py [--scenario table1[,paper]] [--provider fem]
-        [--walks 3] [--points 60] [--strokes 0.5,0.8] [--seed 1] [--breakaway 2]
+        [--walks 3] [--points 60] [--strokes 0.5,0.8] [--seed 1] [--breakaway 2] [--slopes]
         [--trajectory table1=DIR/trajectory.csv ...]
 
 Truth: the scenario's as-built virtual prototype (FEM segment stiffness by default, noise-free
@@ -10,8 +10,10 @@ each step adding one thing: the paper's (Eq. 1-8 as written: closed-form chains,
 order), + FEM-informed chain compliance (docs/model.md 7), + second-order geometric terms
 (docs/model.md 8; the calibration's default), + the clearance's play state with the
 prototype's breakaway force given (docs/model.md 9), + the consistent second-order model:
-the chains' second-order shortening measured on the prototype's chains at the nominal design
-and the second-order terms solved inside the fixed point (docs/model.md 10). The prototype's breakaway force is
+each chain's second-order shortening from its own elements (exact joint kinematics) plus the
+correction measured on the prototype's chains at the nominal design, the chain forces' and the
+weight's turning lever arms, Eq. 6-7 with the nut's own tangent stiffness, all solved inside
+the per-point equilibrium with Newton steps on the clearance (docs/model.md 10). The prototype's breakaway force is
 ``--breakaway`` (comma-separated values: one table per value; the prototype's default is
 2 N); ``--trajectory NAME=FILE`` adds a trajectory file (e.g. ``flexcal design``'s
 trajectory.csv) for scenario NAME. Each is evaluated at the scenario's true values
@@ -76,6 +78,9 @@ def main(argv=None) -> int:
     parser.add_argument("--strokes", default="0.5,0.8")
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--breakaway", default="2", help="the prototype's breakaway force(s) [N], comma-separated")
+    parser.add_argument("--slopes", action="store_true",
+                        help="add the consistent model with FEM compliance slopes (docs/model.md 7; 10 cold FEM chain "
+                             "builds the first time)")
     parser.add_argument("--trajectory", action="append", default=[], metavar="SCENARIO=FILE",
                         help="a trajectory file (columns xa1_mm, xa2_mm, xa3_mm) to add for that scenario")
     args = parser.parse_args(argv)
@@ -109,7 +114,14 @@ def _table(scenario_name, provider, args, strokes, force, trajectory_file) -> No
     consistent = dataclasses.replace(consistent_space(fem, provider), breakaway_force=force)
     models = (("paper's model", paper), ("+ FEM-informed compliance", fem), ("+ second order (default)", second),
               (f"+ play state (F_b {force:g} N given)", dataclasses.replace(second, breakaway_force=force)),
-              ("+ consistent second order, measured chain S", consistent))
+              ("+ consistent: chain kinematics from its elements (S corrected at nominal), lever arms, "
+               "nut tangent, solved with the clearance", consistent))
+    if args.slopes and args.provider == "fem":
+        from flexcal.validation.runs.model_correction import compliance_slopes
+
+        slopes = tuple(float(v) for v in compliance_slopes(paper, provider).ravel())
+        models += (("+ FEM compliance factors following the dimensions (slopes at nominal)",
+                    dataclasses.replace(consistent, compliance_slopes=slopes)),)
     amplitudes = standard_trajectory(scenario.space.mechanism).amplitudes
     trajectories = [("standard (77 points)", scenario.inputs, scenario.leg)]
     if trajectory_file:

@@ -1,6 +1,18 @@
 """numba kernel of ``consistent.py``: the per-point equilibrium with the chains' second-order
-shortening, the P-delta and the rigid second-order frame kinematics solved inside the fixed
-point together with the clearance (and its play state). See ``consistent.py``."""
+shortening, the P-delta, the rigid second-order frame kinematics and the turning lever arms of
+the chain forces, and the clearance (with its play state) by Newton steps on the nut offsets.
+See ``consistent.py``.
+
+Per point: the pose X is the fixed point of ``X = K^-1 (F_C + sum_j g_j u_j - f2(X))`` at given
+nut offsets C (``_equilibrium``, contracts by ~1e-2 per step); the offsets solve Eq. 6-7,
+``C = clip(play(C_prev, mu rho, band / k), 0, CL)``, with the release ``rho = C + N_D / k`` and
+``k_i = -dN_i/dC_i`` the nut's stiffness at this equilibrium (the mechanism re-equilibrating;
+the linear model's Schur complement s_i misses the second-order load change, 2-5 % here, which
+the nut amplifies by mu / (1 - mu)). Each Newton step measures dN/dC on the equilibrium itself
+(one more equilibrium per nut off its flank, C_k + h), linearises rho and solves the linearised
+box/play problem exactly (``solve_box`` / ``solve_play``). With the linear model's tangent (the
+plain fixed point of before) the iteration locked into 2-cycles on random candidates.
+"""
 
 import numpy as np
 from numba import njit, prange
@@ -9,25 +21,147 @@ from ._numba_kernels import solve_box, solve_play
 from .point_status import CLEARANCE_FAILED, DIVERGED, NOT_CONVERGED, OK
 
 _FAST = {"reassoc", "contract", "arcp"}
+TANGENT_STEP = 1e-6  # [m] offset step of the measured tangent: its second-order error ~1e-6 relative
+MAX_NEWTON = 40  # Newton steps on the offsets per point (2-4 where a nut leaves its flank)
+# the pose is iterated 100x tighter than the offsets' tolerance: near two free nuts with
+# coupling ~0.9, (I - B)^-1 amplifies the pose's rounding by up to ~100 in the offsets
+INNER_SHARE = 1e-2
+PROBE_TOL = 1e-12  # [m, rad] a probe's pose: its rate error ~ 1e-12 / TANGENT_STEP x 1e8 N/m, 5e-5 relative
+MIN_STIFFNESS = 0.2  # a measured nut stiffness below this share of the linear one is not trusted (linear used)
+
+
+@njit(cache=True, nogil=True, fastmath=_FAST)
+def _terms(cand, x, c, command, x0, gain, axial, transform, shortening, rotation, point_b, axial_row, to_wrench,
+           lateral_rows, weight, r, u, n, force, d, sd, ext, ext_c):
+    """At pose x (6,) and offsets c (3,): shortening r, axial inputs u, loads n (6,) and the
+    second-order wrench ``force`` (P-delta 2 N J^T S D, the rigid term and the turning lever
+    arms of the chain forces), all in place."""
+    t0, t1, t2 = x[3], x[4], x[5]
+    tt = t0 * t0 + t1 * t1 + t2 * t2
+    for k in range(6):
+        force[k] = 0.0
+    # the weight W at the centre of gravity r turns with the frame: -d ext_r / d theta^T W
+    w0, w1, w2 = weight[cand, 0], weight[cand, 1], weight[cand, 2]
+    r0, r1, r2 = weight[cand, 3], weight[cand, 4], weight[cand, 5]
+    tw = t0 * w0 + t1 * w1 + t2 * w2
+    tr = t0 * r0 + t1 * r1 + t2 * r2
+    rw = r0 * w0 + r1 * w1 + r2 * w2
+    force[3] -= 0.5 * (r0 * tw + tr * w0 - 2.0 * t0 * rw)
+    force[4] -= 0.5 * (r1 * tw + tr * w1 - 2.0 * t1 * rw)
+    force[5] -= 0.5 * (r2 * tw + tr * w2 - 2.0 * t2 * rw)
+    for j in range(6):
+        pb0, pb1, pb2 = point_b[cand, j, 0], point_b[cand, j, 1], point_b[cand, j, 2]
+        tp = t0 * pb0 + t1 * pb1 + t2 * pb2
+        ext[0] = 0.5 * (t0 * tp - pb0 * tt)  # 1/2 theta x (theta x p_j)
+        ext[1] = 0.5 * (t1 * tp - pb1 * tt)
+        ext[2] = 0.5 * (t2 * tp - pb2 * tt)
+        for a_ in range(3):
+            ext_c[a_] = (rotation[cand, j, 0, a_] * ext[0] + rotation[cand, j, 1, a_] * ext[1]
+                         + rotation[cand, j, 2, a_] * ext[2])
+        for a_ in range(6):
+            acc = 0.0
+            for k in range(6):
+                acc += transform[cand, j, a_, k] * x[k]
+            d[a_] = acc + (ext_c[a_] if a_ < 3 else 0.0)
+        rr = 0.0
+        for a_ in range(6):
+            acc = 0.0
+            for k in range(6):
+                acc += shortening[cand, j, a_, k] * d[k]
+            sd[a_] = acc
+            rr += d[a_] * acc
+        r[j] = -rr
+        u[j] = r[j] + ((command[j - 3] + x0[cand, j - 3] + c[j - 3]) if j >= 3 else 0.0)
+        load = -axial[cand, j] * u[j]
+        for k in range(6):
+            load += gain[cand, k, j] * x[k]
+        for a_ in range(3):
+            load += axial_row[cand, j, a_] * ext_c[a_]
+        n[j] = load
+        for k in range(6):
+            acc = 0.0
+            for a_ in range(6):
+                acc += transform[cand, j, a_, k] * sd[a_]
+            force[k] += 2.0 * load * acc
+            force[k] += (to_wrench[cand, j, k, 0] * ext[0] + to_wrench[cand, j, k, 1] * ext[1]
+                         + to_wrench[cand, j, k, 2] * ext[2])
+        # the chain force F (tension n_j along the axis, lateral K D) works through the second-order
+        # displacement of B: d ext / d theta^T F = 1/2 (p (theta.F) + (theta.p) F - 2 theta (p.F))
+        f1 = 0.0
+        f2 = 0.0
+        for a_ in range(6):
+            f1 += lateral_rows[cand, j, 0, a_] * d[a_]
+            f2 += lateral_rows[cand, j, 1, a_] * d[a_]
+        g0 = rotation[cand, j, 0, 0] * load + rotation[cand, j, 0, 1] * f1 + rotation[cand, j, 0, 2] * f2
+        g1 = rotation[cand, j, 1, 0] * load + rotation[cand, j, 1, 1] * f1 + rotation[cand, j, 1, 2] * f2
+        g2 = rotation[cand, j, 2, 0] * load + rotation[cand, j, 2, 1] * f1 + rotation[cand, j, 2, 2] * f2
+        tf = t0 * g0 + t1 * g1 + t2 * g2
+        pf = pb0 * g0 + pb1 * g1 + pb2 * g2
+        force[3] += 0.5 * (pb0 * tf + tp * g0 - 2.0 * t0 * pf)
+        force[4] += 0.5 * (pb1 * tf + tp * g1 - 2.0 * t1 * pf)
+        force[5] += 0.5 * (pb2 * tf + tp * g2 - 2.0 * t2 * pf)
+
+
+@njit(cache=True, nogil=True, fastmath=_FAST)
+def _equilibrium(cand, x, c, command, compliance, wrench, x0, gain, axial, transform, shortening, rotation, point_b,
+                 axial_row, to_wrench, lateral_rows, weight, tol, max_iter, divergence, r, u, n, force, d, sd, ext,
+                 ext_c, x_new):
+    """Iterate the pose x in place to ``tol`` at fixed offsets c; then r, u, n, force are those of
+    the final x. Returns (status code, iterations)."""
+    for it in range(max_iter):
+        _terms(cand, x, c, command, x0, gain, axial, transform, shortening, rotation, point_b, axial_row, to_wrench,
+               lateral_rows, weight, r, u, n, force, d, sd, ext, ext_c)
+        change = 0.0
+        for k in range(6):
+            acc = 0.0
+            for m in range(6):
+                rhs = wrench[cand, m] - force[m]
+                for j in range(6):
+                    rhs += gain[cand, m, j] * u[j]
+                acc += compliance[cand, k, m] * rhs
+            x_new[k] = acc
+            change = max(change, abs(acc - x[k]))
+        r_max = 0.0
+        for j in range(6):
+            r_max = max(r_max, abs(r[j]))
+        for k in range(6):
+            x[k] = x_new[k]
+        if not np.isfinite(change) or r_max > divergence:
+            return DIVERGED, it + 1
+        if change <= tol:
+            _terms(cand, x, c, command, x0, gain, axial, transform, shortening, rotation, point_b, axial_row,
+                   to_wrench, lateral_rows, weight, r, u, n, force, d, sd, ext, ext_c)
+            return OK, it + 1
+    return NOT_CONVERGED, max_iter
 
 
 @njit(cache=True, nogil=True, parallel=True, fastmath=_FAST)
 def solve(compliance, wrench, gain, axial, transform, shortening, rotation, point_b, axial_row, to_wrench,
-          load_gain_d, scale, coupling, limit, x0, nut, band, play, inputs, clearance, tol, max_iter, divergence,
-          faces, state_tol, pose_out, load_out, c_out, release_out, r_out, state_out, class_out, code_out, iter_out):
+          lateral_rows, weight, coupling, mu, limit, x0, nut, band, play, inputs, clearance, tol, max_iter, divergence,
+          faces, state_tol,
+          pose_out, load_out, c_out, release_out, r_out, state_out, class_out, code_out, iter_out):
     n_c = compliance.shape[0]
     n_p = inputs.shape[0]
+    inner_tol = INNER_SHARE * tol
     for cand in prange(n_c):
         x = np.zeros(6)
         x_new = np.zeros(6)
+        x_probe = np.zeros(6)
         u = np.zeros(6)
         r = np.zeros(6)
         n = np.zeros(6)
+        n_probe = np.zeros(6)
         c = np.zeros(3)
+        c_new = np.zeros(3)
+        c_probe = np.zeros(3)
         c_prev = np.zeros(3)
+        rate = np.zeros((3, 3))
+        stiff = np.zeros(3)
+        b = np.zeros((3, 3))
         a = np.zeros(3)
         lo = np.zeros(3)
         hi = np.zeros(3)
+        band_n = np.zeros(3)
         status = np.zeros(3, dtype=np.int64)
         side = np.zeros(3)
         lo2 = np.zeros(3)
@@ -42,124 +176,100 @@ def solve(compliance, wrench, gain, axial, transform, shortening, rotation, poin
         use_clearance = False
         if clearance:
             for i in range(3):
-                if limit[cand, i] > 0 and scale[cand, i] > 0:
+                if limit[cand, i] > 0 and mu[cand, i] > 0:
                     use_clearance = True
-        b = coupling[cand]
         for i in range(3):
             lo[i] = 0.0
             hi[i] = max(limit[cand, i], 0.0)
         for p in range(n_p):
+            command = inputs[p]
+            for i in range(3):
+                stiff[i] = nut[cand, i]
             code = NOT_CONVERGED
             iterations = 0
-            for it in range(max_iter):
-                iterations = it + 1
-                # chain ends: D_j = J_j X + [R_j^T ext_j; 0], ext = 1/2 theta x (theta x p_j)
-                t0, t1, t2 = x[3], x[4], x[5]
-                tt = t0 * t0 + t1 * t1 + t2 * t2
-                for k in range(6):
-                    force[k] = 0.0
-                for j in range(6):
-                    pb0, pb1, pb2 = point_b[cand, j, 0], point_b[cand, j, 1], point_b[cand, j, 2]
-                    tp = t0 * pb0 + t1 * pb1 + t2 * pb2
-                    ext[0] = 0.5 * (t0 * tp - pb0 * tt)
-                    ext[1] = 0.5 * (t1 * tp - pb1 * tt)
-                    ext[2] = 0.5 * (t2 * tp - pb2 * tt)
-                    for a_ in range(3):
-                        ext_c[a_] = (rotation[cand, j, 0, a_] * ext[0] + rotation[cand, j, 1, a_] * ext[1]
-                                     + rotation[cand, j, 2, a_] * ext[2])
-                    for a_ in range(6):
-                        acc = 0.0
-                        for k in range(6):
-                            acc += transform[cand, j, a_, k] * x[k]
-                        d[a_] = acc + (ext_c[a_] if a_ < 3 else 0.0)
-                    rr = 0.0
-                    for a_ in range(6):
-                        acc = 0.0
-                        for k in range(6):
-                            acc += shortening[cand, j, a_, k] * d[k]
-                        sd[a_] = acc
-                        rr += d[a_] * acc
-                    r[j] = -rr
-                    u[j] = r[j] + ((inputs[p, j - 3] + x0[cand, j - 3] + c[j - 3]) if j >= 3 else 0.0)
-                    load = -axial[cand, j] * u[j]
-                    for k in range(6):
-                        load += gain[cand, k, j] * x[k]
-                    for a_ in range(3):
-                        load += axial_row[cand, j, a_] * ext_c[a_]
-                    n[j] = load
-                    # P-delta 2 N J^T S D and the rigid term's wrench (to_wrench ext)
-                    for k in range(6):
-                        acc = 0.0
-                        for a_ in range(6):
-                            acc += transform[cand, j, a_, k] * sd[a_]
-                        force[k] += 2.0 * load * acc
-                        force[k] += (to_wrench[cand, j, k, 0] * ext[0] + to_wrench[cand, j, k, 1] * ext[1]
-                                     + to_wrench[cand, j, k, 2] * ext[2])
-                if use_clearance:
-                    amax = 0.0
-                    for i in range(3):  # release target mu N(C = 0) / s from the current loads
-                        acc = n[3 + i]
-                        for k in range(3):
-                            acc -= load_gain_d[cand, i, k] * c[k]
-                        a[i] = scale[cand, i] * acc
-                        amax = max(amax, abs(a[i]))
-                    box_tol = 1e-13 + 1e-13 * amax
-                    if play and p > 0:
-                        ok = solve_play(a, b, lo, hi, c_prev, band[cand], side, lo2, hi2, a2, status, box_tol, c,
-                                        faces, trial, it == 0)
+            for step in range(MAX_NEWTON if use_clearance else 1):
+                code, its = _equilibrium(cand, x, c, command, compliance, wrench, x0, gain, axial, transform,
+                                         shortening, rotation, point_b, axial_row, to_wrench, lateral_rows, weight,
+                                         inner_tol, max_iter,
+                                         divergence, r, u, n, force, d, sd, ext, ext_c, x_new)
+                iterations += its
+                if code != OK or not use_clearance:
+                    break
+                # load rates dN_i / dC_k: measured on the equilibrium for the nuts off their
+                # flank (in the gap or at the far wall), the linear model's (coupling, -s on the
+                # diagonal) for the others (an engaged nut needs only the sign of its load; one
+                # that leaves its flank is measured at the next step)
+                for k in range(3):
+                    if mu[cand, k] > 0 and c[k] > state_tol:
+                        for m in range(6):
+                            x_probe[m] = x[m]
+                        for i in range(3):
+                            c_probe[i] = c[i]
+                        c_probe[k] += TANGENT_STEP
+                        code, its = _equilibrium(cand, x_probe, c_probe, command, compliance, wrench, x0, gain,
+                                                 axial, transform, shortening, rotation, point_b, axial_row,
+                                                 to_wrench, lateral_rows, weight, PROBE_TOL, max_iter, divergence,
+                                                 r, u, n_probe, force, d, sd, ext, ext_c, x_new)
+                        iterations += its
+                        if code != OK:
+                            break
+                        for i in range(3):
+                            rate[i, k] = (n_probe[3 + i] - n[3 + i]) / TANGENT_STEP
                     else:
-                        ok = solve_box(a, b, lo, hi, status, box_tol, c, faces, trial)
-                    if not ok:
-                        code = CLEARANCE_FAILED
-                        break
-                # X = K^-1 (F_C + sum_j g_j u_j - f2), with u holding the new C
-                for j in range(3, 6):
-                    u[j] = r[j] + inputs[p, j - 3] + x0[cand, j - 3] + c[j - 3]
+                        for i in range(3):
+                            rate[i, k] = coupling[cand, i, k] - (axial[cand, 3 + i] if i == k else 0.0)
+                if code != OK:
+                    break
+                # Eq. 6-7 with the nut's own stiffness k_i = -dN_i/dC_i at this equilibrium:
+                # release rho = C + N / k, linearised rho(C') = rho + (I + diag(1/k) dN/dC)(C' - C),
+                # whose diagonal vanishes: C' = clip(play(C_prev, a + B C', band / k))
+                for i in range(3):
+                    stiff[i] = -rate[i, i] if -rate[i, i] > MIN_STIFFNESS * nut[cand, i] else nut[cand, i]
+                    acc = c[i] + n[3 + i] / stiff[i]
+                    for k in range(3):
+                        b[i, k] = mu[cand, i] * rate[i, k] / stiff[i] if i != k else 0.0
+                        if i != k:
+                            acc -= rate[i, k] / stiff[i] * c[k]
+                    a[i] = mu[cand, i] * acc
+                    band_n[i] = band[cand, i] * nut[cand, i] / stiff[i]
+                amax = 0.0
+                for i in range(3):
+                    amax = max(amax, abs(a[i]))
+                box_tol = 1e-13 + 1e-13 * amax
+                for i in range(3):
+                    c_new[i] = c[i]
+                if play and p > 0:
+                    ok = solve_play(a, b, lo, hi, c_prev, band_n, side, lo2, hi2, a2, status, box_tol, c_new, faces,
+                                    trial, step == 0)
+                else:
+                    ok = solve_box(a, b, lo, hi, status, box_tol, c_new, faces, trial)
+                if not ok:
+                    code = CLEARANCE_FAILED
+                    break
                 change = 0.0
-                for k in range(6):
-                    acc = 0.0
-                    for m in range(6):
-                        rhs = wrench[cand, m] - force[m]
-                        for j in range(6):
-                            rhs += gain[cand, m, j] * u[j]
-                        acc += compliance[cand, k, m] * rhs
-                    x_new[k] = acc
-                    change = max(change, abs(acc - x[k]))
-                r_max = 0.0
-                for j in range(6):
-                    r_max = max(r_max, abs(r[j]))
-                for k in range(6):
-                    x[k] = x_new[k]
-                if not np.isfinite(change) or r_max > divergence:
-                    code = DIVERGED
+                for i in range(3):
+                    change = max(change, abs(c_new[i] - c[i]))
+                    c[i] = c_new[i]
+                if change == 0.0:
                     break
-                if change <= tol:
-                    code = OK
+                if change <= tol:  # the offsets moved by <= tol: one more equilibrium settles the pose
+                    code, its = _equilibrium(cand, x, c, command, compliance, wrench, x0, gain, axial, transform,
+                                             shortening, rotation, point_b, axial_row, to_wrench, lateral_rows, weight,
+                                         inner_tol, max_iter,
+                                             divergence, r, u, n, force, d, sd, ext, ext_c, x_new)
+                    iterations += its
                     break
-            # outputs at the converged state (loads recomputed at the final X)
+                code = NOT_CONVERGED
             for k in range(6):
                 pose_out[cand, p, k] = x[k]
-            t0, t1, t2 = x[3], x[4], x[5]
-            tt = t0 * t0 + t1 * t1 + t2 * t2
             for j in range(6):
-                pb0, pb1, pb2 = point_b[cand, j, 0], point_b[cand, j, 1], point_b[cand, j, 2]
-                tp = t0 * pb0 + t1 * pb1 + t2 * pb2
-                ext[0] = 0.5 * (t0 * tp - pb0 * tt)
-                ext[1] = 0.5 * (t1 * tp - pb1 * tt)
-                ext[2] = 0.5 * (t2 * tp - pb2 * tt)
-                load = -axial[cand, j] * u[j]
-                for k in range(6):
-                    load += gain[cand, k, j] * x[k]
-                for a_ in range(3):
-                    load += axial_row[cand, j, a_] * (rotation[cand, j, 0, a_] * ext[0] + rotation[cand, j, 1, a_] * ext[1]
-                                                      + rotation[cand, j, 2, a_] * ext[2])
-                load_out[cand, p, j] = load
+                load_out[cand, p, j] = n[j]
                 r_out[cand, p, j] = r[j]
             in_clearance = False
             compressed = True
             for i in range(3):
                 c_out[cand, p, i] = c[i]
-                release_out[cand, p, i] = (load_out[cand, p, 3 + i] + nut[cand, i] * c[i]) / nut[cand, i]
+                release_out[cand, p, i] = c[i] + n[3 + i] / (stiff[i] if use_clearance else nut[cand, i])
                 size = abs(c[i])
                 if size <= state_tol:
                     state_out[cand, p, i] = 0
@@ -169,7 +279,7 @@ def solve(compliance, wrench, gain, axial, transform, shortening, rotation, poin
                     state_out[cand, p, i] = 1
                 if state_out[cand, p, i] > 0:
                     in_clearance = True
-                if load_out[cand, p, 3 + i] >= 0:
+                if n[3 + i] >= 0:
                     compressed = False
                 c_prev[i] = c[i]
             class_out[cand, p] = 2 if in_clearance else (1 if compressed else 3)

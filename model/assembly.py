@@ -35,7 +35,7 @@ from . import kernel
 from .chain import chain_compliance_entries, stiffness_from_entries
 from .consistent import shortening_matrices
 from .second_order import preload_geometric_stiffness
-from .parameters import CHAIN_NAMES, DRIVING, LOAD, N_CHAINS, ParameterSpace
+from .parameters import CHAIN_NAMES, DIMENSION_SYMBOLS, DRIVING, LOAD, N_CHAINS, ParameterSpace
 
 __all__ = ["MechanismMatrices", "mechanism_matrices", "payload_wrench"]
 
@@ -64,7 +64,8 @@ class MechanismMatrices:
     band F_b / s_i of each nut (``ParameterSpace.breakaway_force``), -1 without play state;
     shortening S_j (n_c, 6, 6, 6) the chains' second-order shortening forms and consistent
     (n_c,) bool: solve with ``model.consistent`` (``ParameterSpace.chain_shortening``; the
-    frame stiffness is then the linear one, the P-delta is in the fixed point).
+    frame stiffness is then the linear one, the P-delta is in the fixed point); payload
+    (n_c, 6) the weight [N] and its centre of gravity [m] (mechanism frame).
     """
 
     chain_stiffness: np.ndarray
@@ -92,6 +93,7 @@ class MechanismMatrices:
     breakaway_band: np.ndarray
     shortening: np.ndarray
     consistent: np.ndarray
+    payload: np.ndarray
 
     @property
     def n_candidates(self) -> int:
@@ -199,7 +201,16 @@ def mechanism_matrices(values, space: ParameterSpace, *, candidate_offset: int =
                                           end_block_length=end_block, material=mech.material)
     if space.compliance_factors:  # measured correction of the closed-form chains (docs/model.md 7)
         factors = np.asarray(space.compliance_factors, dtype=float)
-        compliance = {key: entry * factors[:, i] for i, (key, entry) in enumerate(compliance.items())}
+        if space.compliance_slopes:  # the factors follow the dimensions (slopes measured at nominal)
+            nominal = space.nominal_full[space.chain_indices(*DIMENSION_SYMBOLS)]  # (chains, 5)
+            relative = np.stack([w, a, l, t1, t2], axis=-1) / nominal - 1.0
+            slopes = np.reshape(space.compliance_slopes, (N_CHAINS, len(DIMENSION_SYMBOLS), 8))
+            factors = factors + np.einsum("cjk,jke->cje", relative, slopes)
+            if np.any(factors <= 0):
+                cand = int(np.argwhere(factors <= 0)[0, 0])
+                raise ValueError(f"candidate {cand + candidate_offset}: a chain-compliance factor came out <= 0 from "
+                                 "compliance_slopes; the dimensions are too far from nominal for the linear correction")
+        compliance = {key: entry * factors[..., i] for i, (key, entry) in enumerate(compliance.items())}
     compliance["ux_Fx"] = compliance["ux_Fx"] + 1.0 / actuator  # actuator spring in series (1/inf = 0 for loads)
     stiffness = stiffness_from_entries(compliance)
     # (the compiled kernel also returns parasitic rows of one centre point; they are
@@ -266,6 +277,9 @@ def mechanism_matrices(values, space: ParameterSpace, *, candidate_offset: int =
         breakaway_band=(np.full((n_c, 3), -1.0) if space.breakaway_force is None
                         else float(space.breakaway_force) / nut),
         shortening=(np.zeros((n_c, N_CHAINS, 6, 6)) if not space.chain_shortening else shortening_matrices(
-            np.reshape(space.chain_shortening, (N_CHAINS, 6, 6)), end_block, l, connector, length)),
+            np.reshape(space.chain_shortening, (N_CHAINS, 6, 6)), length, l, w, a, t1, t2, section=section,
+            connector_length=connector, end_block_length=end_block, material=mech.material)),
         consistent=np.full(n_c, bool(space.chain_shortening)),
+        payload=np.broadcast_to(np.r_[mech.payload_mass * np.asarray(mech.gravity, dtype=float),
+                                      np.asarray(mech.centre_of_gravity, dtype=float)], (n_c, 6)).copy(),
     )

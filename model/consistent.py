@@ -1,21 +1,31 @@
 """The consistent second-order model (docs/model.md 10): the chains' second-order shortening,
-their P-delta and the frame's rigid second-order kinematics solved inside the per-point fixed
-point, together with the clearance and its play state -- instead of Eq. 4-5's pivot rows and
-one Newton step after the clearance (``model.second_order``).
+their P-delta, the frame's rigid second-order kinematics and the turning lever arms of the chain
+forces and the weight solved per point together with the clearance and its play state -- instead
+of Eq. 4-5's pivot rows and one Newton step after the clearance (``model.second_order``).
 
 Per chain j, with D_j the 6-vector displacement of its end B in its own frame (``J_j X`` plus
-the rigid second-order part ``R_j^T 1/2 theta x (theta x p_j)``):
+the rigid second-order part ``R_j^T ext_j``, ``ext_j = 1/2 theta x (theta x p_j)``):
 
     shortening    r_j = -D_j^T S_j D_j                        (Eq. 4-5 as a full quadratic form)
     axial load    N_j = g_j^T X - k_j u_j + K_j[0, :3] R_j^T ext_j
-    frame         K_CC X = F_C + sum_j g_j u_j - sum_j (2 N_j J_j^T S_j D_j + J_j^T K_j [ext_j; 0])
+    frame         K_CC X = F_C + sum_j g_j u_j - f2(X)
+    f2            sum_j (2 N_j J_j^T S_j D_j + J_j^T K_j [ext_j; 0] + [0; L(p_j, F_j)]) - [0; L(r_cg, W)]
+    lever         L(p, F) = (d ext / d theta)^T F = 1/2 (p (theta.F) + (theta.p) F - 2 theta (p.F))
 
-``S_j`` (6 x 6, chain frame at B) is Eq. 4-5's pivot form ``dy^2/(2 L_y) + dz^2/(2 L_z)`` of the
-candidate's chain plus a correction measured once at the nominal chains
-(``ParameterSpace.chain_shortening``: ``S_measured(P0) - S_pivot(P0)``; the calibration layer
+with F_j = R_j (N_j, (K_j D_j)_y, (K_j D_j)_z) the chain force and W the weight at r_cg. The
+nut offsets solve Eq. 6-7 with the release ``C + N / k`` and k the nut's stiffness at the point's
+equilibrium (``_numba_consistent``: Newton steps with dN/dC measured on the equilibrium).
+
+``S_j`` (6 x 6, chain frame at B) is the candidate's own chain's shortening form from its
+elements (``model.shortening.chain_shortening_form``: the flexible chain with exact kinematics
+at its element joints) plus a correction measured once at the nominal chains
+(``ParameterSpace.chain_shortening``: ``S_measured(P0) - S_elements(P0)``; the calibration layer
 measures it on the virtual prototype's chains, ``validation/runs/chain_kinematics.py``), so a
-dimension error still acts through the pivot distances. Energy-consistent: the P-delta is the
-gradient of N r, so the parasitic shortening and the geometric stiffness come from one S.
+dimension error acts through the element compliances. (Eq. 4-5's pivot form,
+``pivot_shortening``, was the base before: it does not follow the leaf thicknesses, and the true
+values' dimension errors left a gain error of a few 1e-4, docs/model.md 10.) Energy-consistent:
+the P-delta is the gradient of N r, so the parasitic shortening and the geometric stiffness
+come from one S.
 """
 
 from __future__ import annotations
@@ -41,9 +51,16 @@ def pivot_shortening(end_block, hinge_length, connector, length) -> np.ndarray:
             + row_z[..., :, None] * row_z[..., None, :] / (2.0 * span_z)[..., None, None])
 
 
-def shortening_matrices(correction, end_block, hinge_length, connector, length) -> np.ndarray:
-    """S_j (n_c, 6, 6, 6) = pivot form of each candidate's chains + the measured correction (6, 6, 6)."""
-    return pivot_shortening(end_block, hinge_length, connector, length) + np.asarray(correction, dtype=float)
+def shortening_matrices(correction, length, hinge_length, width, fillet, thickness_1, thickness_2, *, section,
+                        connector_length, end_block_length, material) -> np.ndarray:
+    """S_j (n_c, 6, 6, 6) = each candidate's chains' own shortening form
+    (``shortening.chain_shortening_form``, dimensions (n_c, 6) [m]) + the measured correction (6, 6, 6)."""
+    from .shortening import chain_shortening_form
+
+    own = chain_shortening_form(length, hinge_length, width, fillet, thickness_1, thickness_2, section=section,
+                                connector_length=connector_length, end_block_length=end_block_length,
+                                material=material)
+    return own + np.asarray(correction, dtype=float)
 
 
 def solve_points_consistent(matrices, inputs: np.ndarray, *, clearance: bool, tol: float, max_iter: int,
@@ -53,7 +70,6 @@ def solve_points_consistent(matrices, inputs: np.ndarray, *, clearance: bool, to
     import numba
 
     from . import _numba_consistent
-    from .clearance import clearance_coupling
     from .kernel import _FACES
     from .parameters import DRIVING
 
@@ -71,8 +87,8 @@ def solve_points_consistent(matrices, inputs: np.ndarray, *, clearance: bool, to
     arguments = (
         c(compliance), c(wrench), c(m.axial_gain), c(m.axial_stiffness), c(m.frame_transform), c(m.shortening),
         c(m.rotation), c(m.point_b), c(m.chain_stiffness[:, :, 0, :3]), c(to_wrench),
-        c(m.load_gain[:, DRIVING][:, :, DRIVING]), c(m.mu / m.nut_stiffness),
-        c(clearance_coupling(m.coupling[:, DRIVING, DRIVING], m.nut_stiffness, m.mu)), c(m.clearance),
+        c(m.chain_stiffness[:, :, 1:3, :]), c(m.payload),
+        c(m.coupling[:, DRIVING][:, :, DRIVING]), c(m.mu), c(m.clearance),
         c(m.initial_position), c(m.nut_stiffness), c(np.maximum(m.breakaway_band, 0.0)),
         bool(clearance and np.all(m.breakaway_band >= 0)), c(inputs, dtype=float), bool(clearance), float(tol),
         int(max_iter), float(divergence), _FACES, float(state_tolerance), out["pose"], out["loads"], out["clearance"],

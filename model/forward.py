@@ -47,12 +47,11 @@ STATE_TOLERANCE = 1e-12  # [m] |C| below this is engaged, within this of CL is t
 CLEARANCE_MODES = ("directional", "force_only")
 ENGINES = ("auto", "numba", "numpy")
 AUTO_COMPILED_MIN = 200  # postures per call from which "auto" loads numba
-# the consistent model's fixed point oscillates with a factor down to -0.96 per step where a nut
-# sits in its gap (the nut amplifies the second-order load change by mu / (1 - mu)): 1e-11 m/rad
-# (1e-5 urad) takes up to a few thousand steps there, one to ten elsewhere (damped steps were
-# tried and jump to another clearance face: not used)
-CONSISTENT_MAX_ITER = 6000
-CONSISTENT_TOL = 1e-11
+# the consistent model (model/_numba_consistent.py): the pose's fixed point at given nut offsets
+# contracts by ~1e-2 per step (< 20 steps from the previous point's pose); the offsets take
+# Newton steps (2-4 where a nut is in its gap). 200 is a cap per equilibrium, not a typical count
+CONSISTENT_MAX_ITER = 200
+CONSISTENT_TOL = 1e-13  # [m, rad] offsets' update; the pose is iterated to 1e-2 of it
 DIVERGENCE_LIMIT = 1e-2  # [m] a parasitic shortening this large (~1000x the workspace's) means it ran away
 
 

@@ -120,13 +120,16 @@ class ParameterSpace:
     compliance_factors: (n_chains, 8) factors on the eight chain-compliance entries
     (``model.hinge.ENTRY_INDEX`` order) of the closed-form chains, empty = all 1 -- a
     correction measured once against a richer model (FEM, docs/model.md section 7);
+    compliance_slopes: (n_chains, 5, 8) flattened, the factors' change per relative change of
+    each dimension (``DIMENSION_SYMBOLS`` order), measured at the nominal chains: the factors
+    become ``f + slopes^T (P / P0 - 1)`` (docs/model.md 7), empty = constant factors;
     second_order: add the second-order geometric terms (chain-force P-delta, rigid
     second-order frame kinematics; ``model.second_order``, docs/model.md section 8);
     breakaway_force [N] or None: None is the paper's memoryless clip of Eq. 7; a value >= 0
     carries each nut's offset along the ordered trajectory as a play state with the
     breakaway band ``F_b / s_i`` (docs/model.md section 9; force_only clearance, compiled
     engine); chain_shortening: (n_chains, 6, 6) the measured correction of each chain's
-    second-order shortening form to Eq. 4-5's pivot form at the nominal chains [1/m, 1, m],
+    second-order shortening form to the model's own (``model.shortening``) at the nominal chains [1/m, 1, m],
     empty = off; set, the second-order terms are solved inside the fixed point
     (``model.consistent``, docs/model.md 10). Vectors in the
     methods below are over the *active* parameters, ``(..., n_active)``, except
@@ -141,8 +144,14 @@ class ParameterSpace:
     second_order: bool = False
     breakaway_force: float | None = None
     chain_shortening: tuple[float, ...] = ()
+    compliance_slopes: tuple[float, ...] = ()
 
     def __post_init__(self) -> None:
+        if self.compliance_slopes and (not self.compliance_factors
+                                       or len(self.compliance_slopes) != 40 * len(self.mechanism.chains)
+                                       or not np.all(np.isfinite(self.compliance_slopes))):
+            raise ValueError(f"compliance_slopes must be {len(self.mechanism.chains)} x 5 x 8 finite values "
+                             f"(flattened), got {len(self.compliance_slopes)}, and need compliance_factors")
         if self.chain_shortening and (len(self.chain_shortening) != 36 * len(self.mechanism.chains)
                                       or not np.all(np.isfinite(self.chain_shortening))):
             raise ValueError(f"chain_shortening must be {len(self.mechanism.chains)} x 6 x 6 finite values "

@@ -73,3 +73,44 @@ def test_fem_correction_brings_the_model_closer_to_the_fem_prototype():
         model = forward(scenario.values, scenario.inputs, space=sp).angles[0]
         rms[label] = np.sqrt(np.mean((model - measured) ** 2))
     assert rms["fem"] < 0.7 * rms["plain"]  # measured 10.6 -> 3.4 urad, ratio 0.32 (comment above)
+
+
+def test_analytic_provider_gives_zero_slopes():
+    # the factors stay 1 to the inversion rounding (1e-8, above) at every moved dimension, so
+    # their forward differences over the 0.03 step are below 1e-8 / 0.03 ~ 3e-7; 1e-6 leaves 3x
+    from flexcal.validation.runs.model_correction import compliance_slopes
+
+    slopes = compliance_slopes(parameter_space(), analytic_provider())
+    assert slopes.shape == (6, 5, 8)
+    np.testing.assert_allclose(slopes, 0.0, rtol=0, atol=1e-6)
+
+
+def test_slopes_move_the_factors_linearly_with_the_dimensions():
+    """A candidate with dimensions off nominal and ``compliance_slopes``: its chain stiffness is
+    that of constant factors ``f + slopes^T (P / P0 - 1)``; at nominal the slopes change nothing."""
+    from flexcal.model.assembly import mechanism_matrices
+    from flexcal.model.parameters import DIMENSION_SYMBOLS
+
+    space = parameter_space()
+    rng = np.random.default_rng(2)
+    factors = rng.uniform(0.9, 1.2, (6, 8))
+    slopes = rng.uniform(-0.5, 0.5, (6, 5, 8))
+    sloped = dataclasses.replace(space, compliance_factors=tuple(map(tuple, factors)),
+                                 compliance_slopes=tuple(slopes.ravel()))
+    values = space.nominal_full.copy()
+    dims = space.chain_indices(*DIMENSION_SYMBOLS)
+    values[dims] *= rng.uniform(0.92, 1.08, dims.shape)
+    moved = factors + np.einsum("jk,jke->je", values[dims] / space.nominal_full[dims] - 1.0, slopes)
+    constant = dataclasses.replace(space, compliance_factors=tuple(map(tuple, moved)))
+    # 1e-12 relative: the same closed forms scaled by the same numbers in another order
+    np.testing.assert_allclose(mechanism_matrices(values, sloped).chain_stiffness,
+                               mechanism_matrices(values, constant).chain_stiffness, rtol=1e-12)
+    # a space that identifies a subset (its nominal vector is over the active parameters only)
+    subset = dataclasses.replace(sloped, active=("D1.mu", "D1.CL"))
+    np.testing.assert_allclose(mechanism_matrices(values, subset).chain_stiffness,
+                               mechanism_matrices(values, constant).chain_stiffness, rtol=1e-12)  # as above
+    at_nominal = dataclasses.replace(space, compliance_factors=tuple(map(tuple, factors)))
+    np.testing.assert_allclose(mechanism_matrices(space.nominal_full, sloped).chain_stiffness,
+                               mechanism_matrices(space.nominal_full, at_nominal).chain_stiffness, rtol=1e-14)
+    with pytest.raises(ValueError, match="compliance_slopes"):
+        dataclasses.replace(space, compliance_slopes=tuple(slopes.ravel()))  # slopes need factors

@@ -6,8 +6,9 @@ end A clamped and end B moved by D (6-vector in the chain frame: translation, ro
 vector); the interior nodes find their equilibrium. The axial force at A is
 ``N(D) = k (D_x + D^T S D) + O(D^3)``: its even part at +-h along each pair of directions
 gives S, its odd part along x the axial stiffness k. The model then uses
-``S_pivot(P) + (S(P0) - S_pivot(P0))``: Eq. 4-5's pivot form of the candidate's own chain plus
-the measured correction, like the FEM compliance factors (``model_correction``).
+``S_elements(P) + (S(P0) - S_elements(P0))``: the shortening form of the candidate's own chain
+from its elements (``flexcal.model.shortening``, equal to this probe on analytic segments to
+4 digits) plus the measured correction, like the FEM compliance factors (``model_correction``).
 
 Measured (analytic and FEM segments agree to 1 %): the driving chains' S_zz is 0.93 of
 Eq. 4-5's 1/(2 L_z), their rotation entries S_ry,ry and S_rz,rz 1.8x and 6x; the load
@@ -23,7 +24,7 @@ import dataclasses
 import numpy as np
 
 from flexcal.geometry.params import FlexureChain
-from flexcal.model.consistent import pivot_shortening
+from flexcal.model.shortening import chain_shortening_form
 from flexcal.model.parameters import ParameterSpace
 
 from ..prototype.equilibrium import Loads, SolverSettings, build_assembly, solve_equilibrium
@@ -85,7 +86,8 @@ def chain_shortening(chain: FlexureChain, provider: StiffnessProvider) -> tuple[
 
 
 def shortening_corrections(space: ParameterSpace, provider: StiffnessProvider) -> np.ndarray:
-    """(n_chains, 6, 6): measured S minus Eq. 4-5's pivot form at the nominal chains of ``space``."""
+    """(n_chains, 6, 6): measured S minus the model's own shortening form
+    (``flexcal.model.shortening.chain_shortening_form``) at the nominal chains of ``space``."""
     mech = space.mechanism
     prepare_provider(provider, chain_slices(p.chain for p in mech.chains))
     done, rows = {}, []
@@ -93,8 +95,10 @@ def shortening_corrections(space: ParameterSpace, provider: StiffnessProvider) -
         key = placement.chain
         if key not in done:  # identical chains share their probe
             measured, _ = chain_shortening(key, provider)
-            done[key] = measured - pivot_shortening(key.end_block_length, key.hinge_length, key.connector_length,
-                                                    key.length)
+            done[key] = measured - chain_shortening_form(
+                key.length, key.hinge_length, key.width, key.fillet, key.thickness_1, key.thickness_2,
+                section=key.section, connector_length=key.connector_length, end_block_length=key.end_block_length,
+                material=mech.material)
         rows.append(done[key])
     return np.array(rows)
 

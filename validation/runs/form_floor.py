@@ -98,8 +98,8 @@ def truth_from_measurement(measurement: Measurement, space: ParameterSpace) -> T
 def paper_model_space(space: ParameterSpace) -> ParameterSpace:
     """The paper's model (Eq. 1-8 as written) on the mount of ``space``: closed-form chain
     compliance (``--model-stiffness closed-form``), no second-order terms (``--no-second-order``)."""
-    return dataclasses.replace(space, compliance_factors=(), second_order=False, breakaway_force=None,
-                               chain_shortening=())
+    return dataclasses.replace(space, compliance_factors=(), compliance_slopes=(), second_order=False,
+                               breakaway_force=None, chain_shortening=())
 
 
 def model_description(space: ParameterSpace) -> str:
@@ -107,7 +107,8 @@ def model_description(space: ParameterSpace) -> str:
     if (not space.compliance_factors and not space.second_order and space.breakaway_force is None
             and not space.chain_shortening):
         return "the paper's model (Eq. 1-8 as written: closed-form chain stiffness, no second-order terms)"
-    stiffness = "FEM-informed chain stiffness" if space.compliance_factors else "closed-form chain stiffness (Eq. 1)"
+    stiffness = ("closed-form chain stiffness (Eq. 1)" if not space.compliance_factors else
+                 "FEM-informed chain stiffness" + (" following the dimensions" if space.compliance_slopes else ""))
     play = ("" if space.breakaway_force is None
             else f", clearance play state with breakaway force {space.breakaway_force:g} N")
     terms = ("consistent (measured chain shortening, solved with the clearance)" if space.chain_shortening
@@ -177,8 +178,9 @@ def model_form_floor(truth: TruthCurve, inputs: np.ndarray, space: ParameterSpac
     groups = posture_groups(inputs, run.point_class[0], run.release[0], run.directions)
     paper = paper_model_space(space)
     models = [("run", space, run.angles[0])]
-    if ((space.compliance_factors, space.second_order, space.breakaway_force, space.chain_shortening)
-            != (paper.compliance_factors, paper.second_order, paper.breakaway_force, paper.chain_shortening)):
+    if ((space.compliance_factors, space.compliance_slopes, space.second_order, space.breakaway_force,
+         space.chain_shortening) != (paper.compliance_factors, paper.compliance_slopes, paper.second_order,
+                                     paper.breakaway_force, paper.chain_shortening)):
         models.append(("paper", paper, forward(truth.presets, inputs, space=paper).angles[0]))
     out: dict[str, Any] = {
         "available": True,

@@ -29,7 +29,7 @@ from flexcal.model.parameters import ParameterSpace
 
 from ..prototype.segments import (StiffnessProvider, chain_slices, end_stiffness, prepare_provider, section_nodes)
 
-__all__ = ["provider_chain_compliance", "compliance_factors", "corrected_space", "model_space"]
+__all__ = ["provider_chain_compliance", "compliance_factors", "compliance_slopes", "corrected_space", "model_space"]
 
 
 def provider_chain_compliance(chain: FlexureChain, provider: StiffnessProvider) -> np.ndarray:
@@ -65,10 +65,41 @@ def compliance_factors(space: ParameterSpace, provider: StiffnessProvider) -> np
     return factors
 
 
-def corrected_space(space: ParameterSpace, provider: StiffnessProvider) -> ParameterSpace:
-    """``space`` whose model uses ``compliance_factors(space, provider)``."""
+SLOPE_STEP = 0.03  # relative step of each dimension for the slopes: inside the +-10 % the error sources span
+
+
+def compliance_slopes(space: ParameterSpace, provider: StiffnessProvider, step: float = SLOPE_STEP) -> np.ndarray:
+    """(n_chains, 5, 8): the change of each factor of ``compliance_factors`` per relative change
+    of each chain dimension (``DIMENSION_SYMBOLS``: w, a, l, t1, t2), by a forward difference of
+    ``step`` at the nominal chains of ``space`` [-]. One provider solve per chain design and
+    dimension (10 FEM chain builds for the reference mount's two designs, cached)."""
+    from flexcal.model.parameters import DIMENSION_SYMBOLS
+
+    fields = {"w": "width", "a": "fillet", "l": "hinge_length", "t1": "thickness_1", "t2": "thickness_2"}
+    mech = space.mechanism
+    base = compliance_factors(space, provider)
+    moved = [dataclasses.replace(p.chain, **{fields[s]: getattr(p.chain, fields[s]) * (1.0 + step)})
+             for p in mech.chains for s in DIMENSION_SYMBOLS]
+    prepare_provider(provider, chain_slices(moved))  # parallel FEM builds
+    done, out = {}, np.zeros((len(mech.chains), len(DIMENSION_SYMBOLS), 8))
+    for c, placement in enumerate(mech.chains):
+        for k, symbol in enumerate(DIMENSION_SYMBOLS):
+            chain = moved[c * len(DIMENSION_SYMBOLS) + k]
+            if chain not in done:
+                richer = provider_chain_compliance(chain, provider)
+                closed = chain_compliance_matrix(chain, mech.material)
+                done[chain] = np.array([richer[i, j] / closed[i, j] for i, j in ENTRY_INDEX.values()])
+            out[c, k] = (done[chain] - base[c]) / step
+    return out
+
+
+def corrected_space(space: ParameterSpace, provider: StiffnessProvider, *, slopes: bool = False) -> ParameterSpace:
+    """``space`` whose model uses ``compliance_factors(space, provider)``; slopes: with their
+    ``compliance_slopes`` too (the factors then follow the dimensions, docs/model.md 7)."""
     factors = compliance_factors(space, provider)
-    return dataclasses.replace(space, compliance_factors=tuple(tuple(float(v) for v in row) for row in factors))
+    extra = {"compliance_slopes": tuple(float(v) for v in compliance_slopes(space, provider).ravel())} if slopes else {}
+    return dataclasses.replace(space, compliance_factors=tuple(tuple(float(v) for v in row) for row in factors),
+                               **extra)
 
 
 def model_space(stiffness: str = "fem", second_order: bool = True, *, progress: bool = False, workers: int | None = 0,
