@@ -137,7 +137,10 @@ def _section_lines(axis: int, leaves: list[LeafPiece], half_section: float, n: i
         half = _graded(0.0, half_section, None, edge_cell, grading, h_max)[1:]
         return np.concatenate([-half[::-1], [0.0], half]), None
     if core is not None:
-        positive = [np.linspace(-core, core, n + 1)]
+        # (2 k - n) / n exactly: symmetric, and 0 exactly in the middle for even n, where
+        # linspace(-core, core, n + 1) can put it at +-1e-19 and the mirror below then
+        # doubled it into a flat layer of cells (a singular K on table1 seed 2)
+        positive = [core * (2.0 * np.arange(n + 1) - n) / n]
         reach, size = core, 2.0 * core / n
     else:
         positive, reach, size = [], 0.0, None
@@ -221,6 +224,10 @@ def chain_grid(params, n_thickness: int, *, aspect: float = 3.0, n_arc: int = 8,
     x = np.concatenate(x_parts)
     r = int(refinement)
     x, p, q = _refine(x, r), _refine(p, r), _refine(q, r)
+    for name, lines in (("x", x), ("y", p), ("z", q)):
+        if np.min(np.diff(lines)) < 1e-6 * cell:  # a flat layer of cells: its tets have no volume
+            raise RuntimeError(f"the chain mapper made a flat layer of cells along {name} (lines "
+                               f"{np.min(np.diff(lines)):.3g} m apart); please report this chain's dimensions")
     # which cells each piece keeps
     xm, pm, qm = 0.5 * (x[1:] + x[:-1]), 0.5 * (p[1:] + p[:-1]), 0.5 * (q[1:] + q[:-1])
     active = np.zeros((len(xm), len(pm), len(qm)), bool)

@@ -153,3 +153,32 @@ def test_leaf_segment_stiffness_converges_and_agrees_with_tetwild(tmp_path, monk
     off = (tetwild - fit.limit)[mask] / np.abs(fit.limit[mask]) * np.sign(fit.limit[mask])
     # -0.1 %: the Richardson limit's own uncertainty (families differ by ~0.2 %); 0.6 %: above (comment)
     assert np.all(off > -0.001) and np.all(off < 0.006)
+
+
+# table1 seed 2's L1 chain (as built): its leaves thin along z have a core whose middle
+# line linspace placed at -8.7e-19 m, which the mirror doubled into a flat layer of cells
+# (PARDISO error -4 in `flexcal truth --scenario table1 --seed 2`)
+SEED_2_L1 = FlexureChain(length=0.447215544044074, hinge_length=0.020838140039633177, width=0.039808161916264,
+                         fillet=0.005459325427977737, thickness_1=0.0036852314477407604,
+                         thickness_2=0.003632745588259537, section=0.05, connector_length=0.01,
+                         end_block_length=0.01)
+
+
+@pytest.mark.parametrize("n", [2, 3, 4, 5, 6, 7, 8])
+def test_no_flat_layer_of_cells(n):
+    segment = ChainSegment(chain=SEED_2_L1, x_start=0.03583814004, x_end=0.086676280079)
+    grid = chain_grid(segment, n)
+    cell = min(SEED_2_L1.thickness_1, SEED_2_L1.thickness_2) / n
+    for lines in (grid.x, grid.p, grid.q):
+        # 0.01 neck cells: the closest intended lines (a fillet arc's first line beside the
+        # flat part's end, fixed by n_arc) are 0.046 neck cells apart at n = 2, 0.14 at n = 6;
+        # a flat layer is ~1e-19 m
+        assert np.min(np.diff(lines)) > 0.01 * cell
+    for lines in (grid.p, grid.q):
+        assert np.array_equal(lines, -lines[::-1])  # the cross-section symmetric to the bit
+
+
+def test_seed_2_segment_has_no_degenerate_tet():
+    mesh, report = mapped_mesh_chain(ChainSegment(chain=SEED_2_L1, x_start=0.03583814004, x_end=0.086676280079))
+    # measured 4.8e-3 (thin cells at the fillets' ends); a flat layer gave 1e-16
+    assert report.radius_ratio_min > 1e-3
