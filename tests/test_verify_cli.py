@@ -153,24 +153,28 @@ def test_identify_goes_through_the_one_pipeline_with_error_bars(tmp_path):
     assert not (out / "convergence.png").exists()  # no swarm, no convergence picture
 
 
-@pytest.mark.xfail(strict=True, reason="measured 2026-11-26 on main: pooled z RMS 0.33, below the band [0.5, 2] "
-                   "(the discrepancy bars ~3x too wide here; the helper's 1.18 was measured before its last "
-                   "change to the sandwich); issue 28 open")
+@pytest.mark.xfail(strict=True, reason="measured 2026-11-26 (session 13, same fits recomputed): sources alone z RMS "
+                   "0.33, base parameters 2.24; no length scale or amplitude of the stationary Matern discrepancy "
+                   "puts both in [0.5, 2] here (docs/calibration.md 'Why the imperfect-model test fails'); issue 28 open")
 def test_error_bars_stay_honest_with_a_deliberately_imperfect_model(tmp_path):
     """The paper's model (no second-order terms) on the analytic prototype, seeds 1-2: its form
-    error (residual ~2x the 0.5 urad noise, smooth along the postures) biases the drive sources.
-    The Gauss-Newton bars with the AR(1) inflation gave a pooled z RMS of 2.5 over the 8 sources
-    identified alone (measured); the model-discrepancy bars (calibration.discrepancy) must be
-    inside the issue's honesty band [0.5, 2] (measured 1.18). Each source has one error bar: a
-    source identified alone is its own row in the base table, with the same standard error."""
-    z = []
+    error (model at the true values 2.5-3.7 urad RMS from the data, residual 0.77 urad after the
+    fit absorbs most of it) biases the drive sources and the drive-gain combinations. Both the
+    8 sources identified alone and the 12 base parameters must have a pooled z RMS in the
+    issue's honesty band [0.5, 2]. Measured on the same fits: Gauss-Newton bars with the AR(1)
+    noise 1.27 and 18.7 (the base parameters fail); model-discrepancy bars 0.33 and 2.24 (the
+    sources fail). Each source has one error bar: a source identified alone is its own row in
+    the base table, with the same standard error."""
+    z, z_base = [], []
     for seed in ("1", "2"):
         report, _ = _analytic_verify(tmp_path / seed, "--scenario", "table1", "--seed", seed, "--no-second-order")
         z += [r["z_score"] for r in report["parameters"] if r["identifiable"]]
+        z_base += [r["z_score"] for r in report["base_parameters"]["rows"]]
         rows = {r["name"]: r for r in report["parameters"]}
         table = {r["label"]: r for r in report["base_parameters"]["rows"]}
         for name in report["base_parameters"]["pure"]:  # same error and truth: same z only with the same bar
             # one number computed twice from the same covariance entry: only rounding may differ
             assert np.isclose(table[name]["z_score"], rows[name]["z_score"], rtol=1e-6), name
-    assert len(z) >= 8
+    assert len(z) >= 8 and len(z_base) >= 12
     assert 0.5 <= float(np.sqrt(np.mean(np.square(z)))) <= 2.0  # the issue's honesty band
+    assert 0.5 <= float(np.sqrt(np.mean(np.square(z_base)))) <= 2.0  # the same band for the base parameters
