@@ -48,6 +48,10 @@ def run(args: argparse.Namespace) -> int:
     print(f"  remote centre of L1-L3: ({', '.join(f'{v * 1e3:.3f}' for v in centre)}) mm, axes within "
           f"{miss * 1e3:.3g} mm of it")
     print("  chain lengths [mm]: " + ", ".join(f"{c.name} {c.chain.length * 1e3:.1f}" for c in mechanism.chains))
+    placed = mechanism.payload_box_centre
+    print("  no two chains' solids overlap" + (
+        f", nor a chain and the payload box centred at ({', '.join(f'{v * 1e3:g}' for v in placed)}) mm" if placed
+        else "; the payload box is not placed ([payload] box_centre_mm), so not checked"))
     print(f"  held in every direction by the chains' axes (weakest {ratio:.3g} of the strongest)")
     print(f"  actuator travel needed [mm]: {', '.join(f'{v * 1e3:.3g}' for v in travel)} of +-"
           f"{mechanism.actuator_half_stroke * 1e3:g} (workspace corners + x0 and clearance ranges)")
