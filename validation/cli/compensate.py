@@ -122,7 +122,7 @@ def run(args: argparse.Namespace) -> int:
     from ..runs.compensate import bench_from_metadata, run_compensation
     from ..reports.compensation import build_report, plot_fit, plot_first_round, plot_iterated, report_markdown
     from ..output import staged_output, write_report
-    from ..runs.opening import calibration_model, open_data
+    from .opening import calibration_model, open_data
     from ..runs.targets import default_targets, read_targets, write_targets
     from .options import executor_options
 

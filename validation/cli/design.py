@@ -134,7 +134,7 @@ def run(args: argparse.Namespace) -> int:
     from flexcal.model.trajectory import standard_trajectory
 
     from .common import show_progress
-    from ..runs.opening import calibration_model
+    from .opening import calibration_model
     from ..output import staged_output, write_report
     from ..prototype.scenario import load_scenario
 

@@ -170,7 +170,7 @@ def run(args: argparse.Namespace) -> int:
     from ..diagnosis.baseline import BaselineSettings, calibrate_baseline
     from ..diagnosis.plots import plot_heldout, plot_residual, plot_strata
     from ..output import staged_output, write_report
-    from ..runs.opening import open_calibration
+    from .opening import open_calibration
 
     if args.particles < 2 or args.iterations < 1:
         raise ValueError("--particles must be >= 2 and --iterations >= 1")

@@ -70,7 +70,7 @@ def run(args: argparse.Namespace) -> int:
     from ..output import staged_output, write_report
     from ..reports.form_floor import form_floor_line, form_floor_markdown
     from ..reports.plots import plot_misalignment_curves
-    from ..runs.opening import open_calibration
+    from .opening import open_calibration
     from ..runs.verify import VerifySettings, run_verify
     from .common import show_progress
     from .options import prior_scale_option

@@ -56,7 +56,7 @@ def run(args: argparse.Namespace) -> int:
     from flexcal.calibration.sensitivity import format_ranked_table, ranked_table, select_parameters
 
     from .common import show_progress
-    from ..runs.opening import open_calibration
+    from .opening import open_calibration
     from ..output import staged_output, write_report
     from flexcal.model.parameters import DRIVE_SOURCE_NAMES
 

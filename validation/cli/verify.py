@@ -45,7 +45,7 @@ def run(args: argparse.Namespace) -> int:
     from ..measurements import write_measurement
     from ..output import staged_output, write_report
     from ..reports.verify import verify_lines, verify_markdown, write_verify_figures
-    from ..runs.opening import open_calibration
+    from .opening import open_calibration
     from ..runs.verify import VerifySettings, run_verify
 
     if args.particles < 2 or args.iterations < 1:

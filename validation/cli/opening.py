@@ -4,7 +4,9 @@ sidecar and checked against its mount), the mount that models it (the sidecar's,
 ``--mount`` with the differences listed key by key) and the calibration model of that mount
 (``--model-stiffness``, ``--second-order``). One place, so that every command reads data,
 sidecar and mount the same way; the reading itself is ``cli.options`` (``read_data``,
-``load_source_with_truth``, ``data_mechanism``), which know the command line's options.
+``load_source_with_truth``, ``data_mechanism``). It lives in ``cli/``, not ``runs/``: it is
+all reading of the command line's options, and nothing outside ``cli/`` imports ``cli/``
+(docs/architecture.md, tests/test_import_arrows.py).
 
 ``open_calibration`` does it all; ``open_data`` and ``calibration_model`` are its two halves
 for a command that needs the mount before the model (compensate: its targets lie in the
@@ -51,7 +53,7 @@ def open_data(args: argparse.Namespace, *, progress: bool, data_path=None) -> Da
     ``--data`` source."""
     from flexcal.model.parameters import parameter_space
 
-    from ..cli.options import data_mechanism, load_source_with_truth, read_data
+    from .options import data_mechanism, load_source_with_truth, read_data
 
     if data_path is None:
         measurement, presets, truth = load_source_with_truth(args, parameter_space(), progress=progress)
@@ -64,8 +66,8 @@ def open_data(args: argparse.Namespace, *, progress: bool, data_path=None) -> Da
 def calibration_model(args: argparse.Namespace, mechanism, *, progress: bool):
     """The calibration model (``ParameterSpace``) of ``mechanism`` with the command's
     ``--model-stiffness``, ``--second-order`` and executor options."""
-    from ..cli.options import executor_options
-    from .model_correction import model_space
+    from ..runs.model_correction import model_space
+    from .options import executor_options
 
     return model_space(args.model_stiffness, args.second_order, progress=progress, mechanism=mechanism,
                        **executor_options(args))
