@@ -71,12 +71,14 @@ class ChainTable(msgspec.Struct, **_STRICT):
 class PayloadTable(msgspec.Struct, **_STRICT):
     """``[payload]``: mass_kg; centre_of_gravity_mm from O_C; box_mm (x, y, z) it fills;
     inertia_kg_m2 (Ixx, Iyy, Izz) principal moments about the centre of gravity along the
-    mount axes (optional: from the box if absent)."""
+    mount axes (optional: from the box if absent); box_centre_mm: where the box sits, for
+    the collision check and pictures (optional: not placed, not checked)."""
 
     mass_kg: NONNEGATIVE
     centre_of_gravity_mm: VECTOR3
     box_mm: POSITIVE3
     inertia_kg_m2: POSITIVE3 | None = None
+    box_centre_mm: VECTOR3 | None = None
 
 
 class MaterialTable(msgspec.Struct, **_STRICT):
@@ -211,6 +213,7 @@ def _mechanism(typed: MountFile) -> MechanismParams:
         actuator_stiffness=_si(actuators.axial_stiffness_n_per_mm, "n_per_mm"),
         payload_box=_vector(payload.box_mm, "mm"),
         payload_inertia=inertia,
+        payload_box_centre=None if payload.box_centre_mm is None else _vector(payload.box_centre_mm, "mm"),
         actuator_half_stroke=_si(actuators.half_stroke_mm, "mm"),
         workspace=_vector(typed.workspace.half_range_mrad, "mrad"),
         errors=errors,
@@ -264,6 +267,8 @@ def mount_table(mechanism: MechanismParams, *, name: str = "mount") -> dict[str,
                                "box_mm": _shown(mechanism.payload_box, "mm")}
     if mechanism.payload_inertia is not None:
         payload["inertia_kg_m2"] = [float(v) for v in mechanism.payload_inertia]
+    if mechanism.payload_box_centre is not None:
+        payload["box_centre_mm"] = _shown(mechanism.payload_box_centre, "mm")
     material = mechanism.material
     return {
         "name": name,
@@ -303,6 +308,7 @@ _COMMENTS = {  # key -> the comment written beside it (docs/mount.md says more)
     "centre_of_gravity_mm": "payload centre of gravity [mm] from the remote centre O_C",
     "box_mm": "the box the payload fills (x, y, z) [mm]: its inertia about the centre of gravity",
     "inertia_kg_m2": "principal moments (Ixx, Iyy, Izz) [kg m^2] about the CoG; replaces the box's",
+    "box_centre_mm": "where the box's centre sits [mm]: chains are checked against the box (optional)",
     "youngs_modulus_gpa": "Young's modulus E [GPa]",
     "poisson_ratio": "Poisson's ratio nu [-]",
     "density_kg_m3": "density [kg/m^3]",

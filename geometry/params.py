@@ -308,7 +308,9 @@ class MechanismParams:
     material; actuator_stiffness [N/m]: axial stiffness of ball screw + coupling in
     series with each driving chain; payload_box (x, y, z) [m]: the box the payload fills
     (its inertia about the centre of gravity, unless payload_inertia gives the principal
-    moments (Ixx, Iyy, Izz) [kg m^2] along the mechanism axes); actuator_half_stroke [m]:
+    moments (Ixx, Iyy, Izz) [kg m^2] along the mechanism axes); payload_box_centre [m]:
+    where the box sits in the mechanism frame (for the collision check and pictures only;
+    None: not placed, the chains are not checked against it); actuator_half_stroke [m]:
     travel of each actuator either side of its zero; workspace (theta_x, theta_y, theta_z)
     [rad]: half-ranges of the pose (paper Sec. 4.2); errors: the error sources' ranges.
     A mount file (``flexcal.geometry.mount``) holds all of it in display units.
@@ -322,6 +324,7 @@ class MechanismParams:
     actuator_stiffness: float = 2.0e8
     payload_box: tuple[float, float, float] = (0.200, 1.400, 0.420)
     payload_inertia: tuple[float, float, float] | None = None
+    payload_box_centre: tuple[float, float, float] | None = None
     actuator_half_stroke: float = 5e-3
     workspace: tuple[float, float, float] = (1e-3, 5e-3, 3e-3)
     errors: ErrorRanges = ErrorRanges()
@@ -336,6 +339,8 @@ class MechanismParams:
             _require(side > 0, f"payload_box[{i}]", side, "> 0 mm")
         for i, moment in enumerate(self.payload_inertia or ()):
             _require(moment > 0, f"payload_inertia[{i}]", moment, "> 0 kg m^2", unit="kg m^2")
+        for i, coordinate in enumerate(self.payload_box_centre or ()):
+            _finite(f"payload_box_centre[{i}]", coordinate)
         _require(self.actuator_half_stroke > 0, "actuator_half_stroke", self.actuator_half_stroke, "> 0 mm")
         for i, half_range in enumerate(self.workspace):
             _require(half_range > 0, f"workspace[{i}]", half_range, "> 0 rad", unit="rad")

@@ -2,12 +2,11 @@
 load chains form one remote centre. ``flexcal.geometry.mount`` already refused impossible
 dimensions while reading; these need the model's kinematics, so they live here.
 
-``check_mount`` raises ``ValueError`` (one line: the CLI exits 2) for two chains that
-certainly collide (their struts' inscribed cylinders overlap: a cheap test, not CadQuery's
-interference of the solids, so a graze of the square sections' corners passes), a mount
-that is not held in every direction by its chains' axes, or whose actuators' stroke cannot
-reach the workspace; it returns warnings (lines) for a remote centre that the load chains'
-axes miss.
+``check_mount`` raises ``ValueError`` (one line: the CLI exits 2) for two bodies whose
+solids overlap (two chains, or a chain and the payload's box when the file places it:
+``flexcal.validation.mount_solids``, CadQuery booleans), a mount that is not held in every
+direction by its chains' axes, or whose actuators' stroke cannot reach the workspace; it
+returns warnings (lines) for a remote centre that the load chains' axes miss.
 ``read_checked_mount`` reads a mount file and checks it (``--mount FILE``).
 """
 
@@ -21,7 +20,7 @@ import numpy as np
 
 from flexcal.geometry.params import MechanismParams
 
-__all__ = ["check_mount", "read_checked_mount", "free_twist", "remote_centre", "required_travel", "colliding_chains",
+__all__ = ["check_mount", "read_checked_mount", "free_twist", "remote_centre", "required_travel",
            "MIN_CONSTRAINT", "MAX_CENTRE_MISS"]
 
 # The smallest singular value of the chains' axis lines (unit wrenches, moments over the
@@ -95,44 +94,21 @@ def required_travel(mechanism: MechanismParams) -> np.ndarray:
     return np.max(np.abs(inputs), axis=0) + max(abs(v) for v in errors.initial_position) + errors.clearance[1]
 
 
-def _segment_distance(p1: np.ndarray, q1: np.ndarray, p2: np.ndarray, q2: np.ndarray) -> float:
-    """Shortest distance [m] between the segments p1-q1 and p2-q2 (clamped closest points)."""
-    d1, d2, r = q1 - p1, q2 - p2, p1 - p2
-    a, e, f = d1 @ d1, d2 @ d2, d2 @ r
-    c, b = d1 @ r, d1 @ d2
-    denominator = a * e - b * b
-    s = np.clip((b * f - c * e) / denominator, 0.0, 1.0) if denominator > 1e-12 * a * e else 0.0
-    t = (b * s + f) / e
-    if t < 0.0 or t > 1.0:
-        t = float(np.clip(t, 0.0, 1.0))
-        s = float(np.clip((b * t - c) / a, 0.0, 1.0))
-    return float(np.linalg.norm(p1 + s * d1 - (p2 + t * d2)))
-
-
-def colliding_chains(mechanism: MechanismParams) -> list[tuple[str, str, float]]:
-    """(name, name, axis distance [m]) of every pair of chains whose inscribed cylinders
-    (radius section/2 about the axis A-B) overlap: their solids certainly intersect."""
-    found = []
-    chains = mechanism.chains
-    for i, first in enumerate(chains):
-        for second in chains[i + 1:]:
-            distance = _segment_distance(*(np.asarray(v, float) for v in (first.point_a, first.point_b,
-                                                                            second.point_a, second.point_b)))
-            if distance < (first.chain.section + second.chain.section) / 2:
-                found.append((first.name, second.name, distance))
-    return found
-
-
 def check_mount(mechanism: MechanismParams, *, source: str = "mount") -> list[str]:
-    """Refuse (``ValueError``, one line naming ``source``) a mount with two chains that
-    certainly collide, a direction of its pose free, or a stroke that cannot reach its
-    workspace; the warnings (lines) of a remote centre the load chains' axes miss by more
-    than ``MAX_CENTRE_MISS``."""
-    collisions = colliding_chains(mechanism)
+    """Refuse (``ValueError``, one line naming ``source``) a mount with two bodies whose
+    solids overlap (``mount_solids.overlaps``), a direction of its pose free, or a stroke
+    that cannot reach its workspace; the warnings (lines) of a remote centre the load
+    chains' axes miss by more than ``MAX_CENTRE_MISS``."""
+    from .mount_solids import PAYLOAD, overlaps
+
+    collisions = overlaps(mechanism)
     if collisions:
-        a, b, distance = collisions[0]
-        raise ValueError(f"{source}: chains {a} and {b} collide: their axes pass {distance * 1e3:.3g} mm apart, less "
-                         f"than half their sections together; move one")
+        hit = collisions[0]
+        bodies = f"chain {hit.first} runs into the payload" if hit.second == PAYLOAD else \
+            f"chains {hit.first} and {hit.second} collide"
+        raise ValueError(f"{source}: {bodies}: their solids overlap by {hit.volume * 1e9:.4g} mm^3 around "
+                         f"({', '.join(f'{v * 1e3:.1f}' for v in hit.centre)}) mm; move one"
+                         + (" or the payload's box_centre_mm" if hit.second == PAYLOAD else ""))
     ratio, twist = free_twist(mechanism)
     if ratio < MIN_CONSTRAINT:
         raise ValueError(f"{source}: the mount is not held in {_twist_words(twist)}: no chain's axis resists it "

@@ -121,21 +121,17 @@ def run(args: argparse.Namespace) -> int:
     from flexcal.model.forward import ideal_angles
     from ..runs.compensate import bench_from_metadata, run_compensation
     from ..reports.compensation import build_report, plot_fit, plot_first_round, plot_iterated, report_markdown
-    from ..runs.model_correction import model_space
     from ..output import staged_output, write_report
+    from .opening import calibration_model, open_data
     from ..runs.targets import default_targets, read_targets, write_targets
+    from .options import executor_options
 
     quiet = getattr(args, "quiet", False)
     settings = _settings(args)
-    from .options import read_data
-
-    measurement = read_data(args.data, args)
-    targets = read_targets(args.targets) if args.targets else default_targets()
-    from .options import executor_options
-    from .options import data_mechanism
-
-    space = model_space(args.model_stiffness, args.second_order, progress=not quiet,
-                        mechanism=data_mechanism(measurement.metadata, args), **executor_options(args))
+    data = open_data(args, progress=not quiet, data_path=args.data)
+    workspace = data.mechanism.workspace  # the targets lie in the data's mount's workspace
+    targets = read_targets(args.targets, workspace=workspace) if args.targets else default_targets(workspace=workspace)
+    measurement, space = data.measurement, calibration_model(args, data.mechanism, progress=not quiet)
     dwell = float(np.median(np.diff(measurement.time))) if measurement.n_points > 1 else 2.0
     from flexcal.model.parameters import parameter_space
 

@@ -134,10 +134,9 @@ def run(args: argparse.Namespace) -> int:
     from flexcal.model.trajectory import standard_trajectory
 
     from .common import show_progress
-    from ..runs.model_correction import model_space
+    from .opening import calibration_model
     from ..output import staged_output, write_report
     from ..prototype.scenario import load_scenario
-    from .options import executor_options
 
     _check(args)
     progress = show_progress(args)
@@ -145,8 +144,7 @@ def run(args: argparse.Namespace) -> int:
     from .options import mount_option
 
     scenario = load_scenario(args.scenario, mount=mount_option(args))
-    space = model_space(args.model_stiffness, args.second_order, progress=progress,
-                        mechanism=scenario.space.mechanism, **executor_options(args))
+    space = calibration_model(args, scenario.space.mechanism, progress=progress)
     prior = uniform_prior(space.n_params, args.prior_scale)
     x_design = design_point(args.at, space) if args.at else prior.mean
 

@@ -169,22 +169,17 @@ def run(args: argparse.Namespace) -> int:
     from ..diagnosis.diagnose import check_measurement, run_diagnosis
     from ..diagnosis.baseline import BaselineSettings, calibrate_baseline
     from ..diagnosis.plots import plot_heldout, plot_residual, plot_strata
-    from ..runs.model_correction import model_space
     from ..output import staged_output, write_report
-    from .options import read_data
+    from .opening import open_calibration
 
     if args.particles < 2 or args.iterations < 1:
         raise ValueError("--particles must be >= 2 and --iterations >= 1")
     from ..diagnosis.null import read_null
 
     null = read_null(args.null) if args.null else None
-    measurement = read_data(data_path(args), args)
-    check_measurement(measurement)  # before the model's FEM correction (~30 s cold)
-    from .options import executor_options
-    from .options import data_mechanism
-
-    space = model_space(args.model_stiffness, args.second_order, progress=show_progress(args),
-                        mechanism=data_mechanism(measurement.metadata, args), **executor_options(args))
+    # the measurement checked before the model's FEM correction (~30 s cold)
+    opening = open_calibration(args, progress=show_progress(args), data_path=data_path(args), check=check_measurement)
+    measurement, space = opening.measurement, opening.space
     baseline = partial(calibrate_baseline, space=space,
                        settings=BaselineSettings(particles=args.particles, iterations=args.iterations))
     diagnosis = run_diagnosis(measurement, baseline=baseline, rng=args.seed, progress=show_progress(args), null=null)

@@ -16,11 +16,14 @@ worker processes) or ``--scheduler ADDRESS`` (docs/scale.md); with ``--provider 
 as-built mounts' segments are built first, by default on one thread per core. With
 ``--trajectory FILE`` (``flexcal design``'s trajectory.csv) every case is measured along
 that trajectory, ``--cycles`` times, instead of the standard one; the report names it
-(file and content hash), and the case ids include its hash.
+(file and content hash), and the case ids include its hash. With ``--mount FILE`` the
+table1 errors are drawn on that mount (its standard trajectory, its baseline model, its
+null); each case's spec holds the mount, so its id differs from the reference mount's.
 
     flexcal diagnose-benchmark --out runs/bench                 # small grid, analytic prototype
     flexcal diagnose-benchmark --grid full --provider fem --out runs/bench-full
     flexcal diagnose-benchmark --trajectory runs/design/trajectory.csv --out runs/bench-designed
+    flexcal diagnose-benchmark --mount examples/mirror600.mount.toml --out runs/bench-mirror
 """
 
 from __future__ import annotations
@@ -41,7 +44,8 @@ RESUMES_OUT = True
 EXAMPLES = ("flexcal diagnose-benchmark --out runs/bench",
             "flexcal diagnose-benchmark --grid full --provider fem --out runs/bench-full",
             "flexcal design --points 77 --model-stiffness closed-form --out runs/design && "
-            "flexcal diagnose-benchmark --trajectory runs/design/trajectory.csv --out runs/bench-designed")
+            "flexcal diagnose-benchmark --trajectory runs/design/trajectory.csv --out runs/bench-designed",
+            "flexcal diagnose-benchmark --mount examples/mirror600.mount.toml --out runs/bench-mirror")
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -68,7 +72,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
                              "before issue 28); by default `none` files of scenario seeds 1100-1102 along the same "
                              "trajectory are diagnosed first and each term must gain 3x its gain there "
                              "(DIR/null.json)")
-    from .options import add_executor_options
+    from .options import add_executor_options, add_mount
+
+    add_mount(parser, what="the reference mount (the table1 errors are drawn on it)")
 
     add_executor_options(parser, what="the cases (and, with --provider fem, the FEM segment builds)")
     add_out(parser, what="report.json, report.md, answers.json, diagnosis_*.png, cases/",
@@ -85,11 +91,12 @@ def baseline_stiffness(provider_name: str) -> str:
 
 
 def case_spec(effect_id, magnitude, case_seed, *, provider_name, noise_urad, cycles, seed, scenario_seed,
-              trajectory: str | None = None, null: bool = False) -> dict:
+              trajectory: str | None = None, null: bool = False, mount: dict | None = None) -> dict:
     """Everything that decides one case's row: its id (``design_id`` of this) keys the
     case store, so a rerun with other settings never reuses a row. trajectory: the
     ``trajectory_digest`` of a trajectory file, None for the standard trajectory (no key:
-    the ids of standard-trajectory cases stay those of earlier runs)."""
+    the ids of standard-trajectory cases stay those of earlier runs); mount: the mount file's
+    table (``mount_table``) of ``--mount``, None for the reference mount (no key, likewise)."""
     spec = {"effect": effect_id, "magnitude_noise": float(magnitude), "seed": int(case_seed),
             "provider": provider_name, "baseline_model": {"stiffness": baseline_stiffness(provider_name),
                                                           "second_order": True},
@@ -99,7 +106,16 @@ def case_spec(effect_id, magnitude, case_seed, *, provider_name, noise_urad, cyc
         spec["trajectory"] = trajectory
     if null:
         spec["null_seeds"] = list(NULL_SEEDS)
+    if mount is not None:
+        spec["mount"] = mount
     return spec
+
+
+def spec_mechanism(spec: dict):
+    """The ``MechanismParams`` of a case spec's mount (None: the reference mount)."""
+    from flexcal.geometry.mount import mount_from_table
+
+    return None if spec.get("mount") is None else mount_from_table(spec["mount"], source="the case's mount")
 
 
 def grid_cases(ids, grid) -> list[tuple[str, float, int]]:
@@ -138,7 +154,8 @@ def case_record(spec: dict, *, space=None, trajectory=None, null=None) -> dict:
     provider = stiffness_provider(spec["provider"], progress=False)  # FEM: the segments are cached by then
     case = benchmark_measurement(spec["effect"], spec["magnitude_noise"], spec["seed"], provider,
                                  cycles=spec["cycles"], noise_urad=spec["noise_urad"],
-                                 scenario_seed=spec["scenario_seed"], trajectory=trajectory)
+                                 scenario_seed=spec["scenario_seed"], trajectory=trajectory,
+                                 mechanism=spec_mechanism(spec))
     row = run_case(case, lambda m: run_diagnosis(m, rng=spec["baseline_seed"], null=null,
                                                  baseline=partial(calibrate_baseline, space=space)))
     row["wall_s"] = time.perf_counter() - start
@@ -154,16 +171,19 @@ def case_slices(specs) -> list:
     chains = []
     for spec in specs:
         scenario_seed = 1000 + spec["seed"] if spec["scenario_seed"] is None else spec["scenario_seed"]
-        scenario = load_scenario("table1", seed=scenario_seed)
+        scenario = load_scenario("table1", seed=scenario_seed, mount=spec_mechanism(spec))
         mechanism, _, _ = as_built(scenario.space, scenario.values)
         chains += [p.chain for p in mechanism.chains]
     return chain_slices(chains)
 
 
-def benchmark_null(*, provider_name, noise_urad, cycles, seed, space=None, trajectory=None, path=None, log=None):
+def benchmark_null(*, provider_name, noise_urad, cycles, seed, space=None, trajectory=None, path=None, log=None,
+                   mount: dict | None = None):
     """The ``NullModel`` of the benchmark's trajectory: `none` files of ``NULL_SEEDS`` (scenario
     seeds 1100-1102, apart from every grid's cases) diagnosed without a null; read from / kept
-    in ``path`` (DIR/null.json) so that a resumed grid uses the same one."""
+    in ``path`` (DIR/null.json) so that a resumed grid uses the same one; mount: the mount
+    file's table (None: the reference mount). A null.json of another trajectory or mount is
+    refused."""
     from functools import partial
     from pathlib import Path
 
@@ -174,14 +194,24 @@ def benchmark_null(*, provider_name, noise_urad, cycles, seed, space=None, traje
     from ..effects.library import NONE
     from ..prototype.providers import stiffness_provider
 
+    from ..sweep.space import design_id
+
+    label = "standard" if trajectory is None else trajectory_digest(*trajectory)
+    if mount is not None:
+        label += f" on mount {design_id(mount)}"
     if path is not None and Path(path).exists():
-        return read_null(path)
+        null = read_null(path)
+        if null.trajectory != label:
+            raise ValueError(f"{path} is the null of trajectory {null.trajectory!r}, this run's is {label!r}: give a "
+                             f"new --out for another trajectory or mount")
+        return null
     (log or (lambda text: None))(f"diagnose-benchmark: the null of the trajectory ({len(NULL_SEEDS)} none files)")
     provider = stiffness_provider(provider_name, progress=False)
+    mechanism = spec_mechanism({"mount": mount})
     null = measure_null(lambda s: benchmark_measurement(NONE, 0.0, s, provider, cycles=cycles, noise_urad=noise_urad,
-                                                        trajectory=trajectory).measurement,
+                                                        trajectory=trajectory, mechanism=mechanism).measurement,
                         lambda m: run_diagnosis(m, rng=seed, baseline=partial(calibrate_baseline, space=space)),
-                        NULL_SEEDS, "standard" if trajectory is None else trajectory_digest(*trajectory))
+                        NULL_SEEDS, label)
     if path is not None:
         write_null(path, null)
     return null
@@ -189,10 +219,11 @@ def benchmark_null(*, provider_name, noise_urad, cycles, seed, space=None, traje
 
 def run_benchmark(ids, grid, *, noise_urad, cycles, seed, progress, scenario_seed=None, space=None,
                   provider_name="analytic", store=None, log=None, workers: int | None = 0, scheduler=None,
-                  trajectory=None, null=None):
+                  trajectory=None, null=None, mount: dict | None = None):
     """(rows, answers, failures) of every case of the grid, rows in grid order; space: the
     baseline's model (default: the baseline's own default); trajectory: (inputs (k, 3) [m],
     leg (k,)) of one cycle every case is measured along (None: the standard trajectory);
+    mount: the mount file's table the cases are drawn on (None: the reference mount);
     store: a ``DesignStore`` of
     finished cases (each saved as it finishes; a case already in it is not run again);
     failures: {case label: error text} of the cases that raised (one bad case must not
@@ -212,7 +243,7 @@ def run_benchmark(ids, grid, *, noise_urad, cycles, seed, progress, scenario_see
     for effect_id, magnitude, case_seed in grid_cases(ids, grid):
         spec = case_spec(effect_id, magnitude, case_seed, provider_name=provider_name, noise_urad=noise_urad,
                          cycles=cycles, seed=seed, scenario_seed=scenario_seed, trajectory=digest,
-                         null=null is not None)
+                         null=null is not None, mount=mount)
         specs.append(spec)
         labels[design_id(spec)] = f"{effect_id} {magnitude:g}x seed {case_seed}"
     records = {} if store is None else {i: r for i in labels if (r := store.load(i)) is not None}
@@ -245,57 +276,6 @@ def run_benchmark(ids, grid, *, noise_urad, cycles, seed, progress, scenario_see
     return [r["row"] for r in done], [r["answer"] for r in done], failures
 
 
-def _number(value, digits: int = 1) -> str:
-    return "" if value is None else f"{value:.{digits}f}"
-
-
-def _trajectory_text(trajectory: dict) -> str:
-    if trajectory["kind"] == "standard":
-        return "standard trajectory"
-    from ..reports.safe_markdown import md_text
-
-    return (f"trajectory {md_text(trajectory['file'])} ({trajectory['n_points']} points, {trajectory['n_legs']} legs, "
-            f"sha256 {trajectory['sha256']})")
-
-
-def _markdown(report) -> str:
-    from ..reports.safe_markdown import md_text
-
-    s = report["summary"]
-    lines = ["# Blind benchmark of the gap diagnosis", "",
-             f"Grid `{report['grid']}`, prototype provider `{report['provider']}` (diagnosis baseline: second-order model, "
-             f"{report['baseline_model']['stiffness']} chain stiffness), noise {report['noise_urad']} urad, "
-             f"{_trajectory_text(report['trajectory'])} x{report['cycles']}; {len(report['rows'])} cases. "
-             f"Out-of-library effects "
-             f"(no model term): {', '.join(report['out_of_library'])}.", "", "## Goals", "",
-             "| goal | target | measured | met | margin |", "|---|---:|---:|---|---:|"]
-    for name, g in s["goals"].items():
-        lines.append(f"| {name} | {g['goal']:.2f} | {g['measured']:.3f} | {'yes' if g['met'] else 'NO'} | "
-                     f"{g['margin']:+.3f} |")
-    if s.get("detection_at_achieved_3x_or_more") is not None:
-        lines += ["", f"Detection by the magnitude really injected into each file (noise-free signature RMS, the "
-                  f"effect's run minus the same mount without it) >= 3x noise: "
-                  f"{s['detection_at_achieved_3x_or_more']:.3f} of {s['n_at_achieved_3x_or_more']} cases."]
-    lines += ["", f"Detection at >= 3x counting only effects the diagnosis did not report as undetectable "
-              f"(absorbed >= 0.99 by the baseline): {s['detection_at_3x_excluding_reported_undetectable']:.3f} "
-              f"({s['n_reported_undetectable_at_3x']} cases reported undetectable).", ""]
-    lines += ["", f"Out-of-library: no confident library claim in {s['out_of_library_no_confident_claim']} of cases; "
-              f"a concentrated stratum named in {s['out_of_library_where_named']}.", "",
-              "## Detection by magnitude (x noise)", ""]
-    lines += [f"- {m}x: {v:.2f}" for m, v in s["detection_by_magnitude"].items()]
-    if report["failures"]:
-        lines += ["", f"## Failed cases ({len(report['failures'])}; not in the figures)", ""]
-        lines += [f"- {md_text(label)}: {md_text(text)}" for label, text in report["failures"].items()]
-    lines += ["", "## Cases", "", "| effect | x noise | seed | predicted | group | confidence | correct | "
-              "true-term closure | absorbed by baseline | achieved x noise |", "|---|---:|---:|---|---|---|---|---:|---:|---:|"]
-    for r in report["rows"]:
-        closure, absorbed = _number(r.get("true_term_closure"), 2), _number(r.get("absorbed"), 3)
-        lines.append(f"| {r['effect']} | {r['magnitude_noise']:g} | {r['seed']} | {r['predicted']} | "
-                     f"{', '.join(r['group'])} | {r['confidence']} | {'yes' if r['correct'] else 'no'} | "
-                     f"{closure} | {absorbed} | {_number(r.get('achieved_magnitude_noise'))} |")
-    return "\n".join(lines) + "\n"
-
-
 def _trajectory(args: argparse.Namespace):
     """((inputs (k, 3) [m], leg (k,)) of ``--trajectory`` or None, its report entry);
     ValueError (one line) for a file the diagnosis could not use."""
@@ -319,6 +299,7 @@ def run(args: argparse.Namespace) -> int:
     from ..diagnosis.benchmark import summarize
     from .options import executor_options
     from ..diagnosis.plots import plot_benchmark
+    from ..reports.diagnose_benchmark import benchmark_markdown
     from ..effects.library import EFFECT_IDS, LIBRARY, NONE, OUT_OF_LIBRARY_IDS
     from ..runs.model_correction import model_space
     from ..output import out_folder, staged_output, write_json, write_report
@@ -339,15 +320,22 @@ def run(args: argparse.Namespace) -> int:
     log = (lambda text: print(text, file=sys.stderr)) if progress else (lambda text: None)
     store = DesignStore(out_folder(args.out, resume=True) / "cases")
     executor = executor_options(args)
-    space = model_space(baseline_stiffness(args.provider), second_order=True, progress=progress, **executor)
+    from flexcal.geometry.mount import mount_table
+
+    from .options import mount_option
+
+    mechanism = mount_option(args)
+    mount = None if mechanism is None else mount_table(mechanism)  # the physics only: the id is not the path
+    space = model_space(baseline_stiffness(args.provider), second_order=True, progress=progress,
+                        mechanism=mechanism, **executor)
     try:
         null = None if args.no_null else benchmark_null(
             provider_name=args.provider, noise_urad=args.noise_urad, cycles=args.cycles, seed=args.seed, space=space,
-            trajectory=trajectory, path=store.folder.parent / "null.json", log=log)
+            trajectory=trajectory, path=store.folder.parent / "null.json", log=log, mount=mount)
         rows, answers, failures = run_benchmark(
             ids, args.grid, noise_urad=args.noise_urad, cycles=args.cycles, seed=args.seed,
             progress=progress, scenario_seed=args.scenario_seed, provider_name=args.provider, store=store, log=log,
-            space=space, trajectory=trajectory, null=null, **executor)
+            space=space, trajectory=trajectory, null=null, mount=mount, **executor)
     except KeyboardInterrupt:
         log(f"diagnose-benchmark: interrupted; finished cases are kept in {store.folder}, run the same command "
             f"again to resume")
@@ -358,13 +346,14 @@ def run(args: argparse.Namespace) -> int:
     report = {"grid": args.grid, "provider": args.provider, "scenario_seed": args.scenario_seed,
               "baseline_model": {"stiffness": baseline_stiffness(args.provider), "second_order": True},
               "noise_urad": args.noise_urad, "cycles": args.cycles, "trajectory": trajectory_report,
+              "mount": args.mount,
               "out_of_library": list(OUT_OF_LIBRARY_IDS), "null": None if null is None else null.as_dict(),
               "rows": rows, "failures": failures, "summary": summary,
               "note": "answers.json holds what was injected; the diagnosis only received the measurement"}
     with staged_output(args.out, resume=True) as staging:
         write_json(staging / "answers.json", answers)
         write_report(staging, report)
-        (staging / "report.md").write_text(_markdown(report))
+        (staging / "report.md").write_text(benchmark_markdown(report))
         plot_benchmark(staging, rows, summary)
     if progress:
         goals = summary["goals"]

@@ -18,7 +18,7 @@ import dataclasses
 import time
 
 from .options import add_out, calibration_defaults
-from .options import add_source_options, load_source_with_truth
+from .options import add_source_options
 
 __all__ = ["configure", "run", "parse_sources", "EXAMPLES", "DEFAULT_CONFIG"]
 
@@ -68,19 +68,17 @@ def run(args: argparse.Namespace) -> int:
     from flexcal.model.parameters import parameter_space
 
     from ..output import staged_output, write_report
-    from .options import data_mechanism
     from ..reports.form_floor import form_floor_line, form_floor_markdown
     from ..reports.plots import plot_misalignment_curves
-    from ..runs.model_correction import model_space
+    from .opening import open_calibration
     from ..runs.verify import VerifySettings, run_verify
     from .common import show_progress
-    from .options import executor_options, prior_scale_option
+    from .options import prior_scale_option
 
     if args.particles < 2 or args.iterations < 1:
         raise ValueError(f"--particles={args.particles} must be >= 2 and --iterations={args.iterations} >= 1")
     selected = parse_sources(args.sources, parameter_space().names)
     progress = show_progress(args)
-    measurement, presets, truth = load_source_with_truth(args, parameter_space(), progress=progress)
     settings = VerifySettings(method=args.method, prior_scale=prior_scale_option(args), sources=selected,
                               polish=args.polish, seed=args.calibration_seed, remove_offset=args.remove_offset,
                               noise_urad=args.noise_urad if args.noise_urad else None,
@@ -88,9 +86,9 @@ def run(args: argparse.Namespace) -> int:
                                                       max_iterations=args.iterations))
     from flexcal.calibration.pipeline import check_determined
 
-    check_determined(measurement.n_points, len(selected))
-    space = model_space(args.model_stiffness, args.second_order, progress=progress,
-                        mechanism=data_mechanism(measurement.metadata, args), **executor_options(args))
+    opening = open_calibration(args, progress=progress,
+                               check=lambda measurement: check_determined(measurement.n_points, len(selected)))
+    measurement, presets, truth, space = opening.measurement, opening.presets, opening.truth, opening.space
     start = time.perf_counter()
     # bars on stderr for the long loops (PSO iterations, least-squares fits); identify prints its own summary
     result = run_verify(measurement, space, settings, presets=presets, truth=truth, progress=progress,

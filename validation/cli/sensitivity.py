@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import argparse
 
-from .options import add_out, add_source_options, calibration_defaults, check_sobol_options, load_source
+from .options import add_out, add_source_options, calibration_defaults, check_sobol_options
 
 __all__ = ["configure", "run", "screen", "EXAMPLES", "DEFAULT_CONFIG"]
 
@@ -54,21 +54,16 @@ def screen(measurement, space, *, n_base: int, seed: int, progress: bool):
 def run(args: argparse.Namespace) -> int:
     from flexcal.calibration.plots import plot_sensitivity
     from flexcal.calibration.sensitivity import format_ranked_table, ranked_table, select_parameters
-    from flexcal.model.parameters import parameter_space
 
     from .common import show_progress
-    from ..runs.model_correction import model_space
+    from .opening import open_calibration
     from ..output import staged_output, write_report
     from flexcal.model.parameters import DRIVE_SOURCE_NAMES
 
     check_sobol_options(args)
     progress = show_progress(args)
-    measurement, _ = load_source(args, parameter_space(), progress=progress)
-    from .options import data_mechanism
-    from .options import executor_options
-
-    space = model_space(args.model_stiffness, args.second_order, progress=progress,
-                        mechanism=data_mechanism(measurement.metadata, args), **executor_options(args))
+    opening = open_calibration(args, progress=progress)
+    measurement, space = opening.measurement, opening.space
     sobol = screen(measurement, space, n_base=args.sobol_n, seed=args.calibration_seed, progress=progress)
     selected = select_parameters(sobol, threshold=args.sobol_threshold, always=DRIVE_SOURCE_NAMES)
     report = {

@@ -46,21 +46,21 @@ class BenchmarkCase:
     answer: dict[str, Any]
 
 
-def repeated_trajectory(cycles: int, trajectory: tuple[np.ndarray, np.ndarray] | None = None
+def repeated_trajectory(cycles: int, trajectory: tuple[np.ndarray, np.ndarray] | None = None, mechanism=None
                         ) -> tuple[np.ndarray, np.ndarray]:
     """A trajectory ``cycles`` times: (inputs (n, 3) [m], leg (n,)).
 
     trajectory: (inputs (k, 3) [m], leg (k,)) of one cycle (default: the standard
-    trajectory, legs 0, 1..3). The first cycle is the whole trajectory; each later one
-    repeats its points of legs >= 1 (the start posture, leg 0, is not measured again) with
-    the legs numbered on after the previous cycle's (leg + c max(leg)): the standard
-    trajectory twice has legs 0, 1..6."""
+    trajectory of ``mechanism``, the reference mount's by default, legs 0, 1..3). The
+    first cycle is the whole trajectory; each later one repeats its points of legs >= 1
+    (the start posture, leg 0, is not measured again) with the legs numbered on after the
+    previous cycle's (leg + c max(leg)): the standard trajectory twice has legs 0, 1..6."""
     from flexcal.model.trajectory import standard_trajectory
 
     if cycles < 1:
         raise ValueError(f"cycles={cycles} must be >= 1")
     if trajectory is None:
-        standard = standard_trajectory()
+        standard = standard_trajectory(mechanism)
         trajectory = (standard.inputs, standard.leg)
     inputs, leg = np.asarray(trajectory[0], float), np.asarray(trajectory[1], int)
     if inputs.ndim != 2 or inputs.shape[1] != 3 or leg.shape != inputs.shape[:1]:
@@ -83,21 +83,25 @@ def trajectory_digest(inputs: np.ndarray, leg: np.ndarray) -> str:
 
 def benchmark_measurement(effect_id: str, magnitude: float, seed: int, provider, *, cycles: int = 2,
                           noise_urad: float = 0.5, scenario_seed: int | None = None,
-                          trajectory: tuple[np.ndarray, np.ndarray] | None = None) -> BenchmarkCase:
+                          trajectory: tuple[np.ndarray, np.ndarray] | None = None, mechanism=None) -> BenchmarkCase:
     """One blind case. effect_id: a library id, an out-of-library id or "none"; magnitude:
     the injected signature RMS in multiples of ``noise_urad`` [-] on the standard trajectory
     (``make_injector``; the answer also holds the achieved one on this file:
     ``achieved_magnitude_noise``); scenario_seed: the table1 draws and the sensor noise
     (default 1000 + seed, a new as-built mount per case; a fixed one keeps the FEM cache
     warm but repeats the noise); trajectory: (inputs (k, 3) [m], leg (k,)) of one cycle
-    (default the standard trajectory), measured ``cycles`` times (``repeated_trajectory``)."""
+    (default the standard trajectory), measured ``cycles`` times (``repeated_trajectory``);
+    mechanism: the mount the table1 errors are drawn on (``MechanismParams``, ``--mount``;
+    default the reference mount). The effects' nominal magnitudes are scaled on the reference
+    mount's standard setting (``effects.magnitude``); the answer's achieved magnitude is
+    measured on this file."""
     from ..effects.library import NONE, make_injector
     from ..prototype.scenario import load_scenario
     from ..prototype.truth import make_truth
 
     scenario = load_scenario("table1", seed=1000 + seed if scenario_seed is None else scenario_seed,
-                             noise_urad=noise_urad)
-    inputs, leg = repeated_trajectory(cycles, trajectory)
+                             noise_urad=noise_urad, mount=mechanism)
+    inputs, leg = repeated_trajectory(cycles, trajectory, mechanism)
     scenario = dataclasses.replace(scenario, inputs=inputs, leg=leg)
     effects = ()
     if effect_id != NONE:

@@ -14,8 +14,9 @@ Targets file (CSV, one row per target, header required)::
     -250,3500,0
 
 Values in microradians relative to the zero posture; other columns are ignored; rows are
-driven in file order. Each target should lie inside the workspace (|theta_x| <= 1 mrad,
-|theta_y| <= 5 mrad, |theta_z| <= 3 mrad, ``flexcal.model.trajectory.WORKSPACE``);
+driven in file order. Each target must lie inside the mount's workspace (``workspace``:
+``MechanismParams.workspace``, a mount file's ``[workspace] half_range_mrad``; by default
+the reference mount's, |theta_x| <= 1 mrad, |theta_y| <= 5 mrad, |theta_z| <= 3 mrad);
 larger ones are refused.
 
 The default set (``default_targets``) spreads ``n`` points over 80 % of the workspace box
@@ -44,33 +45,41 @@ DEFAULT_N_TARGETS = 30
 DEFAULT_FILL = 0.8  # fraction of each workspace half-range the default targets span
 
 
-def check_targets(targets: np.ndarray, *, where: str = "targets") -> np.ndarray:
-    """(n, 3) [rad] finite and inside the workspace, else ``ValueError`` naming the row (1-based)."""
+def _workspace(workspace) -> np.ndarray:
+    return WORKSPACE if workspace is None else np.asarray(workspace, dtype=float)
+
+
+def check_targets(targets: np.ndarray, *, where: str = "targets", workspace=None) -> np.ndarray:
+    """(n, 3) [rad] finite and inside ``workspace`` (3,) [rad] half-ranges (default the
+    reference mount's), else ``ValueError`` naming the row (1-based)."""
+    workspace = _workspace(workspace)
     targets = np.asarray(targets, dtype=float)
     if targets.ndim != 2 or targets.shape[1] != 3 or targets.shape[0] == 0:
         raise ValueError(f"{where}: need an (n, 3) array of relative angles with n >= 1, got shape {targets.shape}")
-    bad = ~np.all(np.isfinite(targets), axis=1) | np.any(np.abs(targets) > WORKSPACE * (1 + 1e-9), axis=1)
+    bad = ~np.all(np.isfinite(targets), axis=1) | np.any(np.abs(targets) > workspace * (1 + 1e-9), axis=1)
     if np.any(bad):
         row = int(np.argmax(bad))
         raise ValueError(f"{where}: target {row + 1} = {np.round(targets[row] * 1e6, 3).tolist()} urad is not finite "
-                         f"or outside the workspace +-{(WORKSPACE * 1e6).astype(int).tolist()} urad")
+                         f"or outside the workspace +-{np.round(workspace * 1e6).astype(int).tolist()} urad")
     return targets
 
 
-def default_targets(n: int = DEFAULT_N_TARGETS, fill: float = DEFAULT_FILL) -> np.ndarray:
+def default_targets(n: int = DEFAULT_N_TARGETS, fill: float = DEFAULT_FILL, *, workspace=None) -> np.ndarray:
     """(n, 3) [rad] relative targets from the unscrambled Halton sequence (bases 2, 3, 5),
-    first point (the origin) skipped, mapped onto +-fill x the workspace half-ranges."""
+    first point (the origin) skipped, mapped onto +-fill x the ``workspace`` (3,) [rad]
+    half-ranges (default the reference mount's)."""
     from scipy.stats import qmc
 
     if n < 1 or not 0.0 < fill <= 1.0:
         raise ValueError(f"need n >= 1 (got {n}) and 0 < fill <= 1 (got {fill})")
     unit = qmc.Halton(d=3, scramble=False).random(n + 1)[1:]
-    return (2.0 * unit - 1.0) * fill * WORKSPACE
+    return (2.0 * unit - 1.0) * fill * _workspace(workspace)
 
 
-def read_targets(path: str | os.PathLike) -> np.ndarray:
+def read_targets(path: str | os.PathLike, *, workspace=None) -> np.ndarray:
     """Relative targets (n, 3) [rad] from a CSV with columns theta_x_urad, theta_y_urad,
-    theta_z_urad (module docstring). ``FileNotFoundError`` / ``ValueError`` naming the row."""
+    theta_z_urad (module docstring), inside ``workspace`` (3,) [rad] half-ranges (default
+    the reference mount's). ``FileNotFoundError`` / ``ValueError`` naming the row."""
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"targets file {path} does not exist")
@@ -96,7 +105,7 @@ def read_targets(path: str | os.PathLike) -> np.ndarray:
             rows.append(values)
     if not rows:
         raise ValueError(f"{path}: no target rows")
-    return check_targets(np.array(rows) * 1e-6, where=str(path))
+    return check_targets(np.array(rows) * 1e-6, where=str(path), workspace=workspace)
 
 
 def write_targets(path: str | os.PathLike, targets: np.ndarray) -> None:

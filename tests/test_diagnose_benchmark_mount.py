@@ -1,0 +1,61 @@
+"""``diagnose-benchmark --mount FILE``: the cases are drawn on the user's mount (its standard
+trajectory, its baseline model), their ids differ from the reference mount's, and a null.json
+of another mount is refused. The diagnosis is a stub (the real one: test_diagnose)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from flexcal.geometry.mount import mount_table, read_mount
+from flexcal.validation import cli
+from flexcal.validation.diagnosis.null import NullModel, write_null
+
+MIRROR = Path(__file__).resolve().parents[1] / "examples" / "mirror600.mount.toml"
+
+
+class Stub:
+    report = {"top_effect": "none", "top_group": [], "confidence": "none", "noise_floor_urad": 0.5,
+              "how_far": {"closure": 0.0}, "ranking": [], "where": {"concentrated": [], "structure": []},
+              "collinearity": {"absorbed_by_baseline": {}}, "undetectable": []}
+
+
+def test_benchmark_cases_are_drawn_on_the_given_mount(tmp_path, monkeypatch, capsys):
+    import flexcal.validation.diagnosis.diagnose as diagnose
+    from flexcal.validation.diagnosis.benchmark import repeated_trajectory
+
+    seen = []
+
+    def stub(measurement, **options):
+        seen.append((measurement, options))
+        return Stub()
+
+    monkeypatch.setattr(diagnose, "run_diagnosis", stub)
+    mirror = read_mount(MIRROR)
+    command = ["diagnose-benchmark", "--grid", "tiny", "--effects", "none", "--workers", "0", "-q"]
+    out = tmp_path / "mirror"
+    assert cli.main([*command, "--no-null", "--mount", str(MIRROR), "--out", str(out)]) == 0
+    # the one case along the mirror's standard trajectory, twice
+    inputs, leg = repeated_trajectory(2, None, mirror)
+    reference_inputs, _ = repeated_trajectory(2)
+    assert not np.allclose(inputs, reference_inputs)  # the mirror's amplitudes are its own
+    ((measurement, options),) = seen
+    np.testing.assert_allclose(measurement.inputs, inputs, rtol=0, atol=1e-12)  # [m]
+    np.testing.assert_array_equal(measurement.leg, leg)
+    assert options["baseline"].keywords["space"].mechanism == mirror  # the baseline models the mirror
+    (case,) = [json.loads(p.read_text()) for p in (out / "cases").glob("*.json")]
+    assert case["spec"]["mount"] == mount_table(mirror)
+    report = json.loads((out / "report.json").read_text())
+    assert report["mount"] == str(MIRROR) and f"mount {MIRROR}" in (out / "report.md").read_text()
+    # the reference mount: another case id, no mount in the spec
+    assert cli.main([*command, "--no-null", "--out", str(tmp_path / "reference")]) == 0
+    (reference,) = [json.loads(p.read_text()) for p in (tmp_path / "reference" / "cases").glob("*.json")]
+    assert reference["id"] != case["id"] and "mount" not in reference["spec"]
+    # a null of the reference mount's standard trajectory is refused for the mirror, before any case runs
+    write_null(tmp_path / "reference" / "null.json", NullModel(n_files=3, trajectory="standard"))
+    capsys.readouterr()
+    assert cli.main([*command, "--mount", str(MIRROR), "--out", str(tmp_path / "reference")]) == 2
+    assert "null of trajectory 'standard', this run's is 'standard on mount " in capsys.readouterr().err
+    assert len(seen) == 2

@@ -1,0 +1,84 @@
+"""The shared opening of the calibration commands (verify, identify, compensate, diagnose):
+the measurement (a ``--scenario``'s prototype curves, or a ``--data`` file read with its
+sidecar and checked against its mount), the mount that models it (the sidecar's, or
+``--mount`` with the differences listed key by key) and the calibration model of that mount
+(``--model-stiffness``, ``--second-order``). One place, so that every command reads data,
+sidecar and mount the same way; the reading itself is ``cli.options`` (``read_data``,
+``load_source_with_truth``, ``data_mechanism``). It lives in ``cli/``, not ``runs/``: it is
+all reading of the command line's options, and nothing outside ``cli/`` imports ``cli/``
+(docs/architecture.md, tests/test_import_arrows.py).
+
+``open_calibration`` does it all; ``open_data`` and ``calibration_model`` are its two halves
+for a command that needs the mount before the model (compensate: its targets lie in the
+mount's workspace).
+"""
+
+from __future__ import annotations
+
+import argparse
+from dataclasses import dataclass
+from typing import Any, Callable
+
+import numpy as np
+
+__all__ = ["DataOpening", "Opening", "open_data", "calibration_model", "open_calibration"]
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class DataOpening:
+    """measurement: ``Measurement``; presets (45,) [SI] of a synthetic source or None; truth:
+    the model-form floor's ``runs.form_floor.TruthCurve`` or None; mechanism: the
+    ``MechanismParams`` that models the data (``--mount``, else the sidecar's)."""
+
+    measurement: Any
+    presets: np.ndarray | None
+    truth: Any
+    mechanism: Any
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class Opening:
+    """``DataOpening``'s measurement, presets and truth; space: the calibration model's
+    ``ParameterSpace`` on the data's mount (``space.mechanism``)."""
+
+    measurement: Any
+    presets: np.ndarray | None
+    truth: Any
+    space: Any
+
+
+def open_data(args: argparse.Namespace, *, progress: bool, data_path=None) -> DataOpening:
+    """The measurement and its mount. data_path: the file of a command that reads data only
+    (compensate, diagnose; no presets, no truth); else the command's ``--scenario`` /
+    ``--data`` source."""
+    from flexcal.model.parameters import parameter_space
+
+    from .options import data_mechanism, load_source_with_truth, read_data
+
+    if data_path is None:
+        measurement, presets, truth = load_source_with_truth(args, parameter_space(), progress=progress)
+    else:
+        measurement, presets, truth = read_data(data_path, args), None, None
+    return DataOpening(measurement=measurement, presets=presets, truth=truth,
+                       mechanism=data_mechanism(measurement.metadata, args))
+
+
+def calibration_model(args: argparse.Namespace, mechanism, *, progress: bool):
+    """The calibration model (``ParameterSpace``) of ``mechanism`` with the command's
+    ``--model-stiffness``, ``--second-order`` and executor options."""
+    from ..runs.model_correction import model_space
+    from .options import executor_options
+
+    return model_space(args.model_stiffness, args.second_order, progress=progress, mechanism=mechanism,
+                       **executor_options(args))
+
+
+def open_calibration(args: argparse.Namespace, *, progress: bool, data_path=None,
+                     check: Callable[[Any], None] | None = None) -> Opening:
+    """``open_data`` then ``calibration_model``; check(measurement) runs between them and
+    raises to stop before the model is built (a cold FEM-corrected model takes ~30 s)."""
+    data = open_data(args, progress=progress, data_path=data_path)
+    if check is not None:
+        check(data.measurement)
+    return Opening(measurement=data.measurement, presets=data.presets, truth=data.truth,
+                   space=calibration_model(args, data.mechanism, progress=progress))
