@@ -16,7 +16,7 @@ file to remove. The reservation is re-entrant in one process (the command line h
 for the whole command, ``reserved_out``; ``output.staged_output`` inside it reuses it) and
 is released when the block ends, whatever ends it (success, error, Ctrl-C, SIGTERM); a
 Ctrl-C or SIGTERM that arrives while the lock is being taken or released is held back until
-that is done (``_signals_deferred``), then delivered.
+that is done (``interrupts.interrupts_deferred``), then delivered.
 ``sweep`` and ``diagnose-benchmark`` resume their own earlier run once it has released
 the folder. Replacing a folder (``--force``) removes only its visible files: the lock
 and the marker (``run_folder``) are hidden and stay.
@@ -29,7 +29,6 @@ import errno
 import json
 import os
 import re
-import signal
 import threading
 import time
 import uuid
@@ -38,6 +37,8 @@ from pathlib import Path
 from typing import Any, Iterable, Iterator
 
 from flexcal.fem.owners import OWNER_TAG, host_hash, owner_alive, owner_tag
+
+from .interrupts import interrupts_deferred
 
 __all__ = ["LOCK_NAME", "OutInUse", "Holder", "lock_paths", "read_holder", "reserved", "reserved_out", "held_command"]
 
@@ -253,7 +254,7 @@ def reserved(out_dir: str | os.PathLike, *, command: str) -> Iterator[Path]:
         # Ctrl-C and SIGTERM held back while the lock is taken and released (a Ctrl-C just after
         # a run's last line landed in the release and left the lock behind); one held back
         # while taking it is delivered here, with the lock recorded, so the release below runs
-        with _signals_deferred(), _held_guard:
+        with interrupts_deferred(), _held_guard:
             reservation = _held.get(out)
             if reservation is not None:
                 reservation.count += 1
@@ -262,37 +263,13 @@ def reserved(out_dir: str | os.PathLike, *, command: str) -> Iterator[Path]:
         yield out
     finally:
         if reservation is not None:  # None: not taken (OutInUse, an error)
-            with _signals_deferred(), _held_guard:
+            with interrupts_deferred(), _held_guard:
                 reservation.count -= 1
                 if reservation.count == 0:
                     del _held[out]
                     _release(reservation.lock, reservation.text)
                     if not out.exists():
                         _remove_empty(reservation.made)
-
-
-@contextlib.contextmanager
-def _signals_deferred() -> Iterator[None]:
-    """Hold back Ctrl-C and SIGTERM while the block runs (taking or releasing a lock takes
-    ~0.1 ms), then deliver them to the handlers that were in place: an interrupt that lands
-    meanwhile still ends the run, but after the lock is consistent. Main thread only
-    (Python runs signal handlers there); handlers ignored or set outside Python are left."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    caught: list[int] = []
-    previous = {}
-    try:
-        for signum in (signal.SIGINT, signal.SIGTERM):
-            handler = signal.getsignal(signum)
-            if handler is not None and handler != signal.SIG_IGN:
-                previous[signum] = signal.signal(signum, lambda number, frame: caught.append(number))
-        yield
-    finally:
-        for signum, handler in previous.items():
-            signal.signal(signum, handler)
-        for signum in dict.fromkeys(caught):
-            signal.raise_signal(signum)  # to the handler put back: KeyboardInterrupt, Terminated, or the default
 
 
 @contextlib.contextmanager
