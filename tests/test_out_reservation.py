@@ -222,10 +222,20 @@ def test_the_reservation_is_reentrant_and_released_on_error(tmp_path):
 
 
 
+@pytest.fixture
+def ctrl_c_raises():
+    """SIGINT as KeyboardInterrupt for the test (pytest started in the background by a
+    non-interactive shell, or as a pytest-xdist worker, may have SIGINT ignored)."""
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, previous)
+
+
 @pytest.mark.parametrize("signum, raised", [(signal.SIGINT, KeyboardInterrupt), (signal.SIGTERM, Terminated)],
                          ids=["ctrl-c", "sigterm"])
 @pytest.mark.parametrize("when", ["taking", "releasing"])
-def test_a_signal_while_the_lock_is_taken_or_released_leaves_no_lock(tmp_path, monkeypatch, signum, raised, when):
+def test_a_signal_while_the_lock_is_taken_or_released_leaves_no_lock(tmp_path, monkeypatch, ctrl_c_raises, signum,
+                                                                       raised, when):
     # before: a Ctrl-C right after a run's last line landed in the release: the process ended
     # 130 with its results whole, but .out.flexcal-lock stayed beside the folder (flaky
     # test_ctrl_c_after_the_results_are_written[at-once])
