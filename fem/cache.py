@@ -35,6 +35,7 @@ Usage::
 from __future__ import annotations
 
 import dataclasses
+import functools
 import hashlib
 import importlib.util
 import json
@@ -112,10 +113,21 @@ def cache_dir(path: str | os.PathLike | None = None) -> Path:
     return Path(env) if env else Path.home() / ".cache" / "flexcal"
 
 
+@functools.cache
 def code_version() -> str:
     """Package version + SHA-256 (first 16 hex) of the sources that determine results:
     ``flexcal.fem`` (all but ``__init__``, ``cache``, ``results``; its C source too) and
-    ``flexcal.geometry``, and whether fTetWild runs seeded (``flexcal.fem._entropy`` built)."""
+    ``flexcal.geometry``, and whether fTetWild runs seeded (``flexcal.fem._entropy`` built).
+
+    Computed once per process (at its first cache key), then remembered: a source edited or
+    committed while a process runs does not change that process's keys halfway, and a lookup
+    does not reread and hash every source. (A process started later, such as a new worker,
+    computes its own.)"""
+    return _sources_version()
+
+
+def _sources_version() -> str:
+    """``code_version`` computed afresh from the files on disk."""
     try:
         from importlib.metadata import version
 

@@ -203,3 +203,86 @@ def test_baseline_escapes_the_false_clearance_mode():
     false = next((rng for rng in range(8) if worst(BaselineSettings(starts=1), rng) > 30e-6), None)
     assert false is not None, "no single start of seeds 0-7 exercises the false mode on this file any more"
     assert worst(BaselineSettings(), false) < 5e-6  # 2x the good mode's 2.4 urad, 1/10 of the false one
+
+
+def _lookalike_problem():
+    data = _data()
+    n = data.inputs.shape[0]
+    rng = np.random.default_rng(4)
+    baseline = rng.normal(size=(n, 3, 4)) * 1e-6
+    sigma = 0.05e-6
+    residual = np.outer(data.time, [2e-8, -1e-8, 3e-8]) + rng.normal(size=(n, 3)) * sigma
+    offset = ModelTerm(id="offset", parameter_names=("ox", "oy", "oz"), parameter_units=("rad",) * 3,
+                       scale=np.full(3, 1e-6), evaluate=lambda p, d: np.tile(p, (d.inputs.shape[0], 1)))
+    terms = [_linear_double(), _nonlinear_double(), offset]
+    problem = make_problem(residual, np.full(3, sigma), baseline, np.full(4, 1.0), data, terms)
+    return problem, [data.leg == k for k in range(1, 7)]
+
+
+@pytest.mark.parametrize("ids", [[], ["ramp"], ["ramp", "offset"]])
+def test_batched_heldout_fits_equal_the_looped_ones(ids):
+    """heldout_linear (one solve per fold for many residuals) == cross_validate per residual."""
+    import dataclasses
+
+    from flexcal.validation.diagnosis.separation import heldout_linear
+
+    problem, folds = _lookalike_problem()
+    residuals = np.random.default_rng(5).normal(size=(4, *problem.residual.shape)) * 1e-6
+    batched = heldout_linear(problem, ids, folds, residuals)
+    looped = np.stack([cross_validate(dataclasses.replace(problem, residual=r), ids, folds) for r in residuals])
+    # the same least squares, solved with 4 right-hand sides at once: round-off apart
+    np.testing.assert_allclose(batched, looped, rtol=1e-9, atol=1e-9 * np.abs(looped).max())
+    with pytest.raises(ValueError, match="linear terms"):
+        heldout_linear(problem, ["decay"], folds, residuals)
+
+
+@pytest.mark.parametrize("winner", ["ramp", "decay"])
+def test_lookalike_closures_equal_the_plain_loop(winner):
+    """The batched look-alike test gives the closures of the plain loop it replaced (one
+    synthetic residual at a time, the same seeded draws in the same order)."""
+    import dataclasses
+
+    from flexcal.validation.diagnosis.separation import _baseline_residualized, _closure, lookalike_closures
+
+    problem, folds = _lookalike_problem()
+    others = [t for t in problem.terms if t != winner]
+    size, draws = 3.0, 2
+    if winner == "decay":  # nonlinear: 5 least-squares starts per fold and residual; 3 folds, 1 draw
+        folds, draws = [folds[0] | folds[1], folds[2] | folds[3], folds[4] | folds[5]], 1
+    rng, expected = np.random.default_rng(0), {}
+    for other in others:  # the loop as it stood before the batching
+        columns, best = problem.columns[other], -np.inf
+        for _ in range(draws):
+            signature = _baseline_residualized(problem, columns @ rng.normal(size=columns.shape[-1]))
+            rms = float(np.sqrt(np.mean((signature / problem.sigma) ** 2)))
+            if not rms > 0:  # a shape the baseline mimics whole: no residual to scale
+                continue
+            synthetic = dataclasses.replace(problem, residual=signature * (size / rms)
+                                            + rng.normal(size=signature.shape) * problem.sigma)
+            before = np.nanmean(cross_validate(synthetic, [], folds) ** 2, axis=0)
+            after = np.nanmean(cross_validate(synthetic, [winner], folds) ** 2, axis=0)
+            best = max(best, _closure(before, after, problem.sigma))
+        if np.isfinite(best):
+            expected[other] = best
+    closures = lookalike_closures(problem, winner, others, folds, size, draws=draws, seed=0)
+    assert closures.keys() == expected.keys()
+    assert "offset" in expected  # (decay's columns at zero are zero: nothing of its shape to draw)
+    for other in expected:  # closures are ratios of mean squares: round-off apart
+        assert closures[other] == pytest.approx(expected[other], rel=1e-9, abs=1e-12), other
+
+
+def test_the_ridge_solver_equals_the_augmented_least_squares():
+    """fit_terms' factor-once solver == numpy's least squares on [A; diag(1/prior)] [b; 0],
+    on a baseline with two nearly collinear columns (condition ~1e6) and a weak prior."""
+    from flexcal.validation.diagnosis.which import _ridge_solver
+
+    rng = np.random.default_rng(6)
+    A = rng.normal(size=(300, 8))
+    A[:, 7] = A[:, 6] + 1e-6 * rng.normal(size=300)
+    prior = np.full(8, 100.0)
+    solve = _ridge_solver(A, prior)
+    for b in rng.normal(size=(3, 300)):
+        expected = np.linalg.lstsq(np.vstack([A, np.diag(1 / prior)]), np.concatenate([b, np.zeros(8)]),
+                                   rcond=None)[0]
+        # both backward stable; condition ~1e6 times round-off 1e-16, with room
+        np.testing.assert_allclose(solve(b), expected, rtol=1e-8, atol=1e-8 * np.abs(expected).max())

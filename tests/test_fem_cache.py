@@ -44,7 +44,7 @@ def test_code_version_follows_the_sources_of_solids_and_meshes(monkeypatch, edit
     an edit of the input layer or the STEP writer is not (it used to be: a cold rebuild)."""
     from pathlib import Path
 
-    before = cache.code_version()
+    before = cache._sources_version()
     read_bytes = Path.read_bytes
 
     def edited_read(path):
@@ -52,7 +52,29 @@ def test_code_version_follows_the_sources_of_solids_and_meshes(monkeypatch, edit
         return data + b"# edited\n" if path.as_posix().endswith(edited) else data
 
     monkeypatch.setattr(Path, "read_bytes", edited_read)
-    assert (cache.code_version() != before) == changes
+    assert (cache._sources_version() != before) == changes
+
+
+def test_code_version_is_read_once_per_process(monkeypatch):
+    """The sources are read and hashed at the first key only: later keys reread nothing, and
+    a source edited (or committed) while the process runs does not change its keys halfway."""
+    from pathlib import Path
+
+    first = cache.cache_key(PARTS)
+    version = cache.code_version()
+    read_bytes = Path.read_bytes
+    reads = []
+
+    def edited_read(path):
+        reads.append(path)
+        return read_bytes(path) + b"# edited\n"
+
+    monkeypatch.setattr(Path, "read_bytes", edited_read)
+    assert cache._sources_version() != version  # the edit is there on disk, as it were
+    reads.clear()
+    assert [cache.cache_key(PARTS) for _ in range(3)] == [first] * 3
+    assert cache.code_version() == version
+    assert reads == []  # no source reread per lookup
 
 
 def test_unkeyable_values_are_rejected():

@@ -17,6 +17,7 @@ import pytest
 
 from flexcal.fem.owners import host_hash, process_state
 from flexcal.validation import cli
+from flexcal.validation.cli.signals import Terminated, termination_raises
 from flexcal.validation.output import atomic_path, staged_output
 from flexcal.validation.out_lock import LOCK_NAME, lock_paths, read_holder, reserved
 from flexcal.validation.run_folder import MARKER_NAME, inputs_inside
@@ -218,6 +219,49 @@ def test_the_reservation_is_reentrant_and_released_on_error(tmp_path):
     with reserved(out, command="again"):  # released: a new run takes it, now inside the folder
         assert (out / LOCK_NAME).is_file()
     assert not (out / LOCK_NAME).exists()
+
+
+
+@pytest.fixture
+def ctrl_c_raises():
+    """SIGINT as KeyboardInterrupt for the test (pytest started in the background by a
+    non-interactive shell, or as a pytest-xdist worker, may have SIGINT ignored)."""
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, previous)
+
+
+@pytest.mark.parametrize("signum, raised", [(signal.SIGINT, KeyboardInterrupt), (signal.SIGTERM, Terminated)],
+                         ids=["ctrl-c", "sigterm"])
+@pytest.mark.parametrize("when", ["taking", "releasing"])
+def test_a_signal_while_the_lock_is_taken_or_released_leaves_no_lock(tmp_path, monkeypatch, ctrl_c_raises, signum,
+                                                                       raised, when):
+    # before: a Ctrl-C right after a run's last line landed in the release: the process ended
+    # 130 with its results whole, but .out.flexcal-lock stayed beside the folder (flaky
+    # test_ctrl_c_after_the_results_are_written[at-once])
+    import flexcal.validation.out_lock as out_lock
+
+    step = {"taking": "_acquire", "releasing": "_release"}[when]
+    original = getattr(out_lock, step)
+
+    def signalled(*args, **kwargs):  # the signal lands in the step, as a real Ctrl-C or kill can
+        if when == "releasing":
+            signal.raise_signal(signum)  # before the lock file is removed
+        result = original(*args, **kwargs)
+        if when == "taking":
+            signal.raise_signal(signum)  # the lock file made, not yet recorded as this run's
+        return result
+
+    monkeypatch.setattr(out_lock, step, signalled)
+    out = tmp_path / "out"
+    with termination_raises(), pytest.raises(raised):  # the command line's handlers
+        with reserved(out, command="test"):
+            out.mkdir()
+            if when == "taking":
+                pytest.fail("the signal was not delivered before the block")  # it ends the run, after the lock is whole
+    assert sorted(p.name for p in tmp_path.iterdir()) == (["out"] if when == "releasing" else [])
+    assert not any(tmp_path.rglob("*flexcal-lock*"))
+    assert out_lock._held == {}
 
 
 # ----------------------------------------------------------------------------------------

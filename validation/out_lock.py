@@ -14,7 +14,9 @@ checked to be the one read, so two runs clearing it at once cannot both win). A 
 another host is never cleared (its process ids mean nothing here): the message names the
 file to remove. The reservation is re-entrant in one process (the command line holds it
 for the whole command, ``reserved_out``; ``output.staged_output`` inside it reuses it) and
-is released when the block ends, whatever ends it (success, error, Ctrl-C, SIGTERM).
+is released when the block ends, whatever ends it (success, error, Ctrl-C, SIGTERM); a
+Ctrl-C or SIGTERM that arrives while the lock is being taken or released is held back until
+that is done (``interrupts.interrupts_deferred``), then delivered.
 ``sweep`` and ``diagnose-benchmark`` resume their own earlier run once it has released
 the folder. Replacing a folder (``--force``) removes only its visible files: the lock
 and the marker (``run_folder``) are hidden and stay.
@@ -35,6 +37,8 @@ from pathlib import Path
 from typing import Any, Iterable, Iterator
 
 from flexcal.fem.owners import OWNER_TAG, host_hash, owner_alive, owner_tag
+
+from .interrupts import interrupts_deferred
 
 __all__ = ["LOCK_NAME", "OutInUse", "Holder", "lock_paths", "read_holder", "reserved", "reserved_out", "held_command"]
 
@@ -245,22 +249,27 @@ def reserved(out_dir: str | os.PathLike, *, command: str) -> Iterator[Path]:
     """Hold ``out_dir``'s lock for the block (see the module doc); yields the resolved
     folder path. OutInUse (a ValueError) if another live run holds it."""
     out = Path(out_dir).resolve()
-    with _held_guard:
-        reservation = _held.get(out)
-        if reservation is not None:
-            reservation.count += 1
-        else:
-            reservation = _held[out] = _acquire(out, command, str(out_dir))
+    reservation = None
     try:
+        # Ctrl-C and SIGTERM held back while the lock is taken and released (a Ctrl-C just after
+        # a run's last line landed in the release and left the lock behind); one held back
+        # while taking it is delivered here, with the lock recorded, so the release below runs
+        with interrupts_deferred(), _held_guard:
+            reservation = _held.get(out)
+            if reservation is not None:
+                reservation.count += 1
+            else:
+                reservation = _held[out] = _acquire(out, command, str(out_dir))
         yield out
     finally:
-        with _held_guard:
-            reservation.count -= 1
-            if reservation.count == 0:
-                del _held[out]
-                _release(reservation.lock, reservation.text)
-                if not out.exists():
-                    _remove_empty(reservation.made)
+        if reservation is not None:  # None: not taken (OutInUse, an error)
+            with interrupts_deferred(), _held_guard:
+                reservation.count -= 1
+                if reservation.count == 0:
+                    del _held[out]
+                    _release(reservation.lock, reservation.text)
+                    if not out.exists():
+                        _remove_empty(reservation.made)
 
 
 @contextlib.contextmanager

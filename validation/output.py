@@ -53,9 +53,7 @@ import math
 import os
 import re
 import shutil
-import signal
 import tempfile
-import threading
 import uuid
 from pathlib import Path
 from typing import Any, Iterator
@@ -64,6 +62,7 @@ import numpy as np
 
 from flexcal.fem.owners import OWNER_TAG, owner_tag, remove_folders_of_gone_owners
 
+from .interrupts import interrupts_deferred
 from .run_folder import MARKER_NAME, out_folder, visible_entries
 
 __all__ = ["out_folder", "staged_output", "atomic_path", "write_json", "write_text", "to_jsonable", "dumps_strict",
@@ -76,36 +75,6 @@ TIMING_KEYS = frozenset({"wall_s", "timings_s", "elapsed_s"})
 
 _UMASK = os.umask(0o022)  # read the process umask (only settable, not readable) ...
 os.umask(_UMASK)  # ... and put it back: folders made by mkdtemp get the usual permissions
-
-
-@contextlib.contextmanager
-def interrupts_deferred() -> Iterator[None]:
-    """Hold back Ctrl-C (SIGINT) and SIGTERM inside the block and deliver the first one
-    right after (to the handler that was there before); a no-op off the main thread
-    (where Python never delivers signals anyway). A signal that was ignored stays ignored."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    received: list[tuple[int, Any]] = []
-    previous = {}
-    for signum in (signal.SIGINT, signal.SIGTERM):
-        handler = signal.getsignal(signum)
-        if handler is not None and handler is not signal.SIG_IGN:  # None: set outside Python, leave it
-            previous[signum] = signal.signal(signum, lambda number, frame: received.append((number, frame)))
-    try:
-        yield
-    finally:
-        for signum, handler in previous.items():
-            signal.signal(signum, handler)
-    if received:
-        signum, frame = received[0]
-        handler = previous[signum]
-        if callable(handler):
-            handler(signum, frame)
-        elif signum == signal.SIGINT:
-            raise KeyboardInterrupt
-        else:  # SIG_DFL (or a handler not set from Python): let the system act on it
-            os.kill(os.getpid(), signum)
 
 
 @contextlib.contextmanager

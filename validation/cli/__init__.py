@@ -19,7 +19,10 @@ it until it ends (``flexcal.validation.out_lock``: a second run to the same fold
 refused) and checked (``flexcal.validation.run_folder``: ``--force`` only on a run folder
 that holds none of the command's inputs), and an option that takes a file but was given
 a folder is refused. Once the command has returned, Ctrl-C and SIGTERM are held back
-until the process has ended (``_hold_back_late_signals``).
+until the process has ended (``_hold_back_late_signals``). Called in-process with an
+``argv`` (a test, a script), a real Ctrl-C or SIGTERM that stopped the command is passed
+on to the caller once the command has cleaned up (``_pass_on_signal``): it stops pytest
+or the script as it would have without flexcal, rather than ending one call with 130/143.
 """
 
 from __future__ import annotations
@@ -130,7 +133,23 @@ def main(argv: list[str] | None = None) -> int:
     status = _run(argv, command, hold_back=from_sys_argv)  # the process ends next (not a test's or a script's)
     if from_sys_argv:
         _hold_back_late_signals()  # again: leaving termination_raises put the handlers back
+    else:
+        _pass_on_signal()
     return status
+
+
+def _pass_on_signal() -> None:
+    """Deliver a Ctrl-C or SIGTERM that stopped an in-process command again, now to the
+    caller's own handler (put back by ``termination_raises``): pytest stops on it, a default
+    SIGTERM ends the process. Before, a SIGTERM to a pytest run only failed the test that
+    was inside ``main`` (status 143) and the run went on: it took a SIGKILL to stop it."""
+    import signal
+
+    from .signals import take_received_signal
+
+    signum = take_received_signal()
+    if signum is not None:
+        signal.raise_signal(signum)
 
 
 def _run(argv: list[str], command: str | None, *, hold_back: bool = False) -> int:

@@ -19,7 +19,8 @@ import signal
 import threading
 from typing import Iterator
 
-__all__ = ["Terminated", "termination_raises", "interrupt_behind", "exit_status", "HANDLED_SIGNALS"]
+__all__ = ["Terminated", "termination_raises", "interrupt_behind", "exit_status", "take_received_signal",
+           "HANDLED_SIGNALS"]
 
 HANDLED_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
@@ -75,6 +76,14 @@ def interrupt_behind(error: BaseException) -> KeyboardInterrupt | None:
     if _received:
         return Terminated() if _received[0] == signal.SIGTERM else KeyboardInterrupt()
     return None
+
+
+def take_received_signal() -> int | None:
+    """The first signal (SIGINT or SIGTERM) delivered inside the last ``termination_raises``
+    block, or None; forgotten once taken."""
+    signum = _received[0] if _received else None
+    del _received[:]
+    return signum
 
 
 def exit_status(interrupt: KeyboardInterrupt) -> int:
