@@ -79,7 +79,7 @@ def main(argv=None) -> int:
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--breakaway", default="2", help="the prototype's breakaway force(s) [N], comma-separated")
     parser.add_argument("--slopes", action="store_true",
-                        help="add the consistent model with FEM compliance slopes (docs/model.md 7; 10 cold FEM chain "
+                        help="add the consistent model with FEM compliance slopes (docs/model.md 7; 20 cold FEM chain "
                              "builds the first time)")
     parser.add_argument("--trajectory", action="append", default=[], metavar="SCENARIO=FILE",
                         help="a trajectory file (columns xa1_mm, xa2_mm, xa3_mm) to add for that scenario")

@@ -288,8 +288,10 @@ def forward(space_values, inputs, directions=None, *, space: ParameterSpace | No
 
 def ideal_pose(inputs, space: ParameterSpace | None = None) -> np.ndarray:
     """The small-deflection ("ideal", target) model: nominal parameters, no parasitic term, no
-    clearance, with gravity. inputs (n_p, 3) [m] -> pose (n_p, 6) [m, rad]."""
-    space = space or parameter_space()
+    clearance, with gravity. inputs (n_p, 3) [m] -> pose (n_p, 6) [m, rad]. The consistent
+    second-order model's shortening (``chain_shortening``) is a parasitic term, so it is left out
+    here too (its solve has no parasitic-free form)."""
+    space = dataclasses.replace(space or parameter_space(), chain_shortening=())
     nominal = np.array([p.nominal for p in space.parameters])
     return forward(nominal, inputs, space=space, parasitic=False, clearance=False).pose[0]
 

@@ -193,3 +193,14 @@ def test_the_clearance_converges_on_random_candidates(breakaway):
     # reported loads (relative rounding ~1e-12 of ~1e3 N over ~2e6 N/m)
     np.testing.assert_allclose(result.clearance, expected, rtol=0, atol=1e-10)
     assert np.mean(result.clearance > 1e-9) > 0.05  # the test visits nuts off their flank
+
+
+def test_the_ideal_model_runs_on_a_consistent_space(paper):
+    """``flexcal verify`` draws the ideal (target) curve with the run's space: on a consistent
+    space it is the ideal model of the same space without the chains' shortening (before:
+    ValueError, the consistent solve has no parasitic-free form)."""
+    from flexcal.model.forward import ideal_angles
+
+    scenario, space, inputs, _ = paper
+    plain = dataclasses.replace(space, chain_shortening=())
+    np.testing.assert_array_equal(ideal_angles(inputs, space), ideal_angles(inputs, plain))

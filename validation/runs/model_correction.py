@@ -65,31 +65,37 @@ def compliance_factors(space: ParameterSpace, provider: StiffnessProvider) -> np
     return factors
 
 
-SLOPE_STEP = 0.03  # relative step of each dimension for the slopes: inside the +-10 % the error sources span
+# Relative step of each dimension for the slopes (central difference, +-step), inside the
+# +-10 % the error sources span. The fillet's is 2.5 %: the driving chain's leaf segments at
+# fillet x 1.03 (6.18 mm) fail to build (PARDISO error -4 on the mapped mesh, session 14),
+# those at x 1.025 and x 0.97 build.
+SLOPE_STEPS = {"w": 0.03, "a": 0.025, "l": 0.03, "t1": 0.03, "t2": 0.03}
 
 
-def compliance_slopes(space: ParameterSpace, provider: StiffnessProvider, step: float = SLOPE_STEP) -> np.ndarray:
+def compliance_slopes(space: ParameterSpace, provider: StiffnessProvider,
+                      steps: dict[str, float] | None = None) -> np.ndarray:
     """(n_chains, 5, 8): the change of each factor of ``compliance_factors`` per relative change
-    of each chain dimension (``DIMENSION_SYMBOLS``: w, a, l, t1, t2), by a forward difference of
-    ``step`` at the nominal chains of ``space`` [-]. One provider solve per chain design and
-    dimension (10 FEM chain builds for the reference mount's two designs, cached)."""
+    of each chain dimension (``DIMENSION_SYMBOLS``: w, a, l, t1, t2), by a central difference of
+    +-``steps[symbol]`` (``SLOPE_STEPS`` by default) at the nominal chains of ``space`` [-]. Two
+    provider solves per chain design and dimension (20 FEM chain builds for the reference
+    mount's two designs, cached). Central, not forward: the true dimensions sit up to 10 % either
+    side of nominal, and a forward difference's slope is that of the secant to one side."""
     from flexcal.model.parameters import DIMENSION_SYMBOLS
 
+    steps = SLOPE_STEPS if steps is None else steps
     fields = {"w": "width", "a": "fillet", "l": "hinge_length", "t1": "thickness_1", "t2": "thickness_2"}
     mech = space.mechanism
-    base = compliance_factors(space, provider)
-    moved = [dataclasses.replace(p.chain, **{fields[s]: getattr(p.chain, fields[s]) * (1.0 + step)})
-             for p in mech.chains for s in DIMENSION_SYMBOLS]
-    prepare_provider(provider, chain_slices(moved))  # parallel FEM builds
+    moved = {(c, symbol, sign): dataclasses.replace(p.chain, **{fields[symbol]: getattr(p.chain, fields[symbol])
+                                                                 * (1.0 + sign * steps[symbol])})
+             for c, p in enumerate(mech.chains) for symbol in DIMENSION_SYMBOLS for sign in (1, -1)}
+    prepare_provider(provider, chain_slices(moved.values()))  # parallel FEM builds
     done, out = {}, np.zeros((len(mech.chains), len(DIMENSION_SYMBOLS), 8))
-    for c, placement in enumerate(mech.chains):
-        for k, symbol in enumerate(DIMENSION_SYMBOLS):
-            chain = moved[c * len(DIMENSION_SYMBOLS) + k]
-            if chain not in done:
-                richer = provider_chain_compliance(chain, provider)
-                closed = chain_compliance_matrix(chain, mech.material)
-                done[chain] = np.array([richer[i, j] / closed[i, j] for i, j in ENTRY_INDEX.values()])
-            out[c, k] = (done[chain] - base[c]) / step
+    for (c, symbol, sign), chain in moved.items():
+        if chain not in done:
+            richer = provider_chain_compliance(chain, provider)
+            closed = chain_compliance_matrix(chain, mech.material)
+            done[chain] = np.array([richer[i, j] / closed[i, j] for i, j in ENTRY_INDEX.values()])
+        out[c, DIMENSION_SYMBOLS.index(symbol)] += sign * done[chain] / (2.0 * steps[symbol])
     return out
 
 

@@ -1,0 +1,58 @@
+"""Issue 24's form-error goal against the FEM prototype: the consistent model (docs/model.md 10)
+with the FEM compliance factors following the dimensions (``compliance_slopes``, docs/model.md 7)
+at the true values of `table1`, on a random multi-actuator walk, at two breakaway forces.
+
+Slow (15 s warm): the FEM segments of the as-built chains and of the nominal chains at +-step per dimension
+(the slopes) are cached in ~/.cache/flexcal; cold, they are ~100 segment builds."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from flexcal.model import kernel
+from flexcal.model.forward import forward
+from flexcal.model.trajectory import standard_trajectory
+
+from test_model_play import N_WALK, STROKE, WALK_SEED, random_walk
+
+pytestmark = [pytest.mark.slow,
+              pytest.mark.skipif(not kernel.available(), reason="the consistent model runs in the compiled engine")]
+
+
+@pytest.fixture(scope="module")
+def table1_fem():
+    """`table1`, its consistent space with FEM factors and slopes (measured at nominal), a
+    40-point multi-actuator walk and the FEM prototype's curves along it at 2 and 5 N."""
+    from flexcal.validation.prototype.providers import stiffness_provider
+    from flexcal.validation.prototype.scenario import load_scenario
+    from flexcal.validation.prototype.truth import make_truth
+    from flexcal.validation.runs.chain_kinematics import consistent_space
+    from flexcal.validation.runs.model_correction import corrected_space
+
+    scenario = load_scenario("table1")
+    provider = stiffness_provider("fem", progress=False, workers=None)
+    inputs = random_walk(standard_trajectory(scenario.space.mechanism).amplitudes, N_WALK, STROKE, WALK_SEED)
+    curves = {force: make_truth(dataclasses.replace(scenario, inputs=inputs, leg=np.ones(N_WALK, dtype=int),
+                                                    breakaway_force=force), provider).run.angles
+              for force in (2.0, 5.0)}
+    space = consistent_space(corrected_space(scenario.space, provider, slopes=True), provider)
+    return scenario, space, inputs, curves
+
+
+def _rms_urad(error):
+    return np.sqrt(np.mean(error**2, axis=0)) * 1e6
+
+
+@pytest.mark.parametrize("force", [2.0, 5.0])
+def test_the_consistent_model_with_slopes_meets_the_goal_on_the_fem_prototype(table1_fem, force):
+    scenario, space, inputs, curves = table1_fem
+    with_slopes = dataclasses.replace(space, breakaway_force=force)
+    new = _rms_urad(forward(scenario.values, inputs, space=with_slopes).angles[0] - curves[force])
+    constant = _rms_urad(forward(scenario.values, inputs, space=dataclasses.replace(
+        with_slopes, compliance_slopes=())).angles[0] - curves[force])
+    # 0.25 urad per angle is issue 24's goal; measured here 0.045 / 0.077 / 0.003 urad at both
+    # forces with the slopes, 0.38 / 0.20 / 0.03 with the factors held at nominal (on
+    # bench_form_error's trajectories the slopes give <= 0.05 / 0.10 / 0.01, docs/model.md 11)
+    assert np.all(new <= 0.25), new
+    assert np.any(constant > 0.25), constant  # the same bound fails with the constant factors
