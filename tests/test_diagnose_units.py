@@ -268,6 +268,7 @@ def test_lookalike_closures_equal_the_plain_loop(winner):
     assert closures.keys() == expected.keys()
     assert "offset" in expected  # (decay's columns at zero are zero: nothing of its shape to draw)
     for other in expected:  # closures are ratios of mean squares: round-off apart
+        # 1e-9 / 1e-12: ratios of mean squares from the same fits, batched or looped (round-off)
         assert closures[other] == pytest.approx(expected[other], rel=1e-9, abs=1e-12), other
 
 

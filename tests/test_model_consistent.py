@@ -163,7 +163,7 @@ def test_the_element_form_batched_equals_looped():
     for index in np.ndindex(4, 6):
         # 1e-15 relative: the same arithmetic, only vectorised
         np.testing.assert_allclose(batched[index], chain_shortening_form(*dims[index], **common), rtol=1e-13,
-                                   atol=1e-15 * np.max(np.abs(batched[index])))
+                                   atol=1e-15 * np.max(np.abs(batched[index])))  # as above: round-off
 
 
 @pytest.mark.parametrize("breakaway", [None, 2.0])

@@ -24,10 +24,10 @@ def test_targets_follow_the_given_workspace(tmp_path):
     mirror = read_mount(MIRROR)  # workspace +-2, 4, 4 mrad; the reference's +-1, 5, 3 mrad
     spread = np.max(np.abs(default_targets(workspace=mirror.workspace)), axis=0)
     # 30 Halton points over +-80 % of the box reach past 70 % of it on every axis, never past 80 %
-    assert np.all(spread <= 0.8 * np.asarray(mirror.workspace) * (1 + 1e-12))
-    assert np.all(spread >= 0.7 * np.asarray(mirror.workspace))
+    assert np.all(spread <= 0.8 * np.asarray(mirror.workspace) * (1 + 1e-12))  # 1e-12: the scaling's round-off
+    assert np.all(spread >= 0.7 * np.asarray(mirror.workspace))  # 0.7: the Halton points' reach, as above
     wide = targets_file(tmp_path / "t.csv", 1500.0)  # inside the mirror's theta_x range, outside the reference's
-    assert read_targets(wide, workspace=mirror.workspace)[0, 0] == pytest.approx(1.5e-3, rel=1e-12)
+    assert read_targets(wide, workspace=mirror.workspace)[0, 0] == pytest.approx(1.5e-3, rel=1e-12)  # urad -> rad round-off
     with pytest.raises(ValueError, match=r"outside the workspace \+-\[1000, 5000, 3000\] urad"):
         read_targets(wide)
 
