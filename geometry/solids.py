@@ -23,7 +23,7 @@ from .exact import BoxPiece, Params, end_planes, pieces, reference_points
 from .params import ChainSegment, FlexureChain, MechanismParams
 from .profiles.protocol import HingeProfile
 
-__all__ = ["Part", "hinge_solid", "chain_solid", "segment_solid", "mechanism_assembly", "MIN_FEATURE_SIZE"]
+__all__ = ["Part", "hinge_solid", "chain_solid", "segment_solid", "mechanism_assembly", "location", "MIN_FEATURE_SIZE"]
 
 #: Smallest dimension [m] the solids accept: 10x OpenCASCADE's confusion tolerance
 #: (1e-7 model units = 0.1 um here), below which faces merge or booleans fail.
@@ -122,7 +122,7 @@ def segment_solid(segment: ChainSegment) -> Part:
                 end_planes=end_planes(segment))
 
 
-def _location(rotation: np.ndarray, translation: np.ndarray) -> cq.Location:
+def location(rotation: np.ndarray, translation: np.ndarray) -> cq.Location:
     """Location mapping local coordinates x to rotation @ x + translation."""
     trsf = gp_Trsf()
     r, p = np.asarray(rotation, float), np.asarray(translation, float)
@@ -147,5 +147,5 @@ def mechanism_assembly(mech: MechanismParams) -> cq.Assembly:
         shape = _cached_chain_shape(placement.chain)
         colour = cq.Color(0.9, 0.5, 0.1) if placement.is_driving else cq.Color(0.6, 0.6, 0.65)
         assembly.add(shape, name=placement.name, color=colour,
-                     loc=_location(placement.rotation, np.array(placement.point_a)))
+                     loc=location(placement.rotation, np.array(placement.point_a)))
     return assembly

@@ -78,15 +78,13 @@ def _attachment(placement: ChainPlacement) -> cq.Solid:
     """The chain's end block at B placed in the mount frame [m]: where it is fastened to
     the payload."""
     import cadquery as cq
-    from OCP.gp import gp_Trsf
+
+    from flexcal.geometry.solids import location
 
     block = pieces(placement.chain)[-1]
-    rotation, origin = np.asarray(placement.rotation, float), np.asarray(placement.point_a, float)
     local = cq.Solid.makeBox(block.x1 - block.x0, 2 * block.half_y, 2 * block.half_z,
                              cq.Vector(block.x0, -block.half_y, -block.half_z))
-    trsf = gp_Trsf()
-    trsf.SetValues(*rotation[0], origin[0], *rotation[1], origin[1], *rotation[2], origin[2])
-    return local.moved(cq.Location(trsf))
+    return local.moved(location(placement.rotation, placement.point_a))
 
 
 def envelopes(mechanism: MechanismParams) -> dict[str, np.ndarray]:
