@@ -32,10 +32,10 @@ MIN_STIFFNESS = 0.2  # a measured nut stiffness below this share of the linear o
 
 @njit(cache=True, nogil=True, fastmath=_FAST)
 def _terms(cand, x, c, command, x0, gain, axial, transform, shortening, rotation, point_b, axial_row, to_wrench,
-           lateral_rows, weight, r, u, n, force, d, sd, ext, ext_c):
+           stiffness, defect_index, defect, weight, r, u, n, force, d, sd, ext, ext_c, ml, kml, grad):
     """At pose x (6,) and offsets c (3,): shortening r, axial inputs u, loads n (6,) and the
-    second-order wrench ``force`` (P-delta 2 N J^T S D, the rigid term and the turning lever
-    arms of the chain forces), all in place."""
+    second-order wrench ``force`` (P-delta 2 N J^T S D, the lateral defect's forces, the rigid
+    term and the turning lever arms of the chain forces), all in place."""
     t0, t1, t2 = x[3], x[4], x[5]
     tt = t0 * t0 + t1 * t1 + t2 * t2
     for k in range(6):
@@ -72,26 +72,48 @@ def _terms(cand, x, c, command, x0, gain, axial, transform, shortening, rotation
             rr += d[a_] * acc
         r[j] = -rr
         u[j] = r[j] + ((command[j - 3] + x0[cand, j - 3] + c[j - 3]) if j >= 3 else 0.0)
-        load = -axial[cand, j] * u[j]
+        # the lateral compatibility defect m_c = sum_t q_t d_a d_b (c = y..rz) and K m (6,)
+        for a_ in range(6):
+            ml[a_] = 0.0
+        for t in range(defect_index.shape[0]):
+            ml[defect_index[t, 0]] += defect[cand, j, t] * d[defect_index[t, 1]] * d[defect_index[t, 2]]
+        for a_ in range(6):
+            acc = 0.0
+            for k in range(1, 6):
+                acc += stiffness[cand, j, a_, k] * ml[k]
+            kml[a_] = acc
+        load = -axial[cand, j] * u[j] + kml[0]
         for k in range(6):
             load += gain[cand, k, j] * x[k]
         for a_ in range(3):
             load += axial_row[cand, j, a_] * ext_c[a_]
         n[j] = load
+        # the chain's energy gradient beyond the linear part and the P-delta 2 N S D: K m +
+        # sum_c (K e)_c dm_c/dD, e = D - u e_x + m the chain end's strain (model/consistent.py)
+        for a_ in range(6):
+            grad[a_] = kml[a_]
+        for t in range(defect_index.shape[0]):
+            cc, ia, ib = defect_index[t, 0], defect_index[t, 1], defect_index[t, 2]
+            ke = kml[cc] - stiffness[cand, j, cc, 0] * u[j]
+            for k in range(6):
+                ke += stiffness[cand, j, cc, k] * d[k]
+            w = ke * defect[cand, j, t]
+            grad[ia] += w * d[ib]
+            grad[ib] += w * d[ia]
         for k in range(6):
             acc = 0.0
             for a_ in range(6):
-                acc += transform[cand, j, a_, k] * sd[a_]
-            force[k] += 2.0 * load * acc
+                acc += transform[cand, j, a_, k] * (2.0 * load * sd[a_] + grad[a_])
+            force[k] += acc
             force[k] += (to_wrench[cand, j, k, 0] * ext[0] + to_wrench[cand, j, k, 1] * ext[1]
                          + to_wrench[cand, j, k, 2] * ext[2])
-        # the chain force F (tension n_j along the axis, lateral K D) works through the second-order
+        # the chain force F (tension n_j along the axis, lateral K e) works through the second-order
         # displacement of B: d ext / d theta^T F = 1/2 (p (theta.F) + (theta.p) F - 2 theta (p.F))
-        f1 = 0.0
-        f2 = 0.0
+        f1 = kml[1] - stiffness[cand, j, 1, 0] * u[j]
+        f2 = kml[2] - stiffness[cand, j, 2, 0] * u[j]
         for a_ in range(6):
-            f1 += lateral_rows[cand, j, 0, a_] * d[a_]
-            f2 += lateral_rows[cand, j, 1, a_] * d[a_]
+            f1 += stiffness[cand, j, 1, a_] * d[a_]
+            f2 += stiffness[cand, j, 2, a_] * d[a_]
         g0 = rotation[cand, j, 0, 0] * load + rotation[cand, j, 0, 1] * f1 + rotation[cand, j, 0, 2] * f2
         g1 = rotation[cand, j, 1, 0] * load + rotation[cand, j, 1, 1] * f1 + rotation[cand, j, 1, 2] * f2
         g2 = rotation[cand, j, 2, 0] * load + rotation[cand, j, 2, 1] * f1 + rotation[cand, j, 2, 2] * f2
@@ -104,13 +126,13 @@ def _terms(cand, x, c, command, x0, gain, axial, transform, shortening, rotation
 
 @njit(cache=True, nogil=True, fastmath=_FAST)
 def _equilibrium(cand, x, c, command, compliance, wrench, x0, gain, axial, transform, shortening, rotation, point_b,
-                 axial_row, to_wrench, lateral_rows, weight, tol, max_iter, divergence, r, u, n, force, d, sd, ext,
-                 ext_c, x_new):
+                 axial_row, to_wrench, stiffness, defect_index, defect, weight, tol, max_iter, divergence, r, u, n,
+                 force, d, sd, ext, ext_c, ml, kml, grad, x_new):
     """Iterate the pose x in place to ``tol`` at fixed offsets c; then r, u, n, force are those of
     the final x. Returns (status code, iterations)."""
     for it in range(max_iter):
         _terms(cand, x, c, command, x0, gain, axial, transform, shortening, rotation, point_b, axial_row, to_wrench,
-               lateral_rows, weight, r, u, n, force, d, sd, ext, ext_c)
+               stiffness, defect_index, defect, weight, r, u, n, force, d, sd, ext, ext_c, ml, kml, grad)
         change = 0.0
         for k in range(6):
             acc = 0.0
@@ -130,14 +152,14 @@ def _equilibrium(cand, x, c, command, compliance, wrench, x0, gain, axial, trans
             return DIVERGED, it + 1
         if change <= tol:
             _terms(cand, x, c, command, x0, gain, axial, transform, shortening, rotation, point_b, axial_row,
-                   to_wrench, lateral_rows, weight, r, u, n, force, d, sd, ext, ext_c)
+                   to_wrench, stiffness, defect_index, defect, weight, r, u, n, force, d, sd, ext, ext_c, ml, kml, grad)
             return OK, it + 1
     return NOT_CONVERGED, max_iter
 
 
 @njit(cache=True, nogil=True, parallel=True, fastmath=_FAST)
 def solve(compliance, wrench, gain, axial, transform, shortening, rotation, point_b, axial_row, to_wrench,
-          lateral_rows, weight, coupling, mu, limit, x0, nut, band, play, inputs, clearance, tol, max_iter, divergence,
+          stiffness, defect_index, defect, weight, coupling, mu, limit, x0, nut, band, play, inputs, clearance, tol, max_iter, divergence,
           faces, state_tol,
           pose_out, load_out, c_out, release_out, r_out, state_out, class_out, code_out, iter_out):
     n_c = compliance.shape[0]
@@ -172,6 +194,9 @@ def solve(compliance, wrench, gain, axial, transform, shortening, rotation, poin
         sd = np.zeros(6)
         ext = np.zeros(3)
         ext_c = np.zeros(3)
+        ml = np.zeros(6)
+        kml = np.zeros(6)
+        grad = np.zeros(6)
         force = np.zeros(6)
         use_clearance = False
         if clearance:
@@ -189,9 +214,9 @@ def solve(compliance, wrench, gain, axial, transform, shortening, rotation, poin
             iterations = 0
             for step in range(MAX_NEWTON if use_clearance else 1):
                 code, its = _equilibrium(cand, x, c, command, compliance, wrench, x0, gain, axial, transform,
-                                         shortening, rotation, point_b, axial_row, to_wrench, lateral_rows, weight,
-                                         inner_tol, max_iter,
-                                         divergence, r, u, n, force, d, sd, ext, ext_c, x_new)
+                                         shortening, rotation, point_b, axial_row, to_wrench, stiffness, defect_index,
+                                         defect, weight, inner_tol, max_iter,
+                                         divergence, r, u, n, force, d, sd, ext, ext_c, ml, kml, grad, x_new)
                 iterations += its
                 if code != OK or not use_clearance:
                     break
@@ -208,8 +233,9 @@ def solve(compliance, wrench, gain, axial, transform, shortening, rotation, poin
                         c_probe[k] += TANGENT_STEP
                         code, its = _equilibrium(cand, x_probe, c_probe, command, compliance, wrench, x0, gain,
                                                  axial, transform, shortening, rotation, point_b, axial_row,
-                                                 to_wrench, lateral_rows, weight, PROBE_TOL, max_iter, divergence,
-                                                 r, u, n_probe, force, d, sd, ext, ext_c, x_new)
+                                                 to_wrench, stiffness, defect_index, defect, weight, PROBE_TOL,
+                                                 max_iter, divergence, r, u, n_probe, force, d, sd, ext, ext_c, ml,
+                                                 kml, grad, x_new)
                         iterations += its
                         if code != OK:
                             break
@@ -254,9 +280,9 @@ def solve(compliance, wrench, gain, axial, transform, shortening, rotation, poin
                     break
                 if change <= tol:  # the offsets moved by <= tol: one more equilibrium settles the pose
                     code, its = _equilibrium(cand, x, c, command, compliance, wrench, x0, gain, axial, transform,
-                                             shortening, rotation, point_b, axial_row, to_wrench, lateral_rows, weight,
-                                         inner_tol, max_iter,
-                                             divergence, r, u, n, force, d, sd, ext, ext_c, x_new)
+                                             shortening, rotation, point_b, axial_row, to_wrench, stiffness,
+                                             defect_index, defect, weight, inner_tol, max_iter,
+                                             divergence, r, u, n, force, d, sd, ext, ext_c, ml, kml, grad, x_new)
                     iterations += its
                     break
                 code = NOT_CONVERGED

@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["pivot_shortening", "shortening_matrices", "solve_points_consistent"]
+__all__ = ["pivot_shortening", "shortening_matrices", "defect_terms", "solve_points_consistent"]
 
 
 def pivot_shortening(end_block, hinge_length, connector, length) -> np.ndarray:
@@ -52,15 +52,32 @@ def pivot_shortening(end_block, hinge_length, connector, length) -> np.ndarray:
 
 
 def shortening_matrices(correction, length, hinge_length, width, fillet, thickness_1, thickness_2, *, section,
-                        connector_length, end_block_length, material) -> np.ndarray:
-    """S_j (n_c, 6, 6, 6) = each candidate's chains' own shortening form
-    (``shortening.chain_shortening_form``, dimensions (n_c, 6) [m]) + the measured correction (6, 6, 6)."""
-    from .shortening import chain_shortening_form
+                        connector_length, end_block_length, material) -> tuple[np.ndarray, np.ndarray]:
+    """(S_j (n_c, 6, 6, 6), L_j (n_c, 6, 5, 6, 6)): each candidate's chains' own shortening form
+    plus the measured correction (6, 6, 6), and their lateral defect forms
+    (``shortening.chain_second_order_forms``; dimensions (n_c, 6) [m])."""
+    from .shortening import chain_second_order_forms
 
-    own = chain_shortening_form(length, hinge_length, width, fillet, thickness_1, thickness_2, section=section,
-                                connector_length=connector_length, end_block_length=end_block_length,
-                                material=material)
-    return own + np.asarray(correction, dtype=float)
+    own, lateral = chain_second_order_forms(length, hinge_length, width, fillet, thickness_1, thickness_2,
+                                            section=section, connector_length=connector_length,
+                                            end_block_length=end_block_length, material=material)
+    return own + np.asarray(correction, dtype=float), lateral
+
+
+def defect_terms(lateral: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The lateral defect forms L (n_c, 6, 5, 6, 6) as the kernel's sparse terms: index
+    (n_t, 3) int64 rows (c, a, b), a <= b, c in 1..5 the defect's component, and coefficients
+    (n_c, 6, n_t) q with ``m_c = sum q d_a d_b`` (off-diagonal pairs folded: q = 2 L[a, b]).
+    The terms are the union of the non-zero entries over all candidates and chains (13 of
+    the 105 for chains symmetric about their axis: the torsion's couplings, and (dy, ry),
+    (dz, rz), (ry, rz) in the torsion's own defect)."""
+    lateral = np.asarray(lateral, dtype=float)
+    upper = np.triu(np.ones((6, 6), dtype=bool))
+    used = np.any(lateral != 0.0, axis=(0, 1)) & upper  # (5, 6, 6)
+    c, a, b = np.nonzero(used)
+    index = np.stack([c + 1, a, b], axis=1).astype(np.int64)
+    coefficients = lateral[:, :, c, a, b] * np.where(a == b, 1.0, 2.0)
+    return index, np.ascontiguousarray(coefficients)
 
 
 def solve_points_consistent(matrices, inputs: np.ndarray, *, clearance: bool, tol: float, max_iter: int,
@@ -87,7 +104,7 @@ def solve_points_consistent(matrices, inputs: np.ndarray, *, clearance: bool, to
     arguments = (
         c(compliance), c(wrench), c(m.axial_gain), c(m.axial_stiffness), c(m.frame_transform), c(m.shortening),
         c(m.rotation), c(m.point_b), c(m.chain_stiffness[:, :, 0, :3]), c(to_wrench),
-        c(m.chain_stiffness[:, :, 1:3, :]), c(m.payload),
+        c(m.chain_stiffness), *defect_terms(m.lateral_defect), c(m.payload),
         c(m.coupling[:, DRIVING][:, :, DRIVING]), c(m.mu), c(m.clearance),
         c(m.initial_position), c(m.nut_stiffness), c(np.maximum(m.breakaway_band, 0.0)),
         bool(clearance and np.all(m.breakaway_band >= 0)), c(inputs, dtype=float), bool(clearance), float(tol),

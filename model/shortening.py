@@ -36,7 +36,7 @@ from flexcal.geometry.params import Material
 
 from .chain import chain_elements
 
-__all__ = ["twist_bracket_tensor", "chain_defect_tensor", "chain_shortening_form"]
+__all__ = ["twist_bracket_tensor", "chain_defect_tensor", "chain_shortening_form", "chain_second_order_forms"]
 
 
 def _levi_civita() -> np.ndarray:
@@ -100,9 +100,34 @@ def chain_shortening_form(length, hinge_length, width, fillet, thickness_1, thic
     """S (..., 6, 6) [1/m, 1, m] of chains (module docstring): ``N = k (D_x + D^T S D)`` for an end
     displacement D (chain frame at B, A clamped, no actuator). Dimensions as in
     ``chain.chain_elements`` (batch-broadcast, [m])."""
+    return chain_second_order_forms(length, hinge_length, width, fillet, thickness_1, thickness_2, section=section,
+                                    connector_length=connector_length, end_block_length=end_block_length,
+                                    material=material)[0]
+
+
+def chain_second_order_forms(length, hinge_length, width, fillet, thickness_1, thickness_2, *, section: float,
+                             connector_length: float, end_block_length: float, material: Material
+                             ) -> tuple[np.ndarray, np.ndarray]:
+    """(S (..., 6, 6), L (..., 5, 6, 6)) of chains from one defect tensor: the shortening form
+    (``chain_shortening_form``) and the lateral compatibility defect ``m_c(D) = D^T L[c-1] D``
+    of components c = y, z, rx, ry, rz [m, rad] (``chain_defect_tensor``'s rows 1-5, with the
+    axial direction's rows and columns zero: the end's axial displacement is microns, its
+    products with D are 1e-5 of the rest). The consistent model's chain energy is
+    ``1/2 e^T K e``, ``e = D - u e_x + (D^T S D, m_y, ..., m_rz)`` (docs/model.md 10): L's
+    terms couple the torsion with the lateral swing (a twisted chain's leaves bend off their
+    compliant axes) and give the lateral forces and moments that grow with the square of
+    the stroke (on `flexcal design`'s 2-2.5 mm strokes ~1 % of the chain's lateral force)."""
     m, stiffness = chain_defect_tensor(length, hinge_length, width, fillet, thickness_1, thickness_2,
                                        section=section, connector_length=connector_length,
                                        end_block_length=end_block_length, material=material)
+    lateral = m[..., 1:, :, :].copy()
+    lateral[..., :, 0, :] = 0.0
+    lateral[..., :, :, 0] = 0.0
+    return _shortening(m, stiffness), lateral
+
+
+def _shortening(m: np.ndarray, stiffness: np.ndarray) -> np.ndarray:
+    """S (..., 6, 6) from the defect tensor and K_B (module docstring)."""
     k = stiffness[..., 0, 0]
     form = k[..., None, None] * m[..., 0, :, :] + 2.0 * np.einsum("...ca,...cb->...ab", stiffness, m[..., :, 0, :])
     form = 0.5 * (form + np.swapaxes(form, -1, -2)) / k[..., None, None]
