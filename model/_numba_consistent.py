@@ -32,7 +32,8 @@ MIN_STIFFNESS = 0.2  # a measured nut stiffness below this share of the linear o
 
 @njit(cache=True, nogil=True, fastmath=_FAST)
 def _terms(cand, x, c, command, x0, gain, axial, transform, shortening, rotation, point_b, axial_row, to_wrench,
-           stiffness, defect_index, defect, weight, r, u, n, force, d, sd, ext, ext_c, ml, kml, grad):
+           stiffness, defect_index, defect, load_form, weight, r, u, n, force, d, sd, ext, ext_c, ml, kml, grad,
+           td):
     """At pose x (6,) and offsets c (3,): shortening r, axial inputs u, loads n (6,) and the
     second-order wrench ``force`` (P-delta 2 N J^T S D, the lateral defect's forces, the rigid
     term and the turning lever arms of the chain forces), all in place."""
@@ -87,11 +88,21 @@ def _terms(cand, x, c, command, x0, gain, axial, transform, shortening, rotation
             load += gain[cand, k, j] * x[k]
         for a_ in range(3):
             load += axial_row[cand, j, a_] * ext_c[a_]
-        n[j] = load
+        # the chain's own P-delta inside: energy 1/2 N^2 D^T T D with N the load above, so the
+        # tension is N (1 + k q) and the shortening D^T (S + N T) D
+        q = 0.0
+        for a_ in range(6):
+            acc = 0.0
+            for k in range(6):
+                acc += load_form[cand, j, a_, k] * d[k]
+            td[a_] = acc
+            q += d[a_] * acc
+        tension = load * (1.0 + axial[cand, j] * q)
+        n[j] = tension
         # the chain's energy gradient beyond the linear part and the P-delta 2 N S D: K m +
         # sum_c (K e)_c dm_c/dD, e = D - u e_x + m the chain end's strain (model/consistent.py)
         for a_ in range(6):
-            grad[a_] = kml[a_]
+            grad[a_] = kml[a_] + load * (q * stiffness[cand, j, 0, a_] + load * td[a_])
         for t in range(defect_index.shape[0]):
             cc, ia, ib = defect_index[t, 0], defect_index[t, 1], defect_index[t, 2]
             ke = kml[cc] - stiffness[cand, j, cc, 0] * u[j]
@@ -103,7 +114,7 @@ def _terms(cand, x, c, command, x0, gain, axial, transform, shortening, rotation
         for k in range(6):
             acc = 0.0
             for a_ in range(6):
-                acc += transform[cand, j, a_, k] * (2.0 * load * sd[a_] + grad[a_])
+                acc += transform[cand, j, a_, k] * (2.0 * tension * sd[a_] + grad[a_])
             force[k] += acc
             force[k] += (to_wrench[cand, j, k, 0] * ext[0] + to_wrench[cand, j, k, 1] * ext[1]
                          + to_wrench[cand, j, k, 2] * ext[2])
@@ -114,9 +125,9 @@ def _terms(cand, x, c, command, x0, gain, axial, transform, shortening, rotation
         for a_ in range(6):
             f1 += stiffness[cand, j, 1, a_] * d[a_]
             f2 += stiffness[cand, j, 2, a_] * d[a_]
-        g0 = rotation[cand, j, 0, 0] * load + rotation[cand, j, 0, 1] * f1 + rotation[cand, j, 0, 2] * f2
-        g1 = rotation[cand, j, 1, 0] * load + rotation[cand, j, 1, 1] * f1 + rotation[cand, j, 1, 2] * f2
-        g2 = rotation[cand, j, 2, 0] * load + rotation[cand, j, 2, 1] * f1 + rotation[cand, j, 2, 2] * f2
+        g0 = rotation[cand, j, 0, 0] * tension + rotation[cand, j, 0, 1] * f1 + rotation[cand, j, 0, 2] * f2
+        g1 = rotation[cand, j, 1, 0] * tension + rotation[cand, j, 1, 1] * f1 + rotation[cand, j, 1, 2] * f2
+        g2 = rotation[cand, j, 2, 0] * tension + rotation[cand, j, 2, 1] * f1 + rotation[cand, j, 2, 2] * f2
         tf = t0 * g0 + t1 * g1 + t2 * g2
         pf = pb0 * g0 + pb1 * g1 + pb2 * g2
         force[3] += 0.5 * (pb0 * tf + tp * g0 - 2.0 * t0 * pf)
@@ -126,13 +137,14 @@ def _terms(cand, x, c, command, x0, gain, axial, transform, shortening, rotation
 
 @njit(cache=True, nogil=True, fastmath=_FAST)
 def _equilibrium(cand, x, c, command, compliance, wrench, x0, gain, axial, transform, shortening, rotation, point_b,
-                 axial_row, to_wrench, stiffness, defect_index, defect, weight, tol, max_iter, divergence, r, u, n,
-                 force, d, sd, ext, ext_c, ml, kml, grad, x_new):
+                 axial_row, to_wrench, stiffness, defect_index, defect, load_form, weight, tol, max_iter, divergence,
+                 r, u, n, force, d, sd, ext, ext_c, ml, kml, grad, td, x_new):
     """Iterate the pose x in place to ``tol`` at fixed offsets c; then r, u, n, force are those of
     the final x. Returns (status code, iterations)."""
     for it in range(max_iter):
         _terms(cand, x, c, command, x0, gain, axial, transform, shortening, rotation, point_b, axial_row, to_wrench,
-               stiffness, defect_index, defect, weight, r, u, n, force, d, sd, ext, ext_c, ml, kml, grad)
+               stiffness, defect_index, defect, load_form, weight, r, u, n, force, d, sd, ext, ext_c, ml, kml, grad,
+               td)
         change = 0.0
         for k in range(6):
             acc = 0.0
@@ -152,14 +164,16 @@ def _equilibrium(cand, x, c, command, compliance, wrench, x0, gain, axial, trans
             return DIVERGED, it + 1
         if change <= tol:
             _terms(cand, x, c, command, x0, gain, axial, transform, shortening, rotation, point_b, axial_row,
-                   to_wrench, stiffness, defect_index, defect, weight, r, u, n, force, d, sd, ext, ext_c, ml, kml, grad)
+                   to_wrench, stiffness, defect_index, defect, load_form, weight, r, u, n, force, d, sd, ext, ext_c,
+                   ml, kml, grad, td)
             return OK, it + 1
     return NOT_CONVERGED, max_iter
 
 
 @njit(cache=True, nogil=True, parallel=True, fastmath=_FAST)
 def solve(compliance, wrench, gain, axial, transform, shortening, rotation, point_b, axial_row, to_wrench,
-          stiffness, defect_index, defect, weight, coupling, mu, limit, x0, nut, band, play, inputs, clearance, tol, max_iter, divergence,
+          stiffness, defect_index, defect, load_form, weight, coupling, mu, limit, x0, nut, band, play, inputs,
+          clearance, tol, max_iter, divergence,
           faces, state_tol,
           pose_out, load_out, c_out, release_out, r_out, state_out, class_out, code_out, iter_out):
     n_c = compliance.shape[0]
@@ -197,6 +211,7 @@ def solve(compliance, wrench, gain, axial, transform, shortening, rotation, poin
         ml = np.zeros(6)
         kml = np.zeros(6)
         grad = np.zeros(6)
+        td = np.zeros(6)
         force = np.zeros(6)
         use_clearance = False
         if clearance:
@@ -215,8 +230,8 @@ def solve(compliance, wrench, gain, axial, transform, shortening, rotation, poin
             for step in range(MAX_NEWTON if use_clearance else 1):
                 code, its = _equilibrium(cand, x, c, command, compliance, wrench, x0, gain, axial, transform,
                                          shortening, rotation, point_b, axial_row, to_wrench, stiffness, defect_index,
-                                         defect, weight, inner_tol, max_iter,
-                                         divergence, r, u, n, force, d, sd, ext, ext_c, ml, kml, grad, x_new)
+                                         defect, load_form, weight, inner_tol, max_iter,
+                                         divergence, r, u, n, force, d, sd, ext, ext_c, ml, kml, grad, td, x_new)
                 iterations += its
                 if code != OK or not use_clearance:
                     break
@@ -233,9 +248,9 @@ def solve(compliance, wrench, gain, axial, transform, shortening, rotation, poin
                         c_probe[k] += TANGENT_STEP
                         code, its = _equilibrium(cand, x_probe, c_probe, command, compliance, wrench, x0, gain,
                                                  axial, transform, shortening, rotation, point_b, axial_row,
-                                                 to_wrench, stiffness, defect_index, defect, weight, PROBE_TOL,
-                                                 max_iter, divergence, r, u, n_probe, force, d, sd, ext, ext_c, ml,
-                                                 kml, grad, x_new)
+                                                 to_wrench, stiffness, defect_index, defect, load_form, weight,
+                                                 PROBE_TOL, max_iter, divergence, r, u, n_probe, force, d, sd, ext,
+                                                 ext_c, ml, kml, grad, td, x_new)
                         iterations += its
                         if code != OK:
                             break
@@ -281,8 +296,8 @@ def solve(compliance, wrench, gain, axial, transform, shortening, rotation, poin
                 if change <= tol:  # the offsets moved by <= tol: one more equilibrium settles the pose
                     code, its = _equilibrium(cand, x, c, command, compliance, wrench, x0, gain, axial, transform,
                                              shortening, rotation, point_b, axial_row, to_wrench, stiffness,
-                                             defect_index, defect, weight, inner_tol, max_iter,
-                                             divergence, r, u, n, force, d, sd, ext, ext_c, ml, kml, grad, x_new)
+                                             defect_index, defect, load_form, weight, inner_tol, max_iter,
+                                             divergence, r, u, n, force, d, sd, ext, ext_c, ml, kml, grad, td, x_new)
                     iterations += its
                     break
                 code = NOT_CONVERGED

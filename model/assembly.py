@@ -64,7 +64,9 @@ class MechanismMatrices:
     band F_b / s_i of each nut (``ParameterSpace.breakaway_force``), -1 without play state;
     shortening S_j (n_c, 6, 6, 6) the chains' second-order shortening forms; lateral_defect L_j
     (n_c, 6, 5, 6, 6) their lateral compatibility defects (``shortening.chain_second_order_forms``;
-    zero outside the consistent model); consistent
+    zero outside the consistent model); load_shortening T_j (n_c, 6, 6, 6) [1/(N m), 1/N, m/N] their
+    load forms (the shortening under axial load N is ``D^T (S + N T) D``; zero outside the
+    consistent model); consistent
     (n_c,) bool: solve with ``model.consistent`` (``ParameterSpace.chain_shortening``; the
     frame stiffness is then the linear one, the P-delta is in the fixed point); payload
     (n_c, 6) the weight [N] and its centre of gravity [m] (mechanism frame).
@@ -95,6 +97,7 @@ class MechanismMatrices:
     breakaway_band: np.ndarray
     shortening: np.ndarray
     lateral_defect: np.ndarray
+    load_shortening: np.ndarray
     consistent: np.ndarray
     payload: np.ndarray
 
@@ -268,11 +271,12 @@ def mechanism_matrices(values, space: ParameterSpace, *, candidate_offset: int =
                          f"parameters")
     mu, clearance, initial_position = values[:, space.chain_indices("mu", "CL", "x0")].transpose(2, 0, 1)  # drives
     if space.chain_shortening:
-        shortening, lateral_defect = shortening_matrices(
+        shortening, lateral_defect, load_shortening = shortening_matrices(
             np.reshape(space.chain_shortening, (N_CHAINS, 6, 6)), length, l, w, a, t1, t2, section=section,
             connector_length=connector, end_block_length=end_block, material=mech.material)
     else:
-        shortening, lateral_defect = np.zeros((n_c, N_CHAINS, 6, 6)), np.zeros((n_c, N_CHAINS, 5, 6, 6))
+        shortening, load_shortening = np.zeros((n_c, N_CHAINS, 6, 6)), np.zeros((n_c, N_CHAINS, 6, 6))
+        lateral_defect = np.zeros((n_c, N_CHAINS, 5, 6, 6))
     return MechanismMatrices(
         chain_stiffness=stiffness, frame_transform=transform, rotation=rotation, point_a=point_a,
         frame_stiffness=frame_stiffness, axial_gain=axial_gain, input_gain=input_gain, gravity_pose=gravity_pose,
@@ -285,7 +289,7 @@ def mechanism_matrices(values, space: ParameterSpace, *, candidate_offset: int =
         second_order=np.full(n_c, bool(space.second_order)),
         breakaway_band=(np.full((n_c, 3), -1.0) if space.breakaway_force is None
                         else float(space.breakaway_force) / nut),
-        shortening=shortening, lateral_defect=lateral_defect,
+        shortening=shortening, lateral_defect=lateral_defect, load_shortening=load_shortening,
         consistent=np.full(n_c, bool(space.chain_shortening)),
         payload=np.broadcast_to(np.r_[mech.payload_mass * np.asarray(mech.gravity, dtype=float),
                                       np.asarray(mech.centre_of_gravity, dtype=float)], (n_c, 6)).copy(),

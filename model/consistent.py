@@ -52,16 +52,16 @@ def pivot_shortening(end_block, hinge_length, connector, length) -> np.ndarray:
 
 
 def shortening_matrices(correction, length, hinge_length, width, fillet, thickness_1, thickness_2, *, section,
-                        connector_length, end_block_length, material) -> tuple[np.ndarray, np.ndarray]:
-    """(S_j (n_c, 6, 6, 6), L_j (n_c, 6, 5, 6, 6)): each candidate's chains' own shortening form
-    plus the measured correction (6, 6, 6), and their lateral defect forms
-    (``shortening.chain_second_order_forms``; dimensions (n_c, 6) [m])."""
+                        connector_length, end_block_length, material) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(S_j (n_c, 6, 6, 6), L_j (n_c, 6, 5, 6, 6), T_j (n_c, 6, 6, 6)): each candidate's chains' own
+    shortening form plus the measured correction (6, 6, 6), their lateral defect forms and their
+    load forms (``shortening.chain_second_order_forms``; dimensions (n_c, 6) [m])."""
     from .shortening import chain_second_order_forms
 
-    own, lateral = chain_second_order_forms(length, hinge_length, width, fillet, thickness_1, thickness_2,
+    own, lateral, load = chain_second_order_forms(length, hinge_length, width, fillet, thickness_1, thickness_2,
                                             section=section, connector_length=connector_length,
                                             end_block_length=end_block_length, material=material)
-    return own + np.asarray(correction, dtype=float), lateral
+    return own + np.asarray(correction, dtype=float), lateral, load
 
 
 def defect_terms(lateral: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -104,7 +104,7 @@ def solve_points_consistent(matrices, inputs: np.ndarray, *, clearance: bool, to
     arguments = (
         c(compliance), c(wrench), c(m.axial_gain), c(m.axial_stiffness), c(m.frame_transform), c(m.shortening),
         c(m.rotation), c(m.point_b), c(m.chain_stiffness[:, :, 0, :3]), c(to_wrench),
-        c(m.chain_stiffness), *defect_terms(m.lateral_defect), c(m.payload),
+        c(m.chain_stiffness), *defect_terms(m.lateral_defect), c(m.load_shortening), c(m.payload),
         c(m.coupling[:, DRIVING][:, :, DRIVING]), c(m.mu), c(m.clearance),
         c(m.initial_position), c(m.nut_stiffness), c(np.maximum(m.breakaway_band, 0.0)),
         bool(clearance and np.all(m.breakaway_band >= 0)), c(inputs, dtype=float), bool(clearance), float(tol),

@@ -76,6 +76,15 @@ def chain_defect_tensor(length, hinge_length, width, fillet, thickness_1, thickn
     ``m_c(D) = D^T M[c] D`` of the chain's end (module docstring; M symmetric in its last two
     axes) and the chain stiffness at B (chain frame, A clamped, no actuator). Dimensions as in
     ``chain.chain_elements`` (batch-broadcast, [m])."""
+    transported, stiffness = _transported_elements(length, hinge_length, width, fillet, thickness_1, thickness_2,
+                                                   section=section, connector_length=connector_length,
+                                                   end_block_length=end_block_length, material=material)
+    return _defect(transported, stiffness), stiffness
+
+
+def _transported_elements(length, hinge_length, width, fillet, thickness_1, thickness_2, *, section,
+                          connector_length, end_block_length, material) -> tuple[np.ndarray, np.ndarray]:
+    """(C~_e (..., 9, 6, 6) the element compliances transported to B, K_B (..., 6, 6))."""
     compliance, rotation, points = chain_elements(length, hinge_length, width, fillet, thickness_1, thickness_2,
                                                   section=section, connector_length=connector_length,
                                                   end_block_length=end_block_length, material=material)
@@ -83,7 +92,11 @@ def chain_defect_tensor(length, hinge_length, width, fillet, thickness_1, thickn
     offset = points - length[..., None, None] * np.array([1.0, 0.0, 0.0])
     transform = twist_transform(rotation, offset)  # (..., 9, 6, 6) element end -> B
     transported = transform @ compliance @ np.swapaxes(transform, -1, -2)
-    stiffness = np.linalg.inv(transported.sum(axis=-3))  # K_B (..., 6, 6)
+    return transported, np.linalg.inv(transported.sum(axis=-3))
+
+
+def _defect(transported: np.ndarray, stiffness: np.ndarray) -> np.ndarray:
+    """M (..., 6, 6, 6) of ``chain_defect_tensor``."""
     gain = transported @ stiffness[..., None, :, :]  # G_e (..., 9, 6, 6)
     before = np.cumsum(gain, axis=-3) - gain  # sum_{e<f} G_e
     # q(D) = 1/2 sum_{e<f} [G_e D, G_f D]: Q[c] = 1/2 sum_f (sum_{e<f} G_e)^T A_c G_f, symmetrised
@@ -92,7 +105,40 @@ def chain_defect_tensor(length, hinge_length, width, fillet, thickness_1, thickn
     q = 0.5 * (q + np.swapaxes(q, -1, -2))
     m = -q
     m[..., :3, :, :] -= 0.5 * _PHI_CROSS_D
-    return m, stiffness
+    return m
+
+
+# (e_x, 0)'s image under ad(v, w)^T is (e_x x w, e_x x v) = _AXIAL_AD (v, w): the axial force's
+# moment and lateral force on a deformed element (docs: chain_load_form)
+_AXIAL_AD = np.zeros((6, 6))
+_AXIAL_AD[1, 5] = _AXIAL_AD[4, 2] = -1.0
+_AXIAL_AD[2, 4] = _AXIAL_AD[5, 1] = 1.0
+
+
+def _load_form(transported: np.ndarray, stiffness: np.ndarray) -> np.ndarray:
+    """T (..., 6, 6) [1/(N m), 1/N, m/N] of ``chain_second_order_forms`` from C~_e and K_B.
+
+    The chain under its axial load N: each element carries the end wrench carried through the
+    deformed chain, ``xi_e = C~_e (I + 1/2 sum_{f<e} ad_f - 1/2 sum_{f>e} ad_f)^T lambda``
+    (stationarity of the elements' energy under the BCH compatibility of the module
+    docstring), so with lambda = N e_x + dlambda the deformations solve
+    ``eta = C~ dlambda + N A eta``, ``A_ef = 1/2 s_ef C~_e P`` (s_ef = +1 for f < e, -1 for
+    f > e, P = ``_AXIAL_AD``: the axial force's moment N x offset and its lateral force
+    N x rotation), with ``sum_e eta_e = D``. The end compliance is
+    ``E^T (I - N A)^-1 C~ = C0 + N C1 + N^2 C2 + ...``; the stiffness's N^2 term
+    ``K0 (C1 K0 C1 - C2) K0`` is T (its N term is 2 S plus the end's -1/2 phi x d, the
+    shortening form: checked in the tests)."""
+    n_e = transported.shape[-3]
+    sign = np.sign(np.arange(n_e)[:, None] - np.arange(n_e)[None, :]).astype(float)  # s_ef = +1 for f < e
+    signed = np.einsum("ef,...fab->...eab", sign, transported)  # Y_e = sum_f s_ef C~_f
+    first = 0.5 * transported @ _AXIAL_AD @ signed  # Z_e = (A C~)_e
+    second = 0.5 * transported @ _AXIAL_AD @ np.einsum("ef,...fab->...eab", sign, first)  # (A A C~)_e
+    c1, c2 = first.sum(axis=-3), second.sum(axis=-3)
+    form = stiffness @ (c1 @ stiffness @ c1 - c2) @ stiffness
+    form = 0.5 * (form + np.swapaxes(form, -1, -2))
+    form[..., 0, :] = 0.0
+    form[..., :, 0] = 0.0
+    return form
 
 
 def chain_shortening_form(length, hinge_length, width, fillet, thickness_1, thickness_2, *, section: float,
@@ -107,9 +153,13 @@ def chain_shortening_form(length, hinge_length, width, fillet, thickness_1, thic
 
 def chain_second_order_forms(length, hinge_length, width, fillet, thickness_1, thickness_2, *, section: float,
                              connector_length: float, end_block_length: float, material: Material
-                             ) -> tuple[np.ndarray, np.ndarray]:
-    """(S (..., 6, 6), L (..., 5, 6, 6)) of chains from one defect tensor: the shortening form
-    (``chain_shortening_form``) and the lateral compatibility defect ``m_c(D) = D^T L[c-1] D``
+                             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(S (..., 6, 6), L (..., 5, 6, 6), T (..., 6, 6)) of chains from their transported
+    elements: the shortening form (``chain_shortening_form``), the load form T (the chain's
+    energy gains ``1/2 N^2 D^T T D`` under its axial load N: the elements' own P-delta inside
+    the chain, ``_load_form``; T < 0, the shortening ``D^T (S + N T) D`` grows under
+    compression, by 0.2 % at 3 kN on the driving chains) and the lateral compatibility defect
+    ``m_c(D) = D^T L[c-1] D`` 
     of components c = y, z, rx, ry, rz [m, rad] (``chain_defect_tensor``'s rows 1-5, with the
     axial direction's rows and columns zero: the end's axial displacement is microns, its
     products with D are 1e-5 of the rest). The consistent model's chain energy is
@@ -117,13 +167,14 @@ def chain_second_order_forms(length, hinge_length, width, fillet, thickness_1, t
     terms couple the torsion with the lateral swing (a twisted chain's leaves bend off their
     compliant axes) and give the lateral forces and moments that grow with the square of
     the stroke (on `flexcal design`'s 2-2.5 mm strokes ~1 % of the chain's lateral force)."""
-    m, stiffness = chain_defect_tensor(length, hinge_length, width, fillet, thickness_1, thickness_2,
-                                       section=section, connector_length=connector_length,
-                                       end_block_length=end_block_length, material=material)
+    transported, stiffness = _transported_elements(length, hinge_length, width, fillet, thickness_1, thickness_2,
+                                                   section=section, connector_length=connector_length,
+                                                   end_block_length=end_block_length, material=material)
+    m = _defect(transported, stiffness)
     lateral = m[..., 1:, :, :].copy()
     lateral[..., :, 0, :] = 0.0
     lateral[..., :, :, 0] = 0.0
-    return _shortening(m, stiffness), lateral
+    return _shortening(m, stiffness), lateral, _load_form(transported, stiffness)
 
 
 def _shortening(m: np.ndarray, stiffness: np.ndarray) -> np.ndarray:
