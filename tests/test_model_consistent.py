@@ -66,8 +66,8 @@ def _lever(theta, point, force):
 def test_the_compiled_solve_equals_a_plain_loop():
     """Without clearance the kernel is the fixed point X = K^-1 (F_C + sum g u - f2(X)); a plain
     per-point numpy loop of the formulas of model/consistent.py (each chain's energy
-    1/2 e^T K e with the strain e = D - u e_x + m(D), its gradient written out with the dense
-    defect forms) gives the same poses (S the chains' own forms from ``model.shortening``, zero
+    1/2 e^T K e + 1/2 N^2 D^T T D with the strain e = D - u e_x + m(D) and N = (K e)_x, its
+    gradient written out with the dense defect forms) gives the same poses (S the chains' own forms from ``model.shortening``, zero
     correction), on the standard trajectory's postures at 2.5x its strokes (the designs' size,
     where the lateral defect's forces are ~1 % of the chains' lateral forces)."""
     from flexcal.model.parameters import parameter_space
@@ -97,11 +97,16 @@ def test_the_compiled_solve_equals_a_plain_loop():
                     strain = d + np.einsum("cab,a,b->c", forms, d, d)
                     strain[0] -= u[j]
                     chain_force = stiffness @ strain
-                    gradient = chain_force + 2.0 * np.einsum("c,cab,b->a", chain_force, forms, d)
+                    # + 1/2 N^2 D^T T D (the load form), N = (K e)_x: tension N (1 + k q)
+                    load, quadratic = chain_force[0], d @ m.load_shortening[cand, j] @ d
+                    tension = load * (1.0 + stiffness[0, 0] * quadratic)
+                    carried = np.r_[tension, chain_force[1:]]
+                    gradient = (chain_force + 2.0 * np.einsum("c,cab,b->a", carried, forms, d)
+                                + load * quadratic * stiffness[0] + load**2 * m.load_shortening[cand, j] @ d)
                     # the linear part J^T K (J X - u e_x) is K_CC X - g u, the left-hand side
                     force += transform.T @ (gradient - stiffness @ (transform @ pose - u[j] * np.eye(6)[0]))
                     # the chain force (tension along the axis, lateral K e) on B's turning lever arm
-                    force[3:] += _lever(theta, point, rot @ chain_force[:3])
+                    force[3:] += _lever(theta, point, rot @ carried[:3])
                 force[3:] -= _lever(theta, m.payload[cand, 3:], m.payload[cand, :3])  # the weight's
                 pose = k_inv @ (wrench + m.axial_gain[cand] @ u - force)
             # 1e-14 rad: the two loops round differently; their fixed points agree to the last bits
@@ -208,3 +213,121 @@ def test_the_ideal_model_runs_on_a_consistent_space(paper):
     scenario, space, inputs, _ = paper
     plain = dataclasses.replace(space, chain_shortening=())
     np.testing.assert_array_equal(ideal_angles(inputs, space), ideal_angles(inputs, plain))
+
+
+def _prototype_end_gradient(chain, end):
+    """The energy gradient dU/dD (6,) [N, N m] of the prototype's chain (analytic segments, A
+    clamped) with its end B moved by D = (d, phi) (chain frame; phi a rotation vector)."""
+    from flexcal.geometry.frames import so3_exp, so3_right_jacobian
+    from flexcal.validation.prototype.equilibrium import Loads, SolverSettings, solve_equilibrium
+    from flexcal.validation.prototype.kinematics import pose
+    from flexcal.validation.prototype.segments import analytic_provider
+    from flexcal.validation.runs.chain_kinematics import _chain_assembly
+
+    assembly, poses, stiffness, length = _chain_assembly(chain, analytic_provider())
+    poses = poses.copy()
+    rotation = so3_exp(end[3:])
+    poses[5] = pose(rotation, np.array([length, 0.0, 0.0]) + end[:3])
+    _, info = solve_equilibrium(assembly, poses, stiffness, Loads(), SolverSettings(force_tolerance=1e-6,
+                                                                                    moment_tolerance=1e-6), where="probe")
+    body = info.segment_gradient[4, 6:]  # B's body-frame perturbation T exp(delta)
+    return np.r_[rotation @ body[:3], so3_right_jacobian(end[3:]).T @ body[3:]]
+
+
+def _model_end_gradient(chain, material, end, lateral=True):
+    """The consistent model's chain law: dU/dD of 1/2 e^T K e + 1/2 N^2 D^T T D (no actuator),
+    e = D + (D^T S D, m_y .. m_rz), N = (K e)_x; ``lateral=False`` leaves out m_y .. m_rz."""
+    from flexcal.model.shortening import chain_defect_tensor, chain_second_order_forms
+
+    dims = (chain.length, chain.hinge_length, chain.width, chain.fillet, chain.thickness_1, chain.thickness_2)
+    common = dict(section=chain.section, connector_length=chain.connector_length,
+                  end_block_length=chain.end_block_length, material=material)
+    shortening, defect, load_form = chain_second_order_forms(*dims, **common)
+    stiffness = chain_defect_tensor(*dims, **common)[1]
+    forms = np.concatenate([shortening[None], defect if lateral else np.zeros_like(defect)])
+    strain = end + np.einsum("cab,a,b->c", forms, end, end)
+    force = stiffness @ strain
+    load, quadratic = force[0], end @ load_form @ end
+    carried = np.r_[load * (1.0 + stiffness[0, 0] * quadratic), force[1:]]
+    return (force + 2.0 * np.einsum("c,cab,b->a", carried, forms, end) + load * quadratic * stiffness[0]
+            + load**2 * load_form @ end)
+
+
+def test_the_lateral_defect_gives_the_prototype_chains_forces_at_design_strokes():
+    """A driving chain twisted and swung as D3 is at a `flexcal design` posture of table1
+    (lateral 1.4 / 0.46 mm, torsion 2.3 mrad, bending 0.1 / 3.7 mrad): the model's chain law
+    with the lateral compatibility defect gives the prototype chain's lateral forces and
+    moments; without it they are off by ~1 % (the torsion's couplings)."""
+    from flexcal.geometry.params import reference_mechanism
+
+    mechanism = reference_mechanism()
+    chain = mechanism.chains[5].chain
+    end = np.array([0.0, 1396.1, 462.0, 2323.6, 100.5, -3667.0]) * 0.8e-6
+    truth = _prototype_end_gradient(chain, end)
+    with_defect = np.abs(_model_end_gradient(chain, mechanism.material, end) - truth) / np.abs(truth)
+    without = np.abs(_model_end_gradient(chain, mechanism.material, end, lateral=False) - truth) / np.abs(truth)
+    bending, torsion = [1, 2, 4, 5], 3
+    # relative to each component: measured <= 1.4e-4 for the lateral forces and bending moments
+    # and 7.9e-3 for the small torsion moment (0.8 N m; the rest is fourth order), so 5e-4 and
+    # 2e-2; without the defect 2.2e-3 (force z), 3.0e-3 (moment y) and 0.25 (torsion)
+    assert np.all(with_defect[bending] <= 5e-4) and with_defect[torsion] <= 2e-2, with_defect
+    assert np.any(without[bending] > 5e-4) and without[torsion] > 2e-2, without  # both fail without it
+
+
+def test_the_load_form_is_the_prototype_chains_shortening_under_load():
+    """Under its axial load N a chain's shortening is D^T (S + N T) D: the prototype's driving
+    chain (analytic segments) under +-3 kN changes its S_zz by -+0.2 %, which T gives."""
+    from flexcal.geometry.params import reference_mechanism
+    from flexcal.model.shortening import chain_defect_tensor, chain_second_order_forms
+
+    mechanism = reference_mechanism()
+    chain = mechanism.chains[3].chain
+    dims = (chain.length, chain.hinge_length, chain.width, chain.fillet, chain.thickness_1, chain.thickness_2)
+    common = dict(section=chain.section, connector_length=chain.connector_length,
+                  end_block_length=chain.end_block_length, material=mechanism.material)
+    shortening, _, load_form = chain_second_order_forms(*dims, **common)
+    k = chain_defect_tensor(*dims, **common)[1][0, 0]
+    step, load = 2e-4, 3000.0  # [m] the lateral probe of chain_kinematics; [N] the weight's preload
+    measured = {}
+    for sign in (1.0, -1.0):
+        axial = np.array([sign * load / k, 0, 0, 0, 0, 0])
+        lateral = np.array([0, 0, step, 0, 0, 0])
+        tensions = [_prototype_end_gradient(chain, axial + s * lateral)[0] for s in (1.0, -1.0, 0.0)]
+        measured[sign] = (tensions[0] + tensions[1] - 2 * tensions[2]) / (2 * step**2 * k)
+    slope = (measured[1.0] - measured[-1.0]) / (2 * load)  # dS_zz / dN [1/(N m)]
+    # 10 %: the probe's S_zz is good to ~2e-4 of 9.2 1/m (docs: chain_kinematics), 5 % of the
+    # 0.037 1/m it moves between -3 and +3 kN; measured slope -6.2e-6 against T_zz -5.9e-6
+    np.testing.assert_allclose(slope, load_form[2, 2], rtol=0.1)
+    assert abs(slope) * load > 1e-3 * shortening[2, 2]  # the effect is there: 0.2 % of S_zz at 3 kN
+
+
+@pytest.mark.parametrize("name", ["table1", "paper"])
+def test_the_consistent_model_bounds_the_form_error_at_the_workspace_corners(name):
+    """The postures a D-optimal design seeks (``flexcal design``: the workspace's corners, edges
+    and faces, 2.6 / 2.6 / 1.6 mm strokes, 2-2.5x the standard amplitudes, 9-13 of 27 with a nut
+    off its flank), ordered as a design orders them, at the true values against the analytic
+    prototype (breakaway force 2 N)."""
+    import itertools
+
+    from flexcal.calibration.design import order_postures
+    from flexcal.model.trajectory import WORKSPACE
+    from flexcal.validation.prototype.providers import stiffness_provider
+    from flexcal.validation.prototype.scenario import load_scenario
+    from flexcal.validation.prototype.truth import make_truth
+    from flexcal.validation.runs.chain_kinematics import consistent_space
+
+    scenario = load_scenario(name)
+    provider = stiffness_provider("analytic", progress=False, workers=None)
+    gain = mechanism_matrices(np.asarray(scenario.space.base_values)[None], scenario.space).input_gain[0, 3:, 3:]
+    angles = np.array([g for g in itertools.product((-1.0, 0.0, 1.0), repeat=3) if any(g)]) * WORKSPACE
+    inputs = np.linalg.solve(gain, angles.T).T
+    amplitudes = standard_trajectory(scenario.space.mechanism).amplitudes
+    inputs = np.vstack([np.zeros(3), inputs[order_postures(inputs, amplitudes)]])
+    truth = make_truth(dataclasses.replace(scenario, inputs=inputs, leg=np.ones(len(inputs), dtype=int)),
+                       provider).run.angles
+    space = dataclasses.replace(consistent_space(scenario.space, provider), breakaway_force=scenario.breakaway_force)
+    error = _rms_urad(forward(scenario.values, inputs, space=space).angles[0] - truth)
+    # 0.1 urad per angle (issue 24's goal is 0.25): measured 0.04 / 0.06 / 0.01 (table1) and
+    # 0.05 / 0.08 / 0.02 (paper); without the lateral defect and the load form (the model of
+    # session 13) 0.23 / 0.69 / 0.18 and 0.28 / 0.85 / 0.22
+    assert np.all(error <= 0.1), error
