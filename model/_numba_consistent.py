@@ -1,7 +1,7 @@
 """numba kernel of ``consistent.py``: the per-point equilibrium with the chains' second-order
-shortening, the P-delta, the rigid second-order frame kinematics and the turning lever arms of
-the chain forces, and the clearance (with its play state) by Newton steps on the nut offsets.
-See ``consistent.py``.
+shortening, the P-delta, their lateral compatibility defect and load form (``_terms``), the
+rigid second-order frame kinematics and the turning lever arms of the chain forces, and the
+clearance (with its play state) by Newton steps on the nut offsets. See ``consistent.py``.
 
 Per point: the pose X is the fixed point of ``X = K^-1 (F_C + sum_j g_j u_j - f2(X))`` at given
 nut offsets C (``_equilibrium``, contracts by ~1e-2 per step); the offsets solve Eq. 6-7,
@@ -83,17 +83,24 @@ def _terms(cand, x, c, command, x0, gain, axial, transform, shortening, rotation
             for k in range(1, 6):
                 acc += stiffness[cand, j, a_, k] * ml[k]
             kml[a_] = acc
+        # the lateral chain force (K e)_c, c = y..rz, into ml (m itself is done with)
+        for a_ in range(1, 6):
+            acc = kml[a_] - stiffness[cand, j, a_, 0] * u[j]
+            for k in range(6):
+                acc += stiffness[cand, j, a_, k] * d[k]
+            ml[a_] = acc
         load = -axial[cand, j] * u[j] + kml[0]
         for k in range(6):
             load += gain[cand, k, j] * x[k]
         for a_ in range(3):
             load += axial_row[cand, j, a_] * ext_c[a_]
         # the chain's own P-delta inside: energy 1/2 N^2 D^T T D with N the load above, so the
-        # tension is N (1 + k q) and the shortening D^T (S + N T) D
+        # tension is N (1 + k q) and the shortening D^T (S + N T) D (T has no axial row)
         q = 0.0
-        for a_ in range(6):
+        td[0] = 0.0
+        for a_ in range(1, 6):
             acc = 0.0
-            for k in range(6):
+            for k in range(1, 6):
                 acc += load_form[cand, j, a_, k] * d[k]
             td[a_] = acc
             q += d[a_] * acc
@@ -104,11 +111,8 @@ def _terms(cand, x, c, command, x0, gain, axial, transform, shortening, rotation
         for a_ in range(6):
             grad[a_] = kml[a_] + load * (q * stiffness[cand, j, 0, a_] + load * td[a_])
         for t in range(defect_index.shape[0]):
-            cc, ia, ib = defect_index[t, 0], defect_index[t, 1], defect_index[t, 2]
-            ke = kml[cc] - stiffness[cand, j, cc, 0] * u[j]
-            for k in range(6):
-                ke += stiffness[cand, j, cc, k] * d[k]
-            w = ke * defect[cand, j, t]
+            ia, ib = defect_index[t, 1], defect_index[t, 2]
+            w = ml[defect_index[t, 0]] * defect[cand, j, t]
             grad[ia] += w * d[ib]
             grad[ib] += w * d[ia]
         for k in range(6):
@@ -120,11 +124,8 @@ def _terms(cand, x, c, command, x0, gain, axial, transform, shortening, rotation
                          + to_wrench[cand, j, k, 2] * ext[2])
         # the chain force F (tension n_j along the axis, lateral K e) works through the second-order
         # displacement of B: d ext / d theta^T F = 1/2 (p (theta.F) + (theta.p) F - 2 theta (p.F))
-        f1 = kml[1] - stiffness[cand, j, 1, 0] * u[j]
-        f2 = kml[2] - stiffness[cand, j, 2, 0] * u[j]
-        for a_ in range(6):
-            f1 += stiffness[cand, j, 1, a_] * d[a_]
-            f2 += stiffness[cand, j, 2, a_] * d[a_]
+        f1 = ml[1]
+        f2 = ml[2]
         g0 = rotation[cand, j, 0, 0] * tension + rotation[cand, j, 0, 1] * f1 + rotation[cand, j, 0, 2] * f2
         g1 = rotation[cand, j, 1, 0] * tension + rotation[cand, j, 1, 1] * f1 + rotation[cand, j, 1, 2] * f2
         g2 = rotation[cand, j, 2, 0] * tension + rotation[cand, j, 2, 1] * f1 + rotation[cand, j, 2, 2] * f2

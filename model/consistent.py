@@ -1,19 +1,29 @@
 """The consistent second-order model (docs/model.md 10): the chains' second-order shortening,
-their P-delta, the frame's rigid second-order kinematics and the turning lever arms of the chain
-forces and the weight solved per point together with the clearance and its play state -- instead
-of Eq. 4-5's pivot rows and one Newton step after the clearance (``model.second_order``).
+their P-delta, their lateral compatibility defect and their own P-delta inside, the frame's
+rigid second-order kinematics and the turning lever arms of the chain forces and the weight
+solved per point together with the clearance and its play state -- instead of Eq. 4-5's pivot
+rows and one Newton step after the clearance (``model.second_order``).
 
 Per chain j, with D_j the 6-vector displacement of its end B in its own frame (``J_j X`` plus
-the rigid second-order part ``R_j^T ext_j``, ``ext_j = 1/2 theta x (theta x p_j)``):
+the rigid second-order part ``R_j^T ext_j``, ``ext_j = 1/2 theta x (theta x p_j)``), the chain's
+energy is ``U_j = 1/2 e_j^T K_j e_j + 1/2 N_j^2 D_j^T T_j D_j`` in the end strain
 
-    shortening    r_j = -D_j^T S_j D_j                        (Eq. 4-5 as a full quadratic form)
-    axial load    N_j = g_j^T X - k_j u_j + K_j[0, :3] R_j^T ext_j
+    e_j = D_j - u_j e_x + m_j(D_j),  m_j = (D^T S_j D, D^T L_j,y D, ..., D^T L_j,rz D)
+    load          N_j = (K_j e_j)_x,   tension N_j (1 + k_j D_j^T T_j D_j)  (the shortening D^T (S + N T) D)
     frame         K_CC X = F_C + sum_j g_j u_j - f2(X)
-    f2            sum_j (2 N_j J_j^T S_j D_j + J_j^T K_j [ext_j; 0] + [0; L(p_j, F_j)]) - [0; L(r_cg, W)]
+    f2            sum_j (J_j^T [dU_j/dD_j - K_j (J_j X - u_j e_x)] + [0; L(p_j, F_j)]) - [0; L(r_cg, W)]
+    dU/dD         K e + 2 sum_c (K e)_c M_c D + N (D^T T D) K[0, :] + N^2 T D   (M_x = S, M_c = L_c;
+                  (K e)_x taken as the tension in the c = x term: the P-delta 2 N S D)
     lever         L(p, F) = (d ext / d theta)^T F = 1/2 (p (theta.F) + (theta.p) F - 2 theta (p.F))
 
-with F_j = R_j (N_j, (K_j D_j)_y, (K_j D_j)_z) the chain force and W the weight at r_cg. The
-nut offsets solve Eq. 6-7 with the release ``C + N / k`` and k the nut's stiffness at the point's
+with F_j = R_j (tension, (K_j e_j)_y, (K_j e_j)_z) the chain force and W the weight at r_cg. L_j
+(5 x 6 x 6, ``shortening.chain_second_order_forms``) is the lateral part of the chain's BCH
+defect (the torsion's couplings with the swing; 13 non-zero entries, passed to the kernel as
+sparse terms, ``defect_terms``); T_j (6 x 6) the chain's load form (its elements' P-delta
+under the axial load; ``shortening._load_form``). Both come from the candidate's own
+elements; neither has a measured correction.
+
+The nut offsets solve Eq. 6-7 with the release ``C + N / k`` and k the nut's stiffness at the point's
 equilibrium (``_numba_consistent``: Newton steps with dN/dC measured on the equilibrium).
 
 ``S_j`` (6 x 6, chain frame at B) is the candidate's own chain's shortening form from its
