@@ -67,8 +67,8 @@ def test_the_compiled_solve_equals_a_plain_loop():
     """Without clearance the kernel is the fixed point X = K^-1 (F_C + sum g u - f2(X)); a plain
     per-point numpy loop of the formulas of model/consistent.py (each chain's energy
     1/2 e^T K e + 1/2 N^2 D^T T D with the strain e = D - u e_x + m(D) and N = (K e)_x, its
-    gradient written out with the dense defect forms) gives the same poses (S the chains' own forms from ``model.shortening``, zero
-    correction), on the standard trajectory's postures at 2.5x its strokes (the designs' size,
+    gradient written out with the dense defect forms) gives the same poses (S the chains' own
+    forms from ``model.shortening``, zero correction), on the standard trajectory's postures at 2.5x its strokes (the designs' size,
     where the lateral defect's forces are ~1 % of the chains' lateral forces)."""
     from flexcal.model.parameters import parameter_space
 
@@ -228,8 +228,8 @@ def _prototype_end_gradient(chain, end):
     poses = poses.copy()
     rotation = so3_exp(end[3:])
     poses[5] = pose(rotation, np.array([length, 0.0, 0.0]) + end[:3])
-    _, info = solve_equilibrium(assembly, poses, stiffness, Loads(), SolverSettings(force_tolerance=1e-6,
-                                                                                    moment_tolerance=1e-6), where="probe")
+    settings = SolverSettings(force_tolerance=1e-6, moment_tolerance=1e-6)  # the probe's N: 1e-9 of 1 kN
+    _, info = solve_equilibrium(assembly, poses, stiffness, Loads(), settings, where="(chain probe)")
     body = info.segment_gradient[4, 6:]  # B's body-frame perturbation T exp(delta)
     return np.r_[rotation @ body[:3], so3_right_jacobian(end[3:]).T @ body[3:]]
 
