@@ -68,8 +68,9 @@ def test_the_compiled_solve_equals_a_plain_loop():
     per-point numpy loop of the formulas of model/consistent.py (each chain's energy
     1/2 e^T K e + 1/2 N^2 D^T T D with the strain e = D - u e_x + m(D) and N = (K e)_x, its
     gradient written out with the dense defect forms) gives the same poses (S the chains' own
-    forms from ``model.shortening``, zero correction), on the standard trajectory's postures at 2.5x its strokes (the designs' size,
-    where the lateral defect's forces are ~1 % of the chains' lateral forces)."""
+    forms from ``model.shortening``, zero correction), on the standard trajectory's postures at
+    2.5x its strokes (the designs' size, where the lateral defect's forces are ~1 % of the
+    chains' lateral forces)."""
     from flexcal.model.parameters import parameter_space
 
     space = dataclasses.replace(parameter_space(), second_order=True, chain_shortening=tuple(np.zeros(216)))
