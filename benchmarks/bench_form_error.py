@@ -11,8 +11,9 @@ order), + FEM-informed chain compliance (docs/model.md 7), + second-order geomet
 (docs/model.md 8; the calibration's default), + the clearance's play state with the
 prototype's breakaway force given (docs/model.md 9), + the consistent second-order model:
 each chain's second-order shortening from its own elements (exact joint kinematics) plus the
-correction measured on the prototype's chains at the nominal design, the chain forces' and the
-weight's turning lever arms, Eq. 6-7 with the nut's own tangent stiffness, all solved inside
+correction measured on the prototype's chains at the nominal design, their lateral
+compatibility defect and load form (docs/model.md 10 items 5-6: the designs' large strokes),
+the chain forces' and the weight's turning lever arms, Eq. 6-7 with the nut's own tangent stiffness, all solved inside
 the per-point equilibrium with Newton steps on the clearance (docs/model.md 10). The prototype's breakaway force is
 ``--breakaway`` (comma-separated values: one table per value; the prototype's default is
 2 N); ``--trajectory NAME=FILE`` adds a trajectory file (e.g. ``flexcal design``'s
@@ -114,8 +115,8 @@ def _table(scenario_name, provider, args, strokes, force, trajectory_file) -> No
     consistent = dataclasses.replace(consistent_space(fem, provider), breakaway_force=force)
     models = (("paper's model", paper), ("+ FEM-informed compliance", fem), ("+ second order (default)", second),
               (f"+ play state (F_b {force:g} N given)", dataclasses.replace(second, breakaway_force=force)),
-              ("+ consistent: chain kinematics from its elements (S corrected at nominal), lever arms, "
-               "nut tangent, solved with the clearance", consistent))
+              ("+ consistent: chain kinematics from its elements (S corrected at nominal, lateral defect, "
+               "load form), lever arms, nut tangent, solved with the clearance", consistent))
     if args.slopes and args.provider == "fem":
         from flexcal.validation.runs.model_correction import compliance_slopes
 
