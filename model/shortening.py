@@ -34,7 +34,9 @@ import numpy as np
 from flexcal.geometry.frames import twist_transform
 from flexcal.geometry.params import Material
 
-from .chain import chain_elements
+from . import kernel
+from .chain import _dimensions, _uniform_entries, chain_elements
+from .hinge import ENTRY_INDEX, segment_entries
 
 __all__ = ["twist_bracket_tensor", "chain_defect_tensor", "chain_shortening_form", "chain_second_order_forms"]
 
@@ -166,7 +168,22 @@ def chain_second_order_forms(length, hinge_length, width, fillet, thickness_1, t
     ``1/2 e^T K e``, ``e = D - u e_x + (D^T S D, m_y, ..., m_rz)`` (docs/model.md 10): L's
     terms couple the torsion with the lateral swing (a twisted chain's leaves bend off their
     compliant axes) and give the lateral forces and moments that grow with the square of
-    the stroke (on `flexcal design`'s 2-2.5 mm strokes ~1 % of the chain's lateral force)."""
+    the stroke (on `flexcal design`'s 2-2.5 mm strokes ~1 % of the chain's lateral force).
+
+    With numba the three run compiled on the elements' eight entries (``_numba_shortening``:
+    every element is collinear with x, so the matrices are block-sparse), ~50x faster than the
+    dense evaluation below, which is used without it; the two agree to rounding."""
+    if kernel.available():
+        return _compiled_forms(length, hinge_length, width, fillet, thickness_1, thickness_2, section=section,
+                               connector_length=connector_length, end_block_length=end_block_length,
+                               material=material)
+    return _dense_forms(length, hinge_length, width, fillet, thickness_1, thickness_2, section=section,
+                        connector_length=connector_length, end_block_length=end_block_length, material=material)
+
+
+def _dense_forms(length, hinge_length, width, fillet, thickness_1, thickness_2, *, section, connector_length,
+                 end_block_length, material) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``chain_second_order_forms`` by dense (..., 9, 6, 6) matrices (numpy)."""
     transported, stiffness = _transported_elements(length, hinge_length, width, fillet, thickness_1, thickness_2,
                                                    section=section, connector_length=connector_length,
                                                    end_block_length=end_block_length, material=material)
@@ -185,3 +202,57 @@ def _shortening(m: np.ndarray, stiffness: np.ndarray) -> np.ndarray:
     form[..., 0, :] = 0.0
     form[..., :, 0] = 0.0
     return form
+
+
+def _compiled_forms(length, hinge_length, width, fillet, thickness_1, thickness_2, *, section, connector_length,
+                    end_block_length, material) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``chain_second_order_forms`` by ``_numba_shortening.shortening_forms``."""
+    from . import _numba_shortening
+
+    entries, offsets = _element_entries(length, hinge_length, width, fillet, thickness_1, thickness_2,
+                                        section=section, connector_length=connector_length,
+                                        end_block_length=end_block_length, material=material)
+    shape = offsets.shape[:-1]
+    flat = np.ascontiguousarray(entries.reshape((-1,) + entries.shape[-2:]))
+    n = flat.shape[0]
+    form, lateral, load, stiffness = (np.empty((n, 6, 6)), np.empty((n, 5, 6, 6)), np.empty((n, 6, 6)),
+                                      np.empty((n, 6, 6)))
+    _numba_shortening.shortening_forms(flat, np.ascontiguousarray(offsets.reshape(n, -1)), *_BRACKET_ENTRIES,
+                                       _PARTNER, _PHI_CROSS_D, _AXIAL_AD, form, lateral, load, stiffness)
+    return form.reshape(shape + (6, 6)), lateral.reshape(shape + (5, 6, 6)), load.reshape(shape + (6, 6))
+
+
+# the non-zero entries of the twist bracket (c, p, r, value) and each index's 2x2-block partner
+# in a collinear chain's matrices ((uy, rz) = (1, 5), (uz, ry) = (2, 4); ux, rx alone)
+_BRACKET_ENTRIES = tuple(np.ascontiguousarray(v) for v in (*np.nonzero(_BRACKET), _BRACKET[np.nonzero(_BRACKET)]))
+_PARTNER = np.array([-1, 5, 4, -1, 2, 1], dtype=np.int64)
+_KEYS = tuple(ENTRY_INDEX)  # ux_Fx, uy_Fy, uy_Mz, rz_Mz, uz_Fz, uz_My, ry_My, rx_Mx
+_QUARTER_TURN = (0, 4, 5, 6, 1, 2, 3, 7)  # leaf 2 (element y -> chain z, z -> -y): blocks swapped,
+_QUARTER_SIGN = np.array([1.0, 1.0, -1.0, 1.0, 1.0, -1.0, 1.0, 1.0])  # couplings negated
+
+
+def _element_entries(length, hinge_length, width, fillet, thickness_1, thickness_2, *, section, connector_length,
+                     end_block_length, material: Material) -> tuple[np.ndarray, np.ndarray]:
+    """(entries (..., 9, 8), offsets (..., 9) [m]): the eight entries (``hinge.ENTRY_INDEX``) of
+    each element of ``chain.chain_elements`` at its loaded end in the chain's axes, and that end's
+    x minus B's (L). The same segments as ``chain_elements`` (leaves by ``segment_entries`` of
+    their flat half and fillet; blocks, connectors and strut uniform, ``chain._uniform_entries``,
+    equal to ``segment_entries`` without fillet)."""
+    length, l, w, a, t1, t2, strut = _dimensions(length, hinge_length, width, fillet, thickness_1, thickness_2,
+                                                 end_block_length, connector_length)
+    if np.any(a < 0) or np.any(2.0 * a > l * (1.0 + 1e-12)):
+        raise ValueError("leaf fillet a must satisfy 0 <= a <= l/2 (both fillets must fit the segment)")
+    shape = length.shape
+    section, connector, block = (np.broadcast_to(np.asarray(v, dtype=float), shape)
+                                 for v in (section, connector_length, end_block_length))
+    leaves = segment_entries(np.maximum(0.5 * l - a, 0.0), a, np.stack([t1, t2]), w, material.youngs_modulus,
+                             material.poisson_ratio)
+    leaves = np.stack([leaves[key] for key in _KEYS], axis=-1)  # (2, ..., 8)
+    leaf1, leaf2 = leaves[0], leaves[1][..., list(_QUARTER_TURN)] * _QUARTER_SIGN
+    uniform = np.moveaxis(_uniform_entries(np.stack([block, connector, strut]), section, section, material), 0, -1)
+    by_kind = {"block": uniform[0], "leaf1": leaf1, "connector": uniform[1], "leaf2": leaf2, "strut": uniform[2]}
+    sizes = {"block": block, "leaf1": l, "connector": connector, "leaf2": l, "strut": strut}
+    kinds = ("block", "leaf1", "connector", "leaf2", "strut", "leaf2", "connector", "leaf1", "block")
+    stacked = np.stack([by_kind[k] for k in kinds], axis=-2)
+    ends = np.cumsum(np.stack([sizes[k] for k in kinds], axis=-1), axis=-1)
+    return stacked, ends - length[..., None]

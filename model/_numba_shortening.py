@@ -1,0 +1,218 @@
+"""numba kernel of ``shortening.chain_second_order_forms`` (S, L, T): the same formulas (that
+module's docstrings) written on the structure of a chain whose elements are all collinear with x.
+
+Every element compliance there has eight independent entries (``hinge.ENTRY_INDEX``: ux and rx
+alone, the 2x2 blocks (uy, rz) and (uz, ry)); the transport to B (a shift along x) and the sum
+and inverse keep that structure, so ``C~_e``, ``K_B`` and ``G_e = C~_e K_B`` are block matrices
+with ten non-zero entries, and the bracket sum ``Q[c] = 1/2 sum_f (sum_{e<f} G_e)^T A_c G_f``
+only visits the eighteen non-zero entries of the twist bracket A and each row's block. No other
+approximation: the dense evaluation (``shortening._transported_elements``, ``_defect``,
+``_load_form``) agrees to rounding (tests/test_shortening_fast.py). The load form T is
+evaluated with dense 6x6 products.
+"""
+
+import numpy as np
+from numba import njit
+
+_FAST = {"reassoc", "contract", "arcp"}
+
+
+@njit(cache=True, nogil=True)
+def _gain(t, k, out):
+    """G = C~ K_B (6, 6) in place, from C~'s eight entries t and the dense block matrix K_B."""
+    for a in range(6):
+        for b in range(6):
+            out[a, b] = 0.0
+    out[0, 0] = t[0] * k[0, 0]
+    out[3, 3] = t[7] * k[3, 3]
+    out[1, 1] = t[1] * k[1, 1] + t[2] * k[5, 1]
+    out[1, 5] = t[1] * k[1, 5] + t[2] * k[5, 5]
+    out[5, 1] = t[2] * k[1, 1] + t[3] * k[5, 1]
+    out[5, 5] = t[2] * k[1, 5] + t[3] * k[5, 5]
+    out[2, 2] = t[4] * k[2, 2] + t[5] * k[4, 2]
+    out[2, 4] = t[4] * k[2, 4] + t[5] * k[4, 4]
+    out[4, 2] = t[5] * k[2, 2] + t[6] * k[4, 2]
+    out[4, 4] = t[5] * k[2, 4] + t[6] * k[4, 4]
+
+
+@njit(cache=True, nogil=True, fastmath=_FAST)
+def shortening_forms(entries, offsets, bracket_c, bracket_p, bracket_r, bracket_value, partner, phi_cross_d,
+                     axial_ad, form_out, lateral_out, load_out, stiffness_out):
+    """entries (n, 9, 8) of each element's compliance at its loaded end (chain axes, leaf 2
+    turned), offsets (n, 9) [m] its loaded end minus B along x; the non-zero entries of the
+    twist bracket A (c, p, r, value); partner (6,) the other index of each row's 2x2 block
+    (-1: none); phi_cross_d (3, 6, 6); axial_ad (6, 6) ``shortening._AXIAL_AD``. Writes S (n, 6, 6),
+    L (n, 5, 6, 6), T (n, 6, 6) and K_B (n, 6, 6). One thread: a few us per chain, less than
+    starting numba's threads on a busy machine."""
+    n = entries.shape[0]
+    n_e = entries.shape[1]
+    moved = np.zeros((n_e, 8))  # C~_e entries
+    total = np.zeros(8)
+    gain = np.zeros((6, 6))
+    before = np.zeros((6, 6))  # sum_{e<f} G_e
+    q = np.zeros((6, 6, 6))
+    dense = np.zeros((n_e, 6, 6))  # C~_e
+    signed = np.zeros((n_e, 6, 6))  # Y_e, then sum_f s_ef Z_f
+    first = np.zeros((n_e, 6, 6))  # Z_e
+    prefix = np.zeros((6, 6))
+    whole = np.zeros((6, 6))
+    tmp = np.zeros((6, 6))
+    c1 = np.zeros((6, 6))
+    c2 = np.zeros((6, 6))
+    for i in range(n):
+        total[:] = 0.0
+        before[:, :] = 0.0
+        q[:, :, :] = 0.0
+        for e in range(n_e):
+            p = entries[i, e]
+            d = offsets[i, e]
+            t = moved[e]
+            t[0] = p[0]
+            t[1] = p[1] - 2.0 * d * p[2] + d * d * p[3]  # uy' = uy - d rz
+            t[2] = p[2] - d * p[3]
+            t[3] = p[3]
+            t[4] = p[4] + 2.0 * d * p[5] + d * d * p[6]  # uz' = uz + d ry
+            t[5] = p[5] + d * p[6]
+            t[6] = p[6]
+            t[7] = p[7]
+            for k in range(8):
+                total[k] += t[k]
+        k_b = stiffness_out[i]
+        for a in range(6):
+            for b in range(6):
+                k_b[a, b] = 0.0
+        k_b[0, 0] = 1.0 / total[0]
+        k_b[3, 3] = 1.0 / total[7]
+        det = total[1] * total[3] - total[2] * total[2]
+        k_b[1, 1] = total[3] / det
+        k_b[5, 5] = total[1] / det
+        k_b[1, 5] = k_b[5, 1] = -total[2] / det
+        det = total[4] * total[6] - total[5] * total[5]
+        k_b[2, 2] = total[6] / det
+        k_b[4, 4] = total[4] / det
+        k_b[2, 4] = k_b[4, 2] = -total[5] / det
+        for f in range(n_e):
+            _gain(moved[f], k_b, gain)
+            for z in range(bracket_c.shape[0]):
+                c, p, r, v = bracket_c[z], bracket_p[z], bracket_r[z], 0.5 * bracket_value[z]
+                for s in range(2):
+                    col_p = p if s == 0 else partner[p]
+                    if col_p < 0:
+                        continue
+                    left = v * before[p, col_p]
+                    for s2 in range(2):
+                        col_r = r if s2 == 0 else partner[r]
+                        if col_r < 0:
+                            continue
+                        q[c, col_p, col_r] += left * gain[r, col_r]
+            for a in range(6):
+                for b in range(6):
+                    before[a, b] += gain[a, b]
+        # m = -sym(q) - 1/2 (phi x d) rows; S = sym(k m[0] + 2 K_B^T m[:, 0, :]) / k, axial row/column zero
+        k = k_b[0, 0]
+        form = form_out[i]
+        for a in range(6):
+            for b in range(6):
+                acc = 0.0
+                for c in range(6):
+                    m_c0b = -0.5 * (q[c, 0, b] + q[c, b, 0]) - (0.5 * phi_cross_d[c, 0, b] if c < 3 else 0.0)
+                    acc += k_b[c, a] * m_c0b
+                m_0ab = -0.5 * (q[0, a, b] + q[0, b, a]) - 0.5 * phi_cross_d[0, a, b]
+                form[a, b] = k * m_0ab + 2.0 * acc
+        for a in range(6):
+            for b in range(a, 6):
+                s_ab = 0.5 * (form[a, b] + form[b, a]) / k
+                form[a, b] = s_ab
+                form[b, a] = s_ab
+        for a in range(6):
+            form[0, a] = 0.0
+            form[a, 0] = 0.0
+        # L: rows y..rz of m = -sym(q) - 1/2 (phi x d), the axial direction's rows and columns zero
+        for c in range(1, 6):
+            for a in range(6):
+                for b in range(6):
+                    value = 0.0
+                    if a > 0 and b > 0:
+                        value = -0.5 * (q[c, a, b] + q[c, b, a]) - (0.5 * phi_cross_d[c, a, b] if c < 3 else 0.0)
+                    lateral_out[i, c - 1, a, b] = value
+        _load_form(moved, k_b, axial_ad, dense, signed, first, prefix, whole, tmp, c1, c2, load_out[i])
+
+
+@njit(cache=True, nogil=True)
+def _signed_sum(parts, out, prefix, whole):
+    """out_e = sum_f sign(e - f) parts_f = 2 sum_{f<e} parts_f - sum_f parts_f + parts_e."""
+    n_e = parts.shape[0]
+    for a in range(6):
+        for b in range(6):
+            acc = 0.0
+            for e in range(n_e):
+                acc += parts[e, a, b]
+            whole[a, b] = acc
+            prefix[a, b] = 0.0
+    for e in range(n_e):
+        for a in range(6):
+            for b in range(6):
+                out[e, a, b] = 2.0 * prefix[a, b] - whole[a, b] + parts[e, a, b]
+                prefix[a, b] += parts[e, a, b]
+
+
+@njit(cache=True, nogil=True)
+def _half_ad_product(left, axial_ad, right, out):
+    """out = 1/2 left P right (6 x 6) for P = ``shortening._AXIAL_AD``: P[1, 5] = P[4, 2] = -1,
+    P[2, 4] = P[5, 1] = 1 (its only non-zero entries; checked by the caller's tests)."""
+    for a in range(6):
+        l1, l2, l4, l5 = left[a, 1], left[a, 2], left[a, 4], left[a, 5]
+        for b in range(6):
+            out[a, b] = 0.5 * (-l1 * right[5, b] - l4 * right[2, b] + l2 * right[4, b] + l5 * right[1, b])
+
+
+@njit(cache=True, nogil=True)
+def _product(left, right, out):
+    """out = left right (6 x 6)."""
+    for a in range(6):
+        for b in range(6):
+            acc = 0.0
+            for k in range(6):
+                acc += left[a, k] * right[k, b]
+            out[a, b] = acc
+
+
+@njit(cache=True, nogil=True)
+def _load_form(moved, k_b, axial_ad, dense, signed, first, prefix, whole, tmp, c1, c2, out):
+    """T (6, 6) of ``shortening._load_form``: Y_e = sum_f s_ef C~_f, Z_e = 1/2 C~_e P Y_e,
+    C1 = sum Z_e, C2 = sum 1/2 C~_e P (sum_f s_ef Z_f), T = sym(K (C1 K C1 - C2) K), axial zero."""
+    n_e = moved.shape[0]
+    for e in range(n_e):
+        t = moved[e]
+        d = dense[e]
+        d[:, :] = 0.0
+        d[0, 0] = t[0]
+        d[1, 1], d[1, 5], d[5, 1], d[5, 5] = t[1], t[2], t[2], t[3]
+        d[2, 2], d[2, 4], d[4, 2], d[4, 4] = t[4], t[5], t[5], t[6]
+        d[3, 3] = t[7]
+    _signed_sum(dense, signed, prefix, whole)
+    c1[:, :] = 0.0
+    for e in range(n_e):
+        _half_ad_product(dense[e], axial_ad, signed[e], first[e])
+        c1 += first[e]
+    _signed_sum(first, signed, prefix, whole)
+    c2[:, :] = 0.0
+    for e in range(n_e):
+        _half_ad_product(dense[e], axial_ad, signed[e], tmp)
+        c2 += tmp
+    # K (C1 K C1 - C2) K
+    _product(c1, k_b, tmp)
+    _product(tmp, c1, prefix)
+    for a in range(6):
+        for b in range(6):
+            prefix[a, b] -= c2[a, b]
+    _product(k_b, prefix, tmp)
+    _product(tmp, k_b, out)
+    for a in range(6):
+        for b in range(a, 6):
+            value = 0.5 * (out[a, b] + out[b, a])
+            out[a, b] = value
+            out[b, a] = value
+    for a in range(6):
+        out[0, a] = 0.0
+        out[a, 0] = 0.0
