@@ -26,7 +26,7 @@ MAX_NEWTON = 40  # Newton steps on the offsets per point (2-4 where a nut leaves
 # the pose is iterated 100x tighter than the offsets' tolerance: near two free nuts with
 # coupling ~0.9, (I - B)^-1 amplifies the pose's rounding by up to ~100 in the offsets
 INNER_SHARE = 1e-2
-PROBE_TOL = 1e-12  # [m, rad] a probe's pose: its rate error ~ 1e-12 / TANGENT_STEP x 1e8 N/m, 5e-5 relative
+PROBE_TOL = 1e-14  # [m, rad] a probe's pose: its rate error ~ 1e-12 / TANGENT_STEP x 1e8 N/m, 5e-5 relative
 MIN_STIFFNESS = 0.2  # a measured nut stiffness below this share of the linear one is not trusted (linear used)
 
 
@@ -139,35 +139,84 @@ def _terms(cand, x, c, command, x0, gain, axial, transform, shortening, rotation
 @njit(cache=True, nogil=True, fastmath=_FAST)
 def _equilibrium(cand, x, c, command, compliance, wrench, x0, gain, axial, transform, shortening, rotation, point_b,
                  axial_row, to_wrench, stiffness, defect_index, defect, load_form, weight, tol, max_iter, divergence,
-                 r, u, n, force, d, sd, ext, ext_c, ml, kml, grad, td, x_new):
-    """Iterate the pose x in place to ``tol`` at fixed offsets c; then r, u, n, force are those of
-    the final x. Returns (status code, iterations)."""
+                 r, u, n, force, d, sd, ext, ext_c, ml, kml, grad, td, work, secant):
+    """Solve the pose x in place to ``tol`` at fixed offsets c: the fixed point ``x = Phi(x)``
+    (module docstring), converged when ``|Phi(x) - x| <= tol``; x is then ``Phi(x)`` and r, u, n,
+    force are those of it. Returns (status code, iterations = evaluations of Phi).
+
+    The steps are Broyden's (``x += B (Phi(x) - x)``, B ~ (I - dPhi/dx)^-1 kept in ``secant``
+    (6, 6) from call to call and updated by the secant condition at each step): Phi contracts
+    by only 0.04-0.09 per step here (its Jacobian's spectral radius on the standard trajectory),
+    the secant steps converge superlinearly. A step that does not halve the residual resets B to
+    the identity, i.e. to the plain fixed-point step. work (6, 6) scratch."""
+    x_new, f_prev, s_prev, b_y, s_b, rhs = work[0], work[1], work[2], work[3], work[4], work[5]
+    previous = np.inf
     for it in range(max_iter):
         _terms(cand, x, c, command, x0, gain, axial, transform, shortening, rotation, point_b, axial_row, to_wrench,
                stiffness, defect_index, defect, load_form, weight, r, u, n, force, d, sd, ext, ext_c, ml, kml, grad,
                td)
+        for m in range(6):  # F_C + sum_j g_j u_j - f2(x)
+            acc = wrench[cand, m] - force[m]
+            for j in range(6):
+                acc += gain[cand, m, j] * u[j]
+            rhs[m] = acc
         change = 0.0
         for k in range(6):
             acc = 0.0
             for m in range(6):
-                rhs = wrench[cand, m] - force[m]
-                for j in range(6):
-                    rhs += gain[cand, m, j] * u[j]
-                acc += compliance[cand, k, m] * rhs
+                acc += compliance[cand, k, m] * rhs[m]
             x_new[k] = acc
             change = max(change, abs(acc - x[k]))
         r_max = 0.0
         for j in range(6):
             r_max = max(r_max, abs(r[j]))
-        for k in range(6):
-            x[k] = x_new[k]
         if not np.isfinite(change) or r_max > divergence:
+            for k in range(6):
+                x[k] = x_new[k]
             return DIVERGED, it + 1
         if change <= tol:
+            for k in range(6):
+                x[k] = x_new[k]
             _terms(cand, x, c, command, x0, gain, axial, transform, shortening, rotation, point_b, axial_row,
                    to_wrench, stiffness, defect_index, defect, load_form, weight, r, u, n, force, d, sd, ext, ext_c,
                    ml, kml, grad, td)
             return OK, it + 1
+        # residual f = Phi(x) - x, kept in x_new
+        for k in range(6):
+            x_new[k] -= x[k]
+        if it > 0:
+            if change > 0.5 * previous:  # the secant model did not help: plain fixed-point steps again
+                for a_ in range(6):
+                    for b_ in range(6):
+                        secant[a_, b_] = 1.0 if a_ == b_ else 0.0
+            else:  # B+ = B - (s + B y) (s^T B) / (s^T B y), y = f - f_prev: then B+ y = -s
+                for a_ in range(6):
+                    acc = 0.0
+                    acc2 = 0.0
+                    for b_ in range(6):
+                        acc += secant[a_, b_] * (x_new[b_] - f_prev[b_])
+                        acc2 += s_prev[b_] * secant[b_, a_]
+                    b_y[a_] = acc
+                    s_b[a_] = acc2
+                denominator = 0.0
+                scale = 0.0
+                for a_ in range(6):
+                    denominator += s_prev[a_] * b_y[a_]
+                    scale += s_prev[a_] * s_prev[a_]
+                if abs(denominator) > 1e-3 * scale:  # |B y| ~ |s|: a well-posed update
+                    for a_ in range(6):
+                        row = (s_prev[a_] + b_y[a_]) / denominator
+                        for b_ in range(6):
+                            secant[a_, b_] -= row * s_b[b_]
+        for a_ in range(6):
+            acc = 0.0
+            for b_ in range(6):
+                acc += secant[a_, b_] * x_new[b_]
+            s_prev[a_] = acc
+            f_prev[a_] = x_new[a_]
+        for k in range(6):
+            x[k] += s_prev[k]
+        previous = change
     return NOT_CONVERGED, max_iter
 
 
@@ -175,14 +224,31 @@ def _equilibrium(cand, x, c, command, compliance, wrench, x0, gain, axial, trans
 def solve(compliance, wrench, gain, axial, transform, shortening, rotation, point_b, axial_row, to_wrench,
           stiffness, defect_index, defect, load_form, weight, coupling, mu, limit, x0, nut, band, play, inputs,
           clearance, tol, max_iter, divergence,
-          faces, state_tol,
+          faces, state_tol, input_gain,
           pose_out, load_out, c_out, release_out, r_out, state_out, class_out, code_out, iter_out):
+    """All candidates (in parallel) at all points (in order). Each fixed point starts from the
+    previous solution moved by the response to what changed: the linear model's ``input_gain``
+    (n_c, 6, 6), dX/du_j, to the command's step (plus the previous points' second-order drift),
+    the last probe's measured dX/dC_k to an offset's step or a probe's. A start off by the
+    change's second-order part only needs fewer fixed-point steps; where they end is unchanged."""
     n_c = compliance.shape[0]
     n_p = inputs.shape[0]
     inner_tol = INNER_SHARE * tol
     for cand in prange(n_c):
         x = np.zeros(6)
-        x_new = np.zeros(6)
+        work = np.zeros((6, 6))
+        secant = np.eye(6)
+        response = np.empty((3, 6))  # dX/dC_k: the linear model's, then as the last probe measured it
+        for k in range(3):
+            for m in range(6):
+                response[k, m] = input_gain[cand, m, 3 + k]
+        drift = np.zeros(6)
+        drift_prev = np.zeros(6)
+        drift_prev2 = np.zeros(6)
+        uniform = 0
+        x_start = np.zeros(6)
+        last_step = np.zeros(3)
+        c_start = np.zeros(3)
         x_probe = np.zeros(6)
         u = np.zeros(6)
         r = np.zeros(6)
@@ -224,15 +290,48 @@ def solve(compliance, wrench, gain, axial, transform, shortening, rotation, poin
             hi[i] = max(limit[cand, i], 0.0)
         for p in range(n_p):
             command = inputs[p]
+            along = 0.0
+            size = 0.0
+            length = 0.0
             for i in range(3):
                 stiff[i] = nut[cand, i]
+                # the start: the previous point's pose + the linear response to the command's step
+                # (at the first point the linear solution from rest, X_g + H u) + the previous
+                # point's second-order drift scaled by the steps' ratio (-1 at a reversal), or
+                # extrapolated from the last two or three drifts inside a leg of equal steps
+                step_i = command[i] - (inputs[p - 1, i] if p > 0 else -x0[cand, i] - c[i])
+                along += step_i * last_step[i]
+                size += last_step[i] * last_step[i]
+                length += step_i * step_i
+                last_step[i] = step_i
+                c_start[i] = c[i]
+                for k in range(6):
+                    x[k] += input_gain[cand, k, 3 + i] * step_i
+            if p == 0:
+                for k in range(6):
+                    for m in range(6):
+                        x[k] += compliance[cand, k, m] * wrench[cand, m]
+            for k in range(6):
+                x_start[k] = x[k]
+            if size > 0.0 and abs(along - size) <= 1e-9 * size and abs(length - size) <= 1e-9 * size:
+                uniform += 1  # equal steps in a row
+            else:
+                uniform = 0
+            if p > 0 and size > 0.0:
+                for k in range(6):
+                    if uniform >= 3:  # the drift extrapolated as a quadratic in the step count
+                        x[k] += 3.0 * drift[k] - 3.0 * drift_prev[k] + drift_prev2[k]
+                    elif uniform == 2:
+                        x[k] += 2.0 * drift[k] - drift_prev[k]
+                    else:
+                        x[k] += along / size * drift[k]
             code = NOT_CONVERGED
             iterations = 0
             for step in range(MAX_NEWTON if use_clearance else 1):
                 code, its = _equilibrium(cand, x, c, command, compliance, wrench, x0, gain, axial, transform,
                                          shortening, rotation, point_b, axial_row, to_wrench, stiffness, defect_index,
                                          defect, load_form, weight, inner_tol, max_iter,
-                                         divergence, r, u, n, force, d, sd, ext, ext_c, ml, kml, grad, td, x_new)
+                                         divergence, r, u, n, force, d, sd, ext, ext_c, ml, kml, grad, td, work, secant)
                 iterations += its
                 if code != OK or not use_clearance:
                     break
@@ -243,7 +342,7 @@ def solve(compliance, wrench, gain, axial, transform, shortening, rotation, poin
                 for k in range(3):
                     if mu[cand, k] > 0 and c[k] > state_tol:
                         for m in range(6):
-                            x_probe[m] = x[m]
+                            x_probe[m] = x[m] + response[k, m] * TANGENT_STEP
                         for i in range(3):
                             c_probe[i] = c[i]
                         c_probe[k] += TANGENT_STEP
@@ -251,12 +350,14 @@ def solve(compliance, wrench, gain, axial, transform, shortening, rotation, poin
                                                  axial, transform, shortening, rotation, point_b, axial_row,
                                                  to_wrench, stiffness, defect_index, defect, load_form, weight,
                                                  PROBE_TOL, max_iter, divergence, r, u, n_probe, force, d, sd, ext,
-                                                 ext_c, ml, kml, grad, td, x_new)
+                                                 ext_c, ml, kml, grad, td, work, secant)
                         iterations += its
                         if code != OK:
                             break
                         for i in range(3):
                             rate[i, k] = (n_probe[3 + i] - n[3 + i]) / TANGENT_STEP
+                        for m in range(6):
+                            response[k, m] = (x_probe[m] - x[m]) / TANGENT_STEP
                     else:
                         for i in range(3):
                             rate[i, k] = coupling[cand, i, k] - (axial[cand, 3 + i] if i == k else 0.0)
@@ -291,6 +392,8 @@ def solve(compliance, wrench, gain, axial, transform, shortening, rotation, poin
                 change = 0.0
                 for i in range(3):
                     change = max(change, abs(c_new[i] - c[i]))
+                    for k in range(6):  # the start of the next equilibrium (see the docstring)
+                        x[k] += response[i, k] * (c_new[i] - c[i])
                     c[i] = c_new[i]
                 if change == 0.0:
                     break
@@ -298,7 +401,7 @@ def solve(compliance, wrench, gain, axial, transform, shortening, rotation, poin
                     code, its = _equilibrium(cand, x, c, command, compliance, wrench, x0, gain, axial, transform,
                                              shortening, rotation, point_b, axial_row, to_wrench, stiffness,
                                              defect_index, defect, load_form, weight, inner_tol, max_iter,
-                                             divergence, r, u, n, force, d, sd, ext, ext_c, ml, kml, grad, td, x_new)
+                                             divergence, r, u, n, force, d, sd, ext, ext_c, ml, kml, grad, td, work, secant)
                     iterations += its
                     break
                 code = NOT_CONVERGED
@@ -325,5 +428,11 @@ def solve(compliance, wrench, gain, axial, transform, shortening, rotation, poin
                     compressed = False
                 c_prev[i] = c[i]
             class_out[cand, p] = 2 if in_clearance else (1 if compressed else 3)
+            for k in range(6):  # the second-order part of this point's change (beyond the linear start)
+                drift_prev2[k] = drift_prev[k]
+                drift_prev[k] = drift[k]
+                drift[k] = x[k] - x_start[k]
+                for i in range(3):
+                    drift[k] -= input_gain[cand, k, 3 + i] * (c[i] - c_start[i])
             code_out[cand, p] = code
             iter_out[cand, p] = iterations

@@ -118,7 +118,7 @@ def solve_points_consistent(matrices, inputs: np.ndarray, *, clearance: bool, to
         c(m.coupling[:, DRIVING][:, :, DRIVING]), c(m.mu), c(m.clearance),
         c(m.initial_position), c(m.nut_stiffness), c(np.maximum(m.breakaway_band, 0.0)),
         bool(clearance and np.all(m.breakaway_band >= 0)), c(inputs, dtype=float), bool(clearance), float(tol),
-        int(max_iter), float(divergence), _FACES, float(state_tolerance), out["pose"], out["loads"], out["clearance"],
+        int(max_iter), float(divergence), _FACES, float(state_tolerance), c(m.input_gain), out["pose"], out["loads"], out["clearance"],
         out["release"], out["parasitic"], out["states"], out["point_class"], out["codes"], out["iterations"])
     previous = numba.get_num_threads()
     numba.set_num_threads(max(1, min(int(n_threads), numba.config.NUMBA_NUM_THREADS)))

@@ -1,7 +1,8 @@
-"""The chains' shortening form S (``model.shortening.chain_shortening_form``), batched and
-compiled on the elements' eight entries, against the module docstring's mathematics evaluated
-chain by chain here in the plainest way: dense adjoints, a matrix inverse, the twist bracket
-with cross products and the quadratic defect read off by polarisation."""
+"""The chains' second-order forms (``model.shortening.chain_second_order_forms``: shortening S,
+lateral defect L, load form T), batched and compiled on the elements' eight entries, against the
+module docstring's mathematics evaluated chain by chain here in the plainest way (S and L: dense
+adjoints, a matrix inverse, the twist bracket with cross products and the quadratic defect read
+off by polarisation), and against the dense numpy route used without numba (S, L, T)."""
 
 import numpy as np
 import pytest
@@ -10,7 +11,7 @@ from flexcal.geometry.frames import twist_transform
 from flexcal.geometry.params import reference_mechanism
 from flexcal.model import kernel
 from flexcal.model.chain import chain_elements
-from flexcal.model.shortening import _dense_shortening_form, chain_shortening_form
+from flexcal.model.shortening import _dense_forms, chain_second_order_forms
 
 
 def _bracket(a, b):
@@ -18,8 +19,8 @@ def _bracket(a, b):
     return np.r_[np.cross(a[3:], b[:3]) - np.cross(b[3:], a[:3]), np.cross(a[3:], b[3:])]
 
 
-def _plain_form(dims, section, connector, end_block, material):
-    """S (6, 6) of one chain, written from the docstring of ``model.shortening``."""
+def _plain_forms(dims, section, connector, end_block, material):
+    """(S (6, 6), L (5, 6, 6)) of one chain, written from the docstrings of ``model.shortening``."""
     length = dims[0]
     compliance, rotation, points = chain_elements(*dims, section=section, connector_length=connector,
                                                   end_block_length=end_block, material=material)
@@ -48,7 +49,9 @@ def _plain_form(dims, section, connector, end_block, material):
     form = k * tensor[0] + 2.0 * k_b.T @ tensor[:, 0, :]
     form = 0.5 * (form + form.T) / k
     form[0, :] = form[:, 0] = 0.0
-    return form
+    lateral = tensor[1:].copy()  # the defect's rows y..rz, the axial direction's rows and columns zero
+    lateral[:, 0, :] = lateral[:, :, 0] = 0.0
+    return form, lateral
 
 
 @pytest.fixture(scope="module")
@@ -72,15 +75,24 @@ def _scaled(form, length):
 
 
 @pytest.mark.skipif(not kernel.available(), reason="the compiled form needs numba")
-def test_the_compiled_form_is_the_docstrings_mathematics(chains):
+def test_the_compiled_forms_are_the_docstrings_mathematics(chains):
     dims, (section, connector, end_block), material = chains
-    fast = chain_shortening_form(*np.moveaxis(dims, -1, 0), section=section, connector_length=connector,
-                                 end_block_length=end_block, material=material)
-    assert fast.shape == (4, 6, 6, 6)
+    fast, fast_lateral, _ = chain_second_order_forms(*np.moveaxis(dims, -1, 0), section=section,
+                                                     connector_length=connector, end_block_length=end_block,
+                                                     material=material)
+    assert fast.shape == (4, 6, 6, 6) and fast_lateral.shape == (4, 6, 5, 6, 6)
     for cand, chain in np.ndindex(4, 6):
-        plain = _plain_form(dims[cand, chain], section[chain], connector[chain], end_block[chain], material)
+        plain, lateral = _plain_forms(dims[cand, chain], section[chain], connector[chain], end_block[chain],
+                                      material)
         length = dims[cand, chain, 0]
+        # L's components y, z [m] and rx, ry, rz [rad]: the rotations' rows times the length too
+        component = np.r_[np.ones(2), np.full(3, length)][:, None, None]
         got, want = _scaled(fast[cand, chain], length), _scaled(plain, length)
+        # 1e-13 of S's largest entry: the polarisation reads L off values of the whole defect
+        # m(D), of S's size (L's entries are ~0.1 of it, its structural zeros come out ~1e-14)
+        np.testing.assert_allclose(_scaled(fast_lateral[cand, chain], length) * component,
+                                   _scaled(lateral, length) * component, rtol=0, atol=1e-13 * np.max(np.abs(want)))
+        assert np.max(np.abs(_scaled(lateral, length) * component)) > 1e-3 * np.max(np.abs(want))  # L is there
         # 1e-13 of the largest entry: both sum the same ~1e2 terms in another order; the
         # polarisation here subtracts quadratic values (measured agreement 5e-15, fast vs
         # dense too); an omitted element or bracket term is >= 1e-3
@@ -89,13 +101,17 @@ def test_the_compiled_form_is_the_docstrings_mathematics(chains):
 
 
 @pytest.mark.skipif(not kernel.available(), reason="the compiled form needs numba")
-def test_the_compiled_form_equals_the_dense_one(chains):
-    """The dense ``chain_defect_tensor`` route (used without numba) gives the same forms."""
+def test_the_compiled_forms_equal_the_dense_ones(chains):
+    """The dense route (``_transported_elements``, ``_defect``, ``_load_form``; used without
+    numba) gives the same S, L and T."""
     dims, (section, connector, end_block), material = chains
     args = dict(section=section, connector_length=connector, end_block_length=end_block, material=material)
-    fast = chain_shortening_form(*np.moveaxis(dims, -1, 0), **args)
-    dense = _dense_shortening_form(*np.moveaxis(dims, -1, 0), **args)
-    scale = np.max(np.abs(dense), axis=(-1, -2), keepdims=True)
-    # 1e-13 of each form's largest entry: the same sums in another order (measured 5e-15)
-    excess = np.max(np.abs(fast - dense) / scale)
-    assert excess <= 1e-13, excess
+    fast = chain_second_order_forms(*np.moveaxis(dims, -1, 0), **args)
+    dense = _dense_forms(*np.moveaxis(dims, -1, 0), **args)
+    # of each chain's form's largest entry: the same sums in another order; measured 1e-14 (S),
+    # 5e-14 (L) and 4e-12 (T: K (C1 K C1 - C2) K subtracts terms ~1e2 x T)
+    for name, got, want, bound in zip("SLT", fast, dense, (1e-13, 1e-12, 1e-10)):
+        scale = np.max(np.abs(want), axis=tuple(range(2, want.ndim)), keepdims=True)
+        assert np.all(scale > 0), name
+        excess = np.max(np.abs(got - want) / scale)
+        assert excess <= bound, (name, excess)
