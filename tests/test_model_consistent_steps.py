@@ -20,8 +20,8 @@ pytestmark = pytest.mark.skipif(not kernel.available(), reason="the consistent m
 def test_the_fixed_point_needs_few_evaluations_per_posture():
     """40 uniform random candidates (those of the convergence test) on the standard trajectory,
     with the play state: Broyden steps from a start moved by the linear response, the previous
-    point's drift and the measured dX/dC take 14.0 evaluations per posture on average (6.0 where
-    every nut sits on its flank, 22.6 where one is off it: the probes); the plain fixed point
+    points' drift and the measured dX/dC take 13.4 evaluations per posture on average (5.1 where
+    every nut sits on its flank, 22.3 where one is off it: the probes); the plain fixed point
     from the previous pose took 25.9 (10.3 / 42.6)."""
     space = dataclasses.replace(parameter_space(), second_order=True, chain_shortening=tuple(np.zeros(216)),
                                 breakaway_force=2.0)
