@@ -1,6 +1,6 @@
 """The consistent model's work per posture (``model._numba_consistent``): evaluations of the
 fixed-point map Phi, counted by the kernel (deterministic, not a timing). Its speed is this count
-times ~0.5-1 us (benchmarks/bench_model.py)."""
+times ~1-1.5 us CPU per evaluation (benchmarks/bench_model.py, docs/model.md 10)."""
 
 import dataclasses
 
