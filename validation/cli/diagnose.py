@@ -21,9 +21,11 @@ import argparse
 
 import numpy as np
 
+from .options import MODEL_DEFAULTS
+
 __all__ = ["configure", "run", "EXAMPLES", "DEFAULT_CONFIG", "markdown"]
 
-DEFAULT_CONFIG = {"model_stiffness": "fem", "second_order": True, "particles": 80, "iterations": 60}
+DEFAULT_CONFIG = {**MODEL_DEFAULTS, "particles": 80, "iterations": 60}
 
 EXAMPLES = ("flexcal diagnose curves.csv --out runs/diagnosis",
             "flexcal diagnose --data runs/t/curves.csv --out runs/d",
