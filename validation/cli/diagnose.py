@@ -21,11 +21,13 @@ import argparse
 
 import numpy as np
 
+from ..runs.settings import BaselineSettings
 from .options import MODEL_DEFAULTS
 
 __all__ = ["configure", "run", "EXAMPLES", "DEFAULT_CONFIG"]
 
-DEFAULT_CONFIG = {**MODEL_DEFAULTS, "particles": 80, "iterations": 60}
+_BASELINE = BaselineSettings()
+DEFAULT_CONFIG = {**MODEL_DEFAULTS, "particles": _BASELINE.particles, "iterations": _BASELINE.iterations}
 
 EXAMPLES = ("flexcal diagnose curves.csv --out runs/diagnosis",
             "flexcal diagnose --data runs/t/curves.csv --out runs/d",
