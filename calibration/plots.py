@@ -5,7 +5,7 @@
 - ``plot_convergence``: best fitness per iteration of one or several PSO runs (Fig. 7d)
   and, for the improved PSO, the local best of every subgroup (Fig. 11).
 
-Each writes its file whole or not at all (temporary name, then rename).
+Each writes its file whole or not at all (``flexcal.geometry.atomic.atomic_path``).
 """
 
 from __future__ import annotations
@@ -18,6 +18,7 @@ import numpy as np
 
 from flexcal.calibration.pso import PSOResult
 from flexcal.calibration.sensitivity import SobolResult
+from flexcal.geometry.atomic import atomic_path
 
 __all__ = ["plot_sensitivity", "plot_convergence"]
 
@@ -29,9 +30,8 @@ def _save(fig, path: str | os.PathLike) -> Path:
     if path.suffix.lower() != ".png":
         raise ValueError(f"figure path {path} must end in .png")
     FigureCanvasAgg(fig)
-    tmp = path.with_name(f".{path.stem}.tmp.png")
-    fig.savefig(tmp, dpi=150)
-    os.replace(tmp, path)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=150)
     return path
 
 

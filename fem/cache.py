@@ -9,7 +9,8 @@ a stale matrix).
 A repeated run finds the file and costs one ``np.load``.
 
 Location: ``$FLEXCAL_CACHE_DIR`` if set, else ``~/.cache/flexcal``. Files are written
-whole or not at all (temporary file in the same folder, then ``os.replace``).
+whole or not at all (``flexcal.geometry.atomic.atomic_path``: a temporary file in the same
+folder, then a rename).
 
 A folder that cannot be written (below a file, a read-only mount, no permission) never
 costs a result: ``cached`` checks it before it computes anything (``cache_is_writable``:
@@ -53,6 +54,8 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
+from flexcal.geometry.atomic import atomic_path
+
 __all__ = [
     "CACHE_ENV",
     "cache_dir",
@@ -77,7 +80,7 @@ _NOT_NUMERICS = frozenset({"__init__.py", "cache.py", "results.py"})
 # geometry modules no solid or mesh depends on: the typed input layer and the mount file reader
 # (files -> params; the params themselves are in every key) and the STEP writer. Leaving one
 # out that does matter would serve stale results, so this lists only modules that cannot.
-_GEOMETRY_NOT_SOLIDS = frozenset({"__init__.py", "schema.py", "mount.py", "export.py"})
+_GEOMETRY_NOT_SOLIDS = frozenset({"__init__.py", "schema.py", "mount.py", "export.py", "atomic.py"})
 # dataclass fields no FEM result depends on, left out of the key so that changing them keeps
 # the cached entries: a material's yield strength only judges stresses (flexcal structure),
 # stiffness, mass and stress fields per unit motion do not depend on it
@@ -264,18 +267,12 @@ def store_cached(key: str, arrays: Mapping[str, np.ndarray], directory: str | os
     folder = cache_dir(directory)
     folder.mkdir(parents=True, exist_ok=True)
     path = _path(key, folder)
-    handle, tmp = tempfile.mkstemp(prefix=f".{key[:16]}.", suffix=".tmp", dir=folder)
-    try:
-        with os.fdopen(handle, "wb") as stream:
-            if {_KEY_ENTRY, _DIGEST_ENTRY} & set(arrays):
-                raise ValueError(f"array names {_KEY_ENTRY!r} and {_DIGEST_ENTRY!r} are reserved by the cache; "
-                                 f"rename that array")
-            values = {name: np.asarray(a) for name, a in arrays.items()}
-            np.savez(stream, **values, **{_KEY_ENTRY: np.array(key), _DIGEST_ENTRY: np.array(arrays_digest(values))})
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    if {_KEY_ENTRY, _DIGEST_ENTRY} & set(arrays):
+        raise ValueError(f"array names {_KEY_ENTRY!r} and {_DIGEST_ENTRY!r} are reserved by the cache; "
+                         f"rename that array")
+    values = {name: np.asarray(a) for name, a in arrays.items()}
+    with atomic_path(path, suffix=".tmp") as tmp, open(tmp, "wb") as stream:
+        np.savez(stream, **values, **{_KEY_ENTRY: np.array(key), _DIGEST_ENTRY: np.array(arrays_digest(values))})
     return path
 
 

@@ -1,7 +1,7 @@
 """FEM results for people: nodal stress, VTU files for ParaView, deformed-shape PNGs.
 
 pyvista is imported inside the functions that need it. Files are written whole or not
-at all (temporary name in the target folder, then ``os.replace``).
+at all (``flexcal.geometry.atomic.atomic_path``: a temporary name in the target folder, then a rename).
 
 Nodal stress is recovered by evaluating each element's stress at its own ten nodes and
 averaging over the elements that share the node (unweighted). For a P2 field the
@@ -12,11 +12,11 @@ singular corners the average smooths the jump between elements.
 from __future__ import annotations
 
 import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
+from flexcal.geometry.atomic import atomic_path
 from flexcal.geometry.params import Material
 
 from .assembly import check_mesh
@@ -85,22 +85,6 @@ def to_pyvista(mesh, displacement: np.ndarray | None = None, material: Material 
     return grid
 
 
-_UMASK = os.umask(0o022)  # read the process umask (only settable, not readable) ...
-os.umask(_UMASK)  # ... and put it back
-
-
-def _atomic_target(path: Path, suffix: str) -> Path:
-    """A fresh temporary file beside ``path``, with the permissions a new file gets
-    (mkstemp makes it 0600, which the writers keep: a VTU or PNG then read-only for its owner)."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    handle, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=suffix, dir=path.parent)
-    try:
-        os.fchmod(handle, 0o666 & ~_UMASK)
-    finally:
-        os.close(handle)
-    return Path(tmp)
-
-
 def write_vtu(
     mesh,
     path: str | os.PathLike,
@@ -114,13 +98,9 @@ def write_vtu(
     if path.suffix != ".vtu":
         raise ValueError(f"{path} must end in .vtu")
     grid = to_pyvista(mesh, displacement, material, point_data)
-    tmp = _atomic_target(path, ".vtu")
-    try:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_path(path) as tmp:
         grid.save(tmp, binary=True)
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
     return path
 
 
@@ -200,13 +180,10 @@ def render_mesh_png(mesh, path: str | os.PathLike, *, window_size: tuple[int, in
 
 def _save_screenshot(plotter, path: Path) -> Path:
     """Screenshot to a temporary name, then rename (whole or nothing); closes the plotter."""
-    tmp = _atomic_target(path, ".png")
+    path.parent.mkdir(parents=True, exist_ok=True)
     try:
-        plotter.screenshot(str(tmp))
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
+        with atomic_path(path) as tmp:
+            plotter.screenshot(str(tmp))
     finally:
         plotter.close()
     return path

@@ -52,6 +52,8 @@ from typing import Any
 
 import numpy as np
 
+from flexcal.geometry.atomic import atomic_path
+
 from .owners import OWNER_TAG, owner_tag, remove_folders_of_gone_owners
 
 __all__ = ["MESHER_SEED", "RUNAWAY_FACTOR", "SEED_TRIES", "expected_vertices", "mesher_is_seeded",
@@ -231,9 +233,8 @@ def _main(argv: list[str]) -> int:
     nodes, tets = pytetwild.tetrahedralize(arrays.pop("vertices"), arrays.pop("faces"), **arrays, **options,
                                            quiet=False, loglevel=3)
     draws = entropy.draws() if entropy is not None else -1
-    partial = Path(outputs).with_name("out.partial.npz")
-    np.savez(partial, nodes=np.asarray(nodes), tets=np.asarray(tets), draws=np.int64(draws))
-    os.replace(partial, outputs)
+    with atomic_path(outputs) as partial:  # the parent never reads half a file
+        np.savez(partial, nodes=np.asarray(nodes), tets=np.asarray(tets), draws=np.int64(draws))
     return 0
 
 

@@ -3,20 +3,20 @@
 Shapes are in metres inside flexcal; files are written in millimetres (the unit CAD
 tools expect): STEP declares MM in its header, STL (which has no unit) is scaled to mm.
 ``import_step`` reads a STEP file back into metres whatever unit it declares.
-Files are written to a temporary name beside the target and renamed, so a failed export
-never leaves a partial file.
+Files are written to a temporary name beside the target and renamed (``atomic.atomic_path``),
+so a failed export never leaves a partial file; they get the permissions of any new file.
 """
 
 from __future__ import annotations
 
 import os
-import tempfile
 from pathlib import Path
 from typing import Union
 
 import cadquery as cq
 from OCP.BRepTools import BRepTools
 
+from .atomic import atomic_path
 from .solids import Part
 
 __all__ = ["export_step", "export_stl", "import_step"]
@@ -27,16 +27,10 @@ def _atomic(path: str | os.PathLike, write) -> Path:
     target = Path(path)
     if not target.parent.is_dir():
         raise FileNotFoundError(f"folder {target.parent} does not exist; create it first")
-    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=target.suffix, dir=target.parent)
-    os.close(fd)
-    try:
-        write(tmp)
-        if os.path.getsize(tmp) == 0:
+    with atomic_path(target) as tmp:
+        write(str(tmp))
+        if not tmp.is_file() or tmp.stat().st_size == 0:
             raise RuntimeError(f"CadQuery wrote an empty file for {target}")
-        os.replace(tmp, target)
-    finally:
-        if os.path.exists(tmp):
-            os.remove(tmp)
     return target
 
 

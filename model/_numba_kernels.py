@@ -4,14 +4,15 @@ Imported only by ``kernel.py`` when the compiled engine runs; see there for the 
 ``solve`` is compiled with ``parallel=True`` (candidates over ``prange``): besides the
 threads this lets LLVM optimize the outlined loop body (measured 3x faster than the same
 loop compiled serially, even on one thread). First compilation takes ~20 s, then cached.
-``_segment_entries`` and ``chain_entries`` repeat the formulas of ``hinge.segment_entries``
-and ``chain.chain_compliance_entries`` (tests hold them equal to 1e-14).
+``_segment_entries`` repeats the formulas of ``hinge.segment_entries`` (tests hold them
+equal to 1e-14); ``chain_entries`` sums Eq. 1 with ``model.serial``'s own functions, compiled.
 Status codes: ``point_status`` (0 converged, 1 no convergence in max_iter, 2 diverged, 3 clearance failed).
 """
 
 import numpy as np
 from numba import njit, prange
 
+from . import serial
 from .point_status import CLEARANCE_FAILED, DIVERGED, NOT_CONVERGED, OK
 
 # reassociation and fused multiply-add, but no "no NaN/inf" assumptions: divergence and NaN
@@ -397,6 +398,11 @@ def _segment_entries(c, rho, t, w, e, g, kappa, nodes, weights, out):
     out[7] = m0j / g
 
 
+# Eq. 1 on the eight entries: model.serial's own functions, compiled (one implementation)
+_moved_along_axis = njit(inline="always", cache=True, nogil=True, fastmath=_FAST)(serial.moved_along_axis)
+_quarter_turn = njit(inline="always", cache=True, nogil=True, fastmath=_FAST)(serial.quarter_turn)
+
+
 @njit(cache=True, nogil=True, parallel=True, fastmath=_FAST)
 def chain_entries(length, hinge, width, fillet, thick1, thick2, section, connector, end_block, actuator_compliance,
                   e, g, kappa, nodes, weights, out):
@@ -412,26 +418,18 @@ def chain_entries(length, hinge, width, fillet, thick1, thick2, section, connect
         _segment_entries(0.5 * connector[k], 0.0, section[k], section[k], e, g, kappa, nodes, weights, parts[2])
         _segment_entries(flat_leaf, fillet[k], thick2[k], width[k], e, g, kappa, nodes, weights, parts[3])
         _segment_entries(0.5 * strut, 0.0, section[k], section[k], e, g, kappa, nodes, weights, parts[4])
-        # leaf 2 is leaf 1 turned +90 deg about x: swap the bending blocks, negate the couplings
-        uy, uymz, rz = parts[3, 1], parts[3, 2], parts[3, 3]
-        parts[3, 1], parts[3, 2], parts[3, 3] = parts[3, 4], -parts[3, 5], parts[3, 6]
-        parts[3, 4], parts[3, 5], parts[3, 6] = uy, -uymz, rz
+        turned = _quarter_turn(parts[3])  # leaf 2 is leaf 1 turned +90 deg about x
+        for i in range(8):
+            parts[3, i] = turned[i]
         sizes = (end_block[k], hinge[k], connector[k], hinge[k], strut)
         for i in range(8):
             out[k, i] = 0.0
         end = 0.0
         for kind in kinds:
             end += sizes[kind]
-            d = end - length[k]  # r_i = p_i - p_B
-            p = parts[kind]
-            out[k, 0] += p[0]
-            out[k, 1] += p[1] - 2.0 * d * p[2] + d * d * p[3]
-            out[k, 2] += p[2] - d * p[3]
-            out[k, 3] += p[3]
-            out[k, 4] += p[4] + 2.0 * d * p[5] + d * d * p[6]
-            out[k, 5] += p[5] + d * p[6]
-            out[k, 6] += p[6]
-            out[k, 7] += p[7]
+            moved = _moved_along_axis(parts[kind], end - length[k])  # r_i = p_i - p_B
+            for i in range(8):
+                out[k, i] += moved[i]
         out[k, 0] += actuator_compliance[k]
 
 

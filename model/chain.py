@@ -1,9 +1,8 @@
-"""Paper Eq. 1: the compliance of a flexure chain as a serial sum of element compliances.
+"""Paper Eq. 1 on a flexure chain: its nine elements in series from the clamped end A to B.
 
-``C_out = sum_i T_i C_i T_i^T`` with the adjoint ``T_i = [[R_i, [r_i]x R_i], [0, R_i]]``,
-``r_i = p_i - p_out`` (``geometry.frames.twist_transform``): element i is clamped at its A-side end,
-loaded at ``p_i`` (its B-side end), with local axes ``R_i``; the elements are in series
-between the clamped end A and the output point.
+The equation itself lives in ``model.serial`` (``serial_compliance``; on the eight entries,
+``quarter_turn`` and ``moved_along_axis``, which the compiled kernel runs too); this module
+says what the elements of a chain are.
 
 A flexure chain (geometry/params.py) from A (x = 0) to B (x = L) in its own frame is
 ``block | leaf1 | connector | leaf2 | strut | leaf2 | connector | leaf1 | block``:
@@ -25,6 +24,7 @@ from . import kernel
 from .hinge import (ENTRY_INDEX, _gauss_legendre, beam_compliance, entries_to_matrix, gauss_node_count,
                     leaf_compliance, segment_entries, shear_coefficient, torsion_constant)
 from .profiles import closed_form_of
+from .serial import quarter_turn, serial_compliance, serial_entries_along_axis
 
 __all__ = [
     "serial_compliance",
@@ -42,19 +42,6 @@ __all__ = [
 # leaf 2 = leaf 1 turned +90 deg about x: element y -> chain z, element z -> chain -y (exact)
 LEAF2_ROTATION = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
 _KINDS = ("block", "leaf1", "connector", "leaf2", "strut", "leaf2", "connector", "leaf1", "block")
-
-
-def serial_compliance(element_compliance: np.ndarray, element_rotation: np.ndarray, element_point: np.ndarray,
-                      output_point: np.ndarray) -> np.ndarray:
-    """Eq. 1: compliance (..., 6, 6) at ``output_point`` of elements in series.
-
-    element_compliance (..., n, 6, 6) at each element's loaded end in its own axes;
-    element_rotation (..., n, 3, 3) its axes (columns) in the output frame; element_point
-    (..., n, 3) [m] its loaded end; output_point (..., 3) [m].
-    """
-    offset = np.asarray(element_point, dtype=float) - np.asarray(output_point, dtype=float)[..., None, :]
-    transform = twist_transform(element_rotation, offset)
-    return np.sum(transform @ element_compliance @ np.swapaxes(transform, -1, -2), axis=-3)
 
 
 def _dimensions(length, hinge_length, width, fillet, thickness_1, thickness_2, end_block_length,
@@ -99,10 +86,6 @@ def chain_elements(length, hinge_length, width, fillet, thickness_1, thickness_2
 
 COMPILED_MIN_CHAINS = 256  # batches this large use the compiled kernel (same formulas, tested equal)
 _KEYS = tuple(ENTRY_INDEX)  # ux_Fx, uy_Fy, uy_Mz, rz_Mz, uz_Fz, uz_My, ry_My, rx_Mx
-# leaf 2 in the chain frame: element y -> chain z, element z -> chain -y, so the chain's
-# (uz, ry) block is the element's (uy, rz) block with the coupling negated, and vice versa
-_QUARTER_TURN = (0, 4, 5, 6, 1, 2, 3, 7)
-_QUARTER_SIGN = np.array([1.0, 1.0, -1.0, 1.0, 1.0, -1.0, 1.0, 1.0])
 
 
 def _uniform_entries(length, height, width, material: Material) -> np.ndarray:
@@ -117,20 +100,6 @@ def _uniform_entries(length, height, width, material: Material) -> np.ndarray:
     return np.stack([length / (e * area), length**3 / (3.0 * ei_z) + shear, length**2 / (2.0 * ei_z), length / ei_z,
                      length**3 / (3.0 * ei_y) + shear, -(length**2) / (2.0 * ei_y), length / ei_y,
                      length / (g * torsion_constant(h, w))])
-
-
-def _shift_along_axis(entries: np.ndarray, offset: np.ndarray) -> np.ndarray:
-    """``T C T^T`` for ``T = twist_transform(I, [offset, 0, 0])`` on entries (..., 8, n) ([m] offset (..., n)).
-
-    uy' = uy - offset rz and uz' = uz + offset ry, so the (uy, rz) block becomes
-    [[a - 2 d b + d^2 c, b - d c], [., c]] and the (uz, ry) block the same with +d.
-    """
-    out = entries.copy()
-    for (a, b, c), sign in (((1, 2, 3), -1.0), ((4, 5, 6), 1.0)):
-        sd = sign * offset
-        out[..., a, :] = entries[..., a, :] + 2.0 * sd * entries[..., b, :] + sd * sd * entries[..., c, :]
-        out[..., b, :] = entries[..., b, :] + sd * entries[..., c, :]
-    return out
 
 
 def chain_compliance(length, hinge_length, width, fillet, thickness_1, thickness_2, *, section: float,
@@ -153,8 +122,8 @@ def chain_compliance_entries(length, hinge_length, width, fillet, thickness_1, t
 
     Dimensions as in ``chain_elements`` (batch-broadcast, [m]); actuator_stiffness [N/m]
     (scalar or batch, None = no actuator): an axial spring in series at A. Evaluates Eq. 1
-    on the eight independent entries (all elements are collinear with x, so the adjoint
-    transforms reduce to ``_shift_along_axis`` and a quarter turn); identical to
+    on the eight independent entries (all elements are collinear with x: leaf 2's
+    ``serial.quarter_turn``, then ``serial.serial_entries_along_axis``); identical to
     ``serial_compliance(*chain_elements(...))`` to rounding (tests/test_model_chain.py).
     """
     length, l, w, a, t1, t2, strut = _dimensions(length, hinge_length, width, fillet, thickness_1, thickness_2,
@@ -175,7 +144,7 @@ def chain_compliance_entries(length, hinge_length, width, fillet, thickness_1, t
     leaves = segment_entries(flat(np.maximum(0.5 * l - a, 0.0))[None, :], flat(a)[None, :],
                              np.stack([flat(t1), flat(t2)]), flat(w)[None, :], e, nu)
     leaf = np.stack([leaves[k] for k in _KEYS], axis=1)  # (2 leaves, 8, n)
-    leaf2 = leaf[1][list(_QUARTER_TURN)] * _QUARTER_SIGN[:, None]
+    leaf2 = np.stack(quarter_turn(leaf[1]))
     block = _uniform_entries(flat(np.asarray(end_block_length, float)), flat(np.asarray(section, float)),
                              flat(np.asarray(section, float)), material)
     connector = _uniform_entries(flat(np.asarray(connector_length, float)), flat(np.asarray(section, float)),
@@ -187,7 +156,7 @@ def chain_compliance_entries(length, hinge_length, width, fillet, thickness_1, t
                "connector": flat(np.asarray(connector_length, float)), "leaf2": flat(l), "strut": flat(strut)}
     elements = np.stack([by_kind[k] for k in _KINDS])  # (9, 8, n)
     ends = np.cumsum(np.stack([lengths[k] for k in _KINDS]), axis=0)  # loaded end of each element
-    total = _shift_along_axis(elements, ends - flat(length)).sum(axis=0)  # r_i = p_i - p_B
+    total = serial_entries_along_axis(elements, ends, flat(length))  # output at B
     if actuator_stiffness is not None:
         # an axial spring at A: T = [[I, [r]x], [0, I]] with r along x leaves only C_xx
         total[0] = total[0] + flat(1.0 / np.asarray(actuator_stiffness, dtype=float))

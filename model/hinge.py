@@ -55,11 +55,11 @@ import functools
 
 import numpy as np
 
-from flexcal.geometry.frames import twist_transform
 from flexcal.geometry.params import Material
 
 from . import kernel
 from .profiles import closed_form_of
+from .serial import serial_compliance
 
 __all__ = [
     "segment_compliance",
@@ -350,9 +350,8 @@ def hinge_compliance_matrix(hinge, material: Material) -> np.ndarray:
     what the FEM condenses.
     """
     local = closed_form_of(hinge).compliance(hinge, material)
-    notch_half = 0.5 * hinge.length
-    transform = twist_transform(np.eye(3), np.array([notch_half - 0.5 * hinge.total_length, 0.0, 0.0]))
-    return transform @ local @ transform.T
+    return serial_compliance(local[None], np.eye(3)[None], np.array([[0.5 * hinge.length, 0.0, 0.0]]),
+                             np.array([0.5 * hinge.total_length, 0.0, 0.0]))
 
 
 # Where the Euler-Bernoulli/Saint-Venant closed forms stop describing the solid hinge,

@@ -8,6 +8,7 @@ import json
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from flexcal.geometry.mount import mount_table, read_mount
 from flexcal.validation import cli
@@ -59,3 +60,34 @@ def test_benchmark_cases_are_drawn_on_the_given_mount(tmp_path, monkeypatch, cap
     assert cli.main([*command, "--mount", str(MIRROR), "--out", str(tmp_path / "reference")]) == 2
     assert "null of trajectory 'standard', this run's is 'standard on mount " in capsys.readouterr().err
     assert len(seen) == 2
+
+
+class _Captured(Exception):
+    pass
+
+
+@pytest.mark.parametrize("effect_id", ["sensor_crosstalk", "large_deflection", "step_loss"])
+def test_benchmark_effect_sizes_are_scaled_on_the_given_mount(monkeypatch, effect_id):
+    """A case's nominal magnitude is the RMS of its signature on the mount it is injected
+    into: scaled on the reference mount, the mirror's sensor cross-talk came out 3.9x too
+    large and its lost step lay beyond the mirror's path (no signature at all)."""
+    import flexcal.validation.prototype.truth as truth
+    from flexcal.validation.diagnosis.benchmark import benchmark_measurement
+    from flexcal.validation.effects.magnitude import estimate_magnitude, standard_setting
+
+    injected = []
+
+    def capture(scenario, provider, *, effects=(), **options):
+        injected.extend(effects)
+        raise _Captured
+
+    monkeypatch.setattr(truth, "make_truth", capture)
+    mirror = read_mount(MIRROR)
+    with pytest.raises(_Captured):
+        benchmark_measurement(effect_id, 3.0, 0, provider=None, noise_urad=0.5, mechanism=mirror)
+    (effect,) = injected
+    achieved = estimate_magnitude(effect, standard_setting(mirror)) * 1e6 / 0.5  # [x noise] on the mirror
+    if effect_id == "step_loss":
+        assert 1.5 < achieved < 4.5  # whole steps, the event moved along the path to come closest (3.3 here)
+    else:
+        assert achieved == pytest.approx(3.0, rel=0.011)  # make_injector's secant stops within 1 %

@@ -137,3 +137,22 @@ def test_compiled_chain_entries_equal_the_numpy_ones(monkeypatch):
     plain = chain.chain_compliance_entries(*args, **options)
     for key in plain:
         np.testing.assert_allclose(compiled[key], plain[key], rtol=1e-14, atol=0)  # same formulas, other order
+
+
+def test_eq1_is_written_once():
+    """Issue #25: one implementation of Eq. 1. The chain kernel compiles ``model.serial``'s own
+    entry functions (no copy of the formulas), and ``chain`` re-exports its ``serial_compliance``."""
+    pytest.importorskip("numba")
+    from flexcal.model import _numba_kernels, serial
+
+    assert _numba_kernels._moved_along_axis.py_func is serial.moved_along_axis
+    assert _numba_kernels._quarter_turn.py_func is serial.quarter_turn
+    assert chain.serial_compliance is serial.serial_compliance
+    # the entry form is the 6x6 form: one element moved and turned, against the adjoint
+    c = hinge.leaf_compliance(0.02, 0.004, 0.04, 0.005, STEEL)
+    entries = np.array([c[i, j] for i, j in hinge.ENTRY_INDEX.values()])
+    turned = serial.serial_compliance(c[None], chain.LEAF2_ROTATION[None], np.array([[0.1, 0, 0]]),
+                                      np.array([0.35, 0, 0]))
+    got = serial.serial_entries_along_axis(np.array(serial.quarter_turn(entries))[None], np.array([0.1]), 0.35)
+    want = np.array([turned[i, j] for i, j in hinge.ENTRY_INDEX.values()])
+    np.testing.assert_allclose(got, want, rtol=1e-13, atol=0)  # same algebra, rounding only

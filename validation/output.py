@@ -33,9 +33,10 @@ An ``OSError`` of the block or the moves that names no file (a writer's ENOSPC o
 is raised again naming ``out_dir``, and one naming a file in the staging folder names the
 same file in ``out_dir``; ``atomic_path`` names its target likewise.
 
-``atomic_path(path)`` yields a temporary name beside ``path`` for any writer (matplotlib,
-numpy, csv); on success it is renamed onto ``path``, on error deleted. ``write_json`` and
-``write_text`` use it.
+``atomic_path(path)`` (``flexcal.geometry.atomic``, the project's one write-to-temp-then-rename,
+re-exported here) yields a temporary name beside ``path`` for any writer (matplotlib, numpy,
+csv); on success it is renamed onto ``path``, on error deleted. ``write_json``, ``write_text``
+and the cross-file-system copy of the moves use it.
 
 ``write_report(folder, report)`` is how every command writes its report: ``report.json``
 holds the results only, the same bytes for the same input; the wall-clock and CPU seconds
@@ -54,13 +55,13 @@ import os
 import re
 import shutil
 import tempfile
-import uuid
 from pathlib import Path
 from typing import Any, Iterator
 
 import numpy as np
 
 from flexcal.fem.owners import OWNER_TAG, owner_tag, remove_folders_of_gone_owners
+from flexcal.geometry.atomic import atomic_path
 
 from .interrupts import interrupts_deferred
 from .run_folder import MARKER_NAME, out_folder, visible_entries
@@ -77,26 +78,6 @@ _UMASK = os.umask(0o022)  # read the process umask (only settable, not readable)
 os.umask(_UMASK)  # ... and put it back: folders made by mkdtemp get the usual permissions
 
 
-@contextlib.contextmanager
-def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
-    """A temporary path in ``path``'s folder (same suffix, so writers that pick the format
-    from it still work); renamed onto ``path`` when the block succeeds, removed otherwise."""
-    path = Path(path)
-    # a fresh name (not created here: the writer creates it with the usual permissions)
-    tmp_path = path.with_name(f".{path.stem}.{uuid.uuid4().hex[:12]}.tmp{path.suffix}")
-    try:
-        yield tmp_path
-        os.replace(tmp_path, path)
-    except OSError as error:
-        tmp_path.unlink(missing_ok=True)
-        if error.errno is None or error.filename is not None:
-            raise
-        raise type(error)(error.errno, error.strerror, str(path)) from error  # a writer's ENOSPC names no file
-    except BaseException:
-        tmp_path.unlink(missing_ok=True)
-        raise
-
-
 def _move(source: Path, target: Path) -> None:
     """``os.replace(source, target)``; across file systems (EXDEV) a copy to a temporary
     name beside ``target``, renamed onto it, then the source removed."""
@@ -106,19 +87,11 @@ def _move(source: Path, target: Path) -> None:
     except OSError as error:
         if error.errno != errno.EXDEV:
             raise
-    partial = target.with_name(f".{target.name}.{uuid.uuid4().hex[:12]}.partial")
-    try:
+    with atomic_path(target, suffix=".partial") as partial:
         if source.is_dir() and not source.is_symlink():
             shutil.copytree(source, partial, symlinks=True)
         else:
             shutil.copy2(source, partial, follow_symlinks=False)
-        os.replace(partial, target)
-    except BaseException:
-        if partial.is_dir() and not partial.is_symlink():
-            shutil.rmtree(partial, ignore_errors=True)
-        else:
-            partial.unlink(missing_ok=True)
-        raise
     if source.is_dir() and not source.is_symlink():
         shutil.rmtree(source)
     else:

@@ -23,7 +23,7 @@ import time
 
 import numpy as np
 
-from .options import add_out, add_scenario
+from .options import MODEL_DEFAULTS, add_out, add_scenario
 
 __all__ = ["configure", "run", "EXAMPLES", "DEFAULT_CONFIG"]
 
@@ -36,8 +36,7 @@ EXAMPLES = (
 MODEL_ERROR_QUANTILE = 0.75  # candidates whose expected model error exceeds this quantile of the standard
 # trajectory's are avoided (the report says how many and why)
 DEFAULT_CONFIG = {"points": 77, "candidates": 2000, "noise_urad": 0.5, "prior_scale": 1.0, "points_per_leg": 11,
-                  "design_seed": 0, "inadequacy": "analytic", "at": "", "scenario": "table1", "model_stiffness": "fem",
-                  "second_order": True}
+                  "design_seed": 0, "inadequacy": "analytic", "at": "", "scenario": "table1", **MODEL_DEFAULTS}
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -137,6 +136,7 @@ def run(args: argparse.Namespace) -> int:
     from .opening import calibration_model
     from ..output import staged_output, write_report
     from ..prototype.scenario import load_scenario
+    from ..reports.design import markdown, plot_design
 
     _check(args)
     progress = show_progress(args)
@@ -171,8 +171,8 @@ def run(args: argparse.Namespace) -> int:
     with staged_output(args.out, replace=args.force) as staging:
         _write_trajectory(staging / "trajectory.csv", design)
         write_report(staging, report)
-        (staging / "report.md").write_text(_markdown(report))
-        _plot(staging / "design.png", design, space.names)
+        (staging / "report.md").write_text(markdown(report))
+        plot_design(staging / "design.png", design, space.names)
     q, r = design.quality, design.reference_quality
     print(f"flexcal design: {args.points} postures from {args.candidates} candidates in {wall:.1f} s; "
           f"log det M {q.d_criterion:.1f} (standard trajectory {r.d_criterion:.1f}), rank {q.rank} ({r.rank}); "
@@ -224,40 +224,6 @@ def _avoided(design) -> dict | None:
             if n else None}
 
 
-def _markdown(report: dict) -> str:
-    d, s = report["designed"], report["standard_trajectory"]
-    cond = lambda v: "inf (rank-deficient)" if v is None else f"{v:.3g}"  # noqa: E731
-    lines = ["# Designed calibration trajectory", "",
-             f"{report['n_points']} postures chosen from {report['n_candidates']} candidates, noise "
-             f"{report['noise_urad']:g} urad, prior scale {report['prior_scale']:g}, model inadequacy: "
-             f"{report['inadequacy']} (wall-clock time: timings.json).", "",
-             "| figure | designed | standard trajectory (77) |", "|---|---:|---:|",
-             f"| log det M (D-criterion) | {d['log_det_information']:.2f} | {s['log_det_information']:.2f} |",
-             f"| det(M)^(1/45) | {d['d_efficiency']:.4g} | {s['d_efficiency']:.4g} |",
-             f"| rank of W | {d['rank']} | {s['rank']} |",
-             f"| sigma_min of W | {d['sigma_min']:.3g} | {s['sigma_min']:.3g} |",
-             f"| condition number of W | {cond(d['condition_number'])} | {cond(s['condition_number'])} |",
-             f"| sources with expected std <= 1 % of range | {d['n_sources_below_1pct']} | "
-             f"{s['n_sources_below_1pct']} |", "",
-             *_avoided_lines(report.get("avoided")),
-             "![expected standard errors](design.png)", "", "## Expected standard error per source [% of range]", "",
-             "| source | designed | standard |", "|---|---:|---:|"]
-    for name, a, b in zip(report["names"], d["expected_std_of_range"], s["expected_std_of_range"]):
-        lines.append(f"| `{name}` | {100 * a:.3g} | {100 * b:.3g} |")
-    return "\n".join(lines) + "\n"
-
-
-def _avoided_lines(avoided: dict | None) -> list[str]:
-    if not avoided:
-        return ["No posture avoided (--inadequacy none: the model's own error is not known here).", ""]
-    median = avoided["avoided_model_error_urad"]["median"]
-    return [f"Postures avoided: {avoided['n_avoided']} of {avoided['n_candidates']} candidates, those where the model's "
-            f"expected error exceeds {avoided['max_model_error_urad']:.3g} urad on some angle"
-            + ("" if median is None else f" (median {median:.3g} urad, up to "
-               f"{avoided['avoided_model_error_urad']['max']:.3g} urad)")
-            + f". Why: {avoided['why']}.", ""]
-
-
 def _write_trajectory(path, design) -> None:
     from ..output import atomic_path
 
@@ -266,22 +232,3 @@ def _write_trajectory(path, design) -> None:
         for k, (x, leg) in enumerate(zip(design.inputs * 1e3, design.leg), start=1):
             rows.append(f"{k},{int(leg)},{x[0]:.9f},{x[1]:.9f},{x[2]:.9f}")
         tmp.write_text("\n".join(rows) + "\n")
-
-
-def _plot(path, design, names) -> None:
-    from ..reports.plots import _pyplot
-
-    plt = _pyplot()
-    fig, ax = plt.subplots(figsize=(12, 4))
-    index = np.arange(len(names))
-    ax.semilogy(index, 100 * design.reference_quality.expected_std, "s", label="standard trajectory (77)", alpha=0.7)
-    ax.semilogy(index, 100 * design.quality.expected_std, "o", label=f"designed ({design.inputs.shape[0]})")
-    ax.axhline(100 / np.sqrt(12) * design.prior_scale, color="0.5", ls="--", lw=0.8, label="prior alone")
-    ax.axhline(1.0, color="k", ls=":", lw=0.8, label="1 % of range")
-    ax.set_xticks(index, names, rotation=90, fontsize=7)
-    ax.set_ylabel("expected standard error [% of range]")
-    ax.legend(fontsize=8)
-    ax.grid(alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)

@@ -2,7 +2,7 @@
 effect causes it, and how far it shrinks once that effect is added (docs/diagnosis.md).
 
 Writes DIR/report.json (``ranking``, ``top_effect``, ``where``, ``noise_floor_urad`` and the
-evidence), DIR/report.md and the figures residual.png (held-out residual before/after),
+evidence), DIR/report.md and the fmt3 residual.png (held-out residual before/after),
 strata.png (residual RMS per stratum), heldout.png (held-out RMS per candidate).
 
     flexcal diagnose curves.csv --out runs/diagnosis
@@ -21,9 +21,13 @@ import argparse
 
 import numpy as np
 
-__all__ = ["configure", "run", "EXAMPLES", "DEFAULT_CONFIG", "markdown"]
+from ..runs.settings import BaselineSettings
+from .options import MODEL_DEFAULTS
 
-DEFAULT_CONFIG = {"model_stiffness": "fem", "second_order": True, "particles": 80, "iterations": 60}
+__all__ = ["configure", "run", "EXAMPLES", "DEFAULT_CONFIG"]
+
+_BASELINE = BaselineSettings()
+DEFAULT_CONFIG = {**MODEL_DEFAULTS, "particles": _BASELINE.particles, "iterations": _BASELINE.iterations}
 
 EXAMPLES = ("flexcal diagnose curves.csv --out runs/diagnosis",
             "flexcal diagnose --data runs/t/curves.csv --out runs/d",
@@ -54,86 +58,6 @@ def configure(parser: argparse.ArgumentParser) -> None:
                              "(DIR/null.json of flexcal diagnose-benchmark --trajectory ...); a term must gain 3x its "
                              "own there as well (docs/diagnosis.md, Null of the trajectory)")
     add_out(parser, what="report.json, report.md, residual.png, strata.png, heldout.png")
-
-
-def _fmt(values) -> str:
-    return ", ".join(f"{v:.3g}" for v in values)
-
-
-def markdown(report) -> str:
-    """report.md of a diagnosis report."""
-    from ..reports.safe_markdown import md_text
-
-    lines = ["# Sim-to-real gap diagnosis", "",
-             f"**Top effect: `{report['top_effect']}`** (confidence {report['confidence']}"
-             + (f"; indistinguishable group: {', '.join(report['top_group'])}" if len(report["top_group"]) > 1 else "")
-             + f"). Effects added in turn: {', '.join(report['accepted_effects']) or 'none'}.", "",
-             *_separation_lines(report),
-             f"Noise floor {report['noise_floor_urad']:.3g} urad ({_fmt(report['noise_floor_per_angle_urad'])} per "
-             f"angle; {report['noise_floor']['method']}).", "",
-             f"Baseline: {report['baseline']['description']}; in-sample RMS {_fmt(report['baseline']['in_sample_rms_urad'])}"
-             f" urad. Held-out unit: {report['heldout']['unit']} ({report['heldout']['n_folds']} folds).", "",
-             "## How far", "",
-             f"Held-out RMS per angle {_fmt(report['how_far']['heldout_rms_before_urad'])} -> "
-             f"{_fmt(report['how_far']['heldout_rms_after_urad'])} urad; closure "
-             f"{report['how_far']['closure']:.2f} of the gap above the noise floor.", "",
-             "## Ranking (stage 1: each term added to the baseline alone)", "",
-             "| effect | closure | gain [noise var] | dAICc | dBIC | held-out RMS before | after | significant |",
-             "|---|---:|---:|---:|---:|---|---|---|"]
-    for r in report["ranking"]:
-        lines.append(f"| {r['effect']} | {r['closure']:.3f} | {r['gain_noise_variances']:.2f} | {r['delta_aicc']:.1f} | "
-                     f"{r['delta_bic']:.1f} | {_fmt(r['heldout_rms_before_urad'])} | "
-                     f"{_fmt(r['heldout_rms_after_urad'])} | {'yes' if r['significant'] else 'no'} |")
-    lines += ["", "## Where", "", f"Overall residual RMS {_fmt(report['where']['overall_rms_urad'])} urad, max "
-              f"{_fmt(report['where']['max_abs_urad'])} urad.", ""]
-    concentrated = report["where"]["concentrated"]
-    if concentrated:
-        lines += ["Concentrated in:", ""] + [
-            f"- {md_text(c['by'])} {md_text(c['stratum'])}, {c['angle']}: {c['rms_urad']:.3g} urad "
-            f"({c['ratio_to_overall']:.2f}x overall)"
-            for c in concentrated[:12]]
-    else:
-        lines.append("No stratum stands out (no RMS above 1.5x overall and 2 noise floors).")
-    lines += ["", "| angle | runs z | lag-1 autocorrelation (z) | period [points] | Fisher p |", "|---|---:|---:|---:|---:|"]
-    for s in report["where"]["structure"]:
-        lines.append(f"| {s['angle']} | {s['runs_z']:.2f} | {s['lag1_autocorrelation']:.2f} ({s['lag1_z']:.1f}) | "
-                     f"{s['period_points']:.1f} | {s['p_value']:.2g} |")
-    absorbed = report["collinearity"]["absorbed_by_baseline"]
-    lines += ["", "## Collinearity", "", "Share of each term's signature the baseline's 45 sources can mimic "
-              "(1 = indistinguishable from a calibration error): " +
-              ", ".join(f"{k} {v:.2f}" for k, v in absorbed.items()) + ".", ""]
-    if report["undetectable"]:
-        lines.append(f"Undetectable on this trajectory (absorbed >= 0.99 by the baseline's sources): "
-                     f"{', '.join(report['undetectable'])}.")
-    if report["skipped_terms"]:
-        lines.append(f"Skipped (column missing): {', '.join(report['skipped_terms'])}.")
-    if "model_form_floor" in report:
-        from ..reports.form_floor import form_floor_markdown
-
-        lines += [""] + form_floor_markdown(report["model_form_floor"])
-    return "\n".join(lines) + "\n"
-
-
-def _separation_lines(report) -> list[str]:
-    """The look-alike test of the confidence and the null of the trajectory, in words."""
-    lines = []
-    separation = report.get("separation")
-    if separation:
-        verdict = "separated" if separation["separated"] else "NOT separated: confidence lowered to low"
-        second = separation.get("runner_up")
-        closest = separation.get("closest")
-        lines += ["Look-alikes (leave one effect out): " +
-                  (f"on a signature of `{closest}`'s kind of the same size the winner would close "
-                   f"{separation['closure_on_closest']:.2f} of the held-out gap" if closest else
-                   "no other effect's signature space meets the winner's")
-                  + (f"; on the data `{second['effect']}` closes {second['ratio']:.2f} of what the winner closes"
-                     if second else "") + f" ({verdict}).", ""]
-    null = report.get("null")
-    if null:
-        raised = {k: v for k, v in null["min_gain"].items() if v > report["criteria"]["min_gain_noise"]}
-        lines += [f"Null of the trajectory ({null['n_files']} `none` files): gain thresholds raised for "
-                  + (", ".join(f"{k} {v:.2f}" for k, v in raised.items()) or "no term") + " [noise variances].", ""]
-    return lines
 
 
 def _form_floor(measurement, space, residual) -> dict:
@@ -170,6 +94,7 @@ def run(args: argparse.Namespace) -> int:
     from ..diagnosis.baseline import BaselineSettings, calibrate_baseline
     from ..diagnosis.plots import plot_heldout, plot_residual, plot_strata
     from ..output import staged_output, write_report
+    from ..reports.diagnose import fmt3, markdown
     from .opening import open_calibration
 
     if args.particles < 2 or args.iterations < 1:
@@ -201,6 +126,6 @@ def run(args: argparse.Namespace) -> int:
         plot_heldout(staging / "heldout.png", report["ranking"])
     if show_progress(args):
         print(f"flexcal diagnose: top effect {report['top_effect']} (confidence {report['confidence']}), held-out RMS "
-              f"{_fmt(report['how_far']['heldout_rms_before_urad'])} -> {_fmt(report['how_far']['heldout_rms_after_urad'])}"
+              f"{fmt3(report['how_far']['heldout_rms_before_urad'])} -> {fmt3(report['how_far']['heldout_rms_after_urad'])}"
               f" urad, noise floor {report['noise_floor_urad']:.3g} urad; wrote {args.out}/report.json")
     return 0

@@ -31,6 +31,7 @@ import numpy as np
 from flexcal.model.parameters import DRIVE_SOURCE_NAMES, ParameterSpace
 
 from ..measurements import Measurement
+from ..runs.settings import BaselineSettings
 
 __all__ = ["BaselineFit", "BaselineSettings", "calibrate_baseline", "Baseline", "input_jacobian"]
 
@@ -63,26 +64,6 @@ class BaselineFit:
 
 
 Baseline = Callable[..., BaselineFit]
-
-
-@dataclass(frozen=True, kw_only=True)
-class BaselineSettings:
-    """particles, iterations: PSO on the nine drive sources; starts: independent PSO runs,
-    each polished on the nine and then (polish_all) over all 45, the one with the smallest
-    final sum of squares kept; polish_all: polish all 45 sources (False: only the nine);
-    prior_sd: ridge prior [unit box] of the linear correction in the term fits (0.3: a
-    source may move by ~a third of its range).
-
-    Why several starts: one 80 x 60 swarm plus the polishes ends in a false clearance mode
-    (a 50-100 urad spike at a stroke end instead of ~2 urad at most) on 6 of 36 (file, seed)
-    pairs of ``none`` benchmark files; six starts, the best kept after the 45-source polish,
-    on 0 of the same 36 (measured 2026-11-22, docs/diagnosis.md), ~10 s per baseline."""
-
-    particles: int = 80
-    iterations: int = 60
-    starts: int = 6
-    polish_all: bool = True
-    prior_sd: float = 0.3
 
 
 def input_jacobian(values: np.ndarray, inputs: np.ndarray, directions: np.ndarray,

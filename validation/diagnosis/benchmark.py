@@ -92,9 +92,9 @@ def benchmark_measurement(effect_id: str, magnitude: float, seed: int, provider,
     warm but repeats the noise); trajectory: (inputs (k, 3) [m], leg (k,)) of one cycle
     (default the standard trajectory), measured ``cycles`` times (``repeated_trajectory``);
     mechanism: the mount the table1 errors are drawn on (``MechanismParams``, ``--mount``;
-    default the reference mount). The effects' nominal magnitudes are scaled on the reference
-    mount's standard setting (``effects.magnitude``); the answer's achieved magnitude is
-    measured on this file."""
+    default the reference mount). The effects' nominal magnitudes are scaled on that mount's
+    standard setting (``effects.magnitude``); the answer's achieved magnitude is measured on
+    this file."""
     from ..effects.library import NONE, make_injector
     from ..prototype.scenario import load_scenario
     from ..prototype.truth import make_truth
@@ -106,7 +106,7 @@ def benchmark_measurement(effect_id: str, magnitude: float, seed: int, provider,
     effects = ()
     if effect_id != NONE:
         rng = np.random.default_rng([seed, 7])
-        effects = (make_injector(effect_id, magnitude * noise_urad, rng),)
+        effects = (make_injector(effect_id, magnitude * noise_urad, rng, mechanism=mechanism),)
     truth = make_truth(scenario, provider, effects=effects)
     blind = dataclasses.replace(truth.measurement, metadata={})
     answer = {"effect": effect_id, "magnitude_noise": float(magnitude), "magnitude_urad": float(magnitude * noise_urad),

@@ -313,14 +313,14 @@ class StepLoss(_Injector):
 
 # ---------------------------------------------------------------- stiffness side
 
-@functools.lru_cache(maxsize=1)
-def reference_angle_gain() -> tuple:
-    """d theta / d x (3 angles x 3 actuators) [rad/m] of the reference mechanism's linear
-    model, row-major (9,)."""
+@functools.lru_cache(maxsize=4)
+def reference_angle_gain(mechanism=None) -> tuple:
+    """d theta / d x (3 angles x 3 actuators) [rad/m] of the linear model of ``mechanism``
+    (``MechanismParams``; None: the reference mechanism), row-major (9,)."""
     from flexcal.model.assembly import mechanism_matrices
     from flexcal.model.parameters import parameter_space
 
-    space = parameter_space()
+    space = parameter_space(mechanism)
     gain = mechanism_matrices(space.nominal_full, space).input_gain[0, 3:, 3:]
     return tuple(float(v) for v in gain.ravel())
 

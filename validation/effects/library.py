@@ -1,10 +1,10 @@
 """The effect library of issue #7: ids, descriptions, model terms and injectors
 (docs/effects.md).
 
-``make_injector(id, magnitude_urad, rng)`` draws an injector's shape (signs, channels,
-phases, time constants) from ``rng`` and scales its strength so that the linearized
-angle signature on the standard trajectory (``effects.magnitude``) has RMS
-``magnitude_urad``; ``effects_from_scenario`` turns a scenario's ``[[effects]]`` tables
+``make_injector(id, magnitude_urad, rng, mechanism=None)`` draws an injector's shape (signs,
+channels, phases, time constants) from ``rng`` and scales its strength so that the linearized
+angle signature on the standard trajectory of ``mechanism`` (the mount the effect is injected
+into; the reference mount by default; ``effects.magnitude``) has RMS ``magnitude_urad``; ``effects_from_scenario`` turns a scenario's ``[[effects]]`` tables
 into injectors. The ids outside ``EFFECT_IDS`` (``OUT_OF_LIBRARY_IDS``) have an injector
 but no model term: the blind benchmark's "something else" cases.
 """
@@ -16,6 +16,8 @@ from dataclasses import dataclass
 from typing import Any, Callable
 
 import numpy as np
+
+from flexcal.geometry.params import reference_mechanism
 
 from ..effects import injectors as inj
 from . import chain
@@ -55,8 +57,10 @@ def _signs(rng, n):
     return rng.choice([-1.0, 1.0], size=n)
 
 
-def _shape(effect_id: str, rng: np.random.Generator):
-    """(unit-strength injector, function factor -> injector of factor x that strength)."""
+def _shape(effect_id: str, rng: np.random.Generator, angle_gain: tuple | None = None):
+    """(unit-strength injector, function factor -> injector of factor x that strength).
+    angle_gain: the mount's linear gain (``injectors.reference_angle_gain``; None: the
+    reference mount's), for the effects that map commands to hinge angles."""
     if effect_id == "drift":
         rate = _signs(rng, 3) * rng.uniform(0.3, 1.0, 3) * 1e-8
         curvature = rate * rng.uniform(-0.2, 0.2, 3) / 150.0  # <= 20 % more or less drift after 150 s
@@ -86,7 +90,7 @@ def _shape(effect_id: str, rng: np.random.Generator):
                                             preload_torque=preload)
     if effect_id == "large_deflection":
         coefficient = np.abs(rng.normal(size=6)) * 0.01  # geometric stiffening: hinges harden with bending
-        return lambda f: inj.LargeDeflection(coefficient=f * coefficient)
+        return lambda f: inj.LargeDeflection(coefficient=f * coefficient, angle_gain=angle_gain)
     if effect_id == "gravity_sag":
         exponent, coefficient = rng.uniform(0.1, 0.33, 3), rng.normal(size=6) * 0.01
         return lambda f: inj.GravitySag(exponent=f * exponent, coefficient=min(f, 1.0) * coefficient)
@@ -115,39 +119,44 @@ def _shape(effect_id: str, rng: np.random.Generator):
     raise ValueError(f"no shape for effect {effect_id!r}")
 
 
-def _step_loss(magnitude: float, rng: np.random.Generator):
+def _step_loss(magnitude: float, rng: np.random.Generator, setting):
     """Whole steps: draw the actuator and where along its path, then the step count; if one
     step is still too large, move the event later along the path (fewer points after it)."""
     actuator = int(rng.integers(3))
-    total = path_length(standard_setting().data.inputs)[-1, actuator]
+    total = path_length(setting.data.inputs)[-1, actuator]
     fraction = rng.uniform(0.15, 0.85)
 
     def make(n, where):
         return inj.StepLoss(events=((actuator, where * total, n),))
 
-    per_step = estimate_magnitude(make(1, fraction))
+    per_step = estimate_magnitude(make(1, fraction), setting)
     n_steps = max(1, int(round(magnitude / per_step)))
     if n_steps == 1 and per_step > magnitude:
         later = np.linspace(fraction, 0.97, 12)
-        fraction = later[np.argmin([abs(estimate_magnitude(make(1, w)) - magnitude) for w in later])]
+        fraction = later[np.argmin([abs(estimate_magnitude(make(1, w), setting) - magnitude) for w in later])]
     return make(n_steps, fraction)
 
 
-def make_injector(effect_id: str, magnitude_urad: float, rng: np.random.Generator | int | None = None):
-    """An injector of ``effect_id`` whose linearized signature on the standard trajectory
-    has RMS ~``magnitude_urad`` [urad] (``effects.magnitude``); shape drawn from ``rng``."""
+def make_injector(effect_id: str, magnitude_urad: float, rng: np.random.Generator | int | None = None, *,
+                  mechanism=None):
+    """An injector of ``effect_id`` whose linearized signature on the standard trajectory of
+    ``mechanism`` (``MechanismParams``: the mount it goes into; None: the reference mount) has
+    RMS ~``magnitude_urad`` [urad] (``effects.magnitude``); shape drawn from ``rng``."""
     if effect_id not in LIBRARY:
         raise ValueError(f"unknown effect id {effect_id!r}; known: {', '.join(LIBRARY)}")
     if not (np.isfinite(magnitude_urad) and magnitude_urad > 0):
         raise ValueError(f"magnitude_urad={magnitude_urad} must be > 0")
     rng = np.random.default_rng(rng)
     magnitude = magnitude_urad * 1e-6
+    if mechanism is not None and mechanism == reference_mechanism():
+        mechanism = None  # one injector per mount: the reference mount's as by default
+    setting = standard_setting(mechanism)
     if effect_id == "step_loss":
-        return _step_loss(magnitude, rng)
-    build = _shape(effect_id, rng)
+        return _step_loss(magnitude, rng, setting)
+    build = _shape(effect_id, rng, None if mechanism is None else inj.reference_angle_gain(mechanism))
     factor = 1.0
     for _ in range(3):  # linear in the strength for most; a few secant steps for the rest (gravity_sag)
-        achieved = estimate_magnitude(build(factor))
+        achieved = estimate_magnitude(build(factor), setting)
         if not achieved > 0:
             raise ValueError(f"effect {effect_id!r}: its drawn shape has no signature on the standard trajectory")
         if abs(achieved / magnitude - 1.0) < 0.01:
@@ -168,12 +177,13 @@ def _fields(kind) -> set[str]:
     return {f.name for f in dataclasses.fields(kind) if f.name != "name"}
 
 
-def effects_from_scenario(entries: tuple[dict[str, Any], ...]) -> tuple:
+def effects_from_scenario(entries: tuple[dict[str, Any], ...], mechanism=None) -> tuple:
     """Injectors from a scenario's ``[[effects]]`` tables.
 
     Each table is ``{"name": id, <field>: value, ...}`` with the injector's fields in SI
     (``effects.injectors``), or ``{"name": id, "magnitude_urad": m, "seed": s}`` for
-    ``make_injector``. Raises ValueError naming an unknown id or parameter.
+    ``make_injector`` on ``mechanism`` (the scenario's mount; None: the reference mount).
+    Raises ValueError naming an unknown id or parameter.
     """
     effects = []
     for number, entry in enumerate(entries, start=1):
@@ -188,7 +198,8 @@ def effects_from_scenario(entries: tuple[dict[str, Any], ...]) -> tuple:
             if unknown:
                 raise ValueError(f"[[effects]] entry {number} ({name}): with magnitude_urad only 'seed' may be "
                                  f"given, not {unknown}")
-            effects.append(make_injector(name, float(entry["magnitude_urad"]), int(entry.get("seed", 0))))
+            effects.append(make_injector(name, float(entry["magnitude_urad"]), int(entry.get("seed", 0)),
+                                         mechanism=mechanism))
             continue
         unknown = sorted(set(entry) - _fields(kind))
         if unknown:

@@ -1,10 +1,11 @@
 """Closed-form (linearized) angle signature of an injector along the standard trajectory,
 for ``effects.library.make_injector`` to choose physical parameters (docs/effects.md).
 
-The injector's hooks are called on contexts built from the nominal analytic model
-(``flexcal.model.forward``: angles and chain loads at every point of the standard
-trajectory, dwell 2 s, room temperature of seed 0) instead of the prototype, and their
-outputs are mapped to angles to first order:
+The injector's hooks are called on contexts built from the nominal analytic model of one
+mount (``standard_setting(mechanism)``, the reference mount by default; ``flexcal.model.forward``:
+angles and chain loads at every point of that mount's standard trajectory, dwell 2 s, room
+temperature of seed 0) instead of the prototype, and their outputs are mapped to angles to
+first order:
 
 - screw side: Δθ = J Δs, J the model's input Jacobian (central differences);
 - stiffness side: the per-chain relative stiffness change ε_c (mean factor of the chain's
@@ -37,22 +38,25 @@ STANDARD_DWELL = 2.0  # [s] the scenarios' default time between points (validati
 
 @dataclass(frozen=True, kw_only=True, eq=False)
 class StandardSetting:
-    """The standard trajectory and the nominal model along it: data (``TermData``, with
-    extras temperature_c), temperature (n,) [degC], width_sensitivity (n, 6, 3) [rad] S_c."""
+    """A mount's standard trajectory and its nominal model along it: data (``TermData``, with
+    extras temperature_c), temperature (n,) [degC], width_sensitivity (n, 6, 3) [rad] S_c,
+    actuator_stiffness [N/m] of the mount's drives."""
 
     data: TermData
     temperature: np.ndarray
     width_sensitivity: np.ndarray
+    actuator_stiffness: float
 
 
-@functools.lru_cache(maxsize=1)
-def standard_setting() -> StandardSetting:
-    """The nominal model on the standard trajectory (computed once, ~0.1 s)."""
+@functools.lru_cache(maxsize=4)
+def standard_setting(mechanism=None) -> StandardSetting:
+    """The nominal model of ``mechanism`` (``MechanismParams``; None: the reference mount) on
+    its standard trajectory (computed once per mount, ~0.1 s for the reference one)."""
     from flexcal.model.forward import forward
     from flexcal.model.parameters import parameter_space
     from flexcal.model.trajectory import standard_trajectory
 
-    space = parameter_space()
+    space = parameter_space(mechanism)
     trajectory = standard_trajectory(space.mechanism)
     time = np.arange(trajectory.n_points) * STANDARD_DWELL
     temperature = room_temperature(time, 0)
@@ -65,7 +69,8 @@ def standard_setting() -> StandardSetting:
         candidates[c + 1, space.index(f"{placement.name}.w")] *= 1 + relative
     angles = forward(candidates, trajectory.inputs, data.direction, space=space).angles
     sensitivity = np.swapaxes((angles[1:] - angles[0]) / relative, 0, 1)  # (n, 6, 3)
-    return StandardSetting(data=data, temperature=temperature, width_sensitivity=sensitivity)
+    return StandardSetting(data=data, temperature=temperature, width_sensitivity=sensitivity,
+                           actuator_stiffness=float(space.mechanism.actuator_stiffness))
 
 
 def _contexts(setting: StandardSetting):
@@ -81,14 +86,14 @@ def _contexts(setting: StandardSetting):
                             history=tuple(results[:k]))
 
 
-def _mechanism_change(effect, change, driving_loads: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _mechanism_change(effect, change, driving_loads: np.ndarray, actuator_stiffness: float
+                      ) -> tuple[np.ndarray, np.ndarray]:
     """(Δs (3,) [m], ε (6,)) of a ``modify_mechanism`` or ``modify_loaded_mechanism`` hook
     (``change``: conditions -> conditions): a changed actuator stiffness k -> k' moves each
     nut by N (1/k' - 1/k) (tension N > 0 stretches the contact); a changed segment
-    stiffness is ε as for ``modify_stiffness``. Other changes have no estimate."""
-    from flexcal.geometry.params import reference_mechanism
-
-    k_a = np.full(3, reference_mechanism().actuator_stiffness)
+    stiffness is ε as for ``modify_stiffness``. Other changes have no estimate.
+    actuator_stiffness [N/m]: the mount's k."""
+    k_a = np.full(3, actuator_stiffness)
     marker = (np.zeros(3), np.zeros(3))
     before = PointConditions(segment_stiffness=np.ones((6, 5, 6, 6)), frame_forces=(marker,), actuator_stiffness=k_a)
     after = change(before)
@@ -99,7 +104,8 @@ def _mechanism_change(effect, change, driving_loads: np.ndarray) -> tuple[np.nda
 
 
 def estimate_signature(effect, setting: StandardSetting | None = None) -> np.ndarray:
-    """Linearized angle signature (n, 3) [rad] of ``effect`` on the standard trajectory."""
+    """Linearized angle signature (n, 3) [rad] of ``effect`` on the standard trajectory of
+    ``setting``'s mount (default the reference mount's ``standard_setting()``)."""
     setting = setting or standard_setting()
     data = setting.data
     n = len(data.time)
@@ -118,7 +124,7 @@ def estimate_signature(effect, setting: StandardSetting | None = None) -> np.nda
             changes.append(lambda c, k=k, context=context: effect.modify_loaded_mechanism(c, data.axial_loads[k],
                                                                                           context))
         for change in changes:
-            stiffness = _mechanism_change(effect, change, data.axial_loads[k, 3:])
+            stiffness = _mechanism_change(effect, change, data.axial_loads[k, 3:], setting.actuator_stiffness)
             screw[k] += stiffness[0]
             stretch[k] += stiffness[1]
         if callable(getattr(effect, "measure", None)):

@@ -144,27 +144,27 @@ def end_compliance(chain: FlexureChain, x_start: float, x_end: float, material: 
     cut anywhere (uniform Timoshenko beams of the square section). Uses the analytic
     model's hinge compliances (``flexcal.model.hinge``) and Eq. 1.
     """
-    from flexcal.geometry.frames import rotation_about_x, twist_transform
+    from flexcal.geometry.frames import rotation_about_x
     from flexcal.model.hinge import beam_compliance, leaf_compliance
+    from flexcal.model.serial import serial_compliance
 
     if not 0.0 <= x_start < x_end <= chain.length + 1e-12:
         raise ValueError(f"slice [{x_start * 1e3:.6g}, {x_end * 1e3:.6g}] mm must satisfy "
                          f"0 <= start < end <= L = {chain.length * 1e3:.6g} mm")
-    total = np.zeros((6, 6))
+    pieces, rotations, ends = [], [], []
     for kind, a, b in _pieces(chain, x_start, x_end):
         if kind in ("leaf1", "leaf2"):
             if b - a < chain.hinge_length * (1.0 - 1e-9):
                 raise ValueError(f"slice [{x_start * 1e3:.6g}, {x_end * 1e3:.6g}] mm cuts through a leaf "
                                  f"hinge at [{a * 1e3:.6g}, {b * 1e3:.6g}] mm; cut in blocks or the strut")
             thickness = chain.thickness_1 if kind == "leaf1" else chain.thickness_2
-            piece = leaf_compliance(chain.hinge_length, thickness, chain.width, chain.fillet, material)
-            if kind == "leaf2":  # leaf 1 turned +90 deg about x: hinge y -> chain z
-                turn = twist_transform(rotation_about_x(0.5 * np.pi), np.zeros(3))
-                piece = turn @ piece @ turn.T
+            pieces.append(leaf_compliance(chain.hinge_length, thickness, chain.width, chain.fillet, material))
         else:
-            piece = beam_compliance(b - a, chain.section, chain.section, material)
-        move = twist_transform(np.eye(3), np.array([b - x_end, 0.0, 0.0]))  # piece end -> slice end
-        total += move @ piece @ move.T
+            pieces.append(beam_compliance(b - a, chain.section, chain.section, material))
+        # leaf 2 is leaf 1 turned +90 deg about x: hinge y -> chain z
+        rotations.append(rotation_about_x(0.5 * np.pi) if kind == "leaf2" else np.eye(3))
+        ends.append([b, 0.0, 0.0])
+    total = serial_compliance(np.array(pieces), np.array(rotations), np.array(ends), np.array([x_end, 0.0, 0.0]))
     return 0.5 * (total + total.T)
 
 

@@ -85,7 +85,7 @@ def make_truth(scenario: Scenario, provider: Callable, *, effects: tuple = (), p
     transmissions = [(x0, cl, mu, scenario.breakaway_force) for x0, cl, mu in drives]
     prototype = build_prototype(mechanism, transmissions, provider, mount_offsets=offsets)
     temperature = room_temperature(time, scenario.seed)
-    effects = effects_from_scenario(scenario.effects) + tuple(effects)
+    effects = effects_from_scenario(scenario.effects, scenario.space.mechanism) + tuple(effects)
     try:
         run = simulate(prototype, scenario.inputs, effects=effects, progress=progress, time=time,
                        temperature=temperature)

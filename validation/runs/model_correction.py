@@ -21,10 +21,10 @@ import dataclasses
 
 import numpy as np
 
-from flexcal.geometry.frames import twist_transform
 from flexcal.geometry.params import FlexureChain
 from flexcal.model.chain import chain_compliance_matrix
 from flexcal.model.hinge import ENTRY_INDEX
+from flexcal.model.serial import serial_compliance
 from flexcal.model.parameters import ParameterSpace
 
 from ..prototype.segments import (StiffnessProvider, chain_slices, end_stiffness, prepare_provider, section_nodes)
@@ -36,12 +36,12 @@ def provider_chain_compliance(chain: FlexureChain, provider: StiffnessProvider) 
     """(6, 6) compliance at end B of ``chain`` (A clamped, chain frame) [SI] from a
     segment stiffness provider: each segment's end compliance moved to B and summed (Eq. 1)."""
     nodes = section_nodes(chain)
-    total = np.zeros((6, 6))
-    for start, end in zip(nodes[:-1], nodes[1:]):
-        k_end = end_stiffness(provider(chain, float(start), float(end)))
-        compliance = np.linalg.inv(0.5 * (k_end + k_end.T))
-        move = twist_transform(np.eye(3), np.array([end - chain.length, 0.0, 0.0]))  # segment end -> B
-        total += move @ compliance @ move.T
+    stiffness = np.array([end_stiffness(provider(chain, float(start), float(end)))
+                          for start, end in zip(nodes[:-1], nodes[1:])])
+    compliance = np.linalg.inv(0.5 * (stiffness + np.swapaxes(stiffness, -1, -2)))
+    ends = np.stack([nodes[1:], np.zeros(len(compliance)), np.zeros(len(compliance))], axis=-1)
+    total = serial_compliance(compliance, np.broadcast_to(np.eye(3), compliance.shape[:1] + (3, 3)), ends,
+                              np.array([chain.length, 0.0, 0.0]))
     return 0.5 * (total + total.T)
 
 

@@ -1,6 +1,7 @@
-"""The settings of a calibration run (``VerifySettings``), in a module light enough for the
-command line to read its defaults at start-up (``cli.options.CALIBRATION_DEFAULTS``): the
-one place the run's defaults are set."""
+"""The settings of a calibration run (``VerifySettings``) and of the diagnosis baseline
+(``BaselineSettings``), in a module light enough for the command line to read its defaults
+at start-up (``cli.options.CALIBRATION_DEFAULTS``, ``cli.diagnose``): the one place these
+defaults are set."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ from dataclasses import dataclass, field
 
 from flexcal.calibration.pso_settings import PSOSettings
 
-__all__ = ["VerifySettings"]
+__all__ = ["VerifySettings", "BaselineSettings"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -38,3 +39,23 @@ class VerifySettings:
             raise ValueError(f"method={self.method!r} must be 'map', 'free' or 'paper'")
         if self.sources is not None and not self.sources:
             raise ValueError("sources=() names no source to identify")
+
+
+@dataclass(frozen=True, kw_only=True)
+class BaselineSettings:
+    """particles, iterations: PSO on the nine drive sources; starts: independent PSO runs,
+    each polished on the nine and then (polish_all) over all 45, the one with the smallest
+    final sum of squares kept; polish_all: polish all 45 sources (False: only the nine);
+    prior_sd: ridge prior [unit box] of the linear correction in the term fits (0.3: a
+    source may move by ~a third of its range).
+
+    Why several starts: one 80 x 60 swarm plus the polishes ends in a false clearance mode
+    (a 50-100 urad spike at a stroke end instead of ~2 urad at most) on 6 of 36 (file, seed)
+    pairs of ``none`` benchmark files; six starts, the best kept after the 45-source polish,
+    on 0 of the same 36 (measured 2026-11-22, docs/diagnosis.md), ~10 s per baseline."""
+
+    particles: int = 80
+    iterations: int = 60
+    starts: int = 6
+    polish_all: bool = True
+    prior_sd: float = 0.3

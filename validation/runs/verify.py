@@ -209,7 +209,7 @@ def _paper_identification(measurement: Measurement, angles: np.ndarray, space: P
                 "sobol": None if sobol is None else {
                     "n_base": sobol.n_base, "n_evaluations": sobol.n_evaluations, "outputs": list(OUTPUTS),
                     "names": list(sobol.names), "ST": sobol.ST, "ST_conf": sobol.ST_conf, "S1": sobol.S1,
-                    "note": "N = 512 instead of the paper's 500 (Sobol sequences need a power of two)"},
+                    "note": f"N = {sobol.n_base} instead of the paper's 500 (Sobol sequences need a power of two)"},
                 "pso": {"n_evaluations": pso.n_evaluations, "stagnation_iterations": list(pso.stagnation_iterations),
                         "n_subgroups": len(pso.subgroups), "history_best_f_urad": pso.history_best_f * 1e6},
                 "polish": None if polish is None else {"n_evaluations": polish.n_evaluations,
