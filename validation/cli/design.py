@@ -36,8 +36,8 @@ EXAMPLES = (
 MODEL_ERROR_QUANTILE = 0.75  # candidates whose expected model error exceeds this quantile of the standard
 # trajectory's are avoided (the report says how many and why)
 DEFAULT_CONFIG = {"points": 77, "candidates": 2000, "noise_urad": 0.5, "prior_scale": 1.0, "points_per_leg": 11,
-                  "design_seed": 0, "inadequacy": "analytic", "at": "", "scenario": "table1", "model_stiffness": "fem",
-                  "second_order": True}
+                  "design_seed": 0, "inadequacy": "analytic", "at": "", "scenario": "table1", "model": "second-order",
+                  "model_stiffness": "fem", "second_order": True}
 
 
 def configure(parser: argparse.ArgumentParser) -> None:

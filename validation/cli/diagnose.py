@@ -23,7 +23,8 @@ import numpy as np
 
 __all__ = ["configure", "run", "EXAMPLES", "DEFAULT_CONFIG", "markdown"]
 
-DEFAULT_CONFIG = {"model_stiffness": "fem", "second_order": True, "particles": 80, "iterations": 60}
+DEFAULT_CONFIG = {"model": "second-order", "model_stiffness": "fem", "second_order": True, "particles": 80,
+                  "iterations": 60}
 
 EXAMPLES = ("flexcal diagnose curves.csv --out runs/diagnosis",
             "flexcal diagnose --data runs/t/curves.csv --out runs/d",

@@ -29,7 +29,8 @@ from flexcal.model.parameters import ParameterSpace
 
 from ..prototype.segments import (StiffnessProvider, chain_slices, end_stiffness, prepare_provider, section_nodes)
 
-__all__ = ["provider_chain_compliance", "compliance_factors", "compliance_slopes", "corrected_space", "model_space"]
+__all__ = ["provider_chain_compliance", "compliance_factors", "compliance_slopes", "corrected_space", "model_space",
+           "MODELS", "DEFAULT_BREAKAWAY_N"]
 
 
 def provider_chain_compliance(chain: FlexureChain, provider: StiffnessProvider) -> np.ndarray:
@@ -108,22 +109,56 @@ def corrected_space(space: ParameterSpace, provider: StiffnessProvider, *, slope
                                **extra)
 
 
+# The calibration models by name (``--model``): the paper's Eq. 1-8 as written; today's default,
+# FEM-informed chains with the second-order terms added to the pose (docs/model.md 7-8); the
+# consistent second-order model (docs/model.md 9-10: compliance factors following the
+# dimensions, the chains' measured shortening solved inside the fixed point, the clearance's
+# play state)
+MODELS = ("paper", "second-order", "consistent")
+# [N] the consistent model's breakaway force when none is given: the virtual prototype's
+# default (validation.prototype.scenario, [transmission] breakaway_force_n). Given, not
+# identified; the form error moves by <= 0.01 urad between 0.5, 2 and 5 N (docs/model.md 9)
+DEFAULT_BREAKAWAY_N = 2.0
+
+
 def model_space(stiffness: str = "fem", second_order: bool = True, *, progress: bool = False, workers: int | None = 0,
-                scheduler: str | None = None, mechanism=None, breakaway_force: float | None = None) -> ParameterSpace:
+                scheduler: str | None = None, mechanism=None, breakaway_force: float | None = None,
+                model: str = "second-order") -> ParameterSpace:
     """The parameter space of ``mechanism`` (the reference one by default) with the model
-    options the calibration commands share: stiffness "fem" (FEM-informed chain compliance,
-    FEM solves cached) or "closed-form" (the paper's Eq. 1); second_order: the geometric
-    second-order terms (``flexcal.model.second_order``); breakaway_force [N]: the clearance's
-    play state with that breakaway force (None: Eq. 7's memoryless clip; docs/model.md 9);
-    workers / scheduler: where missing FEM segments are built (``fem_provider``)."""
+    options the calibration commands share.
+
+    model (``MODELS``): "paper" is Eq. 1-8 as written (closed-form chains, no second-order
+    terms; ``stiffness`` and ``second_order`` are not read); "second-order" takes ``stiffness``
+    "fem" (FEM-informed chain compliance, FEM solves cached) or "closed-form" (the paper's
+    Eq. 1) and ``second_order`` (the geometric second-order terms,
+    ``flexcal.model.second_order``); "consistent" is ``chain_kinematics.consistent_space``
+    over FEM factors with their slopes (``stiffness`` "fem" and ``second_order`` True only),
+    with the clearance's play state at ``breakaway_force`` (None: ``DEFAULT_BREAKAWAY_N``).
+    breakaway_force [N] for "second-order": the clearance's play state with that breakaway
+    force (None: Eq. 7's memoryless clip; docs/model.md 9). workers / scheduler: where missing
+    FEM segments are built (``fem_provider``)."""
     from flexcal.model.parameters import parameter_space
 
+    if model not in MODELS:
+        raise ValueError(f"model {model!r} must be one of {', '.join(MODELS)}")
     if stiffness not in ("fem", "closed-form"):
         raise ValueError(f"model stiffness {stiffness!r} must be 'fem' or 'closed-form'")
     space = parameter_space(mechanism)
+    if model == "paper":
+        return space
+    if model == "consistent":
+        if stiffness != "fem" or not second_order:
+            raise ValueError("the consistent model is FEM-informed and second-order by construction: drop "
+                             "--model-stiffness closed-form / --no-second-order, or use --model second-order")
+        from ..prototype.fem_provider import fem_provider
+        from .chain_kinematics import consistent_space
+
+        provider = fem_provider(progress=progress, workers=workers, scheduler=scheduler)
+        space = consistent_space(corrected_space(space, provider, slopes=True), provider)
+        return dataclasses.replace(space, breakaway_force=DEFAULT_BREAKAWAY_N if breakaway_force is None
+                                   else float(breakaway_force))
     if stiffness == "fem":
         from ..prototype.fem_provider import fem_provider
 
         space = corrected_space(space, fem_provider(progress=progress, workers=workers, scheduler=scheduler))
     return dataclasses.replace(space, second_order=bool(second_order), breakaway_force=breakaway_force)
-
