@@ -50,6 +50,13 @@ def test_consistent_builds_the_consistent_space(closed_form_segments):
     assert "(--model consistent)" in model_description(space)
 
 
+def test_closed_form_consistent_is_eq1s_chains_with_their_own_shortening():
+    # no FEM and no prototype code: the factors and the measured shortening correction are left out
+    space = _space("--model", "consistent", "--model-stiffness", "closed-form")
+    assert model_name(space) == "consistent" and not space.compliance_factors and not space.compliance_slopes
+    assert space.chain_shortening == (0.0,) * (36 * 6) and space.breakaway_force == 2.0
+
+
 def test_the_old_options_still_build_the_papers_model(closed_form_segments):
     space = _space("--model-stiffness", "closed-form", "--no-second-order")
     assert model_name(space) == "paper"
@@ -58,10 +65,9 @@ def test_the_old_options_still_build_the_papers_model(closed_form_segments):
 @pytest.mark.parametrize("options, words", [
     (["--model", "consistant"], ["invalid choice", "consistant"]),
     (["--model", "consistent", "--no-second-order"], ["consistent model", "--no-second-order"]),
-    (["--model", "consistent", "--model-stiffness", "closed-form"], ["consistent model", "closed-form"]),
     (["--breakaway-force", "3"], ["--breakaway-force", "--model consistent"]),
     (["--model", "consistent", "--breakaway-force", "-1"], ["breakaway_force", ">= 0"]),
-], ids=["bad-name", "no-second-order", "closed-form", "force-without-consistent", "negative-force"])
+], ids=["bad-name", "no-second-order", "force-without-consistent", "negative-force"])
 def test_a_bad_model_choice_is_one_line_and_exit_2(tmp_path, capsys, closed_form_segments, options, words):
     from test_bad_input import write_csv
 

@@ -205,17 +205,19 @@ def add_model_options(parser: argparse.ArgumentParser) -> None:
 
     parser.add_argument("--model", choices=MODELS,
                         help="the calibration model: paper (Eq. 1-8 as written: closed-form chains, no second-order "
-                             "terms), second-order (FEM-informed chains and second-order terms, refined by "
-                             "--model-stiffness and --second-order) or consistent (FEM factors following the "
-                             "dimensions, the chains' measured shortening solved with the clearance, the clearance's "
-                             "play state; docs/model.md 9-10) (default %(default)s)")
+                             "terms), second-order (FEM-informed chains and second-order terms added to the pose; "
+                             "--model-stiffness and --second-order refine it) or consistent (FEM factors following "
+                             "the dimensions, the chains' measured shortening solved with the clearance, the "
+                             "clearance's play state; docs/model.md 9-10; --model-stiffness closed-form: the same on "
+                             "Eq. 1's chains) (default %(default)s)")
     parser.add_argument("--second-order", action=argparse.BooleanOptionalAction,
                         help="--model second-order's geometric terms: chain-force P-delta and rigid second-order "
                              "frame kinematics (docs/model.md 8; default: on; --no-second-order with "
                              "--model-stiffness closed-form = --model paper)")
     parser.add_argument("--model-stiffness", choices=("fem", "closed-form"),
-                        help="--model second-order's chain compliance: closed-form (the paper's Eq. 1) or corrected "
-                             "by the FEM at the nominal design (docs/model.md 7; default %(default)s)")
+                        help="the chain compliance of --model second-order and consistent: closed-form (the paper's "
+                             "Eq. 1) or corrected by the FEM at the nominal design (docs/model.md 7; default "
+                             "%(default)s)")
     parser.add_argument("--breakaway-force", type=float, metavar="N", default=None,
                         help=f"--model consistent's breakaway force of the drives' friction [N] (the clearance's "
                              f"play state, given, not identified; default {DEFAULT_BREAKAWAY_N:g}, the virtual "

@@ -131,9 +131,11 @@ def model_space(stiffness: str = "fem", second_order: bool = True, *, progress: 
     terms; ``stiffness`` and ``second_order`` are not read); "second-order" takes ``stiffness``
     "fem" (FEM-informed chain compliance, FEM solves cached) or "closed-form" (the paper's
     Eq. 1) and ``second_order`` (the geometric second-order terms,
-    ``flexcal.model.second_order``); "consistent" is ``chain_kinematics.consistent_space``
-    over FEM factors with their slopes (``stiffness`` "fem" and ``second_order`` True only),
-    with the clearance's play state at ``breakaway_force`` (None: ``DEFAULT_BREAKAWAY_N``).
+    ``flexcal.model.second_order``); "consistent" (``second_order`` True only) with
+    ``stiffness`` "fem" is ``chain_kinematics.consistent_space`` over FEM factors with their
+    slopes, with "closed-form" the same model on Eq. 1's chains with the chains' own
+    shortening form (no measured correction); both with the clearance's play state at
+    ``breakaway_force`` (None: ``DEFAULT_BREAKAWAY_N``).
     breakaway_force [N] for "second-order": the clearance's play state with that breakaway
     force (None: Eq. 7's memoryless clip; docs/model.md 9). workers / scheduler: where missing
     FEM segments are built (``fem_provider``)."""
@@ -147,16 +149,19 @@ def model_space(stiffness: str = "fem", second_order: bool = True, *, progress: 
     if model == "paper":
         return space
     if model == "consistent":
-        if stiffness != "fem" or not second_order:
-            raise ValueError("the consistent model is FEM-informed and second-order by construction: drop "
-                             "--model-stiffness closed-form / --no-second-order, or use --model second-order")
+        if not second_order:
+            raise ValueError("the consistent model is second-order by construction: drop --no-second-order, or use "
+                             "--model second-order --no-second-order")
+        force = DEFAULT_BREAKAWAY_N if breakaway_force is None else float(breakaway_force)
+        if stiffness == "closed-form":  # Eq. 1's chains and the chains' own shortening form, nothing measured
+            return dataclasses.replace(space, second_order=True, breakaway_force=force,
+                                       chain_shortening=(0.0,) * (36 * len(space.mechanism.chains)))
         from ..prototype.fem_provider import fem_provider
         from .chain_kinematics import consistent_space
 
         provider = fem_provider(progress=progress, workers=workers, scheduler=scheduler)
         space = consistent_space(corrected_space(space, provider, slopes=True), provider)
-        return dataclasses.replace(space, breakaway_force=DEFAULT_BREAKAWAY_N if breakaway_force is None
-                                   else float(breakaway_force))
+        return dataclasses.replace(space, breakaway_force=force)
     if stiffness == "fem":
         from ..prototype.fem_provider import fem_provider
 
