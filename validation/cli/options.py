@@ -1,6 +1,7 @@
 """The option groups several commands share, each defined once: where results go
 (``--out``), what is measured (``--scenario`` | ``--data``, ``--seed``, ``--trajectory``,
-``--provider``), which model calibrates (``--second-order``, ``--model-stiffness``), how it
+``--provider``), which model calibrates (``--model``, refined by ``--model-stiffness``,
+``--second-order``, ``--breakaway-force``), how it
 identifies (``--method``, ``--prior-scale``, Sobol and PSO sizes) and where heavy items run
 (``--workers``, ``--scheduler``). A command's own options stay in its module.
 """
@@ -201,7 +202,7 @@ def calibration_defaults(*names: str, **overrides: Any) -> dict[str, Any]:
 def add_model_options(parser: argparse.ArgumentParser) -> None:
     """Which model the calibration uses (``verify``, ``sensitivity``, ``identify``,
     ``compensate``); defaults from the command's DEFAULT_CONFIG (``MODEL_DEFAULTS``)."""
-    from ..runs.model_correction import DEFAULT_BREAKAWAY_N, MODELS
+    from ..runs.model_names import DEFAULT_BREAKAWAY_N, MODELS
 
     parser.add_argument("--model", choices=MODELS,
                         help="the calibration model: paper (Eq. 1-8 as written: closed-form chains, no second-order "

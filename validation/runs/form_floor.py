@@ -118,7 +118,8 @@ def model_description(space: ParameterSpace) -> str:
     ``--model`` name."""
     name = model_name(space)
     if name == "paper":
-        return "the paper's model (Eq. 1-8 as written: closed-form chain stiffness, no second-order terms; --model paper)"
+        return ("the paper's model (Eq. 1-8 as written: closed-form chain stiffness, no second-order terms; "
+                "--model paper)")
     stiffness = ("closed-form chain stiffness (Eq. 1)" if not space.compliance_factors else
                  "FEM-informed chain stiffness" + (" following the dimensions" if space.compliance_slopes else ""))
     play = ("" if space.breakaway_force is None

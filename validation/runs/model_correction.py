@@ -28,6 +28,7 @@ from flexcal.model.hinge import ENTRY_INDEX
 from flexcal.model.parameters import ParameterSpace
 
 from ..prototype.segments import (StiffnessProvider, chain_slices, end_stiffness, prepare_provider, section_nodes)
+from .model_names import DEFAULT_BREAKAWAY_N, MODELS
 
 __all__ = ["provider_chain_compliance", "compliance_factors", "compliance_slopes", "corrected_space", "model_space",
            "MODELS", "DEFAULT_BREAKAWAY_N"]
@@ -107,18 +108,6 @@ def corrected_space(space: ParameterSpace, provider: StiffnessProvider, *, slope
     extra = {"compliance_slopes": tuple(float(v) for v in compliance_slopes(space, provider).ravel())} if slopes else {}
     return dataclasses.replace(space, compliance_factors=tuple(tuple(float(v) for v in row) for row in factors),
                                **extra)
-
-
-# The calibration models by name (``--model``): the paper's Eq. 1-8 as written; today's default,
-# FEM-informed chains with the second-order terms added to the pose (docs/model.md 7-8); the
-# consistent second-order model (docs/model.md 9-10: compliance factors following the
-# dimensions, the chains' measured shortening solved inside the fixed point, the clearance's
-# play state)
-MODELS = ("paper", "second-order", "consistent")
-# [N] the consistent model's breakaway force when none is given: the virtual prototype's
-# default (validation.prototype.scenario, [transmission] breakaway_force_n). Given, not
-# identified; the form error moves by <= 0.01 urad between 0.5, 2 and 5 N (docs/model.md 9)
-DEFAULT_BREAKAWAY_N = 2.0
 
 
 def model_space(stiffness: str = "fem", second_order: bool = True, *, progress: bool = False, workers: int | None = 0,
