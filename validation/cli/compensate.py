@@ -151,7 +151,7 @@ def run(args: argparse.Namespace) -> int:
                           "max_rounds": args.max_rounds, "gain": args.gain, "sobol_n": args.sobol_n,
                           "particles": args.particles, "iterations": args.iterations,
                           "calibration_seed": args.calibration_seed, "model_stiffness": args.model_stiffness,
-                          "second_order": args.second_order}
+                          "second_order": args.second_order, "model": args.model}
     ideal = ideal_angles(measurement.inputs, space)
     with staged_output(args.out, replace=args.force) as staging:
         write_report(staging, report)
