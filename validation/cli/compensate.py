@@ -38,7 +38,7 @@ EXAMPLES = (
 # method "paper": the identification measured for docs/compensation.md; "map" (verify's default)
 # is available with --method map (its compensation figures are not yet measured on the FEM run).
 DEFAULT_CONFIG = calibration_defaults("prior_scale", "sobol_n", "particles", "iterations", "polish", "calibration_seed",
-                                      "model_stiffness", "second_order", method="paper", sobol_threshold=0.0,
+                                      "model", "model_stiffness", "second_order", method="paper", sobol_threshold=0.0,
                                       readings=10, tolerance_urad=1.0, max_rounds=8, gain=1.0)
 
 
@@ -151,7 +151,7 @@ def run(args: argparse.Namespace) -> int:
                           "max_rounds": args.max_rounds, "gain": args.gain, "sobol_n": args.sobol_n,
                           "particles": args.particles, "iterations": args.iterations,
                           "calibration_seed": args.calibration_seed, "model_stiffness": args.model_stiffness,
-                          "second_order": args.second_order}
+                          "second_order": args.second_order, "model": args.model}
     ideal = ideal_angles(measurement.inputs, space)
     with staged_output(args.out, replace=args.force) as staging:
         write_report(staging, report)

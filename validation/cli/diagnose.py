@@ -111,6 +111,7 @@ def run(args: argparse.Namespace) -> int:
     report = diagnosis.report
     report["baseline"]["model_stiffness"] = args.model_stiffness
     report["baseline"]["second_order"] = bool(args.second_order)
+    report["baseline"]["model"] = args.model
     report["model_form_floor"] = _form_floor(measurement, space, diagnosis.residual)
     share = report["heldout"]["share_not_repeated"]
     if share > EXTRAPOLATION_WARNING_SHARE:

@@ -2,7 +2,7 @@
 the measurement (a ``--scenario``'s prototype curves, or a ``--data`` file read with its
 sidecar and checked against its mount), the mount that models it (the sidecar's, or
 ``--mount`` with the differences listed key by key) and the calibration model of that mount
-(``--model-stiffness``, ``--second-order``). One place, so that every command reads data,
+(``--model``, ``--model-stiffness``, ``--second-order``). One place, so that every command reads data,
 sidecar and mount the same way; the reading itself is ``cli.options`` (``read_data``,
 ``load_source_with_truth``, ``data_mechanism``). It lives in ``cli/``, not ``runs/``: it is
 all reading of the command line's options, and nothing outside ``cli/`` imports ``cli/``
@@ -65,12 +65,18 @@ def open_data(args: argparse.Namespace, *, progress: bool, data_path=None) -> Da
 
 def calibration_model(args: argparse.Namespace, mechanism, *, progress: bool):
     """The calibration model (``ParameterSpace``) of ``mechanism`` with the command's
-    ``--model-stiffness``, ``--second-order`` and executor options."""
+    ``--model``, ``--model-stiffness``, ``--second-order``, ``--breakaway-force`` and executor
+    options (``runs.model_correction.model_space``)."""
     from ..runs.model_correction import model_space
     from .options import executor_options
 
+    model = getattr(args, "model", "second-order")
+    force = getattr(args, "breakaway_force", None)
+    if force is not None and model != "consistent":
+        raise ValueError(f"--breakaway-force sets the consistent model's play state; add --model consistent "
+                         f"(this run's model is {model})")
     return model_space(args.model_stiffness, args.second_order, progress=progress, mechanism=mechanism,
-                       **executor_options(args))
+                       model=model, breakaway_force=force, **executor_options(args))
 
 
 def open_calibration(args: argparse.Namespace, *, progress: bool, data_path=None,

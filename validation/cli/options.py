@@ -1,6 +1,7 @@
 """The option groups several commands share, each defined once: where results go
 (``--out``), what is measured (``--scenario`` | ``--data``, ``--seed``, ``--trajectory``,
-``--provider``), which model calibrates (``--second-order``, ``--model-stiffness``), how it
+``--provider``), which model calibrates (``--model``, refined by ``--model-stiffness``,
+``--second-order``, ``--breakaway-force``), how it
 identifies (``--method``, ``--prior-scale``, Sobol and PSO sizes) and where heavy items run
 (``--workers``, ``--scheduler``). A command's own options stay in its module.
 """
@@ -170,7 +171,9 @@ def executor_options(args: argparse.Namespace) -> dict[str, Any]:
     return {"workers": getattr(args, "workers", 0), "scheduler": getattr(args, "scheduler", None)}
 
 
-MODEL_DEFAULTS = {"model_stiffness": "fem", "second_order": True}
+# --model's default names today's calibration model; the consistent model (issue 24) is selected
+# by name, not by default (docs/cli.md "Which model calibrates")
+MODEL_DEFAULTS = {"model": "second-order", "model_stiffness": "fem", "second_order": True}
 
 
 def _calibration_defaults() -> dict[str, Any]:
@@ -199,12 +202,27 @@ def calibration_defaults(*names: str, **overrides: Any) -> dict[str, Any]:
 def add_model_options(parser: argparse.ArgumentParser) -> None:
     """Which model the calibration uses (``verify``, ``sensitivity``, ``identify``,
     ``compensate``); defaults from the command's DEFAULT_CONFIG (``MODEL_DEFAULTS``)."""
+    from ..runs.model_names import DEFAULT_BREAKAWAY_N, MODELS
+
+    parser.add_argument("--model", choices=MODELS,
+                        help="the calibration model: paper (Eq. 1-8 as written: closed-form chains, no second-order "
+                             "terms), second-order (FEM-informed chains and second-order terms added to the pose; "
+                             "--model-stiffness and --second-order refine it) or consistent (FEM factors following "
+                             "the dimensions, the chains' measured shortening solved with the clearance, the "
+                             "clearance's play state; docs/model.md 9-10; --model-stiffness closed-form: the same on "
+                             "Eq. 1's chains) (default %(default)s)")
     parser.add_argument("--second-order", action=argparse.BooleanOptionalAction,
-                        help="the model's second-order geometric terms: chain-force P-delta and rigid second-order "
-                             "frame kinematics (docs/model.md 8; default: on; --no-second-order = the paper's model)")
+                        help="--model second-order's geometric terms: chain-force P-delta and rigid second-order "
+                             "frame kinematics (docs/model.md 8; default: on; --no-second-order with "
+                             "--model-stiffness closed-form = --model paper)")
     parser.add_argument("--model-stiffness", choices=("fem", "closed-form"),
-                        help="the model's chain compliance: closed-form (the paper's Eq. 1) or corrected by the FEM "
-                             "at the nominal design (docs/model.md 7; default %(default)s)")
+                        help="the chain compliance of --model second-order and consistent: closed-form (the paper's "
+                             "Eq. 1) or corrected by the FEM at the nominal design (docs/model.md 7; default "
+                             "%(default)s)")
+    parser.add_argument("--breakaway-force", type=float, metavar="N", default=None,
+                        help=f"--model consistent's breakaway force of the drives' friction [N] (the clearance's "
+                             f"play state, given, not identified; default {DEFAULT_BREAKAWAY_N:g}, the virtual "
+                             f"prototype's)")
 
     add_executor_options(parser, what="the FEM segment builds (cold cache only)")
 

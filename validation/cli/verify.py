@@ -64,6 +64,9 @@ def run(args: argparse.Namespace) -> int:
     result.report["model_stiffness"] = ("closed-form chains scaled by FEM factors at the nominal design "
                                         "(docs/model.md 7)" if space.compliance_factors else "closed-form (paper Eq. 1)")
     result.report["model_second_order"] = bool(space.second_order)
+    from ..runs.form_floor import model_description
+
+    result.report["model"] = model_description(space)
     with staged_output(args.out, replace=args.force) as staging:
         write_report(staging, result.report)
         (staging / "report.md").write_text(verify_markdown(result.report))

@@ -147,7 +147,8 @@ def verify_markdown(report) -> str:
             lines.append(f"| {row['figure']} | {row['paper']:g} | {ours} | {'yes' if row['beats_paper'] else 'NO'} | "
                          f"{meaningful} | {'yes' if row['beats_paper_identifiable'] else 'NO'} | "
                          f"{', '.join(row['not_identifiable']) or '-'} | {hidden} |")
-        lines += ["", f"Model chain stiffness: {report.get('model_stiffness', 'closed-form')}; second-order "
+        lines += ["", f"Model: {report['model']}." if "model" in report else
+                  f"Model chain stiffness: {report.get('model_stiffness', 'closed-form')}; second-order "
                   f"geometric terms: {'on' if report.get('model_second_order') else 'off (the paper model)'}.", ""]
     has_preset = "preset" in report["parameters"][0]
     header = "| parameter | unit | " + ("preset | " if has_preset else "") + "identified | std error | " + \

@@ -41,7 +41,8 @@ from flexcal.model.parameters import ParameterSpace
 
 from ..measurements import Measurement
 
-__all__ = ["TruthCurve", "truth_from_run", "truth_from_measurement", "paper_model_space", "model_description",
+__all__ = ["TruthCurve", "truth_from_run", "truth_from_measurement", "paper_model_space", "model_name",
+           "model_description",
            "posture_groups", "model_form_floor", "not_available", "GROUP_ORDER", "MOVED"]
 
 ANGLES = ("theta_x", "theta_y", "theta_z")
@@ -102,18 +103,30 @@ def paper_model_space(space: ParameterSpace) -> ParameterSpace:
                                breakaway_force=None, chain_shortening=())
 
 
-def model_description(space: ParameterSpace) -> str:
-    """Which model a space evaluates, in the command line's words."""
+def model_name(space: ParameterSpace) -> str:
+    """The ``--model`` name of the model a space evaluates: "paper", "consistent" (the chains'
+    measured shortening set) or "second-order" (anything else ``--model second-order`` builds,
+    its ``--model-stiffness`` and ``--second-order`` variants included)."""
     if (not space.compliance_factors and not space.second_order and space.breakaway_force is None
             and not space.chain_shortening):
-        return "the paper's model (Eq. 1-8 as written: closed-form chain stiffness, no second-order terms)"
+        return "paper"
+    return "consistent" if space.chain_shortening else "second-order"
+
+
+def model_description(space: ParameterSpace) -> str:
+    """Which model a space evaluates, in the command line's words: what it holds, then its
+    ``--model`` name."""
+    name = model_name(space)
+    if name == "paper":
+        return ("the paper's model (Eq. 1-8 as written: closed-form chain stiffness, no second-order terms; "
+                "--model paper)")
     stiffness = ("closed-form chain stiffness (Eq. 1)" if not space.compliance_factors else
                  "FEM-informed chain stiffness" + (" following the dimensions" if space.compliance_slopes else ""))
     play = ("" if space.breakaway_force is None
             else f", clearance play state with breakaway force {space.breakaway_force:g} N")
     terms = ("consistent (measured chain shortening, solved with the clearance)" if space.chain_shortening
              else "on" if space.second_order else "off")
-    return f"{stiffness}, second-order terms {terms}{play}"
+    return f"{stiffness}, second-order terms {terms}{play} (--model {name})"
 
 
 def posture_groups(inputs: np.ndarray, point_class: np.ndarray, release: np.ndarray,
@@ -193,7 +206,7 @@ def model_form_floor(truth: TruthCurve, inputs: np.ndarray, space: ParameterSpac
                    "unloading": "near: a drive's release fx_A (run's model at the true values) changes sign within "
                                 "one trajectory step before or after the posture, or its actuator reversed here "
                                 "while its nut is off its loaded flank (fx_A > 0); far: elsewhere"},
-        "models": [{"model": key, "description": model_description(s),
+        "models": [{"model": key, "name": model_name(s), "description": model_description(s),
                     "is_paper_model": len(models) == 1 or key == "paper",
                     **_grouped(angles - truth.angles, groups)} for key, s, angles in models],
     }

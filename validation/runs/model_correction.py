@@ -28,8 +28,10 @@ from flexcal.model.serial import serial_compliance
 from flexcal.model.parameters import ParameterSpace
 
 from ..prototype.segments import (StiffnessProvider, chain_slices, end_stiffness, prepare_provider, section_nodes)
+from .model_names import DEFAULT_BREAKAWAY_N, MODELS
 
-__all__ = ["provider_chain_compliance", "compliance_factors", "compliance_slopes", "corrected_space", "model_space"]
+__all__ = ["provider_chain_compliance", "compliance_factors", "compliance_slopes", "corrected_space", "model_space",
+           "MODELS", "DEFAULT_BREAKAWAY_N"]
 
 
 def provider_chain_compliance(chain: FlexureChain, provider: StiffnessProvider) -> np.ndarray:
@@ -109,21 +111,48 @@ def corrected_space(space: ParameterSpace, provider: StiffnessProvider, *, slope
 
 
 def model_space(stiffness: str = "fem", second_order: bool = True, *, progress: bool = False, workers: int | None = 0,
-                scheduler: str | None = None, mechanism=None, breakaway_force: float | None = None) -> ParameterSpace:
+                scheduler: str | None = None, mechanism=None, breakaway_force: float | None = None,
+                model: str = "second-order") -> ParameterSpace:
     """The parameter space of ``mechanism`` (the reference one by default) with the model
-    options the calibration commands share: stiffness "fem" (FEM-informed chain compliance,
-    FEM solves cached) or "closed-form" (the paper's Eq. 1); second_order: the geometric
-    second-order terms (``flexcal.model.second_order``); breakaway_force [N]: the clearance's
-    play state with that breakaway force (None: Eq. 7's memoryless clip; docs/model.md 9);
-    workers / scheduler: where missing FEM segments are built (``fem_provider``)."""
+    options the calibration commands share.
+
+    model (``MODELS``): "paper" is Eq. 1-8 as written (closed-form chains, no second-order
+    terms; ``stiffness`` and ``second_order`` are not read); "second-order" takes ``stiffness``
+    "fem" (FEM-informed chain compliance, FEM solves cached) or "closed-form" (the paper's
+    Eq. 1) and ``second_order`` (the geometric second-order terms,
+    ``flexcal.model.second_order``); "consistent" (``second_order`` True only) with
+    ``stiffness`` "fem" is ``chain_kinematics.consistent_space`` over FEM factors with their
+    slopes, with "closed-form" the same model on Eq. 1's chains with the chains' own
+    shortening form (no measured correction); both with the clearance's play state at
+    ``breakaway_force`` (None: ``DEFAULT_BREAKAWAY_N``).
+    breakaway_force [N] for "second-order": the clearance's play state with that breakaway
+    force (None: Eq. 7's memoryless clip; docs/model.md 9). workers / scheduler: where missing
+    FEM segments are built (``fem_provider``)."""
     from flexcal.model.parameters import parameter_space
 
+    if model not in MODELS:
+        raise ValueError(f"model {model!r} must be one of {', '.join(MODELS)}")
     if stiffness not in ("fem", "closed-form"):
         raise ValueError(f"model stiffness {stiffness!r} must be 'fem' or 'closed-form'")
     space = parameter_space(mechanism)
+    if model == "paper":
+        return space
+    if model == "consistent":
+        if not second_order:
+            raise ValueError("the consistent model is second-order by construction: drop --no-second-order, or use "
+                             "--model second-order --no-second-order")
+        force = DEFAULT_BREAKAWAY_N if breakaway_force is None else float(breakaway_force)
+        if stiffness == "closed-form":  # Eq. 1's chains and the chains' own shortening form, nothing measured
+            return dataclasses.replace(space, second_order=True, breakaway_force=force,
+                                       chain_shortening=(0.0,) * (36 * len(space.mechanism.chains)))
+        from ..prototype.fem_provider import fem_provider
+        from .chain_kinematics import consistent_space
+
+        provider = fem_provider(progress=progress, workers=workers, scheduler=scheduler)
+        space = consistent_space(corrected_space(space, provider, slopes=True), provider)
+        return dataclasses.replace(space, breakaway_force=force)
     if stiffness == "fem":
         from ..prototype.fem_provider import fem_provider
 
         space = corrected_space(space, fem_provider(progress=progress, workers=workers, scheduler=scheduler))
     return dataclasses.replace(space, second_order=bool(second_order), breakaway_force=breakaway_force)
-

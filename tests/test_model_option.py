@@ -1,0 +1,81 @@
+"""``--model paper | second-order | consistent`` (issue 24): the calibration commands build the
+model they name (``cli.opening.calibration_model`` -> ``runs.model_correction.model_space``),
+refuse a bad name or a contradicting option in one line, and the form floor says which ran.
+
+The FEM segment provider is replaced by the closed-form one (no FEM cache needed): what is
+checked is which space each name builds, not the FEM's numbers."""
+
+import numpy as np
+import pytest
+
+from flexcal.geometry.params import reference_mechanism
+from flexcal.validation import cli
+from flexcal.validation.cli.opening import calibration_model
+from flexcal.validation.runs.form_floor import model_description, model_name
+
+
+@pytest.fixture
+def closed_form_segments(monkeypatch):
+    """``fem_provider`` -> the analytic segment provider, everywhere ``model_space`` asks for it."""
+    from flexcal.validation.prototype import fem_provider as fem_module
+    from flexcal.validation.prototype.providers import stiffness_provider
+
+    monkeypatch.setattr(fem_module, "fem_provider", lambda **_: stiffness_provider("analytic", progress=False))
+
+
+def _space(*options):
+    args = cli.build_parser(only="verify").parse_args(["verify", "--data", "curves.csv", "--out", "o", *options])
+    return calibration_model(args, reference_mechanism(), progress=False)
+
+
+def test_the_default_is_todays_second_order_model(closed_form_segments):
+    space = _space()
+    assert model_name(space) == "second-order" and space.second_order and space.compliance_factors
+    assert not space.chain_shortening and not space.compliance_slopes and space.breakaway_force is None
+
+
+def test_paper_is_the_papers_model(closed_form_segments):
+    space = _space("--model", "paper")
+    assert model_name(space) == "paper"
+    assert not space.second_order and not space.compliance_factors and not space.chain_shortening
+
+
+def test_consistent_builds_the_consistent_space(closed_form_segments):
+    space = _space("--model", "consistent")
+    assert model_name(space) == "consistent" and space.second_order
+    assert len(space.chain_shortening) == 36 * 6 and np.all(np.isfinite(space.chain_shortening))
+    assert len(space.compliance_slopes) == 40 * 6  # the factors follow the dimensions
+    assert space.breakaway_force == 2.0  # the prototype's default, given
+    assert _space("--model", "consistent", "--breakaway-force", "5").breakaway_force == 5.0
+    assert "(--model consistent)" in model_description(space)
+
+
+def test_closed_form_consistent_is_eq1s_chains_with_their_own_shortening():
+    # no FEM and no prototype code: the factors and the measured shortening correction are left out
+    space = _space("--model", "consistent", "--model-stiffness", "closed-form")
+    assert model_name(space) == "consistent" and not space.compliance_factors and not space.compliance_slopes
+    assert space.chain_shortening == (0.0,) * (36 * 6) and space.breakaway_force == 2.0
+
+
+def test_the_old_options_still_build_the_papers_model(closed_form_segments):
+    space = _space("--model-stiffness", "closed-form", "--no-second-order")
+    assert model_name(space) == "paper"
+
+
+@pytest.mark.parametrize("options, words", [
+    (["--model", "consistant"], ["invalid choice", "consistant"]),
+    (["--model", "consistent", "--no-second-order"], ["consistent model", "--no-second-order"]),
+    (["--breakaway-force", "3"], ["--breakaway-force", "--model consistent"]),
+    (["--model", "consistent", "--breakaway-force", "-1"], ["breakaway_force", ">= 0"]),
+], ids=["bad-name", "no-second-order", "force-without-consistent", "negative-force"])
+def test_a_bad_model_choice_is_one_line_and_exit_2(tmp_path, capsys, closed_form_segments, options, words):
+    from test_bad_input import write_csv
+
+    rows = [f"{k + 1},{k},0,{0.01 * k:.2f},0,0,{k:.1f},{2 * k:.1f},0.5" for k in range(30)]
+    data = write_csv(tmp_path / "curves.csv", rows)
+    out = tmp_path / "out"
+    status = cli.main(["verify", "--data", str(data), "--skip-unit-check", "--out", str(out), "-q", *options])
+    err = capsys.readouterr().err
+    assert status == 2 and len(err.strip().splitlines()) == 1, err
+    assert all(word in err for word in words), err
+    assert not out.exists()

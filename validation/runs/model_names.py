@@ -1,0 +1,18 @@
+"""The calibration models by name (``--model``; docs/cli.md "Which model calibrates"), apart
+from ``model_correction`` so that the command line reads them without importing the model.
+
+- "paper": Eq. 1-8 as written (closed-form chains, no second-order terms);
+- "second-order": today's default, FEM-informed chains with the second-order terms added to
+  the pose (docs/model.md 7-8);
+- "consistent": compliance factors following the dimensions, the chains' measured shortening
+  solved inside the fixed point with the clearance, the clearance's play state
+  (docs/model.md 9-10).
+"""
+
+__all__ = ["MODELS", "DEFAULT_BREAKAWAY_N"]
+
+MODELS = ("paper", "second-order", "consistent")
+# [N] the consistent model's breakaway force when none is given: the virtual prototype's
+# default (validation.prototype.scenario, [transmission] breakaway_force_n). Given, not
+# identified; the form error moves by <= 0.01 urad between 0.5, 2 and 5 N (docs/model.md 9)
+DEFAULT_BREAKAWAY_N = 2.0
