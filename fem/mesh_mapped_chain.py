@@ -9,14 +9,21 @@ grid lines are shared by all pieces, so neighbouring blocks meet on the same nod
 
 - every size is relative to the neck cell t / n of the thinnest leaf (n = elements
   through the neck), so n refines the whole part;
+- a-priori n (``cells_through``): the neck cell is also at most l / (``slenderness`` n),
+  l the leaf's length, so a stubby leaf (small l / t) gets more cells through than the n
+  asked for (the prototype's L leaves, l / t = 5: 8 for n = 6; the D leaves, l / t = 6.7:
+  6). The error of the stiffness at a given n grows as the leaf gets stubbier: it comes
+  from the roots (fillets, blocks, the re-entrant side edges), whose share of the leaf's
+  compliance is about t / l (docs/meshing.md, "Convergence");
 - x lines: in a leaf those of the single-hinge mapper (``mesh_mapped.mapped_grid``: at
   most ``aspect`` neck cells long on the flat part, at least ``n_arc`` cells per fillet
   arc), in a block graded from ``edge_aspect`` neck cells at a leaf face and at the part's
   end faces by ``grading`` per unit distance up to ``max_aspect`` neck cells;
 - y and z lines (the cross-section): across the fillet-to-fillet height t + 2a of the
-  leaves thin along that axis n uniform cells, then graded to ``edge_aspect`` neck cells
+  leaves thin along that axis n uniform cells, then graded to ``side_aspect`` neck cells
   at the side faces of the leaves wide along that axis (at most ``width_aspect`` across
-  the width) and again to the section's rims;
+  the width; where a side face meets a block face, a re-entrant edge, the stress is
+  singular) and to ``edge_aspect`` at the section's rims;
 - each piece keeps the cells inside it: a block all, a leaf those inside its footprint
   (t + 2a by w at its ends).
 
@@ -54,11 +61,13 @@ __all__ = ["ChainGrid", "cells_through", "chain_grid", "chain_mapped_supported",
            "DEFAULT_CHAIN_OPTIONS"]
 
 # The defaults of the chain mapper, chosen by accuracy with n = 6 through the neck
-# (docs/meshing.md, "Mapped chain meshes": every dominant entry of the D1 leaf segments'
-# 12 x 12 within 0.51 % of its Richardson limit, L1's compliant entries within 1.1 %; more
-# cells through the leaf buy more accuracy per DOF than shorter or narrower cells).
+# (docs/meshing.md, "Convergence": every dominant entry of the prototype's L1 and D1 leaf
+# segments' 12 x 12 within 0.49 % of the Richardson limit of a nested reference sequence;
+# with n = 6 for every leaf and side cells of 3 neck cells, L1 was 0.85 % off). slenderness:
+# the a-priori n (``cells_through``); side_aspect: the cells at the leaves' side faces,
+# which bought the most accuracy per DOF of the in-plane sizes tried.
 DEFAULT_CHAIN_OPTIONS = {"aspect": 3.0, "n_arc": 8, "width_aspect": 12.0, "side_aspect": 1.5, "edge_aspect": 3.0,
-                         "grading": 0.5, "max_aspect": 24.0, "slenderness": 6.0}
+                         "grading": 0.5, "max_aspect": 24.0, "slenderness": 6.5}
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -201,7 +210,7 @@ def cells_through(params, n_thickness: int, slenderness: float | None) -> int:
 
 def chain_grid(params, n_thickness: int, *, aspect: float = 3.0, n_arc: int = 8, width_aspect: float = 12.0,
                side_aspect: float = 1.5, edge_aspect: float = 3.0, grading: float = 0.5, max_aspect: float = 24.0,
-               slenderness: float | None = 6.0, refinement: int = 1) -> ChainGrid:
+               slenderness: float | None = 6.5, refinement: int = 1) -> ChainGrid:
     """The parent grid of a chain or segment (module docstring).
 
     n_thickness: cells across every leaf's core (so across t at its neck), raised by

@@ -21,12 +21,12 @@ def _segment(name: str, k: int) -> ChainSegment:
 
 def test_stubby_leaves_get_more_cells_through():
     # the a-priori n: neck cell t / n at most l / (slenderness n). D1's leaves (l / t = 6.7)
-    # are slender enough for n; L1's (l / t = 5) get n * 6 / 5 rounded up
-    assert [cells_through(_segment("D1", 0), n, 6.0) for n in (2, 4, 6, 8)] == [2, 4, 6, 8]
-    assert [cells_through(_segment("L1", 0), n, 6.0) for n in (2, 4, 6, 8)] == [3, 5, 8, 10]
+    # are slender enough for n; L1's (l / t = 5) get n * 6.5 / 5 rounded up
+    assert [cells_through(_segment("D1", 0), n, 6.5) for n in (2, 4, 6, 8)] == [2, 4, 6, 8]
+    assert [cells_through(_segment("L1", 0), n, 6.5) for n in (2, 4, 6, 8)] == [3, 6, 8, 11]
     assert cells_through(_segment("L1", 0), 6, None) == 6  # None: n as given (nested studies)
     strut = _segment("L1", 2)  # no leaf: n as given
-    assert cells_through(strut, 6, 6.0) == 6
+    assert cells_through(strut, 6, 6.5) == 6
     with pytest.raises(ValueError, match="slenderness"):
         cells_through(_segment("L1", 0), 6, 0.0)
     # the default grid of L1 has 8 cells across the core t + 2a of its leaf 1
