@@ -2,6 +2,7 @@
 every dominant entry of the prototype's leaf segments within 0.5 % of a converged reference
 (docs/meshing.md, "Convergence")."""
 
+import functools
 import math
 
 import numpy as np
@@ -70,12 +71,10 @@ def _stiffness(segment: ChainSegment, **mesh_options) -> np.ndarray:
 REFERENCE = dict(elements_through_thickness=2, side_aspect=3.0, slenderness=None)
 
 
-@pytest.mark.slow
-@pytest.mark.parametrize("name, k", [("L1", 0), ("L1", 1), ("D1", 0), ("D1", 1)],
-                         ids=["L1 leaf 1", "L1 leaf 2", "D1 leaf 1", "D1 leaf 2"])
-def test_default_mesh_within_half_a_percent_of_the_converged_stiffness(name, k):
-    """The issue's goal: every dominant entry of the default mesh's 12 x 12 within 0.5 % of
-    the Richardson limit of a nested sequence of another grid family."""
+@functools.lru_cache(maxsize=None)
+def _reference(name: str, k: int):
+    """(Richardson limit (12, 12) [SI], dominant-entry mask) of the nested sequence, after
+    checking that it is one: monotone from above at a rate of its own."""
     from flexcal.fem.convergence import dominant_entries, richardson
     from flexcal.validation.reports.fem import DOMINANT_FRACTION
 
@@ -92,7 +91,32 @@ def test_default_mesh_within_half_a_percent_of_the_converged_stiffness(name, k):
     # rate >= 1.2: the re-entrant edges' r^-0.46 stresses give ~1.1 under uniform
     # refinement, the smooth part 4 (P2); measured 1.44-2.93
     assert np.all(fit.rate[mask][monotone] > 1.2)
-    default = _stiffness(segment)  # what the segment provider builds
-    error = np.abs(default - fit.limit)[mask] / np.abs(fit.limit[mask])
-    assert error.max() < 0.005, f"largest error {100 * error.max():.3f} % of a dominant entry"
-    assert math.isfinite(error.max())
+    return fit.limit, mask
+
+
+def _largest_error(name: str, k: int, **mesh_options) -> float:
+    """Largest relative error [-] of a dominant entry of the mesh's 12 x 12 against the
+    nested reference."""
+    limit, mask = _reference(name, k)
+    stiffness = _stiffness(_segment(name, k), **mesh_options)
+    error = float((np.abs(stiffness - limit)[mask] / np.abs(limit[mask])).max())
+    assert math.isfinite(error)
+    return error
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name, k", [("L1", 0), ("L1", 1), ("D1", 0), ("D1", 1)],
+                         ids=["L1 leaf 1", "L1 leaf 2", "D1 leaf 1", "D1 leaf 2"])
+def test_default_mesh_within_half_a_percent_of_the_converged_stiffness(name, k):
+    """The issue's goal: every dominant entry of the default mesh's 12 x 12 (what the
+    segment provider builds) within 0.5 % of the Richardson limit of a nested sequence of
+    another grid family (measured: L1 0.486 % and 0.325 %)."""
+    error = _largest_error(name, k)
+    assert error < 0.005, f"largest error {100 * error:.3f} % of a dominant entry"
+
+
+@pytest.mark.slow
+def test_the_former_defaults_missed_it_on_the_stubby_leaf():
+    # that the check above can fail: session 13's defaults (6 through for every leaf, side
+    # cells of 3 neck cells) left L1's leaf-1 segment 0.85 % off (measured 0.848 %)
+    assert _largest_error("L1", 0, side_aspect=3.0, slenderness=None) > 0.005
