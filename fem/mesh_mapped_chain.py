@@ -11,8 +11,8 @@ grid lines are shared by all pieces, so neighbouring blocks meet on the same nod
   through the neck), so n refines the whole part;
 - a-priori n (``cells_through``): the neck cell is also at most l / (``slenderness`` n),
   l the leaf's length, so a stubby leaf (small l / t) gets more cells through than the n
-  asked for (the prototype's L leaves, l / t = 5: 8 for n = 6; the D leaves, l / t = 6.7:
-  6). The error of the stiffness at a given n grows as the leaf gets stubbier: it comes
+  asked for (the prototype's L leaves, l / t = 5: 8 for n = 7; the D leaves, l / t = 6.7:
+  7). The error of the stiffness at a given n grows as the leaf gets stubbier: it comes
   from the roots (fillets, blocks, the re-entrant side edges), whose share of the leaf's
   compliance is about t / l (docs/meshing.md, "Convergence");
 - x lines: in a leaf those of the single-hinge mapper (``mesh_mapped.mapped_grid``: at
@@ -60,14 +60,15 @@ from .structured import _EDGES, _folded_tets, _straighten, grid_tet_mesh
 __all__ = ["ChainGrid", "cells_through", "chain_grid", "chain_mapped_supported", "mapped_mesh_chain",
            "DEFAULT_CHAIN_OPTIONS"]
 
-# The defaults of the chain mapper, chosen by accuracy with n = 6 through the neck
+# The defaults of the chain mapper, chosen by accuracy with n = 7 through the neck
 # (docs/meshing.md, "Convergence": against the Richardson limit of a nested reference
-# sequence, every dominant entry of the prototype's L1 leaf segments' 12 x 12 within
-# 0.49 %, was 0.85 %; D1's within 0.56 %, was 0.61 %, still short of the 0.5 % goal).
-# slenderness: the a-priori n (``cells_through``); side_aspect: the cells at the leaves'
-# side faces, which bought the most accuracy per DOF of the in-plane sizes tried on L1.
+# sequence, every dominant entry of the prototype's L1 and D1 leaf segments' 12 x 12 within
+# 0.49 %; with n = 6 for every leaf and side cells of 3 neck cells, session 13's, 0.85 % and
+# 0.61 %). slenderness: the a-priori n (``cells_through``: 8 through on the L leaves, l / t
+# = 5; 7 on the D leaves, l / t = 6.7); side_aspect: the cells at the leaves' side faces,
+# which bought the most accuracy per DOF of the in-plane sizes tried on L1.
 DEFAULT_CHAIN_OPTIONS = {"aspect": 3.0, "n_arc": 8, "width_aspect": 12.0, "side_aspect": 1.5, "edge_aspect": 3.0,
-                         "grading": 0.5, "max_aspect": 24.0, "slenderness": 6.5}
+                         "grading": 0.5, "max_aspect": 24.0, "slenderness": 5.5}
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -210,7 +211,7 @@ def cells_through(params, n_thickness: int, slenderness: float | None) -> int:
 
 def chain_grid(params, n_thickness: int, *, aspect: float = 3.0, n_arc: int = 8, width_aspect: float = 12.0,
                side_aspect: float = 1.5, edge_aspect: float = 3.0, grading: float = 0.5, max_aspect: float = 24.0,
-               slenderness: float | None = 6.5, refinement: int = 1) -> ChainGrid:
+               slenderness: float | None = 5.5, refinement: int = 1) -> ChainGrid:
     """The parent grid of a chain or segment (module docstring).
 
     n_thickness: cells across every leaf's core (so across t at its neck), raised by
@@ -288,7 +289,7 @@ def _quadratic_mesh(grid: ChainGrid) -> tuple[np.ndarray, np.ndarray, np.ndarray
     return full.nodes[order], new[tets], np.arange(len(corners))
 
 
-def mapped_mesh_chain(params, *, elements_through_thickness: float = 6, refinement: int = 1,
+def mapped_mesh_chain(params, *, elements_through_thickness: float = 7, refinement: int = 1,
                       measure: bool = True, **options) -> tuple[TetMesh, MeshReport]:
     """Mapped quadratic tet mesh of a chain or chain segment (parameters, not a CAD solid)
     and its report (as ``mesh_part``). Options as ``chain_grid`` (defaults

@@ -22,16 +22,18 @@ def _segment(name: str, k: int) -> ChainSegment:
 
 def test_stubby_leaves_get_more_cells_through():
     # the a-priori n: neck cell t / n at most l / (slenderness n). D1's leaves (l / t = 6.7)
-    # are slender enough for n; L1's (l / t = 5) get n * 6.5 / 5 rounded up
-    assert [cells_through(_segment("D1", 0), n, 6.5) for n in (2, 4, 6, 8)] == [2, 4, 6, 8]
-    assert [cells_through(_segment("L1", 0), n, 6.5) for n in (2, 4, 6, 8)] == [3, 6, 8, 11]
-    assert cells_through(_segment("L1", 0), 6, None) == 6  # None: n as given (nested studies)
+    # are slender enough for n; L1's (l / t = 5) get n * 5.5 / 5 rounded up
+    slenderness = DEFAULT_CHAIN_OPTIONS["slenderness"]
+    assert slenderness == 5.5
+    assert [cells_through(_segment("D1", 0), n, slenderness) for n in (2, 4, 6, 7, 8)] == [2, 4, 6, 7, 8]
+    assert [cells_through(_segment("L1", 0), n, slenderness) for n in (2, 4, 6, 7, 8)] == [3, 5, 7, 8, 9]
+    assert cells_through(_segment("L1", 0), 7, None) == 7  # None: n as given (nested studies)
     strut = _segment("L1", 2)  # no leaf: n as given
-    assert cells_through(strut, 6, 6.5) == 6
+    assert cells_through(strut, 7, slenderness) == 7
     with pytest.raises(ValueError, match="slenderness"):
-        cells_through(_segment("L1", 0), 6, 0.0)
-    # the default grid of L1 has 8 cells across the core t + 2a of its leaf 1
-    grid = chain_grid(_segment("L1", 0), 6, **DEFAULT_CHAIN_OPTIONS)
+        cells_through(_segment("L1", 0), 7, 0.0)
+    # the default grid (n = 7 asked for) of L1 has 8 cells across the core t + 2a of its leaf 1
+    grid = chain_grid(_segment("L1", 0), 7, **DEFAULT_CHAIN_OPTIONS)
     core = CHAINS["L1"].thickness_1 + 2 * CHAINS["L1"].fillet
     assert np.count_nonzero(np.abs(grid.p) < 0.5 * core * (1 - 1e-9)) + 1 == 8
 
@@ -104,21 +106,16 @@ def _largest_error(name: str, k: int, **mesh_options) -> float:
     return error
 
 
-# D1's leaf segments are still short of the goal (docs/meshing.md, "Convergence": D1
-# [0, m1] 0.557 % at the default, K[ryA,ryB]; 8 through would give 0.42 % at 1.3x the DOF):
-# strict, so that the test says when a change reaches it
-_D1_SHORT = pytest.mark.xfail(strict=True, reason="D1 leaf segments 0.56 % at the default (issue #26, still short)")
-
-
 @pytest.mark.slow
-@pytest.mark.parametrize("name, k", [("L1", 0), ("L1", 1), pytest.param("D1", 0, marks=_D1_SHORT),
-                                     pytest.param("D1", 1, marks=_D1_SHORT)],
+@pytest.mark.parametrize("name, k", [("L1", 0), ("L1", 1), ("D1", 0), ("D1", 1)],
                          ids=["L1 leaf 1", "L1 leaf 2", "D1 leaf 1", "D1 leaf 2"])
 def test_default_mesh_within_half_a_percent_of_the_converged_stiffness(name, k):
     """The issue's goal: every dominant entry of the default mesh's 12 x 12 (what the
     segment provider builds) within 0.5 % of the Richardson limit of a nested sequence of
-    another grid family (measured: L1 0.486 % and 0.325 %; D1 0.557 %, still short)."""
-    error = _largest_error(name, k)
+    another grid family (measured: L1 0.486 % and 0.325 %, D1 0.419 % and D1SEG1TEST)."""
+    from flexcal.validation.prototype.fem_provider import DEFAULT_ELEMENTS_THROUGH
+
+    error = _largest_error(name, k, elements_through_thickness=DEFAULT_ELEMENTS_THROUGH)
     assert error < 0.005, f"largest error {100 * error:.3f} % of a dominant entry"
 
 
@@ -126,4 +123,4 @@ def test_default_mesh_within_half_a_percent_of_the_converged_stiffness(name, k):
 def test_the_former_defaults_missed_it_on_the_stubby_leaf():
     # that the check above can fail: session 13's defaults (6 through for every leaf, side
     # cells of 3 neck cells) left L1's leaf-1 segment 0.85 % off (measured 0.848 %)
-    assert _largest_error("L1", 0, side_aspect=3.0, slenderness=None) > 0.005
+    assert _largest_error("L1", 0, elements_through_thickness=6, side_aspect=3.0, slenderness=None) > 0.005

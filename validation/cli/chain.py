@@ -21,7 +21,7 @@ EXAMPLES = (
     "flexcal chain --mount my.mount.toml --reference L2 --out runs/chain-l2   # a chain of your mount",
     "flexcal report runs/chain-d1",
 )
-DEFAULT_CONFIG = {"elements_through": 6.0, "mesher": "mapped"}
+DEFAULT_CONFIG = {"elements_through": 7.0, "mesher": "mapped"}
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
