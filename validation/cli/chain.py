@@ -40,8 +40,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--section-mm", type=float, help="square section of blocks and strut [mm] (default 50)")
     parser.add_argument("--elements-through", type=float,
                         help="quadratic tets through the thinnest leaf (default %(default)s: every dominant "
-                             "stiffness entry of a leaf segment within ~0.5 %% of converged with the mapped mesher, "
-                             "docs/meshing.md)")
+                             "stiffness entry of the prototype's leaf segments within 0.5 %% of converged with the mapped "
+                             "mesher, which raises it for stubby leaves; docs/meshing.md)")
     parser.add_argument("--mesher", choices=("mapped", "tetwild"),
                         help="mapped multi-block mesh (default %(default)s: the same mesh on every machine) or "
                              "fTetWild")
