@@ -117,7 +117,13 @@ def main() -> None:
     mapped = np.array(mapped)
     tetwild = np.array([_cached(folder, f"tetwild_{stem}_n{n:g}", lambda: stiffness(part, "tetwild", n))
                         for n in args.tetwild])
-    default = _cached(folder, f"default_{stem}", lambda: stiffness(part, "mapped", 6)) if args.default else None
+    if args.default:
+        from flexcal.validation.prototype.fem_provider import DEFAULT_ELEMENTS_THROUGH
+
+        default = _cached(folder, f"default{DEFAULT_ELEMENTS_THROUGH:g}_{stem}",
+                          lambda: stiffness(part, "mapped", DEFAULT_ELEMENTS_THROUGH))
+    else:
+        default = None
     fit = richardson(1.0 / np.array(args.levels), mapped)
     mask = np.triu(dominant_entries(mapped[-1], DOMINANT_FRACTION))
     reference = spread = None
