@@ -105,7 +105,7 @@ def main() -> None:
     os.chdir(folder)  # fTetWild writes its scratch files into the working directory
     part = _part(args.chain, args.segment)
     stem = f"{args.chain}_{args.segment}"
-    suffix = "".join(f"_{k}{v:g}" for k, v in sorted(options.items()))
+    suffix = "".join(f"_{k}{v}" for k, v in sorted(options.items()))
     mapped = []
     for level in args.levels:
         if args.nested:
