@@ -112,7 +112,7 @@ def _largest_error(name: str, k: int, **mesh_options) -> float:
 def test_default_mesh_within_half_a_percent_of_the_converged_stiffness(name, k):
     """The issue's goal: every dominant entry of the default mesh's 12 x 12 (what the
     segment provider builds) within 0.5 % of the Richardson limit of a nested sequence of
-    another grid family (measured: L1 0.486 % and 0.325 %, D1 0.419 % and D1SEG1TEST)."""
+    another grid family (measured: L1 0.486 % and 0.325 %, D1 0.419 % and 0.367 %)."""
     from flexcal.validation.prototype.fem_provider import DEFAULT_ELEMENTS_THROUGH
 
     error = _largest_error(name, k, elements_through_thickness=DEFAULT_ELEMENTS_THROUGH)
