@@ -292,8 +292,9 @@ def _quadratic_mesh(grid: ChainGrid) -> tuple[np.ndarray, np.ndarray, np.ndarray
 def mapped_mesh_chain(params, *, elements_through_thickness: float = 7, refinement: int = 1,
                       measure: bool = True, **options) -> tuple[TetMesh, MeshReport]:
     """Mapped quadratic tet mesh of a chain or chain segment (parameters, not a CAD solid)
-    and its report (as ``mesh_part``). Options as ``chain_grid`` (defaults
-    ``DEFAULT_CHAIN_OPTIONS``). ``measure=False`` skips the boundary measurements of
+    and its report (as ``mesh_part``). elements_through_thickness: n asked for, raised for
+    stubby leaves (``cells_through``; the report's ``cells_through`` says what was used).
+    Options as ``chain_grid`` (defaults ``DEFAULT_CHAIN_OPTIONS``). ``measure=False`` skips the boundary measurements of
     ``snap_to_part`` (the report then has NaN there); the mesh is the same.
     Raises ValueError for a part it cannot map or bad options.
     """
