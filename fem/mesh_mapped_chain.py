@@ -9,14 +9,21 @@ grid lines are shared by all pieces, so neighbouring blocks meet on the same nod
 
 - every size is relative to the neck cell t / n of the thinnest leaf (n = elements
   through the neck), so n refines the whole part;
+- a-priori n (``cells_through``): the neck cell is also at most l / (``slenderness`` n),
+  l the leaf's length, so a stubby leaf (small l / t) gets more cells through than the n
+  asked for (the prototype's L leaves, l / t = 5: 8 for n = 7; the D leaves, l / t = 6.7:
+  7). The error of the stiffness at a given n grows as the leaf gets stubbier: it comes
+  from the roots (fillets, blocks, the re-entrant side edges), whose share of the leaf's
+  compliance is about t / l (docs/meshing.md, "Convergence");
 - x lines: in a leaf those of the single-hinge mapper (``mesh_mapped.mapped_grid``: at
   most ``aspect`` neck cells long on the flat part, at least ``n_arc`` cells per fillet
   arc), in a block graded from ``edge_aspect`` neck cells at a leaf face and at the part's
   end faces by ``grading`` per unit distance up to ``max_aspect`` neck cells;
 - y and z lines (the cross-section): across the fillet-to-fillet height t + 2a of the
-  leaves thin along that axis n uniform cells, then graded to ``edge_aspect`` neck cells
+  leaves thin along that axis n uniform cells, then graded to ``side_aspect`` neck cells
   at the side faces of the leaves wide along that axis (at most ``width_aspect`` across
-  the width) and again to the section's rims;
+  the width; where a side face meets a block face, a re-entrant edge, the stress is
+  singular) and to ``edge_aspect`` at the section's rims;
 - each piece keeps the cells inside it: a block all, a leaf those inside its footprint
   (t + 2a by w at its ends).
 
@@ -50,14 +57,18 @@ from .mesh import MeshReport, TetMesh
 from .mesh_snap import _jacobian_ratios, snap_to_part
 from .structured import _EDGES, _folded_tets, _straighten, grid_tet_mesh
 
-__all__ = ["ChainGrid", "chain_grid", "chain_mapped_supported", "mapped_mesh_chain", "DEFAULT_CHAIN_OPTIONS"]
+__all__ = ["ChainGrid", "cells_through", "chain_grid", "chain_mapped_supported", "mapped_mesh_chain",
+           "DEFAULT_CHAIN_OPTIONS"]
 
-# The defaults of the chain mapper, chosen by accuracy with n = 6 through the neck
-# (docs/meshing.md, "Mapped chain meshes": every dominant entry of the D1 leaf segments'
-# 12 x 12 within 0.51 % of its Richardson limit, L1's compliant entries within 1.1 %; more
-# cells through the leaf buy more accuracy per DOF than shorter or narrower cells).
-DEFAULT_CHAIN_OPTIONS = {"aspect": 3.0, "n_arc": 8, "width_aspect": 12.0, "edge_aspect": 3.0, "grading": 0.5,
-                         "max_aspect": 24.0}
+# The defaults of the chain mapper, chosen by accuracy with n = 7 through the neck
+# (docs/meshing.md, "Convergence": against the Richardson limit of a nested reference
+# sequence, every dominant entry of the prototype's L1 and D1 leaf segments' 12 x 12 within
+# 0.49 %; with n = 6 for every leaf and side cells of 3 neck cells, session 13's, 0.85 % and
+# 0.61 %). slenderness: the a-priori n (``cells_through``: 8 through on the L leaves, l / t
+# = 5; 7 on the D leaves, l / t = 6.7); side_aspect: the cells at the leaves' side faces,
+# which bought the most accuracy per DOF of the in-plane sizes tried on L1.
+DEFAULT_CHAIN_OPTIONS = {"aspect": 3.0, "n_arc": 8, "width_aspect": 12.0, "side_aspect": 1.5, "edge_aspect": 3.0,
+                         "grading": 0.5, "max_aspect": 24.0, "slenderness": 5.5}
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -119,12 +130,12 @@ def _graded(a: float, b: float, h_a: float | None, h_b: float | None, grading: f
 
 
 def _section_lines(axis: int, leaves: list[LeafPiece], half_section: float, n: int, width_cell: float,
-                   edge_cell: float, grading: float, h_max: float) -> tuple[np.ndarray, float | None]:
+                   side_cell: float, edge_cell: float, grading: float, h_max: float) -> tuple[np.ndarray, float | None]:
     """Cross-section lines along ``axis`` (1 = y, 2 = z) [m], symmetric, and the half core
     height [m] (None when no leaf is thin along this axis): n uniform cells across the core
     t + 2a of the leaves thin along this axis, then graded towards the side faces of the
-    leaves wide along it (cells of a neck cell t / n there: where a side face meets a block
-    face the stress is singular) and out to the section."""
+    leaves wide along it (cells of ``side_cell`` there: where a side face meets a block
+    face the stress is singular) and out to the section (``edge_cell`` at its rims)."""
     thin = [leaf for leaf in leaves if leaf.thin_axis == axis]
     wide = [leaf for leaf in leaves if leaf.width_axis == axis]
     core = None
@@ -146,12 +157,11 @@ def _section_lines(axis: int, leaves: list[LeafPiece], half_section: float, n: i
         positive, reach, size = [], 0.0, None
     if wide:
         half_width = max(leaf.half_width for leaf in wide)
-        edge = edge_cell
         if half_width > reach * (1 + 1e-9):
-            lines = _graded(reach, half_width, size, edge, grading, width_cell)
+            lines = _graded(reach, half_width, size, side_cell, grading, width_cell)
             positive.append(lines[1:])
             reach = half_width
-        size = edge
+        size = side_cell
     if half_section > reach * (1 + 1e-9):  # graded towards the section's edges too (the end faces' rims)
         positive.append(_graded(reach, half_section, size, edge_cell, grading, h_max)[1:])
     half = np.concatenate(positive)
@@ -182,14 +192,35 @@ def _refine(lines: np.ndarray, r: int) -> np.ndarray:
     return np.concatenate([inner, lines[-1:]])
 
 
+def cells_through(params, n_thickness: int, slenderness: float | None) -> int:
+    """Cells across the thinnest leaf's neck for ``n_thickness`` requested [-]: n, or more
+    where a leaf is stubbier than ``slenderness`` (length l / thickness t): the neck cell
+    t / n is at most l / (slenderness n) for every leaf (module docstring, "a-priori n").
+    None: n as given. A part without leaves: n."""
+    n = int(n_thickness)
+    leaves = _leaves(params)
+    if slenderness is None or not leaves:
+        return n
+    if not (math.isfinite(slenderness) and slenderness > 0):
+        raise ValueError(f"slenderness={slenderness!r} must be > 0 (or None to take n as given)")
+    cell = min(min(leaf.thickness for leaf in leaves) / n,
+               min(leaf.x1 - leaf.x0 for leaf in leaves) / (slenderness * n))
+    # 1e-9: t / cell is n exactly (to round-off) when no leaf is stubbier than the bound
+    return max(n, math.ceil(min(leaf.thickness for leaf in leaves) / cell - 1e-9))
+
+
 def chain_grid(params, n_thickness: int, *, aspect: float = 3.0, n_arc: int = 8, width_aspect: float = 12.0,
-               edge_aspect: float = 3.0, grading: float = 0.5, max_aspect: float = 24.0, refinement: int = 1) -> ChainGrid:
+               side_aspect: float = 1.5, edge_aspect: float = 3.0, grading: float = 0.5, max_aspect: float = 24.0,
+               slenderness: float | None = 5.5, refinement: int = 1) -> ChainGrid:
     """The parent grid of a chain or segment (module docstring).
 
-    n_thickness: cells across every leaf's core (so across t at its neck); aspect: leaf
-    cell length / neck cell height on the flat part; n_arc: least cells per fillet arc;
-    width_aspect: leaf cell width / neck cell height across the width (the thinnest leaf);
-    edge_aspect: cell width at the leaves' side faces / neck cell height;
+    n_thickness: cells across every leaf's core (so across t at its neck), raised by
+    ``cells_through`` for leaves stubbier than ``slenderness`` (l / t; None: n as given);
+    aspect: leaf cell length / neck cell height on the flat part; n_arc: least cells per
+    fillet arc; width_aspect: leaf cell width / neck cell height across the width (the
+    thinnest leaf); side_aspect: cell width at the leaves' side faces / neck cell height
+    (the re-entrant edges where they meet the blocks); edge_aspect: the same at the blocks'
+    faces next to a leaf, the part's end faces and the section's rims;
     grading: growth of the cell size per unit distance away from the leaves, the end faces
     and the section's edges [-]; max_aspect: largest cell / neck cell (at most half the
     section); refinement: every cell split
@@ -197,7 +228,7 @@ def chain_grid(params, n_thickness: int, *, aspect: float = 3.0, n_arc: int = 8,
     """
     if not chain_mapped_supported(params):
         raise ValueError(f"the chain mapper takes a FlexureChain or ChainSegment of leaves, got {type(params).__name__}")
-    n = int(n_thickness)
+    n = cells_through(params, n_thickness, slenderness)
     ps = pieces(params)
     leaves = _leaves(params)
     half_section = max(max(p.half_y, p.half_z) for p in ps if isinstance(p, BoxPiece))
@@ -207,8 +238,9 @@ def chain_grid(params, n_thickness: int, *, aspect: float = 3.0, n_arc: int = 8,
     h_max = min(max_aspect * cell, half_section)
     width_cell = min(width_aspect * cell, h_max)
     edge_cell = min(edge_aspect * cell, h_max)
-    p, core_y = _section_lines(1, leaves, half_section, n, width_cell, edge_cell, grading, h_max)
-    q, core_z = _section_lines(2, leaves, half_section, n, width_cell, edge_cell, grading, h_max)
+    side_cell = min(side_aspect * cell, h_max)
+    p, core_y = _section_lines(1, leaves, half_section, n, width_cell, side_cell, edge_cell, grading, h_max)
+    q, core_z = _section_lines(2, leaves, half_section, n, width_cell, side_cell, edge_cell, grading, h_max)
     # x: leaves as the hinge mapper, blocks graded away from the leaf faces
     x_parts: list[np.ndarray] = []
     for i, piece in enumerate(ps):
@@ -257,11 +289,12 @@ def _quadratic_mesh(grid: ChainGrid) -> tuple[np.ndarray, np.ndarray, np.ndarray
     return full.nodes[order], new[tets], np.arange(len(corners))
 
 
-def mapped_mesh_chain(params, *, elements_through_thickness: float = 6, refinement: int = 1,
+def mapped_mesh_chain(params, *, elements_through_thickness: float = 7, refinement: int = 1,
                       measure: bool = True, **options) -> tuple[TetMesh, MeshReport]:
     """Mapped quadratic tet mesh of a chain or chain segment (parameters, not a CAD solid)
-    and its report (as ``mesh_part``). Options as ``chain_grid`` (defaults
-    ``DEFAULT_CHAIN_OPTIONS``). ``measure=False`` skips the boundary measurements of
+    and its report (as ``mesh_part``). elements_through_thickness: n asked for, raised for
+    stubby leaves (``cells_through``; the report's ``cells_through`` says what was used).
+    Options as ``chain_grid`` (defaults ``DEFAULT_CHAIN_OPTIONS``). ``measure=False`` skips the boundary measurements of
     ``snap_to_part`` (the report then has NaN there); the mesh is the same.
     Raises ValueError for a part it cannot map or bad options.
     """
@@ -293,13 +326,14 @@ def mapped_mesh_chain(params, *, elements_through_thickness: float = 6, refineme
     mesh = TetMesh(nodes, tets)
     timings["map"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    measured = _measure(params, mesh, corners, n) if measure else _unmeasured(params, mesh, len(corners))
+    measured = _measure(params, mesh, corners, cells_through(params, n, settings["slenderness"])) if measure else _unmeasured(params, mesh, len(corners))
     measured.update(min_jacobian_ratio=float(_jacobian_ratios(mesh.nodes, mesh.tets).min()), n_straight_mid=n_straight)
     timings["measure"] = time.perf_counter() - t0
     timings["cpu"] = time.process_time() - cpu0
     report = MeshReport(
         n_nodes=mesh.n_nodes, n_tets=mesh.n_tets, epsilon=0.0, n_retries=0, retry_reasons=(),
         options=dict(mesher="mapped", elements_through_thickness=float(n), refinement=int(refinement), **settings,
+                     cells_through=cells_through(params, n, settings["slenderness"]),
                      n_cells=[len(grid.x) - 1, len(grid.p) - 1, len(grid.q) - 1], n_hexes=int(grid.active.sum())),
         timings=timings, **measured)
     return mesh, report

@@ -21,7 +21,7 @@ EXAMPLES = (
     "flexcal chain --mount my.mount.toml --reference L2 --out runs/chain-l2   # a chain of your mount",
     "flexcal report runs/chain-d1",
 )
-DEFAULT_CONFIG = {"elements_through": 6.0, "mesher": "mapped"}
+DEFAULT_CONFIG = {"elements_through": 7.0, "mesher": "mapped"}
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -40,8 +40,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--section-mm", type=float, help="square section of blocks and strut [mm] (default 50)")
     parser.add_argument("--elements-through", type=float,
                         help="quadratic tets through the thinnest leaf (default %(default)s: every dominant "
-                             "stiffness entry of a leaf segment within ~0.5 %% of converged with the mapped mesher, "
-                             "docs/meshing.md)")
+                             "stiffness entry of the prototype's leaf segments within 0.5 %% of converged with the mapped "
+                             "mesher, which raises it for stubby leaves; docs/meshing.md)")
     parser.add_argument("--mesher", choices=("mapped", "tetwild"),
                         help="mapped multi-block mesh (default %(default)s: the same mesh on every machine) or "
                              "fTetWild")
