@@ -58,7 +58,7 @@ from .mesh_snap import _jacobian_ratios, snap_to_part
 from .structured import _EDGES, _folded_tets, _straighten, grid_tet_mesh
 
 __all__ = ["ChainGrid", "cells_through", "chain_grid", "chain_mapped_supported", "mapped_mesh_chain",
-           "DEFAULT_CHAIN_OPTIONS"]
+           "DEFAULT_CHAIN_OPTIONS", "FAST_CHAIN_OPTIONS"]
 
 # The defaults of the chain mapper, chosen by accuracy with n = 7 through the neck
 # (docs/meshing.md, "Convergence": against the Richardson limit of a nested reference
@@ -69,6 +69,14 @@ __all__ = ["ChainGrid", "cells_through", "chain_grid", "chain_mapped_supported",
 # which bought the most accuracy per DOF of the in-plane sizes tried on L1.
 DEFAULT_CHAIN_OPTIONS = {"aspect": 3.0, "n_arc": 8, "width_aspect": 12.0, "side_aspect": 1.5, "edge_aspect": 3.0,
                          "grading": 0.5, "max_aspect": 24.0, "slenderness": 5.5}
+# The grid of the virtual prototype's segments and the structure assessment (session 13's:
+# n as given, side cells of 3 neck cells), used at n = 6: L1's leaf segments within 0.85 %
+# of the nested limit, D1's 0.61 % (docs/meshing.md, "Convergence"), at a third of the CPU
+# of the accurate default (cold `flexcal truth --scenario table1` 54 s against 162 s CPU).
+# The prototype keeps it because the calibration model's FEM factors come from the same
+# segments (the mesh error is in both) and Table 1 does not move between the two grids
+# (seed 1: 0.03 standard errors), while the cold main job would take ~3x longer.
+FAST_CHAIN_OPTIONS = {**DEFAULT_CHAIN_OPTIONS, "side_aspect": 3.0, "slenderness": None}
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)

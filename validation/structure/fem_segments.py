@@ -73,10 +73,11 @@ def _check_mesher(mesher: str) -> None:
 def _mesh(segment: ChainSegment, elements_through: float, mesher: str, threads: int):
     """(mesh, end planes, reference points) of the segment."""
     if mesher == "mapped":
-        from flexcal.fem.mesh_mapped_chain import mapped_mesh_chain
+        from flexcal.fem.mesh_mapped_chain import FAST_CHAIN_OPTIONS, mapped_mesh_chain
         from flexcal.geometry.exact import end_planes, reference_points
 
-        mesh, _ = mapped_mesh_chain(segment, elements_through_thickness=elements_through, measure=False)
+        mesh, _ = mapped_mesh_chain(segment, elements_through_thickness=elements_through, measure=False,
+                                    **FAST_CHAIN_OPTIONS)  # session 13's grid (docs/structure.md figures)
         return mesh, end_planes(segment), reference_points(segment)
     from flexcal.fem.mesh import mesh_part
     from flexcal.geometry.solids import segment_solid
@@ -110,7 +111,9 @@ def _parts(segment: ChainSegment, material: Material, elements_through: float, m
     entry), so its cached segments stay valid."""
     mesh: dict[str, Any] = {"elements_through_thickness": float(elements_through)}
     if mesher != "tetwild":
-        mesh = {"mesher": mesher, **mesh}
+        from flexcal.fem.mesh_mapped_chain import FAST_CHAIN_OPTIONS
+
+        mesh = {"mesher": mesher, **mesh, "options": FAST_CHAIN_OPTIONS}
     return {"kind": "structure_segment", "layout": 2, "segment": segment, "material": material, "mesh": mesh}
 
 
