@@ -96,7 +96,7 @@ def check_n_base(n_base: int, *, name: str = "n_base") -> None:
     and the next power of two."""
     if n_base < 2 or n_base & (n_base - 1):
         suggestion = 1 << (max(n_base, 2) - 1).bit_length()
-        raise ValueError(f"{name}={n_base} must be a power of two (e.g. {suggestion}; the paper's 500 -> 512): "
+        raise ValueError(f"{name}={n_base} must be a power of two (e.g. {suggestion}): "
                          "the Sobol sequence loses its balance otherwise")
 
 

@@ -8,7 +8,7 @@ import pytest
 
 from flexcal.validation import cli
 
-REFUSAL = "must be a power of two (e.g. 512; the paper's 500 -> 512)"
+REFUSAL = "must be a power of two (e.g. 512): the Sobol sequence loses its balance otherwise"
 SCENARIO = ["--scenario", "table1", "--provider", "analytic", "--model-stiffness", "closed-form"]
 
 
