@@ -27,6 +27,7 @@ __all__ = [
     "ranked_table",
     "format_ranked_table",
     "select_parameters",
+    "check_n_base",
 ]
 
 Evaluate = Callable[[np.ndarray], np.ndarray]
@@ -89,9 +90,13 @@ def make_problem(problem_or_bounds, names: Sequence[str] | None = None) -> dict:
     return {"num_vars": d, "names": list(names), "bounds": bounds.tolist()}
 
 
-def _check_n_base(n_base: int) -> None:
+def check_n_base(n_base: int, *, name: str = "n_base") -> None:
+    """The one rule on Sobol's base sample N (``sobol_indices``, ``--sobol-n``, a sweep's
+    ``[identification] sobol_n``): a power of two >= 2, else one ValueError naming ``name``
+    and the next power of two."""
     if n_base < 2 or n_base & (n_base - 1):
-        raise ValueError(f"n_base={n_base} must be a power of two (e.g. 512 instead of the paper's 500): "
+        suggestion = 1 << (max(n_base, 2) - 1).bit_length()
+        raise ValueError(f"{name}={n_base} must be a power of two (e.g. {suggestion}): "
                          "the Sobol sequence loses its balance otherwise")
 
 
@@ -156,7 +161,7 @@ def sobol_indices(evaluate: Evaluate, problem_or_bounds, n_base: int = 512, *, s
     """
     from SALib.sample import sobol as sobol_sample
 
-    _check_n_base(n_base)
+    check_n_base(n_base)
     problem = make_problem(problem_or_bounds, names)
     seed = _seed_of(seed)
     X = sobol_sample.sample(problem, n_base, calc_second_order=False, scramble=True, seed=seed)

@@ -19,7 +19,7 @@ import numpy as np
 from flexcal.calibration.sensitivity import (
     Evaluate,
     SobolResult,
-    _check_n_base,
+    check_n_base,
     _evaluate_batched,
     _seed_of,
     analyze_outputs,
@@ -75,7 +75,7 @@ def sobol_convergence(evaluate: Evaluate, problem_or_bounds, n_values: Sequence[
     if len(n_values) < 2 or any(b <= a for a, b in zip(n_values, n_values[1:])):
         raise ValueError(f"n_values={n_values} must hold at least two increasing base sizes")
     for n in n_values:
-        _check_n_base(n)
+        check_n_base(n)
     problem = make_problem(problem_or_bounds, names)
     seed = _seed_of(seed)
     d = problem["num_vars"]

@@ -85,14 +85,14 @@ def configure(parser: argparse.ArgumentParser) -> None:
 def _settings(args):
     from flexcal.calibration.compensation import LoopSettings
     from flexcal.calibration.pso_settings import PSOSettings
+    from flexcal.calibration.sensitivity import check_n_base
 
     from ..runs.compensate import CompensationSettings
     from ..runs.verify import VerifySettings
 
     if args.particles < 2 or args.iterations < 1:
         raise ValueError("--particles must be >= 2 and --iterations >= 1")
-    if args.sobol_n < 2 or args.sobol_n & (args.sobol_n - 1):
-        raise ValueError(f"--sobol-n={args.sobol_n} must be a power of two (e.g. 512)")
+    check_n_base(args.sobol_n, name="--sobol-n")
     if args.readings < 1:
         raise ValueError(f"--readings={args.readings} must be >= 1")
     from .options import prior_scale_option

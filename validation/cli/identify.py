@@ -62,14 +62,12 @@ def parse_sources(text: str, names: tuple[str, ...]) -> tuple[str, ...]:
 
 
 def run(args: argparse.Namespace) -> int:
-    from flexcal.calibration.plots import plot_convergence
     from flexcal.calibration.pso_settings import PSOSettings
-    from flexcal.model.forward import ideal_angles
     from flexcal.model.parameters import parameter_space
 
     from ..output import staged_output, write_report
-    from ..reports.form_floor import form_floor_line, form_floor_markdown
-    from ..reports.plots import plot_misalignment_curves
+    from ..reports.form_floor import form_floor_line
+    from ..reports.identify import identify_markdown, write_identify_figures
     from .opening import open_calibration
     from ..runs.verify import VerifySettings, run_verify
     from .common import show_progress
@@ -95,8 +93,6 @@ def run(args: argparse.Namespace) -> int:
                         log=lambda *a, **k: None)
     wall_s = time.perf_counter() - start
     verified = result.report
-    angles = result.problem.angles
-    fitted = result.fitted_angles
     rows = verified["parameters"]
     fit_rms = verified["fit_rms_urad"] * 1e-6
     ident = verified["identifiability"]
@@ -116,35 +112,11 @@ def run(args: argparse.Namespace) -> int:
         "model_form_floor": verified["model_form_floor"],
         "wall_s": wall_s,
     }
-    has_preset = presets is not None
-    how = {"paper": "improved PSO + polish", "map": "MAP with the paper's ranges as prior",
-           "free": "free least squares"}[args.method]
-    lines = [f"# Identification ({how})", "",
-             f"{len(selected)} sources identified from {measurement.n_points} postures; fit RMS {fit_rms * 1e6:.4g} urad, "
-             f"max ||Δθ|| {summary['fit_max_urad']:.4g} urad; identifiability rank {ident['rank']} of "
-             f"{ident['n_parameters']}" + (f", condition number {ident['condition_number']:.3g}."
-                                           if "condition_number" in ident else "."), "",
-             "![fit](fit.png)", ""] + (["![convergence](convergence.png)", ""] if result.pso is not None else []) + [
-             "## Identified sources", "",
-             "| parameter | unit | identified | std error | " + ("preset | abs error | " if has_preset else "")
-             + "identifiable |",
-             "|---|---|---:|---:|" + ("---:|---:|" if has_preset else "") + "---|"]
-    for r in (r for r in rows if r["was_identified"]):
-        cells = [f"`{r['name']}`", r["unit"], f"{r['identified']:.5g}",
-                 "–" if r["std_error"] is None else f"{r['std_error']:.3g}"]
-        if has_preset:
-            cells += [f"{r['preset']:.5g}", f"{r['abs_error']:.3g}"]
-        lines.append("| " + " | ".join(cells + ["yes" if r["identifiable"] else "no"]) + " |")
-    lines += [""] + form_floor_markdown(verified["model_form_floor"])
-    ideal = ideal_angles(measurement.inputs, space)
     with staged_output(args.out, replace=args.force) as staging:
         write_report(staging, report)
-        (staging / "report.md").write_text("\n".join(lines) + "\n")
-        classes = measurement.metadata.get("prototype", {}).get("point_class") or ["S3"] * measurement.n_points
-        plot_misalignment_curves(staging / "fit.png", angles - ideal, classes, leg=measurement.leg,
-                                 fitted=fitted - ideal, title="misalignment (measured − ideal) and the identified model")
-        if result.pso is not None:
-            plot_convergence(result.pso, staging / "convergence.png", ylabel="Eq. 13 fitness [rad]")
+        (staging / "report.md").write_text(identify_markdown(report, has_pso=result.pso is not None,
+                                                             has_preset=presets is not None))
+        write_identify_figures(staging, result, measurement, space)
     print(f"flexcal identify: {len(selected)} sources ({args.method}), fit RMS {fit_rms * 1e6:.3g} urad, max "
           f"{summary['fit_max_urad']:.3g} urad, {wall_s:.1f} s; wrote {args.out}/report.json, report.md, fit.png"
           + (", convergence.png" if result.pso is not None else ""))

@@ -348,8 +348,9 @@ def load_source_with_truth(args: argparse.Namespace, space, *, progress: bool):
 
 
 def check_sobol_options(args: argparse.Namespace) -> None:
-    if args.sobol_n < 2 or args.sobol_n & (args.sobol_n - 1):
-        raise ValueError(f"--sobol-n={args.sobol_n} must be a power of two (e.g. 512)")
+    from flexcal.calibration.sensitivity import check_n_base
+
+    check_n_base(args.sobol_n, name="--sobol-n")
     if not 0.0 <= args.sobol_threshold <= 1.0:
         raise ValueError(f"--sobol-threshold={args.sobol_threshold} must be in [0, 1]")
 

@@ -53,12 +53,12 @@ def screen(measurement, space, *, n_base: int, seed: int, progress: bool):
 
 
 def run(args: argparse.Namespace) -> int:
-    from flexcal.calibration.plots import plot_sensitivity
-    from flexcal.calibration.sensitivity import format_ranked_table, ranked_table, select_parameters
+    from flexcal.calibration.sensitivity import ranked_table, select_parameters
 
     from .common import show_progress
     from .opening import open_calibration
     from ..output import staged_output, write_report
+    from ..reports.sensitivity import sensitivity_markdown, write_sensitivity_figure
     from flexcal.model.parameters import DRIVE_SOURCE_NAMES
 
     check_sobol_options(args)
@@ -77,18 +77,12 @@ def run(args: argparse.Namespace) -> int:
         "ST": sobol.ST, "ST_conf": sobol.ST_conf, "S1": sobol.S1, "S1_conf": sobol.S1_conf,
         "ranked_overall": ranked_table(sobol, 0),
     }
-    markdown = ["# Sobol screening of the 45 error sources", "",
-                f"{measurement.n_points} postures; N = {sobol.n_base} ({sobol.n_evaluations} model runs), sample seed "
-                f"{args.calibration_seed}. Output: the model's deviation from the ideal small-deflection model "
-                f"(overall Eq. 13 norm and per angle).", "",
-                f"Sources with a total index >= {args.sobol_threshold:g} on any output, plus the nine Table 1 "
-                f"drive sources ({len(selected)}): " + ", ".join(f"`{n}`" for n in selected), "",
-                "![Normalized total Sobol indices (Fig. 5)](sensitivity.png)", "",
-                "## Ranked by the overall total index", "", format_ranked_table(sobol, 0)]
     with staged_output(args.out, replace=args.force) as staging:
         write_report(staging, report)
-        (staging / "report.md").write_text("\n".join(markdown))
-        plot_sensitivity(sobol, staging / "sensitivity.png")
+        (staging / "report.md").write_text(sensitivity_markdown(
+            sobol, n_points=measurement.n_points, seed=args.calibration_seed, threshold=args.sobol_threshold,
+            selected=selected))
+        write_sensitivity_figure(staging, sobol)
     top = ", ".join(f"{r['name']} {r['ST']:.3f}" for r in ranked_table(sobol, 0)[:5])
     print(f"flexcal sensitivity: {sobol.n_evaluations} model runs; top total indices {top}; "
           f"{len(selected)} sources selected; wrote {args.out}/report.json, report.md, sensitivity.png")

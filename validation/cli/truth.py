@@ -50,8 +50,7 @@ def run(args: argparse.Namespace) -> int:
 
     from ..measurements import write_measurement
     from ..output import staged_output, write_report
-    from ..reports.plots import plot_misalignment_curves
-    from ..reports.safe_markdown import md_text
+    from ..reports.truth import truth_markdown, write_truth_figure
     from .options import load_scenario_with_trajectory
     from ..prototype.truth import make_truth
 
@@ -81,17 +80,9 @@ def run(args: argparse.Namespace) -> int:
     with staged_output(args.out, replace=args.force) as staging:
         write_measurement(staging / "curves.csv", measurement)
         write_report(staging, report)
-        (staging / "report.md").write_text(
-            f"# Virtual prototype: scenario {md_text(scenario.name)} (seed {scenario.seed})\n\n"
-            f"{measurement.n_points} points; classes " + ", ".join(f"{c} {n}" for c, n in zip(classes, counts))
-            + (f"; injected effects: {', '.join(map(md_text, injected))}" if injected else "; no injected effects")
-            + ".\n\nMax |measured − ideal model| [urad]: "
-            + ", ".join(f"{a} {v:.2f}" for a, v in zip(("θx", "θy", "θz"), max_misalignment))
-            + ".\n\n![curves](curves.png)\n\nData: `curves.csv` with its sidecar `curves.json` "
-              "(docs/prototype.md).\n")
-        plot_misalignment_curves(staging / "curves.png", misalignment, result.run.point_class, leg=measurement.leg,
-                                 title=f"virtual prototype, scenario {scenario.name} (seed {scenario.seed}): "
-                                       f"measured − ideal model")
+        (staging / "report.md").write_text(truth_markdown(scenario, measurement.n_points, classes, counts, injected,
+                                                          max_misalignment))
+        write_truth_figure(staging, scenario, misalignment, result.run.point_class, measurement.leg)
     print(f"flexcal truth: {measurement.n_points} points, "
           + (f"effects {', '.join(injected)}, " if injected else "") + "classes "
           + ", ".join(f"{c} {n}" for c, n in zip(classes, counts))

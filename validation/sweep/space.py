@@ -34,6 +34,8 @@ from typing import Any
 
 import numpy as np
 
+from flexcal.calibration.sensitivity import check_n_base
+
 __all__ = ["DEFAULT_CONFIG", "resolve_config", "designs_from_config", "design_id", "varied_names",
            "build_part_params"]
 
@@ -84,8 +86,7 @@ def _identification(table: dict[str, Any]) -> dict[str, Any]:
     for name in ("sobol_n", "particles", "iterations", "seed"):
         if not isinstance(merged[name], int) or merged[name] < 0:
             raise ValueError(f"[identification] {name} = {merged[name]!r} must be a non-negative integer")
-    if merged["sobol_n"] < 2 or merged["sobol_n"] & (merged["sobol_n"] - 1):
-        raise ValueError(f"[identification] sobol_n = {merged['sobol_n']} must be a power of two (e.g. 64)")
+    check_n_base(merged["sobol_n"], name="[identification] sobol_n")
     return merged
 
 
