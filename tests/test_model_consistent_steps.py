@@ -35,4 +35,4 @@ def test_the_fixed_point_needs_few_evaluations_per_posture():
     # bounds halfway between after and before: the counts move by a few per cent with the
     # rounding of the starts, a regression to the plain fixed point moves them by ~2x
     assert np.mean(out["iterations"]) <= 20.0, np.mean(out["iterations"])
-    assert np.mean(out["iterations"][engaged]) <= 8.0, np.mean(out["iterations"][engaged])
+    assert np.mean(out["iterations"][engaged]) <= 8.0, np.mean(out["iterations"][engaged])  # after 5.1, before ~10

@@ -91,7 +91,8 @@ def test_the_compiled_forms_are_the_docstrings_mathematics(chains):
         # 1e-13 of S's largest entry: the polarisation reads L off values of the whole defect
         # m(D), of S's size (L's entries are ~0.1 of it, its structural zeros come out ~1e-14)
         np.testing.assert_allclose(_scaled(fast_lateral[cand, chain], length) * component,
-                                   _scaled(lateral, length) * component, rtol=0, atol=1e-13 * np.max(np.abs(want)))
+                                   _scaled(lateral, length) * component, rtol=0,
+                                   atol=1e-13 * np.max(np.abs(want)))  # 1e-13 of S's largest entry (above)
         assert np.max(np.abs(_scaled(lateral, length) * component)) > 1e-3 * np.max(np.abs(want))  # L is there
         # 1e-13 of the largest entry: both sum the same ~1e2 terms in another order; the
         # polarisation here subtracts quadratic values (measured agreement 5e-15, fast vs
