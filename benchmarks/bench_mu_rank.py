@@ -15,7 +15,9 @@ identification).
 
 For each: the Jacobian of the angles w.r.t. the 45 sources on the unit box (forward
 differences, step ``FD_STEP``, as the identification), its singular values in noise units
-per range (0.5 urad) and numerical rank (s_i > 1e-6 s_1, ``identifiability``); the base
+per range (0.5 urad) and numerical rank (s_i > 1e-6 s_1, ``identifiability``), each mu's squared
+share in the weak directions (s_i < 100: pinned worse than 1 % of a range) and its joint standard
+deviation (no prior); the base
 parameters (``base_parameters``, max_std 1 % of a range, the pipeline's criterion) at 0.5 urad
 and at 0.5 nrad (the noise-free limit), with ``pure``: the mu identified alone, and the
 combination each mu enters otherwise; and, per drive, how many postures leave its nut in
@@ -103,6 +105,12 @@ def analyse(label: str, inputs: np.ndarray, space, truth, x_true) -> None:
               f"(largest outside the gap {outside.max() if outside.size else 0.0:.2g})")
     print(f"rank {rank} of {W.shape[1]} (s > 1e-6 s_1); singular values [noise units per range]:")
     print("  " + " ".join(f"{v:.3g}" for v in s))
+    _, _, Vt = np.linalg.svd(W, full_matrices=False)
+    weak = Vt[s < 100.0]  # directions the data pin worse than 1 % of a range (identifiability's max_std)
+    joint = np.sqrt(np.sum(Vt.T ** 2 / s ** 2, axis=1))  # joint std [fraction of range], no prior
+    print("weak directions (s < 100): " + str(weak.shape[0]) + "; " + "; ".join(
+        f"{n}: share in them {np.sum(weak[:, names.index(n)] ** 2):.2g}, joint std "
+        f"{joint[names.index(n)] * 100:.3g} % of range" for n in MU))
     for noise in (NOISE, NOISE_FREE):
         base = base_parameters(J / noise, names)
         pure = [n for n in MU if n in base.pure()]
