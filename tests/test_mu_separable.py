@@ -61,7 +61,7 @@ def test_standard_trajectory_leaves_d3_mu_unseparated(paper):
     assert "D1.mu" in pure
     # if this fails, the standard trajectory now separates D3.mu: update docs/calibration.md
     assert "D3.mu" not in pure
-    assert _gap_postures(truth, space, inputs)[2] <= 2
+    assert _gap_postures(truth, space, inputs)[2] <= 2  # measured 2: D3 in tension at one corner only
 
 
 def test_designed_postures_separate_every_mu(paper):
