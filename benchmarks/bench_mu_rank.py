@@ -1,7 +1,7 @@
 """Which drive hysteresis coefficients (D1-D3.mu) a measurement of angles and inputs separates.
 
     .venv/bin/python benchmarks/bench_mu_rank.py [--scenario paper] [--candidates 2000] [--seed 0]
-        [--model consistent|second-order]
+        [--model consistent|second-order] [--inadequacy]
 
 The model: ``model_space("closed-form", model=...)`` (the consistent model on Eq. 1's chains
 by default: analytic, no FEM), at the scenario's true values. Posture sets, each ordered (the
@@ -11,7 +11,9 @@ uniform in the angular workspace), in their drawn order (a reversal of some actu
 nearly every step) and in the design's nearest-neighbour tour; and the 77-point D-optimal
 designs ``flexcal design`` makes from those candidates, at the prior mean (the command's
 default) and at the true values (``flexcal design --at report.json`` after a first
-identification).
+identification). ``--inadequacy`` adds the two designs as ``flexcal design`` makes them by
+default (``--inadequacy analytic``: candidates whose model-vs-analytic-prototype error exceeds
+the upper quartile of the standard trajectory's are not offered; ~40 s more).
 
 For each: the Jacobian of the angles w.r.t. the 45 sources on the unit box (forward
 differences, step ``FD_STEP``, as the identification), its singular values in noise units
@@ -62,7 +64,9 @@ def jacobian_at(space, x_unit: np.ndarray):
     return jacobian
 
 
-def posture_sets(space, gain, x_true, n_candidates: int, seed: int) -> dict[str, np.ndarray]:
+def posture_sets(space, gain, x_true, n_candidates: int, seed: int, truth=None) -> dict[str, np.ndarray]:
+    """The posture sets of the module doc; with ``truth`` (the scenario) also the designs with the
+    command's model-inadequacy filter."""
     from flexcal.calibration.design import candidate_postures, design_trajectory, order_postures
     from flexcal.calibration.estimation import uniform_prior
     from flexcal.model.trajectory import standard_trajectory
@@ -76,10 +80,20 @@ def posture_sets(space, gain, x_true, n_candidates: int, seed: int) -> dict[str,
             f"candidates, drawn order ({n_candidates + 1})": np.vstack([zero, candidates]),
             f"candidates, design tour ({n_candidates + 1})": np.vstack([zero, candidates[tour]])}
     prior = uniform_prior(space.n_params, 1.0)
-    for label, point in (("prior mean", prior.mean), ("true values", x_true)):
-        design = design_trajectory(jacobian_at(space, point), gain, workspace, standard, n_points=77,
-                                   n_candidates=n_candidates, noise=NOISE, prior_precision=prior.precision, rng=seed)
-        sets[f"D-optimal design at the {label} (77)"] = design.inputs
+    filters = [("", None, None)]
+    if truth is not None:
+        from flexcal.validation.cli.design import MODEL_ERROR_QUANTILE, _inadequacy
+
+        inadequacy = _inadequacy(space, truth.space, False)
+        limit = float(np.quantile(np.max(inadequacy(standard), axis=1), MODEL_ERROR_QUANTILE))
+        filters.append((f", inadequacy-filtered (limit {limit * 1e6:.3g} urad)", inadequacy, limit))
+    for suffix, inadequacy, limit in filters:
+        for label, point in (("prior mean", prior.mean), ("true values", x_true)):
+            design = design_trajectory(jacobian_at(space, point), gain, workspace, standard, n_points=77,
+                                       n_candidates=n_candidates, noise=NOISE, prior_precision=prior.precision,
+                                       rng=seed, inadequacy=inadequacy, max_inadequacy=limit)
+            note = "" if design.avoided is None else f", {int(design.avoided.sum())} candidates avoided"
+            sets[f"D-optimal design at the {label}{suffix} (77{note})"] = design.inputs
     return sets
 
 
@@ -134,11 +148,14 @@ def main() -> None:
     parser.add_argument("--model", default="consistent", choices=("consistent", "second-order"))
     parser.add_argument("--candidates", type=int, default=2000)
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--inadequacy", action="store_true", help="also the designs with flexcal design's "
+                        "default model-inadequacy filter (the analytic prototype at nominal)")
     args = parser.parse_args()
     truth, space, x_true, gain = setup(args.scenario, args.model)
     print(f"# {args.scenario} mount, {args.model} model (closed-form chains), true values; "
           f"noise {NOISE * 1e6:g} urad; candidate seed {args.seed}")
-    for label, inputs in posture_sets(space, gain, x_true, args.candidates, args.seed).items():
+    for label, inputs in posture_sets(space, gain, x_true, args.candidates, args.seed,
+                                               truth if args.inadequacy else None).items():
         analyse(label, inputs, space, truth, x_true)
 
 
