@@ -37,6 +37,7 @@ from flexcal.geometry.params import Material
 from . import kernel
 from .chain import _dimensions, _uniform_entries, chain_elements
 from .hinge import ENTRY_INDEX, segment_entries
+from .serial import quarter_turn
 
 __all__ = ["twist_bracket_tensor", "chain_defect_tensor", "chain_shortening_form", "chain_second_order_forms"]
 
@@ -227,8 +228,6 @@ def _compiled_forms(length, hinge_length, width, fillet, thickness_1, thickness_
 _BRACKET_ENTRIES = tuple(np.ascontiguousarray(v) for v in (*np.nonzero(_BRACKET), _BRACKET[np.nonzero(_BRACKET)]))
 _PARTNER = np.array([-1, 5, 4, -1, 2, 1], dtype=np.int64)
 _KEYS = tuple(ENTRY_INDEX)  # ux_Fx, uy_Fy, uy_Mz, rz_Mz, uz_Fz, uz_My, ry_My, rx_Mx
-_QUARTER_TURN = (0, 4, 5, 6, 1, 2, 3, 7)  # leaf 2 (element y -> chain z, z -> -y): blocks swapped,
-_QUARTER_SIGN = np.array([1.0, 1.0, -1.0, 1.0, 1.0, -1.0, 1.0, 1.0])  # couplings negated
 
 
 def _element_entries(length, hinge_length, width, fillet, thickness_1, thickness_2, *, section, connector_length,
@@ -248,7 +247,7 @@ def _element_entries(length, hinge_length, width, fillet, thickness_1, thickness
     leaves = segment_entries(np.maximum(0.5 * l - a, 0.0), a, np.stack([t1, t2]), w, material.youngs_modulus,
                              material.poisson_ratio)
     leaves = np.stack([leaves[key] for key in _KEYS], axis=-1)  # (2, ..., 8)
-    leaf1, leaf2 = leaves[0], leaves[1][..., list(_QUARTER_TURN)] * _QUARTER_SIGN
+    leaf1, leaf2 = leaves[0], np.stack(quarter_turn(np.moveaxis(leaves[1], -1, 0)), axis=-1)  # leaf 2 turned
     uniform = np.moveaxis(_uniform_entries(np.stack([block, connector, strut]), section, section, material), 0, -1)
     by_kind = {"block": uniform[0], "leaf1": leaf1, "connector": uniform[1], "leaf2": leaf2, "strut": uniform[2]}
     sizes = {"block": block, "leaf1": l, "connector": connector, "leaf2": l, "strut": strut}
