@@ -30,16 +30,35 @@ PROBE_TOL = 1e-14  # [m, rad] a probe's pose: its rate error ~ 1e-12 / TANGENT_S
 MIN_STIFFNESS = 0.2  # a measured nut stiffness below this share of the linear one is not trusted (linear used)
 
 
+# pack rows (``consistent.pack_chains``): per candidate and chain a (N_PACK, WIDTH) block of
+# the chain's matrices padded to 8 columns (one AVX-512 vector or two AVX2 ones per row), so
+# that every 6x6 product below is a sum of 8-wide rows scaled by scalars
+WIDTH = 8
+J_COL = 0  # 0-5: J[:, k] (frame twist -> chain end D)
+R_ROW = 6  # 6-8: R[b, :3] (the chain frame's axes in the frame's)
+S_COL = 9  # 9-14: S[:, k] (shortening form)
+K_COL = 15  # 15-20: K[:, k] (chain stiffness at B)
+T_COL = 21  # 21-26: T[:, k] with T's axial row and column zero (load form)
+J_ROW = 27  # 27-32: J[a, :]
+W_COL = 33  # 33-35: (J^T K[:, :3] R^T)[:, b] (``to_wrench``)
+GAIN = 36  # axial_gain[:, j] (J^T K[:, 0])
+AXIAL_ROW = 37  # K[0, :3]
+K_ROW0 = 38  # K[0, :]
+N_PACK = 39
+
+
 @njit(cache=True, nogil=True, fastmath=_FAST)
-def _terms(cand, x, c, command, x0, gain, axial, transform, shortening, rotation, point_b, axial_row, to_wrench,
-           stiffness, defect_index, defect, load_form, weight, r, u, n, force, d, sd, ext, ext_c, ml, kml, grad,
-           td):
+def _terms(cand, x, c, command, x0, axial, pack, point_b, defect_index, defect, weight, r, u, n, force, d, sd, ext_c,
+           ml, kml, grad, td, v):
     """At pose x (6,) and offsets c (3,): shortening r, axial inputs u, loads n (6,) and the
     second-order wrench ``force`` (P-delta 2 N J^T S D, the lateral defect's forces, the rigid
-    term and the turning lever arms of the chain forces), all in place."""
+    term and the turning lever arms of the chain forces), all in place; force and the scratch
+    vectors d ... v are (WIDTH,), their last two entries zero (the padding)."""
     t0, t1, t2 = x[3], x[4], x[5]
+    x1, x2, x3, x4, x5 = x[1], x[2], x[3], x[4], x[5]
+    x_0 = x[0]
     tt = t0 * t0 + t1 * t1 + t2 * t2
-    for k in range(6):
+    for k in range(WIDTH):
         force[k] = 0.0
     # the weight W at the centre of gravity r turns with the frame: -d ext_r / d theta^T W
     w0, w1, w2 = weight[cand, 0], weight[cand, 1], weight[cand, 2]
@@ -51,84 +70,79 @@ def _terms(cand, x, c, command, x0, gain, axial, transform, shortening, rotation
     force[4] -= 0.5 * (r1 * tw + tr * w1 - 2.0 * t1 * rw)
     force[5] -= 0.5 * (r2 * tw + tr * w2 - 2.0 * t2 * rw)
     for j in range(6):
+        p = pack[cand, j]
         pb0, pb1, pb2 = point_b[cand, j, 0], point_b[cand, j, 1], point_b[cand, j, 2]
         tp = t0 * pb0 + t1 * pb1 + t2 * pb2
-        ext[0] = 0.5 * (t0 * tp - pb0 * tt)  # 1/2 theta x (theta x p_j)
-        ext[1] = 0.5 * (t1 * tp - pb1 * tt)
-        ext[2] = 0.5 * (t2 * tp - pb2 * tt)
-        for a_ in range(3):
-            ext_c[a_] = (rotation[cand, j, 0, a_] * ext[0] + rotation[cand, j, 1, a_] * ext[1]
-                         + rotation[cand, j, 2, a_] * ext[2])
-        for a_ in range(6):
-            acc = 0.0
-            for k in range(6):
-                acc += transform[cand, j, a_, k] * x[k]
-            d[a_] = acc + (ext_c[a_] if a_ < 3 else 0.0)
+        e0 = 0.5 * (t0 * tp - pb0 * tt)  # ext = 1/2 theta x (theta x p_j)
+        e1 = 0.5 * (t1 * tp - pb1 * tt)
+        e2 = 0.5 * (t2 * tp - pb2 * tt)
+        # D = J x + (R^T ext, 0)
+        for a_ in range(WIDTH):
+            ext_c[a_] = e0 * p[R_ROW, a_] + e1 * p[R_ROW + 1, a_] + e2 * p[R_ROW + 2, a_]
+            d[a_] = (x_0 * p[J_COL, a_] + x1 * p[J_COL + 1, a_] + x2 * p[J_COL + 2, a_] + x3 * p[J_COL + 3, a_]
+                     + x4 * p[J_COL + 4, a_] + x5 * p[J_COL + 5, a_]) + ext_c[a_]
+        d0, d1, d2, d3, d4, d5 = d[0], d[1], d[2], d[3], d[4], d[5]
         rr = 0.0
-        for a_ in range(6):
-            acc = 0.0
-            for k in range(6):
-                acc += shortening[cand, j, a_, k] * d[k]
-            sd[a_] = acc
-            rr += d[a_] * acc
+        for a_ in range(WIDTH):
+            s_a = (d0 * p[S_COL, a_] + d1 * p[S_COL + 1, a_] + d2 * p[S_COL + 2, a_] + d3 * p[S_COL + 3, a_]
+                   + d4 * p[S_COL + 4, a_] + d5 * p[S_COL + 5, a_])
+            sd[a_] = s_a
+            rr += d[a_] * s_a
         r[j] = -rr
-        u[j] = r[j] + ((command[j - 3] + x0[cand, j - 3] + c[j - 3]) if j >= 3 else 0.0)
-        # the lateral compatibility defect m_c = sum_t q_t d_a d_b (c = y..rz) and K m (6,)
-        for a_ in range(6):
+        u_j = r[j] + ((command[j - 3] + x0[cand, j - 3] + c[j - 3]) if j >= 3 else 0.0)
+        u[j] = u_j
+        # the lateral compatibility defect m_c = sum_t q_t d_a d_b (c = y..rz) and K m
+        for a_ in range(WIDTH):
             ml[a_] = 0.0
         for t in range(defect_index.shape[0]):
             ml[defect_index[t, 0]] += defect[cand, j, t] * d[defect_index[t, 1]] * d[defect_index[t, 2]]
-        for a_ in range(6):
-            acc = 0.0
-            for k in range(1, 6):
-                acc += stiffness[cand, j, a_, k] * ml[k]
-            kml[a_] = acc
-        # the lateral chain force (K e)_c, c = y..rz, into ml (m itself is done with)
-        for a_ in range(1, 6):
-            acc = kml[a_] - stiffness[cand, j, a_, 0] * u[j]
-            for k in range(6):
-                acc += stiffness[cand, j, a_, k] * d[k]
-            ml[a_] = acc
-        load = -axial[cand, j] * u[j] + kml[0]
-        for k in range(6):
-            load += gain[cand, k, j] * x[k]
-        for a_ in range(3):
-            load += axial_row[cand, j, a_] * ext_c[a_]
+        m1, m2, m3, m4, m5 = ml[1], ml[2], ml[3], ml[4], ml[5]
+        # K m, and the lateral chain force (K e)_c = K m - K[:, 0] u + K D into ml (entry 0 unused)
+        for a_ in range(WIDTH):
+            km = (m1 * p[K_COL + 1, a_] + m2 * p[K_COL + 2, a_] + m3 * p[K_COL + 3, a_] + m4 * p[K_COL + 4, a_]
+                  + m5 * p[K_COL + 5, a_])
+            kml[a_] = km
+            ml[a_] = (km - p[K_COL, a_] * u_j) + (d0 * p[K_COL, a_] + d1 * p[K_COL + 1, a_] + d2 * p[K_COL + 2, a_]
+                                                 + d3 * p[K_COL + 3, a_] + d4 * p[K_COL + 4, a_]
+                                                 + d5 * p[K_COL + 5, a_])
+        load = -axial[cand, j] * u_j + kml[0]
+        load += (p[GAIN, 0] * x_0 + p[GAIN, 1] * x1 + p[GAIN, 2] * x2 + p[GAIN, 3] * x3 + p[GAIN, 4] * x4
+                 + p[GAIN, 5] * x5)
+        load += p[AXIAL_ROW, 0] * ext_c[0] + p[AXIAL_ROW, 1] * ext_c[1] + p[AXIAL_ROW, 2] * ext_c[2]
         # the chain's own P-delta inside: energy 1/2 N^2 D^T T D with N the load above, so the
         # tension is N (1 + k q) and the shortening D^T (S + N T) D (T has no axial row)
         q = 0.0
-        td[0] = 0.0
-        for a_ in range(1, 6):
-            acc = 0.0
-            for k in range(1, 6):
-                acc += load_form[cand, j, a_, k] * d[k]
-            td[a_] = acc
-            q += d[a_] * acc
+        for a_ in range(WIDTH):
+            t_a = (d1 * p[T_COL + 1, a_] + d2 * p[T_COL + 2, a_] + d3 * p[T_COL + 3, a_] + d4 * p[T_COL + 4, a_]
+                   + d5 * p[T_COL + 5, a_])
+            td[a_] = t_a
+            q += d[a_] * t_a
         tension = load * (1.0 + axial[cand, j] * q)
         n[j] = tension
         # the chain's energy gradient beyond the linear part and the P-delta 2 N S D: K m +
         # sum_c (K e)_c dm_c/dD, e = D - u e_x + m the chain end's strain (model/consistent.py)
-        for a_ in range(6):
-            grad[a_] = kml[a_] + load * (q * stiffness[cand, j, 0, a_] + load * td[a_])
+        for a_ in range(WIDTH):
+            grad[a_] = kml[a_] + load * (q * p[K_ROW0, a_] + load * td[a_])
         for t in range(defect_index.shape[0]):
             ia, ib = defect_index[t, 1], defect_index[t, 2]
             w = ml[defect_index[t, 0]] * defect[cand, j, t]
             grad[ia] += w * d[ib]
             grad[ib] += w * d[ia]
-        for k in range(6):
-            acc = 0.0
-            for a_ in range(6):
-                acc += transform[cand, j, a_, k] * (2.0 * tension * sd[a_] + grad[a_])
-            force[k] += acc
-            force[k] += (to_wrench[cand, j, k, 0] * ext[0] + to_wrench[cand, j, k, 1] * ext[1]
-                         + to_wrench[cand, j, k, 2] * ext[2])
+        two_t = 2.0 * tension
+        for a_ in range(WIDTH):
+            v[a_] = two_t * sd[a_] + grad[a_]
+        v0, v1, v2, v3, v4, v5 = v[0], v[1], v[2], v[3], v[4], v[5]
+        for k in range(WIDTH):
+            force[k] += ((v0 * p[J_ROW, k] + v1 * p[J_ROW + 1, k] + v2 * p[J_ROW + 2, k] + v3 * p[J_ROW + 3, k]
+                          + v4 * p[J_ROW + 4, k] + v5 * p[J_ROW + 5, k])
+                         + (e0 * p[W_COL, k] + e1 * p[W_COL + 1, k] + e2 * p[W_COL + 2, k]))
         # the chain force F (tension n_j along the axis, lateral K e) works through the second-order
         # displacement of B: d ext / d theta^T F = 1/2 (p (theta.F) + (theta.p) F - 2 theta (p.F))
         f1 = ml[1]
         f2 = ml[2]
-        g0 = rotation[cand, j, 0, 0] * tension + rotation[cand, j, 0, 1] * f1 + rotation[cand, j, 0, 2] * f2
-        g1 = rotation[cand, j, 1, 0] * tension + rotation[cand, j, 1, 1] * f1 + rotation[cand, j, 1, 2] * f2
-        g2 = rotation[cand, j, 2, 0] * tension + rotation[cand, j, 2, 1] * f1 + rotation[cand, j, 2, 2] * f2
+        g0 = p[R_ROW, 0] * tension + p[R_ROW, 1] * f1 + p[R_ROW, 2] * f2
+        g1 = p[R_ROW + 1, 0] * tension + p[R_ROW + 1, 1] * f1 + p[R_ROW + 1, 2] * f2
+        g2 = p[R_ROW + 2, 0] * tension + p[R_ROW + 2, 1] * f1 + p[R_ROW + 2, 2] * f2
         tf = t0 * g0 + t1 * g1 + t2 * g2
         pf = pb0 * g0 + pb1 * g1 + pb2 * g2
         force[3] += 0.5 * (pb0 * tf + tp * g0 - 2.0 * t0 * pf)
@@ -137,9 +151,8 @@ def _terms(cand, x, c, command, x0, gain, axial, transform, shortening, rotation
 
 
 @njit(cache=True, nogil=True, fastmath=_FAST)
-def _equilibrium(cand, x, c, command, compliance, wrench, x0, gain, axial, transform, shortening, rotation, point_b,
-                 axial_row, to_wrench, stiffness, defect_index, defect, load_form, weight, tol, max_iter, divergence,
-                 r, u, n, force, d, sd, ext, ext_c, ml, kml, grad, td, work, secant):
+def _equilibrium(cand, x, c, command, compliance, wrench, x0, gain, axial, pack, point_b, defect_index, defect, weight,
+                 tol, max_iter, divergence, r, u, n, force, d, sd, ext_c, ml, kml, grad, td, v, work, secant):
     """Solve the pose x in place to ``tol`` at fixed offsets c: the fixed point ``x = Phi(x)``
     (module docstring), converged when ``|Phi(x) - x| <= tol``; x is then ``Phi(x)`` and r, u, n,
     force are those of it. Returns (status code, iterations = evaluations of Phi).
@@ -152,9 +165,8 @@ def _equilibrium(cand, x, c, command, compliance, wrench, x0, gain, axial, trans
     x_new, f_prev, s_prev, b_y, s_b, rhs = work[0], work[1], work[2], work[3], work[4], work[5]
     previous = np.inf
     for it in range(max_iter):
-        _terms(cand, x, c, command, x0, gain, axial, transform, shortening, rotation, point_b, axial_row, to_wrench,
-               stiffness, defect_index, defect, load_form, weight, r, u, n, force, d, sd, ext, ext_c, ml, kml, grad,
-               td)
+        _terms(cand, x, c, command, x0, axial, pack, point_b, defect_index, defect, weight, r, u, n, force, d, sd,
+               ext_c, ml, kml, grad, td, v)
         for m in range(6):  # F_C + sum_j g_j u_j - f2(x)
             acc = wrench[cand, m] - force[m]
             for j in range(6):
@@ -177,9 +189,8 @@ def _equilibrium(cand, x, c, command, compliance, wrench, x0, gain, axial, trans
         if change <= tol:
             for k in range(6):
                 x[k] = x_new[k]
-            _terms(cand, x, c, command, x0, gain, axial, transform, shortening, rotation, point_b, axial_row,
-                   to_wrench, stiffness, defect_index, defect, load_form, weight, r, u, n, force, d, sd, ext, ext_c,
-                   ml, kml, grad, td)
+            _terms(cand, x, c, command, x0, axial, pack, point_b, defect_index, defect, weight, r, u, n, force, d,
+                   sd, ext_c, ml, kml, grad, td, v)
             return OK, it + 1
         # residual f = Phi(x) - x, kept in x_new
         for k in range(6):
@@ -221,9 +232,8 @@ def _equilibrium(cand, x, c, command, compliance, wrench, x0, gain, axial, trans
 
 
 @njit(cache=True, nogil=True, parallel=True, fastmath=_FAST)
-def solve(compliance, wrench, gain, axial, transform, shortening, rotation, point_b, axial_row, to_wrench,
-          stiffness, defect_index, defect, load_form, weight, coupling, mu, limit, x0, nut, band, play, inputs,
-          clearance, tol, max_iter, divergence,
+def solve(compliance, wrench, gain, axial, pack, point_b, defect_index, defect, weight, coupling, mu, limit, x0, nut,
+          band, play, inputs, clearance, tol, max_iter, divergence,
           faces, state_tol, input_gain,
           pose_out, load_out, c_out, release_out, r_out, state_out, class_out, code_out, iter_out):
     """All candidates (in parallel) at all points (in order). Each fixed point starts from the
@@ -271,15 +281,15 @@ def solve(compliance, wrench, gain, axial, transform, shortening, rotation, poin
         hi2 = np.zeros(3)
         a2 = np.zeros(3)
         trial = np.zeros(3)
-        d = np.zeros(6)
-        sd = np.zeros(6)
-        ext = np.zeros(3)
-        ext_c = np.zeros(3)
-        ml = np.zeros(6)
-        kml = np.zeros(6)
-        grad = np.zeros(6)
-        td = np.zeros(6)
-        force = np.zeros(6)
+        d = np.zeros(WIDTH)
+        sd = np.zeros(WIDTH)
+        ext_c = np.zeros(WIDTH)
+        ml = np.zeros(WIDTH)
+        kml = np.zeros(WIDTH)
+        grad = np.zeros(WIDTH)
+        td = np.zeros(WIDTH)
+        v = np.zeros(WIDTH)
+        force = np.zeros(WIDTH)
         use_clearance = False
         if clearance:
             for i in range(3):
@@ -328,10 +338,9 @@ def solve(compliance, wrench, gain, axial, transform, shortening, rotation, poin
             code = NOT_CONVERGED
             iterations = 0
             for step in range(MAX_NEWTON if use_clearance else 1):
-                code, its = _equilibrium(cand, x, c, command, compliance, wrench, x0, gain, axial, transform,
-                                         shortening, rotation, point_b, axial_row, to_wrench, stiffness, defect_index,
-                                         defect, load_form, weight, inner_tol, max_iter,
-                                         divergence, r, u, n, force, d, sd, ext, ext_c, ml, kml, grad, td, work, secant)
+                code, its = _equilibrium(cand, x, c, command, compliance, wrench, x0, gain, axial, pack, point_b,
+                                         defect_index, defect, weight, inner_tol, max_iter, divergence, r, u, n, force,
+                                         d, sd, ext_c, ml, kml, grad, td, v, work, secant)
                 iterations += its
                 if code != OK or not use_clearance:
                     break
@@ -347,10 +356,9 @@ def solve(compliance, wrench, gain, axial, transform, shortening, rotation, poin
                             c_probe[i] = c[i]
                         c_probe[k] += TANGENT_STEP
                         code, its = _equilibrium(cand, x_probe, c_probe, command, compliance, wrench, x0, gain,
-                                                 axial, transform, shortening, rotation, point_b, axial_row,
-                                                 to_wrench, stiffness, defect_index, defect, load_form, weight,
-                                                 PROBE_TOL, max_iter, divergence, r, u, n_probe, force, d, sd, ext,
-                                                 ext_c, ml, kml, grad, td, work, secant)
+                                                 axial, pack, point_b, defect_index, defect, weight, PROBE_TOL,
+                                                 max_iter, divergence, r, u, n_probe, force, d, sd, ext_c, ml, kml,
+                                                 grad, td, v, work, secant)
                         iterations += its
                         if code != OK:
                             break
@@ -398,10 +406,9 @@ def solve(compliance, wrench, gain, axial, transform, shortening, rotation, poin
                 if change == 0.0:
                     break
                 if change <= tol:  # the offsets moved by <= tol: one more equilibrium settles the pose
-                    code, its = _equilibrium(cand, x, c, command, compliance, wrench, x0, gain, axial, transform,
-                                             shortening, rotation, point_b, axial_row, to_wrench, stiffness,
-                                             defect_index, defect, load_form, weight, inner_tol, max_iter,
-                                             divergence, r, u, n, force, d, sd, ext, ext_c, ml, kml, grad, td, work, secant)
+                    code, its = _equilibrium(cand, x, c, command, compliance, wrench, x0, gain, axial, pack,
+                                             point_b, defect_index, defect, weight, inner_tol, max_iter, divergence,
+                                             r, u, n, force, d, sd, ext_c, ml, kml, grad, td, v, work, secant)
                     iterations += its
                     break
                 code = NOT_CONVERGED

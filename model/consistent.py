@@ -90,6 +90,34 @@ def defect_terms(lateral: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return index, np.ascontiguousarray(coefficients)
 
 
+def pack_chains(m) -> np.ndarray:
+    """The kernel's per-chain matrices (n_c, 6, N_PACK, WIDTH) (``_numba_consistent``'s row
+    layout): each 6 x 6 matrix as its columns (or rows) padded with zeros to 8 entries, so that
+    the kernel's products are sums of 8-wide rows, which the compiler vectorizes."""
+    from . import _numba_consistent as nc
+
+    n_c = m.n_candidates
+    k = m.chain_stiffness
+    t = m.load_shortening.copy()
+    t[..., 0, :] = 0.0  # the kernel's load form has no axial row or column (``_load_form``)
+    t[..., :, 0] = 0.0
+    pack = np.zeros((n_c, 6, nc.N_PACK, nc.WIDTH))
+    swap = lambda a: np.swapaxes(a, -1, -2)  # noqa: E731
+    pack[:, :, nc.J_COL:nc.J_COL + 6, :6] = swap(m.frame_transform)
+    pack[:, :, nc.R_ROW:nc.R_ROW + 3, :3] = m.rotation
+    pack[:, :, nc.S_COL:nc.S_COL + 6, :6] = swap(m.shortening)
+    pack[:, :, nc.K_COL:nc.K_COL + 6, :6] = swap(k)
+    pack[:, :, nc.T_COL:nc.T_COL + 6, :6] = swap(t)
+    pack[:, :, nc.J_ROW:nc.J_ROW + 6, :6] = m.frame_transform
+    to_wrench = np.einsum("cjba,cjbk,cjlk->cjal", m.frame_transform, k[..., :3], m.rotation,
+                          optimize=True)  # J^T K[:, :3] R^T (n_c, 6 chains, 6, 3)
+    pack[:, :, nc.W_COL:nc.W_COL + 3, :6] = swap(to_wrench)
+    pack[:, :, nc.GAIN, :6] = swap(m.axial_gain)
+    pack[:, :, nc.AXIAL_ROW, :3] = k[:, :, 0, :3]
+    pack[:, :, nc.K_ROW0, :6] = k[:, :, 0, :]
+    return pack
+
+
 def solve_points_consistent(matrices, inputs: np.ndarray, *, clearance: bool, tol: float, max_iter: int,
                             divergence: float, state_tolerance: float, n_threads: int = 1) -> dict[str, np.ndarray]:
     """Run the compiled consistent kernel; same outputs as ``kernel.solve_points_compiled``
@@ -109,12 +137,9 @@ def solve_points_consistent(matrices, inputs: np.ndarray, *, clearance: bool, to
            "codes": np.empty((n_c, n_p), dtype=np.int64), "iterations": np.empty((n_c, n_p), dtype=np.int64)}
     compliance = np.linalg.inv(m.frame_stiffness)
     wrench = np.einsum("cab,cb->ca", m.frame_stiffness, m.gravity_pose)
-    to_wrench = np.einsum("cjba,cjbk,cjlk->cjal", m.frame_transform, m.chain_stiffness[..., :3], m.rotation,
-                          optimize=True)  # J^T K[:, :3] R^T (n_c, 6 chains, 6, 3)
     arguments = (
-        c(compliance), c(wrench), c(m.axial_gain), c(m.axial_stiffness), c(m.frame_transform), c(m.shortening),
-        c(m.rotation), c(m.point_b), c(m.chain_stiffness[:, :, 0, :3]), c(to_wrench),
-        c(m.chain_stiffness), *defect_terms(m.lateral_defect), c(m.load_shortening), c(m.payload),
+        c(compliance), c(wrench), c(m.axial_gain), c(m.axial_stiffness), pack_chains(m), c(m.point_b),
+        *defect_terms(m.lateral_defect), c(m.payload),
         c(m.coupling[:, DRIVING][:, :, DRIVING]), c(m.mu), c(m.clearance),
         c(m.initial_position), c(m.nut_stiffness), c(np.maximum(m.breakaway_band, 0.0)),
         bool(clearance and np.all(m.breakaway_band >= 0)), c(inputs, dtype=float), bool(clearance), float(tol),
