@@ -152,10 +152,13 @@ def _terms(cand, x, c, command, x0, axial, pack, point_b, defect_index, defect, 
 
 @njit(cache=True, nogil=True, fastmath=_FAST)
 def _equilibrium(cand, x, c, command, compliance, wrench, x0, gain, axial, pack, point_b, defect_index, defect, weight,
-                 tol, max_iter, divergence, r, u, n, force, d, sd, ext_c, ml, kml, grad, td, v, work, secant):
+                 tol, max_iter, divergence, settle, r, u, n, force, d, sd, ext_c, ml, kml, grad, td, v, work, secant):
     """Solve the pose x in place to ``tol`` at fixed offsets c: the fixed point ``x = Phi(x)``
-    (module docstring), converged when ``|Phi(x) - x| <= tol``; x is then ``Phi(x)`` and r, u, n,
-    force are those of it. Returns (status code, iterations = evaluations of Phi).
+    (module docstring), converged when ``|Phi(x) - x| <= tol``; x is then the last point evaluated
+    (within ``tol / (1 - rho)`` of the fixed point, rho <= 0.1 the map's contraction) and r, u, n,
+    force are those of it. Returns (status code, iterations = evaluations of Phi). (Before session
+    15 x was moved to ``Phi(x)`` and Phi evaluated once more there: 20-23 % of all evaluations,
+    for a pose change <= tol.)
 
     The steps are Broyden's (``x += B (Phi(x) - x)``, B ~ (I - dPhi/dx)^-1 kept in ``secant``
     (6, 6) from call to call and updated by the secant condition at each step): Phi contracts
@@ -187,10 +190,11 @@ def _equilibrium(cand, x, c, command, compliance, wrench, x0, gain, axial, pack,
                 x[k] = x_new[k]
             return DIVERGED, it + 1
         if change <= tol:
-            for k in range(6):
-                x[k] = x_new[k]
-            _terms(cand, x, c, command, x0, axial, pack, point_b, defect_index, defect, weight, r, u, n, force, d,
-                   sd, ext_c, ml, kml, grad, td, v)
+            if settle:  # x moved to Phi(x), ~rho tol from the fixed point, and its terms
+                for k in range(6):
+                    x[k] = x_new[k]
+                _terms(cand, x, c, command, x0, axial, pack, point_b, defect_index, defect, weight, r, u, n, force,
+                       d, sd, ext_c, ml, kml, grad, td, v)
             return OK, it + 1
         # residual f = Phi(x) - x, kept in x_new
         for k in range(6):
@@ -338,9 +342,16 @@ def solve(compliance, wrench, gain, axial, pack, point_b, defect_index, defect, 
             code = NOT_CONVERGED
             iterations = 0
             for step in range(MAX_NEWTON if use_clearance else 1):
+                # a probe follows (a nut off its flank): its rate (N_probe - N) / TANGENT_STEP needs
+                # this N settled too (without, the rates' error moved C by up to 3e-12 m)
+                probed = False
+                if use_clearance:
+                    for k in range(3):
+                        if mu[cand, k] > 0 and c[k] > state_tol:
+                            probed = True
                 code, its = _equilibrium(cand, x, c, command, compliance, wrench, x0, gain, axial, pack, point_b,
-                                         defect_index, defect, weight, inner_tol, max_iter, divergence, r, u, n, force,
-                                         d, sd, ext_c, ml, kml, grad, td, v, work, secant)
+                                         defect_index, defect, weight, inner_tol, max_iter, divergence, probed, r, u,
+                                         n, force, d, sd, ext_c, ml, kml, grad, td, v, work, secant)
                 iterations += its
                 if code != OK or not use_clearance:
                     break
@@ -357,8 +368,8 @@ def solve(compliance, wrench, gain, axial, pack, point_b, defect_index, defect, 
                         c_probe[k] += TANGENT_STEP
                         code, its = _equilibrium(cand, x_probe, c_probe, command, compliance, wrench, x0, gain,
                                                  axial, pack, point_b, defect_index, defect, weight, PROBE_TOL,
-                                                 max_iter, divergence, r, u, n_probe, force, d, sd, ext_c, ml, kml,
-                                                 grad, td, v, work, secant)
+                                                 max_iter, divergence, True, r, u, n_probe, force, d, sd, ext_c, ml,
+                                                 kml, grad, td, v, work, secant)
                         iterations += its
                         if code != OK:
                             break
@@ -408,7 +419,7 @@ def solve(compliance, wrench, gain, axial, pack, point_b, defect_index, defect, 
                 if change <= tol:  # the offsets moved by <= tol: one more equilibrium settles the pose
                     code, its = _equilibrium(cand, x, c, command, compliance, wrench, x0, gain, axial, pack,
                                              point_b, defect_index, defect, weight, inner_tol, max_iter, divergence,
-                                             r, u, n, force, d, sd, ext_c, ml, kml, grad, td, v, work, secant)
+                                             False, r, u, n, force, d, sd, ext_c, ml, kml, grad, td, v, work, secant)
                     iterations += its
                     break
                 code = NOT_CONVERGED
