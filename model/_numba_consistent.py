@@ -48,15 +48,13 @@ N_PACK = 39
 
 
 @njit(cache=True, nogil=True, fastmath=_FAST)
-def _terms(cand, x, c, command, x0, axial, pack, point_b, defect_index, defect, weight, r, u, n, force, d, sd, ext_c,
-           ml, kml, grad, td, v):
+def _terms(cand, x, c, command, x0, axial, pack, point_b, defect_index, defect, weight, r, u, n, force, d, ml, grad):
     """At pose x (6,) and offsets c (3,): shortening r, axial inputs u, loads n (6,) and the
     second-order wrench ``force`` (P-delta 2 N J^T S D, the lateral defect's forces, the rigid
     term and the turning lever arms of the chain forces), all in place; force and the scratch
-    vectors d ... v are (WIDTH,), their last two entries zero (the padding)."""
+    vectors d, ml, grad are (WIDTH,) (entries 6, 7 unused)."""
     t0, t1, t2 = x[3], x[4], x[5]
-    x1, x2, x3, x4, x5 = x[1], x[2], x[3], x[4], x[5]
-    x_0 = x[0]
+    xs0, xs1, xs2, xs3, xs4, xs5 = x[0], x[1], x[2], x[3], x[4], x[5]
     tt = t0 * t0 + t1 * t1 + t2 * t2
     for k in range(WIDTH):
         force[k] = 0.0
@@ -76,66 +74,136 @@ def _terms(cand, x, c, command, x0, axial, pack, point_b, defect_index, defect, 
         e0 = 0.5 * (t0 * tp - pb0 * tt)  # ext = 1/2 theta x (theta x p_j)
         e1 = 0.5 * (t1 * tp - pb1 * tt)
         e2 = 0.5 * (t2 * tp - pb2 * tt)
-        # D = J x + (R^T ext, 0)
-        for a_ in range(WIDTH):
-            ext_c[a_] = e0 * p[R_ROW, a_] + e1 * p[R_ROW + 1, a_] + e2 * p[R_ROW + 2, a_]
-            d[a_] = (x_0 * p[J_COL, a_] + x1 * p[J_COL + 1, a_] + x2 * p[J_COL + 2, a_] + x3 * p[J_COL + 3, a_]
-                     + x4 * p[J_COL + 4, a_] + x5 * p[J_COL + 5, a_]) + ext_c[a_]
-        d0, d1, d2, d3, d4, d5 = d[0], d[1], d[2], d[3], d[4], d[5]
-        rr = 0.0
-        for a_ in range(WIDTH):
-            s_a = (d0 * p[S_COL, a_] + d1 * p[S_COL + 1, a_] + d2 * p[S_COL + 2, a_] + d3 * p[S_COL + 3, a_]
-                   + d4 * p[S_COL + 4, a_] + d5 * p[S_COL + 5, a_])
-            sd[a_] = s_a
-            rr += d[a_] * s_a
+        # the 6x6 products written out lane by lane into locals (no scratch stores between them,
+        # so the compiler keeps the lanes in registers and pairs them into vector instructions)
+        ec0 = e0 * p[R_ROW, 0] + e1 * p[R_ROW + 1, 0] + e2 * p[R_ROW + 2, 0]
+        ec1 = e0 * p[R_ROW, 1] + e1 * p[R_ROW + 1, 1] + e2 * p[R_ROW + 2, 1]
+        ec2 = e0 * p[R_ROW, 2] + e1 * p[R_ROW + 1, 2] + e2 * p[R_ROW + 2, 2]
+        d0 = ((xs0 * p[J_COL + 0, 0] + xs1 * p[J_COL + 1, 0] + xs2 * p[J_COL + 2, 0] + xs3 * p[J_COL + 3, 0]
+              + xs4 * p[J_COL + 4, 0] + xs5 * p[J_COL + 5, 0]) + ec0)
+        d1 = ((xs0 * p[J_COL + 0, 1] + xs1 * p[J_COL + 1, 1] + xs2 * p[J_COL + 2, 1] + xs3 * p[J_COL + 3, 1]
+              + xs4 * p[J_COL + 4, 1] + xs5 * p[J_COL + 5, 1]) + ec1)
+        d2 = ((xs0 * p[J_COL + 0, 2] + xs1 * p[J_COL + 1, 2] + xs2 * p[J_COL + 2, 2] + xs3 * p[J_COL + 3, 2]
+              + xs4 * p[J_COL + 4, 2] + xs5 * p[J_COL + 5, 2]) + ec2)
+        d3 = (xs0 * p[J_COL + 0, 3] + xs1 * p[J_COL + 1, 3] + xs2 * p[J_COL + 2, 3] + xs3 * p[J_COL + 3, 3]
+              + xs4 * p[J_COL + 4, 3] + xs5 * p[J_COL + 5, 3])
+        d4 = (xs0 * p[J_COL + 0, 4] + xs1 * p[J_COL + 1, 4] + xs2 * p[J_COL + 2, 4] + xs3 * p[J_COL + 3, 4]
+              + xs4 * p[J_COL + 4, 4] + xs5 * p[J_COL + 5, 4])
+        d5 = (xs0 * p[J_COL + 0, 5] + xs1 * p[J_COL + 1, 5] + xs2 * p[J_COL + 2, 5] + xs3 * p[J_COL + 3, 5]
+              + xs4 * p[J_COL + 4, 5] + xs5 * p[J_COL + 5, 5])
+        s0 = (d0 * p[S_COL + 0, 0] + d1 * p[S_COL + 1, 0] + d2 * p[S_COL + 2, 0] + d3 * p[S_COL + 3, 0]
+              + d4 * p[S_COL + 4, 0] + d5 * p[S_COL + 5, 0])
+        s1 = (d0 * p[S_COL + 0, 1] + d1 * p[S_COL + 1, 1] + d2 * p[S_COL + 2, 1] + d3 * p[S_COL + 3, 1]
+              + d4 * p[S_COL + 4, 1] + d5 * p[S_COL + 5, 1])
+        s2 = (d0 * p[S_COL + 0, 2] + d1 * p[S_COL + 1, 2] + d2 * p[S_COL + 2, 2] + d3 * p[S_COL + 3, 2]
+              + d4 * p[S_COL + 4, 2] + d5 * p[S_COL + 5, 2])
+        s3 = (d0 * p[S_COL + 0, 3] + d1 * p[S_COL + 1, 3] + d2 * p[S_COL + 2, 3] + d3 * p[S_COL + 3, 3]
+              + d4 * p[S_COL + 4, 3] + d5 * p[S_COL + 5, 3])
+        s4 = (d0 * p[S_COL + 0, 4] + d1 * p[S_COL + 1, 4] + d2 * p[S_COL + 2, 4] + d3 * p[S_COL + 3, 4]
+              + d4 * p[S_COL + 4, 4] + d5 * p[S_COL + 5, 4])
+        s5 = (d0 * p[S_COL + 0, 5] + d1 * p[S_COL + 1, 5] + d2 * p[S_COL + 2, 5] + d3 * p[S_COL + 3, 5]
+              + d4 * p[S_COL + 4, 5] + d5 * p[S_COL + 5, 5])
+        rr = d0 * s0 + d1 * s1 + d2 * s2 + d3 * s3 + d4 * s4 + d5 * s5
         r[j] = -rr
         u_j = r[j] + ((command[j - 3] + x0[cand, j - 3] + c[j - 3]) if j >= 3 else 0.0)
         u[j] = u_j
         # the lateral compatibility defect m_c = sum_t q_t d_a d_b (c = y..rz) and K m
-        for a_ in range(WIDTH):
-            ml[a_] = 0.0
+        d[0] = d0
+        ml[0] = 0.0
+        d[1] = d1
+        ml[1] = 0.0
+        d[2] = d2
+        ml[2] = 0.0
+        d[3] = d3
+        ml[3] = 0.0
+        d[4] = d4
+        ml[4] = 0.0
+        d[5] = d5
+        ml[5] = 0.0
         for t in range(defect_index.shape[0]):
             ml[defect_index[t, 0]] += defect[cand, j, t] * d[defect_index[t, 1]] * d[defect_index[t, 2]]
         m1, m2, m3, m4, m5 = ml[1], ml[2], ml[3], ml[4], ml[5]
-        # K m, and the lateral chain force (K e)_c = K m - K[:, 0] u + K D into ml (entry 0 unused)
-        for a_ in range(WIDTH):
-            km = (m1 * p[K_COL + 1, a_] + m2 * p[K_COL + 2, a_] + m3 * p[K_COL + 3, a_] + m4 * p[K_COL + 4, a_]
-                  + m5 * p[K_COL + 5, a_])
-            kml[a_] = km
-            ml[a_] = (km - p[K_COL, a_] * u_j) + (d0 * p[K_COL, a_] + d1 * p[K_COL + 1, a_] + d2 * p[K_COL + 2, a_]
-                                                 + d3 * p[K_COL + 3, a_] + d4 * p[K_COL + 4, a_]
-                                                 + d5 * p[K_COL + 5, a_])
-        load = -axial[cand, j] * u_j + kml[0]
-        load += (p[GAIN, 0] * x_0 + p[GAIN, 1] * x1 + p[GAIN, 2] * x2 + p[GAIN, 3] * x3 + p[GAIN, 4] * x4
-                 + p[GAIN, 5] * x5)
-        load += p[AXIAL_ROW, 0] * ext_c[0] + p[AXIAL_ROW, 1] * ext_c[1] + p[AXIAL_ROW, 2] * ext_c[2]
+        # K m, and the lateral chain force (K e)_c = K m - K[:, 0] u + K D (c = y..rz)
+        k0 = (m1 * p[K_COL + 1, 0] + m2 * p[K_COL + 2, 0] + m3 * p[K_COL + 3, 0] + m4 * p[K_COL + 4, 0]
+              + m5 * p[K_COL + 5, 0])
+        k1 = (m1 * p[K_COL + 1, 1] + m2 * p[K_COL + 2, 1] + m3 * p[K_COL + 3, 1] + m4 * p[K_COL + 4, 1]
+              + m5 * p[K_COL + 5, 1])
+        k2 = (m1 * p[K_COL + 1, 2] + m2 * p[K_COL + 2, 2] + m3 * p[K_COL + 3, 2] + m4 * p[K_COL + 4, 2]
+              + m5 * p[K_COL + 5, 2])
+        k3 = (m1 * p[K_COL + 1, 3] + m2 * p[K_COL + 2, 3] + m3 * p[K_COL + 3, 3] + m4 * p[K_COL + 4, 3]
+              + m5 * p[K_COL + 5, 3])
+        k4 = (m1 * p[K_COL + 1, 4] + m2 * p[K_COL + 2, 4] + m3 * p[K_COL + 3, 4] + m4 * p[K_COL + 4, 4]
+              + m5 * p[K_COL + 5, 4])
+        k5 = (m1 * p[K_COL + 1, 5] + m2 * p[K_COL + 2, 5] + m3 * p[K_COL + 3, 5] + m4 * p[K_COL + 4, 5]
+              + m5 * p[K_COL + 5, 5])
+        f1 = ((k1 - p[K_COL, 1] * u_j) + (d0 * p[K_COL + 0, 1] + d1 * p[K_COL + 1, 1] + d2 * p[K_COL + 2, 1]
+              + d3 * p[K_COL + 3, 1] + d4 * p[K_COL + 4, 1] + d5 * p[K_COL + 5, 1]))
+        f2 = ((k2 - p[K_COL, 2] * u_j) + (d0 * p[K_COL + 0, 2] + d1 * p[K_COL + 1, 2] + d2 * p[K_COL + 2, 2]
+              + d3 * p[K_COL + 3, 2] + d4 * p[K_COL + 4, 2] + d5 * p[K_COL + 5, 2]))
+        f3 = ((k3 - p[K_COL, 3] * u_j) + (d0 * p[K_COL + 0, 3] + d1 * p[K_COL + 1, 3] + d2 * p[K_COL + 2, 3]
+              + d3 * p[K_COL + 3, 3] + d4 * p[K_COL + 4, 3] + d5 * p[K_COL + 5, 3]))
+        f4 = ((k4 - p[K_COL, 4] * u_j) + (d0 * p[K_COL + 0, 4] + d1 * p[K_COL + 1, 4] + d2 * p[K_COL + 2, 4]
+              + d3 * p[K_COL + 3, 4] + d4 * p[K_COL + 4, 4] + d5 * p[K_COL + 5, 4]))
+        f5 = ((k5 - p[K_COL, 5] * u_j) + (d0 * p[K_COL + 0, 5] + d1 * p[K_COL + 1, 5] + d2 * p[K_COL + 2, 5]
+              + d3 * p[K_COL + 3, 5] + d4 * p[K_COL + 4, 5] + d5 * p[K_COL + 5, 5]))
+        load = -axial[cand, j] * u_j + k0
+        load += (p[GAIN, 0] * xs0 + p[GAIN, 1] * xs1 + p[GAIN, 2] * xs2 + p[GAIN, 3] * xs3 + p[GAIN, 4] * xs4
+                 + p[GAIN, 5] * xs5)
+        load += p[AXIAL_ROW, 0] * ec0 + p[AXIAL_ROW, 1] * ec1 + p[AXIAL_ROW, 2] * ec2
         # the chain's own P-delta inside: energy 1/2 N^2 D^T T D with N the load above, so the
         # tension is N (1 + k q) and the shortening D^T (S + N T) D (T has no axial row)
-        q = 0.0
-        for a_ in range(WIDTH):
-            t_a = (d1 * p[T_COL + 1, a_] + d2 * p[T_COL + 2, a_] + d3 * p[T_COL + 3, a_] + d4 * p[T_COL + 4, a_]
-                   + d5 * p[T_COL + 5, a_])
-            td[a_] = t_a
-            q += d[a_] * t_a
+        tq1 = (d1 * p[T_COL + 1, 1] + d2 * p[T_COL + 2, 1] + d3 * p[T_COL + 3, 1] + d4 * p[T_COL + 4, 1]
+               + d5 * p[T_COL + 5, 1])
+        tq2 = (d1 * p[T_COL + 1, 2] + d2 * p[T_COL + 2, 2] + d3 * p[T_COL + 3, 2] + d4 * p[T_COL + 4, 2]
+               + d5 * p[T_COL + 5, 2])
+        tq3 = (d1 * p[T_COL + 1, 3] + d2 * p[T_COL + 2, 3] + d3 * p[T_COL + 3, 3] + d4 * p[T_COL + 4, 3]
+               + d5 * p[T_COL + 5, 3])
+        tq4 = (d1 * p[T_COL + 1, 4] + d2 * p[T_COL + 2, 4] + d3 * p[T_COL + 3, 4] + d4 * p[T_COL + 4, 4]
+               + d5 * p[T_COL + 5, 4])
+        tq5 = (d1 * p[T_COL + 1, 5] + d2 * p[T_COL + 2, 5] + d3 * p[T_COL + 3, 5] + d4 * p[T_COL + 4, 5]
+               + d5 * p[T_COL + 5, 5])
+        q = d1 * tq1 + d2 * tq2 + d3 * tq3 + d4 * tq4 + d5 * tq5
         tension = load * (1.0 + axial[cand, j] * q)
         n[j] = tension
         # the chain's energy gradient beyond the linear part and the P-delta 2 N S D: K m +
         # sum_c (K e)_c dm_c/dD, e = D - u e_x + m the chain end's strain (model/consistent.py)
-        for a_ in range(WIDTH):
-            grad[a_] = kml[a_] + load * (q * p[K_ROW0, a_] + load * td[a_])
+        grad[0] = k0 + load * (q * p[K_ROW0, 0])
+        grad[1] = k1 + load * (q * p[K_ROW0, 1] + load * tq1)
+        grad[2] = k2 + load * (q * p[K_ROW0, 2] + load * tq2)
+        grad[3] = k3 + load * (q * p[K_ROW0, 3] + load * tq3)
+        grad[4] = k4 + load * (q * p[K_ROW0, 4] + load * tq4)
+        grad[5] = k5 + load * (q * p[K_ROW0, 5] + load * tq5)
+        ml[1], ml[2], ml[3], ml[4], ml[5] = f1, f2, f3, f4, f5
         for t in range(defect_index.shape[0]):
             ia, ib = defect_index[t, 1], defect_index[t, 2]
             w = ml[defect_index[t, 0]] * defect[cand, j, t]
             grad[ia] += w * d[ib]
             grad[ib] += w * d[ia]
         two_t = 2.0 * tension
-        for a_ in range(WIDTH):
-            v[a_] = two_t * sd[a_] + grad[a_]
-        v0, v1, v2, v3, v4, v5 = v[0], v[1], v[2], v[3], v[4], v[5]
-        for k in range(WIDTH):
-            force[k] += ((v0 * p[J_ROW, k] + v1 * p[J_ROW + 1, k] + v2 * p[J_ROW + 2, k] + v3 * p[J_ROW + 3, k]
-                          + v4 * p[J_ROW + 4, k] + v5 * p[J_ROW + 5, k])
-                         + (e0 * p[W_COL, k] + e1 * p[W_COL + 1, k] + e2 * p[W_COL + 2, k]))
+        v0 = two_t * s0 + grad[0]
+        v1 = two_t * s1 + grad[1]
+        v2 = two_t * s2 + grad[2]
+        v3 = two_t * s3 + grad[3]
+        v4 = two_t * s4 + grad[4]
+        v5 = two_t * s5 + grad[5]
+        force[0] += (((v0 * p[J_ROW + 0, 0] + v1 * p[J_ROW + 1, 0] + v2 * p[J_ROW + 2, 0] + v3 * p[J_ROW + 3, 0]
+                     + v4 * p[J_ROW + 4, 0] + v5 * p[J_ROW + 5, 0]))
+                      + (e0 * p[W_COL, 0] + e1 * p[W_COL + 1, 0] + e2 * p[W_COL + 2, 0]))
+        force[1] += (((v0 * p[J_ROW + 0, 1] + v1 * p[J_ROW + 1, 1] + v2 * p[J_ROW + 2, 1] + v3 * p[J_ROW + 3, 1]
+                     + v4 * p[J_ROW + 4, 1] + v5 * p[J_ROW + 5, 1]))
+                      + (e0 * p[W_COL, 1] + e1 * p[W_COL + 1, 1] + e2 * p[W_COL + 2, 1]))
+        force[2] += (((v0 * p[J_ROW + 0, 2] + v1 * p[J_ROW + 1, 2] + v2 * p[J_ROW + 2, 2] + v3 * p[J_ROW + 3, 2]
+                     + v4 * p[J_ROW + 4, 2] + v5 * p[J_ROW + 5, 2]))
+                      + (e0 * p[W_COL, 2] + e1 * p[W_COL + 1, 2] + e2 * p[W_COL + 2, 2]))
+        force[3] += (((v0 * p[J_ROW + 0, 3] + v1 * p[J_ROW + 1, 3] + v2 * p[J_ROW + 2, 3] + v3 * p[J_ROW + 3, 3]
+                     + v4 * p[J_ROW + 4, 3] + v5 * p[J_ROW + 5, 3]))
+                      + (e0 * p[W_COL, 3] + e1 * p[W_COL + 1, 3] + e2 * p[W_COL + 2, 3]))
+        force[4] += (((v0 * p[J_ROW + 0, 4] + v1 * p[J_ROW + 1, 4] + v2 * p[J_ROW + 2, 4] + v3 * p[J_ROW + 3, 4]
+                     + v4 * p[J_ROW + 4, 4] + v5 * p[J_ROW + 5, 4]))
+                      + (e0 * p[W_COL, 4] + e1 * p[W_COL + 1, 4] + e2 * p[W_COL + 2, 4]))
+        force[5] += (((v0 * p[J_ROW + 0, 5] + v1 * p[J_ROW + 1, 5] + v2 * p[J_ROW + 2, 5] + v3 * p[J_ROW + 3, 5]
+                     + v4 * p[J_ROW + 4, 5] + v5 * p[J_ROW + 5, 5]))
+                      + (e0 * p[W_COL, 5] + e1 * p[W_COL + 1, 5] + e2 * p[W_COL + 2, 5]))
         # the chain force F (tension n_j along the axis, lateral K e) works through the second-order
         # displacement of B: d ext / d theta^T F = 1/2 (p (theta.F) + (theta.p) F - 2 theta (p.F))
         f1 = ml[1]
@@ -152,7 +220,7 @@ def _terms(cand, x, c, command, x0, axial, pack, point_b, defect_index, defect, 
 
 @njit(cache=True, nogil=True, fastmath=_FAST)
 def _equilibrium(cand, x, c, command, compliance, wrench, x0, gain, axial, pack, point_b, defect_index, defect, weight,
-                 tol, max_iter, divergence, settle, r, u, n, force, d, sd, ext_c, ml, kml, grad, td, v, work, secant):
+                 tol, max_iter, divergence, settle, r, u, n, force, d, ml, grad, work, secant):
     """Solve the pose x in place to ``tol`` at fixed offsets c: the fixed point ``x = Phi(x)``
     (module docstring), converged when ``|Phi(x) - x| <= tol``; x is then the last point evaluated
     (within ``tol / (1 - rho)`` of the fixed point, rho <= 0.1 the map's contraction) and r, u, n,
@@ -168,8 +236,7 @@ def _equilibrium(cand, x, c, command, compliance, wrench, x0, gain, axial, pack,
     x_new, f_prev, s_prev, b_y, s_b, rhs = work[0], work[1], work[2], work[3], work[4], work[5]
     previous = np.inf
     for it in range(max_iter):
-        _terms(cand, x, c, command, x0, axial, pack, point_b, defect_index, defect, weight, r, u, n, force, d, sd,
-               ext_c, ml, kml, grad, td, v)
+        _terms(cand, x, c, command, x0, axial, pack, point_b, defect_index, defect, weight, r, u, n, force, d, ml, grad)
         for m in range(6):  # F_C + sum_j g_j u_j - f2(x)
             acc = wrench[cand, m] - force[m]
             for j in range(6):
@@ -194,7 +261,7 @@ def _equilibrium(cand, x, c, command, compliance, wrench, x0, gain, axial, pack,
                 for k in range(6):
                     x[k] = x_new[k]
                 _terms(cand, x, c, command, x0, axial, pack, point_b, defect_index, defect, weight, r, u, n, force,
-                       d, sd, ext_c, ml, kml, grad, td, v)
+                       d, ml, grad)
             return OK, it + 1
         # residual f = Phi(x) - x, kept in x_new
         for k in range(6):
@@ -286,13 +353,8 @@ def solve(compliance, wrench, gain, axial, pack, point_b, defect_index, defect, 
         a2 = np.zeros(3)
         trial = np.zeros(3)
         d = np.zeros(WIDTH)
-        sd = np.zeros(WIDTH)
-        ext_c = np.zeros(WIDTH)
         ml = np.zeros(WIDTH)
-        kml = np.zeros(WIDTH)
         grad = np.zeros(WIDTH)
-        td = np.zeros(WIDTH)
-        v = np.zeros(WIDTH)
         force = np.zeros(WIDTH)
         use_clearance = False
         if clearance:
@@ -351,7 +413,7 @@ def solve(compliance, wrench, gain, axial, pack, point_b, defect_index, defect, 
                             probed = True
                 code, its = _equilibrium(cand, x, c, command, compliance, wrench, x0, gain, axial, pack, point_b,
                                          defect_index, defect, weight, inner_tol, max_iter, divergence, probed, r, u,
-                                         n, force, d, sd, ext_c, ml, kml, grad, td, v, work, secant)
+                                         n, force, d, ml, grad, work, secant)
                 iterations += its
                 if code != OK or not use_clearance:
                     break
@@ -368,8 +430,8 @@ def solve(compliance, wrench, gain, axial, pack, point_b, defect_index, defect, 
                         c_probe[k] += TANGENT_STEP
                         code, its = _equilibrium(cand, x_probe, c_probe, command, compliance, wrench, x0, gain,
                                                  axial, pack, point_b, defect_index, defect, weight, PROBE_TOL,
-                                                 max_iter, divergence, True, r, u, n_probe, force, d, sd, ext_c, ml,
-                                                 kml, grad, td, v, work, secant)
+                                                 max_iter, divergence, True, r, u, n_probe, force, d, ml,
+                                                 grad, work, secant)
                         iterations += its
                         if code != OK:
                             break
@@ -419,7 +481,7 @@ def solve(compliance, wrench, gain, axial, pack, point_b, defect_index, defect, 
                 if change <= tol:  # the offsets moved by <= tol: one more equilibrium settles the pose
                     code, its = _equilibrium(cand, x, c, command, compliance, wrench, x0, gain, axial, pack,
                                              point_b, defect_index, defect, weight, inner_tol, max_iter, divergence,
-                                             False, r, u, n, force, d, sd, ext_c, ml, kml, grad, td, v, work, secant)
+                                             False, r, u, n, force, d, ml, grad, work, secant)
                     iterations += its
                     break
                 code = NOT_CONVERGED
