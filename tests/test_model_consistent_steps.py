@@ -36,3 +36,24 @@ def test_the_fixed_point_needs_few_evaluations_per_posture():
     # rounding of the starts, a regression to the plain fixed point moves them by ~2x
     assert np.mean(out["iterations"]) <= 20.0, np.mean(out["iterations"])
     assert np.mean(out["iterations"][engaged]) <= 8.0, np.mean(out["iterations"][engaged])  # after 5.1, before ~10
+
+
+def test_the_default_tolerances_agree_with_tighter_ones():
+    """The same 40 candidates with the play state, solved at the default tolerance (offsets 1e-13 m,
+    the pose 1e-15) and at 30x tighter ones: the poses agree to 1.1e-13 rad and the offsets to
+    3.5e-14 m (session 15, both before and after the kernel stopped re-evaluating the map after a
+    converged equilibrium where no probe follows). Without the re-evaluation before the probes
+    too, the rates' error moved the poses by 1.3e-12 rad here (2.7e-12 on 300 candidates)."""
+    space = dataclasses.replace(parameter_space(), second_order=True, chain_shortening=tuple(np.zeros(216)),
+                                breakaway_force=2.0)
+    values = space.from_unit(np.random.default_rng(0).random((40, 45)))
+    matrices = mechanism_matrices(values, space)
+    runs = [solve_points_consistent(matrices, standard_trajectory().inputs, clearance=True, tol=tol,
+                                    max_iter=CONSISTENT_MAX_ITER, divergence=DIVERGENCE_LIMIT,
+                                    state_tolerance=STATE_TOLERANCE) for tol in (CONSISTENT_TOL, CONSISTENT_TOL / 30)]
+    assert all(np.all(run["codes"] == 0) for run in runs)
+    # 5e-13 rad / 2e-13 m: ~4x the measured 1.1e-13 / 3.5e-14 (rounding of the probes' rates),
+    # below the 1.3e-12 rad an under-resolved rate gives (checked: that variant fails here)
+    np.testing.assert_allclose(runs[0]["pose"], runs[1]["pose"], rtol=0, atol=5e-13)
+    # 2e-13 m: ~6x the measured 3.5e-14 m of the offsets, the Newton steps' own stop (1e-13 m) x 2
+    np.testing.assert_allclose(runs[0]["clearance"], runs[1]["clearance"], rtol=0, atol=2e-13)
