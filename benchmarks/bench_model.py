@@ -114,7 +114,8 @@ def main() -> None:
                 if label.startswith("consistent"):
                     new_rates[(set_label, threads)] = n_evals / wall_x
                 print(f"  {set_label:24s} {label:26s} {threads} thread(s): {wall_x * 1e3:7.2f} ms best "
-                      f"({median_x * 1e3:7.2f} median, {cpu_x * 1e3:7.2f} ms CPU; setup {setup_x * 1e3:6.2f} ms) "
+                      f"({median_x * 1e3:7.2f} median, {cpu_x * 1e3:7.2f} ms CPU; setup {setup_x * 1e3:6.2f} ms, "
+                      f"{setup_cpu_x * 1e3:6.2f} ms CPU) "
                       f"-> {n_evals / wall_x / 1e6:5.3f} M postures/s")
     new_best = max(new_rates.values())
     new_key = max(new_rates, key=new_rates.get)
