@@ -30,9 +30,9 @@ PROBE_TOL = 1e-14  # [m, rad] a probe's pose: its rate error ~ 1e-12 / TANGENT_S
 MIN_STIFFNESS = 0.2  # a measured nut stiffness below this share of the linear one is not trusted (linear used)
 
 
-# pack rows (``consistent.pack_chains``): per candidate and chain a (N_PACK, WIDTH) block of
-# the chain's matrices padded to 8 columns (one AVX-512 vector or two AVX2 ones per row), so
-# that every 6x6 product below is a sum of 8-wide rows scaled by scalars
+# pack rows (``consistent.pack_chains``): per candidate and chain one (N_PACK, WIDTH) block of
+# the chain's matrices, each row padded to 8 columns (64 bytes), read by ``_terms`` as columns
+# or rows of its 6x6 products (one contiguous block per chain instead of eight arrays)
 WIDTH = 8
 J_COL = 0  # 0-5: J[:, k] (frame twist -> chain end D)
 R_ROW = 6  # 6-8: R[b, :3] (the chain frame's axes in the frame's)
