@@ -123,7 +123,9 @@ def condensation_blocks(K: sp.spmatrix, cmap: CouplingMap) -> tuple[sp.csr_matri
     T = cmap.transform
     n_full = K.shape[0]
     n_i = cmap.free_node_dofs.size
-    new = np.full(n_full, -1, np.int64)
+    # 32-bit indices while they fit: these arrays have one entry per stored entry of K
+    index = np.int32 if n_full < 2**31 else np.int64
+    new = np.full(n_full, -1, index)
     new[cmap.free_node_dofs] = np.arange(n_i)
     counts = np.diff(K.indptr)
     row_new = np.repeat(new, counts)
@@ -137,7 +139,7 @@ def condensation_blocks(K: sp.spmatrix, cmap: CouplingMap) -> tuple[sp.csr_matri
                           shape=(n_i, n_i))
     # the coupled (slave) DOFs, ascending, and their rows of T on the master columns
     slave = np.flatnonzero(new < 0)
-    position = np.full(n_full, -1, np.int64)
+    position = np.full(n_full, -1, index)
     position[slave] = np.arange(slave.size)
     T_s = T[slave][:, n_i:].tocsr()
     T_s.sort_indices()
