@@ -131,6 +131,9 @@ def test_pardiso_out_of_memory_is_named(monkeypatch):
         def factorize(self, matrix):
             raise pypardiso.pardiso_wrapper.PyPardisoError(-2)
 
+        def solve(self, matrix, rhs):  # solve_spd factorizes and solves in one call (phase 13)
+            raise pypardiso.pardiso_wrapper.PyPardisoError(-2)
+
         def free_memory(self, everything=False):
             pass
 

@@ -120,7 +120,7 @@ def segment_stiffness_fem(segment: ChainSegment, material: Material = STEEL, *,
             from flexcal.fem.mesh_mapped_chain import FAST_CHAIN_OPTIONS, mapped_mesh_chain
 
             mesh, _report = mapped_mesh_chain(segment, elements_through_thickness=elements_through_thickness,
-                                              measure=False, **FAST_CHAIN_OPTIONS)
+                                              measure=False, quality=False, **FAST_CHAIN_OPTIONS)
         else:
             from flexcal.fem.mesh import mesh_part
             from flexcal.geometry.solids import segment_solid
