@@ -19,10 +19,12 @@ for the sources delta does not look like (z RMS 0.1-0.5 on the ``paper`` mount).
   missing second-order terms of a model are (docs/calibration.md 6, "Why the imperfect-model
   test fails"); a Matern process of any length scale gives an offset mode and a gain mode
   comparable variance, so its bars are either too narrow for the gain-like combinations or
-  too wide for the rest;
+  too wide for the rest (measured, docs/calibration.md 6, 2026-11-27: the polynomial part takes
+  table1's base parameters on FEM truth from z RMS 9.2 to 2.6, not yet into [0.5, 2]);
 - **estimated from the measurement, the model and its Jacobian only** (no truth): the
   hyperparameters (sigma unless given, s_x, s_y, s_z, l, tau) maximize the marginal likelihood of
-  the linearized data ``z = J (x_hat - mean) - r ~ N(0, J D J^T + sigma^2 I + K)`` (r = model -
+  the linearized data ``z = J (x_hat - mean) - r ~ N(0, J D J^T + sigma^2 I + K)`` (K the Matern
+  and polynomial parts; r = model -
   data at the estimate, D the prior covariance): the prior's J D J^T term lets the parameters
   take whatever part of z they can explain (restricted maximum likelihood, with the prior in
   place of flat fixed effects), so the discrepancy is sized by what the parameters *cannot*
