@@ -45,7 +45,8 @@ def _z(x, truth, covariance, C):
 
 
 def run_case(scenario_name: str, seed: int, trajectory: str | None, provider, noise_urad: float,
-             walk_seed: int) -> dict:
+             walk_seed: int, model: tuple[str, str, bool] = ("second-order", "fem", True),
+             arrays: Path | None = None) -> dict:
     from flexcal.calibration.pipeline import identify_all
     from flexcal.model.trajectory import standard_trajectory
     from flexcal.validation.measurements import read_trajectory
@@ -58,7 +59,8 @@ def run_case(scenario_name: str, seed: int, trajectory: str | None, provider, no
         inputs, leg = read_trajectory(trajectory)
         scenario = dataclasses.replace(scenario, inputs=inputs, leg=leg)
     measurement = make_truth(scenario, provider).measurement
-    space = model_space("fem", True, progress=False, mechanism=scenario.space.mechanism)
+    kind, stiffness, second_order = model
+    space = model_space(stiffness, second_order, progress=False, mechanism=scenario.space.mechanism, model=kind)
     found = identify_all(space, measurement.inputs, measurement.angles, measurement.leg)
     fit, base, names = found.estimate, found.base, list(space.names)
     truth = space.to_unit(scenario.values[space.active_indices])
@@ -73,6 +75,15 @@ def run_case(scenario_name: str, seed: int, trajectory: str | None, provider, no
     from flexcal.calibration.problem import CalibrationProblem
 
     predicted = CalibrationProblem(space=space, inputs=walk_inputs, angles=walk_angles).residuals(fit.x[None])[0]
+    if arrays is not None:  # what the error bars are computed from, to recompute them on the same fit
+        from flexcal.model.trajectory import WORKSPACE
+
+        arrays.mkdir(parents=True, exist_ok=True)
+        np.savez(arrays / f"{scenario_name}-{seed}-{Path(trajectory).stem if trajectory else 'standard'}.npz",
+                 residual=fit.residual, jacobian=fit.jacobian, x=fit.x, truth=truth, prior_mean=fit.prior.mean,
+                 prior_std=fit.prior.std, prior_precision=fit.prior.precision, noise=fit.noise,
+                 posterior=old, coordinates=measurement.angles / WORKSPACE, pure=E,
+                 base=base.reported_combinations(names), base_old=base.combinations(names))
     return {"scenario": scenario_name, "seed": seed, "trajectory": trajectory or "standard",
             "n_points": int(measurement.n_points), "fit_rms_urad": fit.rms * 1e6, "pure": pure,
             "z_sources_new": _z(fit.x, truth, fit.covariance, E).tolist(),
@@ -81,7 +92,7 @@ def run_case(scenario_name: str, seed: int, trajectory: str | None, provider, no
             "z_base_old": _z(fit.x, truth, old, base.combinations(names)).tolist(),
             "width_ratio": (np.sqrt(np.diag(E @ fit.covariance @ E.T)) / np.sqrt(np.diag(E @ old @ E.T))).tolist(),
             "abs_errors_si": errors, "walk_rms_urad": float(np.sqrt(np.mean(predicted ** 2)) * 1e6),
-            "walk_seed": [walk_seed, seed],
+            "walk_seed": [walk_seed, seed], "model": list(model),
             "discrepancy": None if fit.discrepancy is None else fit.discrepancy.as_dict()}
 
 
@@ -129,6 +140,53 @@ def summarize(cases: list[dict]) -> None:
               f"{case['walk_rms_urad']:.3g} / {d['walk_rms_urad']:.3g} |")
 
 
+def recompute_bars(out: Path) -> list[dict]:
+    """The error bars of each saved fit (OUT/arrays/*.npz, written by run_case) recomputed with
+    the Matern discrepancy alone (before issue 28's item 1) and with the Matern + quadratic
+    polynomial one (``fit_discrepancy``'s default): same fit, same sandwich, two discrepancies.
+    Returns one row per fit with both sets of z-scores and the bar widths."""
+    from flexcal.calibration.discrepancy import fit_discrepancy, sandwich_covariance
+
+    rows = []
+    for path in sorted((out / "arrays").glob("*.npz")):
+        a = dict(np.load(path))
+        row = {"case": path.stem}
+        for label, polynomial in (("matern", False), ("polynomial", True)):
+            found = fit_discrepancy(a["residual"], a["jacobian"], a["x"], a["prior_mean"], a["prior_std"],
+                                    a["coordinates"], polynomial=polynomial)
+            cov = sandwich_covariance(a["posterior"], a["jacobian"], float(a["noise"]), a["prior_precision"],
+                                      found.covariance)
+            row[f"z_sources_{label}"] = _z(a["x"], a["truth"], cov, a["pure"]).tolist()
+            row[f"z_base_{label}"] = _z(a["x"], a["truth"], cov, a["base"]).tolist()
+            row[f"std_sources_{label}"] = np.sqrt(np.einsum("kd,de,ke->k", a["pure"], cov, a["pure"])).tolist()
+            row[f"discrepancy_{label}"] = found.as_dict()
+        rows.append(row)
+        print(f"{path.stem}: z sources {np.round(row['z_sources_matern'], 2)} -> "
+              f"{np.round(row['z_sources_polynomial'], 2)}; base RMS {_rms(row['z_base_matern']):.3g} -> "
+              f"{_rms(row['z_base_polynomial']):.3g}; tau {row['discrepancy_polynomial']['polynomial_tau_urad']:.3g} "
+              f"urad", flush=True)
+    return rows
+
+
+def summarize_recomputed(rows: list[dict]) -> None:
+    """Pooled table of ``recompute_bars`` by mount and trajectory (case names scenario-seed-trajectory)."""
+    print("| mount | trajectory | fits | z RMS sources Matern -> + polynomial (n) | z RMS base Matern -> + polynomial (n) "
+          "| width + polynomial / Matern (geo. mean, sources) |")
+    print("|---|---|---|---|---|---:|")
+    groups: dict[tuple[str, str], list[dict]] = {}
+    for row in rows:
+        mount, seed, trajectory = row["case"].split("-", 2)
+        groups.setdefault((mount, trajectory), []).append(row)
+    for (mount, trajectory), group in sorted(groups.items()):
+        cat = lambda key: sum((r[key] for r in group), [])  # noqa: E731
+        ratio = np.asarray(cat("std_sources_polynomial")) / np.asarray(cat("std_sources_matern"))
+        print(f"| {mount} | {trajectory} | {', '.join(r['case'] for r in group)} | "
+              f"{_rms(cat('z_sources_matern')):.3g} -> {_rms(cat('z_sources_polynomial')):.3g} "
+              f"({len(cat('z_sources_polynomial'))}) | {_rms(cat('z_base_matern')):.3g} -> "
+              f"{_rms(cat('z_base_polynomial')):.3g} ({len(cat('z_base_polynomial'))}) | "
+              f"{float(np.exp(np.mean(np.log(ratio)))) if ratio.size else float('nan'):.3g} |")
+
+
 def main(argv=None) -> int:
     from flexcal.validation.prototype.providers import stiffness_provider
 
@@ -141,12 +199,23 @@ def main(argv=None) -> int:
     parser.add_argument("--noise-urad", type=float, default=0.5)
     parser.add_argument("--walk-seed", type=int, default=101)
     parser.add_argument("--summary-only", action="store_true")
+    parser.add_argument("--recompute-bars", action="store_true",
+                        help="only recompute the bars of the saved fits (OUT/arrays) with the Matern discrepancy "
+                             "alone and with the polynomial part; writes OUT/recomputed.json")
+    parser.add_argument("--model", default="second-order", choices=("paper", "second-order", "consistent"))
+    parser.add_argument("--model-stiffness", default="fem", choices=("fem", "closed-form"))
+    parser.add_argument("--no-second-order", action="store_true")
     args = parser.parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     log = out / "cases.jsonl"
     cases = [json.loads(line) for line in log.read_text().splitlines()] if log.exists() else []
     designs = dict(item.split("=", 1) for item in args.designs.split(",") if item)
+    if args.recompute_bars:
+        rows = recompute_bars(out)
+        (out / "recomputed.json").write_text(json.dumps(rows, indent=1))
+        summarize_recomputed(rows)
+        return 0
     if not args.summary_only:
         provider = stiffness_provider(args.provider, progress=False, workers=None)
         for name in args.scenarios.split(","):
@@ -155,7 +224,8 @@ def main(argv=None) -> int:
                     key = (name, seed, trajectory or "standard")
                     if any((c["scenario"], c["seed"], c["trajectory"]) == key for c in cases):
                         continue
-                    case = run_case(name, seed, trajectory, provider, args.noise_urad, args.walk_seed)
+                    case = run_case(name, seed, trajectory, provider, args.noise_urad, args.walk_seed,
+                                    (args.model, args.model_stiffness, not args.no_second_order), out / "arrays")
                     cases.append(case)
                     with log.open("a") as handle:
                         handle.write(json.dumps(case) + "\n")
