@@ -114,3 +114,30 @@ def test_slopes_move_the_factors_linearly_with_the_dimensions():
                                mechanism_matrices(space.nominal_full, at_nominal).chain_stiffness, rtol=1e-14)  # zero slopes' terms: round-off
     with pytest.raises(ValueError, match="compliance_slopes"):
         dataclasses.replace(space, compliance_slopes=tuple(slopes.ravel()))  # slopes need factors
+
+
+def test_slopes_are_measured_on_their_own_grid_under_their_own_cache_keys():
+    """The FEM slopes' builds run on ``SLOPE_ELEMENTS_THROUGH`` cells through the thinnest
+    section (docs/model.md 7), with the provider's material, cache, executor and mesher, and the
+    grid is in every segment's cache key (a coarse segment is never read as a fine one); the
+    analytic and fTetWild providers, and elements_through=None, keep the provider itself."""
+    from flexcal.validation.prototype.fem_provider import DEFAULT_ELEMENTS_THROUGH, canonical_segment, fem_provider, \
+        segment_cache_key
+    from flexcal.validation.prototype.segments import section_nodes
+    from flexcal.validation.runs.model_correction import SLOPE_ELEMENTS_THROUGH, slope_provider
+
+    fine = fem_provider(progress=False, workers=3, cache_directory="/nonexistent/x")
+    coarse = slope_provider(fine)
+    assert coarse is not fine and coarse.mesher == "mapped"
+    assert fine.elements_through_thickness == DEFAULT_ELEMENTS_THROUGH
+    assert coarse.elements_through_thickness == SLOPE_ELEMENTS_THROUGH != DEFAULT_ELEMENTS_THROUGH
+    assert f"{SLOPE_ELEMENTS_THROUGH:g} through" in coarse.description
+    assert slope_provider(fine, None) is fine
+    analytic = analytic_provider()
+    assert slope_provider(analytic) is analytic
+    tetwild = fem_provider(progress=False, mesher="tetwild", elements_through_thickness=3)
+    assert slope_provider(tetwild) is tetwild
+    chain = parameter_space().mechanism.chains[0].chain
+    segment, _ = canonical_segment(chain, *section_nodes(chain)[:2])
+    assert segment_cache_key(segment, elements_through_thickness=SLOPE_ELEMENTS_THROUGH) != segment_cache_key(
+        segment, elements_through_thickness=DEFAULT_ELEMENTS_THROUGH)

@@ -30,8 +30,8 @@ from flexcal.model.parameters import ParameterSpace
 from ..prototype.segments import (StiffnessProvider, chain_slices, end_stiffness, prepare_provider, section_nodes)
 from .model_names import DEFAULT_BREAKAWAY_N, MODELS
 
-__all__ = ["provider_chain_compliance", "compliance_factors", "compliance_slopes", "corrected_space", "model_space",
-           "MODELS", "DEFAULT_BREAKAWAY_N"]
+__all__ = ["provider_chain_compliance", "compliance_factors", "compliance_slopes", "slope_provider", "corrected_space",
+           "model_space", "MODELS", "DEFAULT_BREAKAWAY_N", "SLOPE_STEPS", "SLOPE_ELEMENTS_THROUGH"]
 
 
 def provider_chain_compliance(chain: FlexureChain, provider: StiffnessProvider) -> np.ndarray:
@@ -72,18 +72,38 @@ def compliance_factors(space: ParameterSpace, provider: StiffnessProvider) -> np
 # fillet x 1.03 (6.18 mm) fail to build (PARDISO error -4 on the mapped mesh, session 14),
 # those at x 1.025 and x 0.97 build.
 SLOPE_STEPS = {"w": 0.03, "a": 0.025, "l": 0.03, "t1": 0.03, "t2": 0.03}
+# The mapped FEM grid of the slopes' builds: SLOPE_ELEMENTS_THROUGH cells through the thinnest
+# section (FAST_CHAIN_OPTIONS otherwise), against the prototype's DEFAULT_ELEMENTS_THROUGH (6):
+# a difference of two ratios on meshes of one topology, so most of the grid's error cancels.
+# Measured (docs/model.md 7, "Slopes on a coarse grid"): see there for the figures.
+SLOPE_ELEMENTS_THROUGH = 3
+
+
+def slope_provider(provider: StiffnessProvider, elements_through: float | None = SLOPE_ELEMENTS_THROUGH):
+    """The provider the slopes are measured with: a mapped FEM provider (``fem_provider``'s
+    ``on_grid``) on ``elements_through`` cells through the thinnest section; any other provider
+    (analytic, fTetWild) or elements_through None: ``provider`` itself."""
+    on_grid = getattr(provider, "on_grid", None)
+    if elements_through is None or not callable(on_grid) or getattr(provider, "mesher", None) != "mapped":
+        return provider
+    return on_grid(float(elements_through))
 
 
 def compliance_slopes(space: ParameterSpace, provider: StiffnessProvider,
-                      steps: dict[str, float] | None = None) -> np.ndarray:
+                      steps: dict[str, float] | None = None, *,
+                      elements_through: float | None = SLOPE_ELEMENTS_THROUGH) -> np.ndarray:
     """(n_chains, 5, 8): the change of each factor of ``compliance_factors`` per relative change
     of each chain dimension (``DIMENSION_SYMBOLS``: w, a, l, t1, t2), by a central difference of
     +-``steps[symbol]`` (``SLOPE_STEPS`` by default) at the nominal chains of ``space`` [-]. Two
     provider solves per chain design and dimension (20 FEM chain builds for the reference
     mount's two designs, cached). Central, not forward: the true dimensions sit up to 10 % either
-    side of nominal, and a forward difference's slope is that of the secant to one side."""
+    side of nominal, and a forward difference's slope is that of the secant to one side.
+    elements_through: the FEM grid of those builds (``slope_provider``: the mapped FEM provider
+    on that grid, ``SLOPE_ELEMENTS_THROUGH`` by default; None: ``provider``'s own grid); the
+    segments' cache keys carry it."""
     from flexcal.model.parameters import DIMENSION_SYMBOLS
 
+    provider = slope_provider(provider, elements_through)
     steps = SLOPE_STEPS if steps is None else steps
     fields = {"w": "width", "a": "fillet", "l": "hinge_length", "t1": "thickness_1", "t2": "thickness_2"}
     mech = space.mechanism
