@@ -194,3 +194,16 @@ def test_slopes_on_a_coarser_grid_agree_with_the_prototypes_grid():
     # slopes is 0.11 / 0.19 / 0.10 / 2.3 % (docs/model.md 7), so 0.2 % keeps the grid's share
     # at most that error's size (2 through: 0.20 / 0.39 / 0.30 / 0.63 %, fails)
     assert np.max(np.abs(change)) < 2e-3, np.max(np.abs(change), axis=0)
+
+
+def test_the_slopes_build_each_chain_design_once():
+    """``same_design``: the reference mount's L2 is L1's design with a length 1 ulp longer (from
+    its mount points), so its slopes are L1's; a chain 1 nm longer is another design."""
+    from flexcal.validation.runs.model_correction import same_design
+
+    chains = parameter_space().mechanism.chains
+    assert chains[1].chain != chains[0].chain  # the 1-ulp length: equal chains would not need same_design
+    np.testing.assert_array_equal(same_design(chains), [0, 0, 0, 3, 3, 3])
+    longer = dataclasses.replace(chains[1], chain=dataclasses.replace(chains[0].chain,
+                                                                      length=chains[0].chain.length + 1e-9))
+    np.testing.assert_array_equal(same_design((chains[0], longer)), [0, 1])

@@ -30,7 +30,7 @@ from flexcal.model.parameters import ParameterSpace
 from ..prototype.segments import (StiffnessProvider, chain_slices, end_stiffness, prepare_provider, section_nodes)
 from .model_names import DEFAULT_BREAKAWAY_N, MODELS
 
-__all__ = ["provider_chain_compliance", "compliance_factors", "compliance_slopes", "slope_provider", "unchanged_slices", "corrected_space",
+__all__ = ["provider_chain_compliance", "compliance_factors", "compliance_slopes", "slope_provider", "unchanged_slices", "same_design", "corrected_space",
            "model_space", "MODELS", "DEFAULT_BREAKAWAY_N", "SLOPE_STEPS", "SLOPE_ELEMENTS_THROUGH"]
 
 
@@ -108,15 +108,32 @@ def unchanged_slices(nominal: FlexureChain, moved: FlexureChain) -> set[tuple[fl
             == pieces(ChainSegment(chain=nominal, x_start=float(x0), x_end=float(x1)))}
 
 
+def same_design(chains) -> np.ndarray:
+    """(n,) for each ``ChainPlacement``: the index of the first chain of the same design, its
+    geometry equal but for a length within 1 pm (the reference mount's L2 is 1 ulp longer than
+    L1 and L3: 4.4721359549995790e-01 against ...787e-01 m, from its mount points), so the
+    slopes build one design once (docs/model.md 7)."""
+    out = np.arange(len(chains))
+    for c, placement in enumerate(chains):
+        for first in range(c):
+            other = chains[first].chain
+            if (abs(placement.chain.length - other.length) <= 1e-12
+                    and dataclasses.replace(placement.chain, length=other.length) == other):
+                out[c] = first
+                break
+    return out
+
+
 def compliance_slopes(space: ParameterSpace, provider: StiffnessProvider,
                       steps: dict[str, float] | None = None, *,
                       elements_through: float | None = SLOPE_ELEMENTS_THROUGH) -> np.ndarray:
     """(n_chains, 5, 8): the change of each factor of ``compliance_factors`` per relative change
     of each chain dimension (``DIMENSION_SYMBOLS``: w, a, l, t1, t2), by a central difference of
     +-``steps[symbol]`` (``SLOPE_STEPS`` by default) at the nominal chains of ``space`` [-]. Two
-    provider solves per chain design and dimension (20 chains for the reference mount's two
-    designs), but a slice the moved dimension leaves as it was is the nominal chain's segment
-    (``unchanged_slices``): 36 FEM segment builds instead of 60, the same slopes bit for bit.
+    provider solves per chain design and dimension (``same_design``: 20 chains for the reference
+    mount's two designs), and a slice the moved dimension leaves as it was is the nominal chain's
+    segment (``unchanged_slices``): 36 FEM segment builds where 90 were (L2 built apart from L1
+    and all three slices of every moved chain), the same slopes to 1e-14.
     Central, not forward: the true dimensions sit up to 10 % either side of nominal, and a
     forward difference's slope is that of the secant to one side.
     elements_through: the FEM grid of those builds (``slope_provider``; None, the default
@@ -132,9 +149,10 @@ def compliance_slopes(space: ParameterSpace, provider: StiffnessProvider,
     steps = SLOPE_STEPS if steps is None else steps
     fields = {"w": "width", "a": "fillet", "l": "hinge_length", "t1": "thickness_1", "t2": "thickness_2"}
     mech = space.mechanism
+    design = same_design(mech.chains)
     moved = {(c, symbol, sign): dataclasses.replace(p.chain, **{fields[symbol]: getattr(p.chain, fields[symbol])
                                                                  * (1.0 + sign * steps[symbol])})
-             for c, p in enumerate(mech.chains) for symbol in DIMENSION_SYMBOLS for sign in (1, -1)}
+             for c, p in enumerate(mech.chains) if design[c] == c for symbol in DIMENSION_SYMBOLS for sign in (1, -1)}
     # a slice a dimension leaves as it was (leaf 2's segment when t1 moves, the strut when w, a,
     # t1 or t2 move) is the nominal chain's own segment: asked for as that, it is built once
     shared = {(c, symbol, sign): unchanged_slices(mech.chains[c].chain, chain)
@@ -160,8 +178,8 @@ def compliance_slopes(space: ParameterSpace, provider: StiffnessProvider,
         out[c, DIMENSION_SYMBOLS.index(symbol)] += sign * done[chain] / (2.0 * steps[symbol])
         middle[c, DIMENSION_SYMBOLS.index(symbol)] += 0.5 * done[chain]
     if provider is not fine:  # on a coarser grid: its relative slope times the factor on the provider's grid
-        out *= compliance_factors(space, fine)[:, None, :] / middle
-    return out
+        out *= compliance_factors(space, fine)[:, None, :] / np.where(middle == 0.0, 1.0, middle)  # 0: a design's copy
+    return out[design]
 
 
 def corrected_space(space: ParameterSpace, provider: StiffnessProvider, *, slopes: bool = False) -> ParameterSpace:
