@@ -2,6 +2,7 @@
 
     .venv/bin/python benchmarks/bench_form_error.py [--scenario table1[,paper]] [--provider fem]
         [--walks 3] [--points 60] [--strokes 0.5,0.8] [--seed 1] [--breakaway 2] [--slopes]
+        [--slope-grids default,provider]
         [--trajectory table1=DIR/trajectory.csv ...]
 
 Truth: the scenario's as-built virtual prototype (FEM segment stiffness by default, noise-free
@@ -82,6 +83,10 @@ def main(argv=None) -> int:
     parser.add_argument("--slopes", action="store_true",
                         help="add the consistent model with FEM compliance slopes (docs/model.md 7; 20 cold FEM chain "
                              "builds the first time)")
+    parser.add_argument("--slope-grids", default="default",
+                        help="with --slopes: the mapped grid(s) of the slopes' FEM builds, comma-separated: 'default' "
+                             "(model_correction.SLOPE_ELEMENTS_THROUGH), 'provider' (the prototype's own grid) or a "
+                             "number of cells through the thinnest section; one model row each")
     parser.add_argument("--trajectory", action="append", default=[], metavar="SCENARIO=FILE",
                         help="a trajectory file (columns xa1_mm, xa2_mm, xa3_mm) to add for that scenario")
     args = parser.parse_args(argv)
@@ -118,11 +123,15 @@ def _table(scenario_name, provider, args, strokes, force, trajectory_file) -> No
               ("+ consistent: chain kinematics from its elements (S corrected at nominal, lateral defect, "
                "load form), lever arms, nut tangent, solved with the clearance", consistent))
     if args.slopes and args.provider == "fem":
-        from flexcal.validation.runs.model_correction import compliance_slopes
+        from flexcal.validation.runs.model_correction import SLOPE_ELEMENTS_THROUGH, compliance_slopes
 
-        slopes = tuple(float(v) for v in compliance_slopes(paper, provider).ravel())
-        models += (("+ FEM compliance factors following the dimensions (slopes at nominal)",
-                    dataclasses.replace(consistent, compliance_slopes=slopes)),)
+        for grid in args.slope_grids.split(","):
+            through = {"default": SLOPE_ELEMENTS_THROUGH, "provider": None}.get(grid)
+            through = float(grid) if grid not in ("default", "provider") else through
+            slopes = tuple(float(v) for v in compliance_slopes(paper, provider, elements_through=through).ravel())
+            shown = f"{through:g} through" if through is not None else "the prototype's grid"
+            models += ((f"+ FEM compliance factors following the dimensions (slopes at nominal, {shown})",
+                        dataclasses.replace(consistent, compliance_slopes=slopes)),)
     amplitudes = standard_trajectory(scenario.space.mechanism).amplitudes
     trajectories = [("standard (77 points)", scenario.inputs, scenario.leg)]
     if trajectory_file:

@@ -317,7 +317,16 @@ def fem_provider(material: Material = STEEL, *, elements_through_thickness: floa
                               cache_directory=cache_directory, workers=workers, scheduler=scheduler,
                               progress=progress, mesher=mesher)
 
+    def on_grid(n: float):
+        """This provider (same material, cache, executor, mesher) with ``n`` elements through
+        the thinnest section: what the compliance slopes are measured with (their own cache keys)."""
+        return fem_provider(material, elements_through_thickness=n, cache_directory=cache_directory,
+                            progress=progress, workers=workers, scheduler=scheduler, mesher=mesher)
+
     provider.prepare = prepare
+    provider.on_grid = on_grid
+    provider.mesher = mesher
+    provider.elements_through_thickness = float(elements_through_thickness)
     provider.description = (f"FEM (quadratic tets, {mesher} mesh, {elements_through_thickness:g} through the thinnest "
                             f"section)")
     return provider

@@ -30,8 +30,8 @@ from flexcal.model.parameters import ParameterSpace
 from ..prototype.segments import (StiffnessProvider, chain_slices, end_stiffness, prepare_provider, section_nodes)
 from .model_names import DEFAULT_BREAKAWAY_N, MODELS
 
-__all__ = ["provider_chain_compliance", "compliance_factors", "compliance_slopes", "corrected_space", "model_space",
-           "MODELS", "DEFAULT_BREAKAWAY_N"]
+__all__ = ["provider_chain_compliance", "compliance_factors", "compliance_slopes", "slope_provider", "unchanged_slices", "same_design", "corrected_space",
+           "model_space", "MODELS", "DEFAULT_BREAKAWAY_N", "SLOPE_STEPS", "SLOPE_ELEMENTS_THROUGH"]
 
 
 def provider_chain_compliance(chain: FlexureChain, provider: StiffnessProvider) -> np.ndarray:
@@ -72,33 +72,114 @@ def compliance_factors(space: ParameterSpace, provider: StiffnessProvider) -> np
 # fillet x 1.03 (6.18 mm) fail to build (PARDISO error -4 on the mapped mesh, session 14),
 # those at x 1.025 and x 0.97 build.
 SLOPE_STEPS = {"w": 0.03, "a": 0.025, "l": 0.03, "t1": 0.03, "t2": 0.03}
+# The grid of the slopes' builds by default: None, the provider's own (the prototype's 6 cells
+# through the thinnest section on the mapped grid). A coarser mapped grid (``elements_through``,
+# ``slope_provider``) was measured and rejected (docs/model.md 7, "Slopes on a coarser grid",
+# session 15): at 3 through the slopes' CPU drops ~5x and the factors at table1's true
+# dimensions move by <= 0.14 % (their error left is 0.11-0.19 %), but the form error on
+# table1's `flexcal design` trajectory rises from 0.10 / 0.27 / 0.07 to 0.18 / 0.49 / 0.12 urad
+# (4 through: 0.14 / 0.39 / 0.10).
+SLOPE_ELEMENTS_THROUGH: float | None = None
+
+
+def slope_provider(provider: StiffnessProvider, elements_through: float | None = SLOPE_ELEMENTS_THROUGH):
+    """The provider the slopes are measured with: a mapped FEM provider (``fem_provider``'s
+    ``on_grid``) on ``elements_through`` cells through the thinnest section (its own cache keys);
+    any other provider (analytic, fTetWild) or elements_through None: ``provider`` itself."""
+    on_grid = getattr(provider, "on_grid", None)
+    if elements_through is None or not callable(on_grid) or getattr(provider, "mesher", None) != "mapped":
+        return provider
+    return on_grid(float(elements_through))
+
+
+def unchanged_slices(nominal: FlexureChain, moved: FlexureChain) -> set[tuple[float, float]]:
+    """The slices (x_start, x_end) [m] between the section nodes of ``moved`` whose solid is
+    that of the same slice of ``nominal`` (same nodes, same pieces: ``flexcal.geometry.exact.pieces``,
+    which is all a segment's mesh and end faces are made from), so the segment of ``nominal``
+    stands for it, bit for bit (tested)."""
+    from flexcal.geometry.exact import pieces
+    from flexcal.geometry.params import ChainSegment
+
+    nodes = section_nodes(moved)
+    if moved.length != nominal.length or not np.array_equal(nodes, section_nodes(nominal)):
+        return set()
+    return {(float(x0), float(x1)) for x0, x1 in zip(nodes[:-1], nodes[1:])
+            if pieces(ChainSegment(chain=moved, x_start=float(x0), x_end=float(x1)))
+            == pieces(ChainSegment(chain=nominal, x_start=float(x0), x_end=float(x1)))}
+
+
+def same_design(chains) -> np.ndarray:
+    """(n,) for each ``ChainPlacement``: the index of the first chain of the same design, its
+    geometry equal but for a length within 1 pm (the reference mount's L2 is 1 ulp longer than
+    L1 and L3: 4.4721359549995790e-01 against ...787e-01 m, from its mount points), so the
+    slopes build one design once (docs/model.md 7)."""
+    out = np.arange(len(chains))
+    for c, placement in enumerate(chains):
+        for first in range(c):
+            other = chains[first].chain
+            if (abs(placement.chain.length - other.length) <= 1e-12
+                    and dataclasses.replace(placement.chain, length=other.length) == other):
+                out[c] = first
+                break
+    return out
 
 
 def compliance_slopes(space: ParameterSpace, provider: StiffnessProvider,
-                      steps: dict[str, float] | None = None) -> np.ndarray:
+                      steps: dict[str, float] | None = None, *,
+                      elements_through: float | None = SLOPE_ELEMENTS_THROUGH) -> np.ndarray:
     """(n_chains, 5, 8): the change of each factor of ``compliance_factors`` per relative change
     of each chain dimension (``DIMENSION_SYMBOLS``: w, a, l, t1, t2), by a central difference of
     +-``steps[symbol]`` (``SLOPE_STEPS`` by default) at the nominal chains of ``space`` [-]. Two
-    provider solves per chain design and dimension (20 FEM chain builds for the reference
-    mount's two designs, cached). Central, not forward: the true dimensions sit up to 10 % either
-    side of nominal, and a forward difference's slope is that of the secant to one side."""
+    provider solves per chain design and dimension (``same_design``: 20 chains for the reference
+    mount's two designs), and a slice the moved dimension leaves as it was is the nominal chain's
+    segment (``unchanged_slices``): 36 FEM segment builds where 90 were (L2 built apart from L1
+    and all three slices of every moved chain), the same slopes to 1e-14.
+    Central, not forward: the true dimensions sit up to 10 % either side of nominal, and a
+    forward difference's slope is that of the secant to one side.
+    elements_through: the FEM grid of those builds (``slope_provider``; None, the default
+    ``SLOPE_ELEMENTS_THROUGH``: ``provider``'s own); the segments' cache keys carry it. On
+    another grid than ``provider``'s the slopes are that grid's relative change of each factor,
+    d ln f / d ln P (the difference over the mean of the +- ratios), times the factor on
+    ``provider``'s grid (``compliance_factors``): the grid's error of the factor itself (up to
+    2.8 % at 3 through) cancels, and with it most of the slopes' (the torsion entry's 0.52 ->
+    0.12 % of the factor at table1's dimensions; not enough for the form error, docs/model.md 7)."""
     from flexcal.model.parameters import DIMENSION_SYMBOLS
 
+    fine, provider = provider, slope_provider(provider, elements_through)
     steps = SLOPE_STEPS if steps is None else steps
     fields = {"w": "width", "a": "fillet", "l": "hinge_length", "t1": "thickness_1", "t2": "thickness_2"}
     mech = space.mechanism
+    design = same_design(mech.chains)
     moved = {(c, symbol, sign): dataclasses.replace(p.chain, **{fields[symbol]: getattr(p.chain, fields[symbol])
                                                                  * (1.0 + sign * steps[symbol])})
-             for c, p in enumerate(mech.chains) for symbol in DIMENSION_SYMBOLS for sign in (1, -1)}
-    prepare_provider(provider, chain_slices(moved.values()))  # parallel FEM builds
+             for c, p in enumerate(mech.chains) if design[c] == c for symbol in DIMENSION_SYMBOLS for sign in (1, -1)}
+    # a slice a dimension leaves as it was (leaf 2's segment when t1 moves, the strut when w, a,
+    # t1 or t2 move) is the nominal chain's own segment: asked for as that, it is built once
+    shared = {(c, symbol, sign): unchanged_slices(mech.chains[c].chain, chain)
+              for (c, symbol, sign), chain in moved.items()}
+
+    def slices_of(key):
+        nominal, chain = mech.chains[key[0]].chain, moved[key]
+        return [(nominal if (x0, x1) in shared[key] else chain, x0, x1) for _, x0, x1 in chain_slices([chain])]
+
+    prepare_provider(provider, list(dict.fromkeys(s for key in moved for s in slices_of(key))))  # parallel FEM builds
     done, out = {}, np.zeros((len(mech.chains), len(DIMENSION_SYMBOLS), 8))
+    middle = np.zeros_like(out)  # the mean of the +- ratios: the factor on the slopes' grid, to O(step^2)
     for (c, symbol, sign), chain in moved.items():
         if chain not in done:
-            richer = provider_chain_compliance(chain, provider)
+            nominal, same = mech.chains[c].chain, shared[c, symbol, sign]
+
+            def asked(at, x0, x1, nominal=nominal, same=same):
+                return provider(nominal if (x0, x1) in same else at, x0, x1)
+
+            richer = provider_chain_compliance(chain, asked)
             closed = chain_compliance_matrix(chain, mech.material)
             done[chain] = np.array([richer[i, j] / closed[i, j] for i, j in ENTRY_INDEX.values()])
         out[c, DIMENSION_SYMBOLS.index(symbol)] += sign * done[chain] / (2.0 * steps[symbol])
-    return out
+        middle[c, DIMENSION_SYMBOLS.index(symbol)] += 0.5 * done[chain]
+    if provider is not fine:  # on a coarser grid: its relative slope times the factor on the provider's grid
+        out *= compliance_factors(space, fine)[:, None, :] / np.where(middle == 0.0, 1.0, middle)  # 0: a design's copy
+    return out[design]
 
 
 def corrected_space(space: ParameterSpace, provider: StiffnessProvider, *, slopes: bool = False) -> ParameterSpace:
