@@ -23,6 +23,7 @@ def _jacobian(inputs):
 def test_candidates_fill_the_box_and_the_hull_and_nothing_outside():
     box = candidate_inputs(BOX, 4000, "box", rng=0)
     hull = candidate_inputs(BOX, 4000, "hull", rng=0)
+    # exact bounds of the draw: |x| <= box and sum |x/a| <= 1 (Dirichlet weights sum to at most 1)
     assert np.all(np.abs(box) <= BOX) and np.all(np.sum(np.abs(hull) / BOX, axis=1) <= 1.0)
     # uniform: each box octant holds 1/8 of 4000 (binomial sd ~21: 5 sd), the hull's mean |x/a| is 1/4
     octants = np.unique((box > 0) @ np.array([1, 2, 4]), return_counts=True)[1]
@@ -61,6 +62,7 @@ def test_fixed_postures_come_first_and_the_design_adds_the_rest():
                                prior_precision=np.full(6, 12.0), rng=1, region="hull", box=BOX,
                                fixed_inputs=fixed, fixed_leg=np.array([0, 1, 1, 2, 3]), points_per_leg=4)
     np.testing.assert_array_equal(design.inputs[:5], fixed)
+    # inside the hull; 1e-12: the rounding of x / a on the fixed postures at the vertices
     assert design.inputs.shape == (12, 3) and np.all(np.sum(np.abs(design.inputs) / BOX, axis=1) <= 1 + 1e-12)
     np.testing.assert_array_equal(design.leg, [0, 1, 1, 2, 3, 4, 4, 4, 4, 5, 5, 5])
     with pytest.raises(ValueError, match="fixed postures leave none"):

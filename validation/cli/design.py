@@ -14,6 +14,11 @@ analytic virtual prototype at the nominal design, is added to the noise, so that
 where the model is known to be off (large combined rotations) weigh less, and the
 candidates where it exceeds the upper quartile of its error over the standard trajectory's
 postures are avoided; report.md says how many and why (``flexcal.calibration.design``).
+``--region box|hull`` draws the candidates in the standard trajectory's input box or the hull of
+its postures, ``--criterion I`` minimizes the mean prediction variance over that box instead of
+maximizing log det M, ``--keep-standard K`` measures the K-point standard trajectory first and
+designs the rest; none of them beat the standard trajectory on table1 seed 1 (FEM prototype,
+docs/calibration.md 10), so the default stays the D-optimal design over the whole workspace.
 """
 
 from __future__ import annotations
