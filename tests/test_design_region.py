@@ -68,3 +68,30 @@ def test_fixed_postures_come_first_and_the_design_adds_the_rest():
     with pytest.raises(ValueError, match="fixed postures leave none"):
         design_trajectory(_jacobian, np.eye(3), WORKSPACE, fixed, n_points=5, n_candidates=20,
                           prior_precision=np.full(6, 12.0), fixed_inputs=fixed)
+
+
+def test_design_cli_keeps_the_standard_postures_and_stays_in_their_hull(tmp_path):
+    """flexcal design --keep-standard 13 --region hull --criterion I: the 13-point standard
+    trajectory first (its postures and legs), then 28 I-optimal postures inside the hull of the
+    77-point standard trajectory's postures; the options are in report.json."""
+    import json
+
+    from flexcal.model.trajectory import standard_trajectory
+    from flexcal.validation import cli
+    from flexcal.validation.prototype.scenario import load_scenario
+
+    out = tmp_path / "design"
+    assert cli.main(["design", "--points", "41", "--candidates", "200", "--model-stiffness", "closed-form",
+                     "--inadequacy", "none", "--region", "hull", "--criterion", "I", "--keep-standard", "13",
+                     "--out", str(out), "-q"]) == 0
+    rows = np.loadtxt(out / "trajectory.csv", delimiter=",", skiprows=1)
+    mechanism = load_scenario("table1").space.mechanism
+    kept, box = standard_trajectory(mechanism, n_points=13), standard_trajectory(mechanism).amplitudes
+    assert rows.shape == (41, 5)
+    # the CSV holds mm with 9 decimals: 1e-9 mm (1e-12 m) is its rounding
+    np.testing.assert_allclose(rows[:13, 2:] * 1e-3, kept.inputs, atol=1e-12)
+    np.testing.assert_array_equal(rows[:13, 1], kept.leg)
+    # inside the hull; 1e-9: the CSV's rounding relative to the ~1 mm strokes
+    assert np.all(np.sum(np.abs(rows[13:, 2:] * 1e-3) / box, axis=1) <= 1 + 1e-9)
+    report = json.loads((out / "report.json").read_text())
+    assert (report["region"], report["criterion_name"], report["keep_standard"]) == ("hull", "I", 13)
