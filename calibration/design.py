@@ -42,8 +42,10 @@ from typing import Callable
 
 import numpy as np
 
-__all__ = ["candidate_postures", "d_criterion", "greedy_d_optimal", "order_postures", "DesignQuality",
-           "design_quality", "Design", "design_trajectory"]
+__all__ = ["candidate_postures", "candidate_inputs", "REGIONS", "d_criterion", "i_criterion", "greedy_d_optimal",
+           "greedy_i_optimal", "order_postures", "DesignQuality", "design_quality", "Design", "design_trajectory"]
+
+REGIONS = ("workspace", "box", "hull")  # where candidates are drawn (candidate_inputs)
 
 
 def candidate_postures(angle_gain: np.ndarray, workspace: np.ndarray, n_candidates: int,
@@ -57,10 +59,85 @@ def candidate_postures(angle_gain: np.ndarray, workspace: np.ndarray, n_candidat
     return np.linalg.solve(np.asarray(angle_gain, float), angles.T).T
 
 
+def candidate_inputs(box: np.ndarray, n_candidates: int, region: str = "box",
+                     rng: np.random.Generator | int | None = None) -> np.ndarray:
+    """(n_candidates, 3) actuator inputs [m] drawn uniformly in the input box +-box (3,) [m]
+    (``region`` "box": every combination of the three strokes) or in its inscribed octahedron
+    sum_i |x_i / box_i| <= 1 ("hull": the convex hull of postures that move one actuator at a
+    time up to +-box_i, as the standard trajectory does)."""
+    if n_candidates < 1:
+        raise ValueError(f"n_candidates={n_candidates} must be >= 1")
+    if region not in ("box", "hull"):
+        raise ValueError(f"region={region!r} must be 'box' or 'hull'")
+    rng = np.random.default_rng(rng)
+    box = np.asarray(box, float)
+    if region == "box":
+        return rng.uniform(-1.0, 1.0, size=(n_candidates, 3)) * box
+    # uniform in the L1 ball: Dirichlet(1,1,1,1) weights (the 4th the slack), random signs
+    weights = rng.dirichlet(np.ones(4), size=n_candidates)[:, :3]
+    signs = rng.choice((-1.0, 1.0), size=(n_candidates, 3))
+    return weights * signs * box
+
+
 def d_criterion(J: np.ndarray, prior_precision: np.ndarray) -> float:
     """log det(J^T J + diag(prior_precision)); J (m, d) in noise units per range."""
     sign, value = np.linalg.slogdet(J.T @ J + np.diag(prior_precision))
     return float(value) if sign > 0 else -np.inf
+
+
+def i_criterion(J: np.ndarray, prior_precision: np.ndarray, A: np.ndarray) -> float:
+    """trace(M^-1 A), M = J^T J + diag(prior_precision): the mean prediction variance [noise^2]
+    over the postures whose mean information is A (d, d) (I-optimality; lower is better)."""
+    M = J.T @ J + np.diag(prior_precision)
+    return float(np.trace(np.linalg.solve(M, A)))
+
+
+def _i_gains(J_candidates: np.ndarray, M_inverse: np.ndarray, A: np.ndarray) -> np.ndarray:
+    """The decrease of trace(M^-1 A) from adding each candidate (rank-3 Woodbury update), (n,):
+    trace((I + J_c M^-1 J_c^T)^-1 J_c M^-1 A M^-1 J_c^T)."""
+    JM = J_candidates @ M_inverse  # (n, k, d)
+    S = JM @ J_candidates.transpose(0, 2, 1) + np.eye(J_candidates.shape[1])
+    G = (JM @ A) @ JM.transpose(0, 2, 1)
+    return np.trace(np.linalg.solve(S, G), axis1=1, axis2=2)
+
+
+def greedy_i_optimal(J_candidates: np.ndarray, prior_precision: np.ndarray, n_select: int, A: np.ndarray, *,
+                     fixed: np.ndarray | None = None, max_passes: int = 10,
+                     progress: Callable[[str], None] | None = None) -> tuple[np.ndarray, float]:
+    """Indices (n_select,) of candidates minimizing trace(M^-1 A) (``i_criterion``), and that
+    value; the arguments and the greedy + Fedorov exchange passes as ``greedy_d_optimal``."""
+    J_candidates = np.asarray(J_candidates, float)
+    n, _, d = J_candidates.shape
+    if n_select < 1:
+        raise ValueError(f"n_select={n_select} must be >= 1")
+    precision = np.asarray(prior_precision, float)
+    if precision.shape != (d,) or np.any(precision <= 0):
+        raise ValueError("prior_precision must be (d,) and > 0 (an I-optimal design needs an invertible start)")
+    M = np.diag(precision)
+    if fixed is not None:
+        M = M + fixed.T @ fixed
+    contributions = J_candidates.transpose(0, 2, 1) @ J_candidates
+    chosen = []
+    for _ in range(n_select):
+        best = int(np.argmax(_i_gains(J_candidates, np.linalg.inv(M), A)))
+        chosen.append(best)
+        M = M + contributions[best]
+    chosen = np.array(chosen)
+    for pass_number in range(max_passes):
+        swaps = 0
+        for position in range(n_select):
+            M_without = M - contributions[chosen[position]]
+            gains = _i_gains(J_candidates, np.linalg.inv(M_without), A)
+            best = int(np.argmax(gains))
+            if best != chosen[position] and gains[best] > gains[chosen[position]] * (1 + 1e-9) + 1e-12:
+                chosen[position] = best
+                M = M_without + contributions[best]
+                swaps += 1
+        if progress is not None:
+            progress(f"exchange pass {pass_number + 1}: {swaps} swaps")
+        if swaps == 0:
+            break
+    return chosen, float(np.trace(np.linalg.solve(M, A)))
 
 
 def _gains(J_candidates: np.ndarray, M_inverse: np.ndarray) -> np.ndarray:
@@ -193,7 +270,10 @@ def design_trajectory(jacobian: Callable[[np.ndarray], np.ndarray], angle_gain: 
                       noise: float = 0.5e-6, prior_precision: np.ndarray, prior_scale: float = 1.0,
                       points_per_leg: int = 11, inadequacy: Callable[[np.ndarray], np.ndarray] | None = None,
                       max_inadequacy: float | None = None, rng: np.random.Generator | int | None = 0,
-                      progress: Callable[[str], None] | None = None) -> Design:
+                      progress: Callable[[str], None] | None = None, region: str = "workspace",
+                      box: np.ndarray | None = None, criterion: str = "D",
+                      prediction_inputs: np.ndarray | None = None,
+                      fixed_inputs: np.ndarray | None = None, fixed_leg: np.ndarray | None = None) -> Design:
     """D-optimal trajectory of ``n_points`` postures (the zero posture first, then n - 1 chosen).
 
     jacobian(inputs (k, 3) [m]) -> (3 k, d) [rad per unit box] the model's angle Jacobian at
@@ -204,6 +284,12 @@ def design_trajectory(jacobian: Callable[[np.ndarray], np.ndarray], angle_gain: 
     that postures where the model is known to be off weigh less; max_inadequacy [rad]: with an
     inadequacy, candidates whose expected error exceeds it on any angle are avoided (never
     chosen; ValueError when fewer than n_points - 1 remain: draw more candidates or raise it).
+    region: "workspace" (candidates uniform in the angular workspace) or "box" / "hull" (in the
+    actuator-input box +-box (3,) [m] or its octahedron: ``candidate_inputs``); criterion "D"
+    (log det M) or "I" (trace M^-1 A, A the mean information of ``prediction_inputs`` (k, 3)
+    [m], the postures to be predicted); fixed_inputs (k, 3) [m]: postures always measured, first
+    and in their order (they replace the zero posture, so they should start with it), the design
+    choosing n_points - k more; fixed_leg (k,) their legs (default all one leg).
     """
     if n_points < 2:
         raise ValueError(f"n_points={n_points} must be >= 2 (the zero posture and at least one more)")
@@ -212,7 +298,20 @@ def design_trajectory(jacobian: Callable[[np.ndarray], np.ndarray], angle_gain: 
     if points_per_leg < 1:
         raise ValueError(f"points_per_leg={points_per_leg} must be >= 1")
     say = progress or (lambda _: None)
-    candidates = candidate_postures(angle_gain, workspace, n_candidates, rng)
+    if region == "workspace":
+        candidates = candidate_postures(angle_gain, workspace, n_candidates, rng)
+    else:
+        if box is None:
+            raise ValueError(f"region={region!r} needs the input box (3,) [m]")
+        candidates = candidate_inputs(box, n_candidates, region, rng)
+    if criterion not in ("D", "I"):
+        raise ValueError(f"criterion={criterion!r} must be 'D' or 'I'")
+    if criterion == "I" and prediction_inputs is None:
+        raise ValueError("criterion 'I' needs prediction_inputs (the postures to be predicted)")
+    start_inputs = np.zeros((1, 3)) if fixed_inputs is None else np.asarray(fixed_inputs, float).reshape(-1, 3)
+    n_choose = n_points - start_inputs.shape[0]
+    if n_choose < 1:
+        raise ValueError(f"{start_inputs.shape[0]} fixed postures leave none of n_points={n_points} to choose")
     J = np.asarray(jacobian(candidates), float).reshape(n_candidates, 3, -1)
     delta, avoided = None, None
     sigma = np.full((n_candidates, 3), float(noise))
@@ -224,20 +323,30 @@ def design_trajectory(jacobian: Callable[[np.ndarray], np.ndarray], angle_gain: 
         if max_inadequacy is not None:
             avoided = np.max(np.abs(delta), axis=1) > max_inadequacy
             offered = np.flatnonzero(~avoided)
-            if offered.size < n_points - 1:
+            if offered.size < n_choose:
                 raise ValueError(f"only {offered.size} of {n_candidates} candidates have an expected model error <= "
-                                 f"{max_inadequacy * 1e6:.3g} urad, fewer than the {n_points - 1} postures to choose: "
+                                 f"{max_inadequacy * 1e6:.3g} urad, fewer than the {n_choose} postures to choose: "
                                  f"draw more candidates or allow a larger model error")
-    start = np.asarray(jacobian(np.zeros((1, 3))), float) / noise
-    say(f"greedy D-optimal selection of {n_points - 1} of {offered.size} postures")
-    picked, _ = greedy_d_optimal(J[offered] / sigma[offered, :, None], prior_precision, n_points - 1, fixed=start,
-                                 progress=say)
+    start = np.asarray(jacobian(start_inputs), float) / noise
+    if criterion == "D":
+        say(f"greedy D-optimal selection of {n_choose} of {offered.size} postures")
+        picked, _ = greedy_d_optimal(J[offered] / sigma[offered, :, None], prior_precision, n_choose, fixed=start,
+                                     progress=say)
+    else:
+        P = np.asarray(jacobian(np.asarray(prediction_inputs, float)), float) / noise
+        say(f"greedy I-optimal selection of {n_choose} of {offered.size} postures ({len(prediction_inputs)} to predict)")
+        picked, _ = greedy_i_optimal(J[offered] / sigma[offered, :, None], prior_precision, n_choose,
+                                     P.T @ P / len(prediction_inputs), fixed=start, progress=say)
     chosen = offered[picked]
-    scale = np.abs(np.linalg.solve(angle_gain, workspace))
-    order = order_postures(candidates[chosen], scale)
+    scale = np.abs(np.linalg.solve(angle_gain, workspace)) if box is None else np.asarray(box, float)
+    order = order_postures(candidates[chosen], scale, start=start_inputs[-1])
     chosen = chosen[order]
-    inputs = np.vstack([np.zeros((1, 3)), candidates[chosen]])
-    leg = np.concatenate([[0], 1 + np.arange(n_points - 1) // points_per_leg])
+    inputs = np.vstack([start_inputs, candidates[chosen]])
+    if fixed_inputs is None:
+        leg = np.concatenate([[0], 1 + np.arange(n_points - 1) // points_per_leg])
+    else:  # the fixed postures' legs (default one leg: the held-out folds), then legs of points_per_leg
+        first = np.ones(start_inputs.shape[0], int) if fixed_leg is None else np.asarray(fixed_leg, int)
+        leg = np.concatenate([first, first.max() + 1 + np.arange(n_choose) // points_per_leg])
     W = np.vstack([start, J[chosen].reshape(-1, J.shape[-1]) / noise])
     W_reference = np.asarray(jacobian(np.asarray(reference_inputs, float)), float) / noise
     return Design(inputs=inputs, leg=leg, candidates=candidates, chosen=chosen,

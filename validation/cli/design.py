@@ -14,6 +14,11 @@ analytic virtual prototype at the nominal design, is added to the noise, so that
 where the model is known to be off (large combined rotations) weigh less, and the
 candidates where it exceeds the upper quartile of its error over the standard trajectory's
 postures are avoided; report.md says how many and why (``flexcal.calibration.design``).
+``--region box|hull`` draws the candidates in the standard trajectory's input box or the hull of
+its postures, ``--criterion I`` minimizes the mean prediction variance over that box instead of
+maximizing log det M, ``--keep-standard K`` measures the K-point standard trajectory first and
+designs the rest; none of them beat the standard trajectory on table1 seed 1 (FEM prototype,
+docs/calibration.md 10), so the default stays the D-optimal design over the whole workspace.
 """
 
 from __future__ import annotations
@@ -36,7 +41,9 @@ EXAMPLES = (
 MODEL_ERROR_QUANTILE = 0.75  # candidates whose expected model error exceeds this quantile of the standard
 # trajectory's are avoided (the report says how many and why)
 DEFAULT_CONFIG = {"points": 77, "candidates": 2000, "noise_urad": 0.5, "prior_scale": 1.0, "points_per_leg": 11,
-                  "design_seed": 0, "inadequacy": "analytic", "at": "", "scenario": "table1", **MODEL_DEFAULTS}
+                  "design_seed": 0, "inadequacy": "analytic", "at": "", "scenario": "table1", "region": "workspace",
+                  "criterion": "D", "keep_standard": 0, **MODEL_DEFAULTS}
+N_PREDICTION = 400  # postures drawn in the standard trajectory's input box whose prediction variance the I-criterion averages
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -66,6 +73,16 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="add the model's error at each candidate (against the analytic prototype at the nominal "
                              "design) to the noise and avoid the candidates where it exceeds the upper quartile of "
                              "its error on the standard trajectory (default %(default)s)")
+    parser.add_argument("--region", choices=("workspace", "box", "hull"),
+                        help="where candidates are drawn: the whole angular workspace, the standard trajectory's "
+                             "actuator-input box (+-its strokes), or the convex hull of its postures (the "
+                             "octahedron of one-actuator strokes) (default %(default)s)")
+    parser.add_argument("--criterion", choices=("D", "I"),
+                        help="D: parameter volume (log det M); I: mean prediction variance over the standard "
+                             "trajectory's input box (default %(default)s)")
+    parser.add_argument("--keep-standard", type=int, metavar="K",
+                        help="measure the standard trajectory of K points first and design only the rest "
+                             "(0: none; default %(default)s)")
     add_model_options(parser)
     add_out(parser, what="trajectory.csv, report.json, report.md, design.png")
 
@@ -81,6 +98,8 @@ def _check(args: argparse.Namespace) -> None:
         raise ValueError(f"--prior-scale={args.prior_scale} must be > 0")
     if args.points_per_leg < 1:
         raise ValueError(f"--points-per-leg={args.points_per_leg} must be >= 1")
+    if not 0 <= args.keep_standard < args.points:
+        raise ValueError(f"--keep-standard={args.keep_standard} must be >= 0 and < --points={args.points}")
     if args.at:
         from pathlib import Path
 
@@ -125,7 +144,7 @@ def design_point(path: str, space) -> np.ndarray:
 
 
 def run(args: argparse.Namespace) -> int:
-    from flexcal.calibration.design import design_trajectory
+    from flexcal.calibration.design import candidate_inputs, design_trajectory
     from flexcal.calibration.estimation import FD_STEP, uniform_prior
     from flexcal.calibration.polish import batched_jacobian_fd
     from flexcal.calibration.problem import CalibrationProblem
@@ -153,7 +172,9 @@ def run(args: argparse.Namespace) -> int:
         return batched_jacobian_fd(problem.residuals, x_design, step=FD_STEP)[0]
 
     gain = mechanism_matrices(space.nominal_full, space).input_gain[0, 3:, 3:]
-    reference = standard_trajectory(space.mechanism, n_points=77).inputs
+    standard = standard_trajectory(space.mechanism, n_points=77)
+    reference = standard.inputs
+    box = np.asarray(standard.amplitudes, float)  # [m] the standard trajectory's strokes
     say = (lambda text: print(f"design: {text}")) if progress else None
     inadequacy = _inadequacy(space, scenario.space, False) if args.inadequacy == "analytic" else None
     # never where the model is known to be worse than on most of the standard trajectory
@@ -161,11 +182,16 @@ def run(args: argparse.Namespace) -> int:
     # largest, 15.6 urad on table1 at one stroke end, left all but 7 of 2000 candidates in)
     limit = None if inadequacy is None else float(np.quantile(np.max(inadequacy(reference), axis=1),
                                                               MODEL_ERROR_QUANTILE))
+    kept = standard_trajectory(space.mechanism, n_points=args.keep_standard) if args.keep_standard else None
     design = design_trajectory(jacobian, gain, np.asarray(space.mechanism.workspace), reference, n_points=args.points,
                                n_candidates=args.candidates, noise=args.noise_urad * 1e-6,
                                prior_precision=prior.precision, prior_scale=args.prior_scale,
                                points_per_leg=args.points_per_leg, rng=args.design_seed, progress=say,
-                               inadequacy=inadequacy, max_inadequacy=limit)
+                               inadequacy=inadequacy, max_inadequacy=limit, region=args.region,
+                               box=None if args.region == "workspace" else box, criterion=args.criterion,
+                               prediction_inputs=candidate_inputs(box, N_PREDICTION, "box", args.design_seed + 1),
+                               fixed_inputs=kept.inputs if kept is not None else None,
+                               fixed_leg=kept.leg if kept is not None else None)
     wall = time.perf_counter() - start
     report = _report(design, space, args, wall)
     with staged_output(args.out, replace=args.force) as staging:
@@ -191,7 +217,8 @@ def _report(design, space, args, wall: float) -> dict:
     return {
         "n_points": int(design.inputs.shape[0]), "n_candidates": int(design.candidates.shape[0]),
         "noise_urad": design.noise * 1e6, "prior_scale": design.prior_scale, "scenario": args.scenario,
-        "design_seed": args.design_seed, "inadequacy": args.inadequacy,
+        "design_seed": args.design_seed, "inadequacy": args.inadequacy, "region": args.region,
+        "criterion_name": args.criterion, "keep_standard": args.keep_standard,
         "design_point": args.at or "prior mean (every source mid-range)",
         "inadequacy_rms_urad": None if design.inadequacy is None else float(np.sqrt(np.mean(design.inadequacy ** 2))
                                                                             * 1e6),

@@ -1,0 +1,108 @@
+"""A designed trajectory against the standard one: identification and held-out prediction (issue #28).
+
+    .venv/bin/python benchmarks/bench_design_heldout.py --out runs/heldout/std-s1 --seed 1 \
+        [--trajectory runs/design/trajectory.csv] [--scenario table1] [--model second-order|consistent] \
+        [--noise-urad 0.5] [--walk-seed 28] [--walk-points 77]
+
+Runs what ``flexcal verify --scenario S --seed N --noise-urad 0.5 [--trajectory T] [--model M]``
+runs (the same parser and defaults, FEM prototype; report.json written to --out), then the
+held-out test: the calibration model at the identified values against the noise-free prototype
+of the same seed along a random multi-actuator walk (``bench_form_error.random_walk``:
+--walk-points postures inside the standard trajectory's strokes, seed --walk-seed), never
+measured by the identification. Also the model at the true values on that walk (the model's
+own floor there: what no estimate can beat). Prints one JSON line and writes it to
+OUT/heldout.json: the errors of the drive sources identified alone (their base parameters are
+pure), the fit RMS, the held-out RMS and the floor.
+Not a test (minutes per run on the FEM prototype); the figures go into docs/calibration.md 10.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).parent))
+from bench_form_error import random_walk  # noqa: E402
+
+DRIVES = ("D1.x0", "D2.x0", "D3.x0", "D1.CL", "D2.CL", "D3.CL", "D1.mu", "D2.mu", "D3.mu")
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--out", required=True)
+    parser.add_argument("--seed", type=int, required=True)
+    parser.add_argument("--trajectory", default=None)
+    parser.add_argument("--scenario", default="table1")
+    parser.add_argument("--model", default="second-order")
+    parser.add_argument("--noise-urad", type=float, default=0.5)
+    parser.add_argument("--walk-seed", type=int, default=28)
+    parser.add_argument("--walk-points", type=int, default=77)
+    parser.add_argument("--provider", default="fem", help="the prototype's segment stiffness (fem, analytic)")
+    args = parser.parse_args(argv)
+
+    from flexcal.calibration.problem import CalibrationProblem
+    from flexcal.model.trajectory import standard_trajectory
+    from flexcal.validation.cli import main as main_cli
+    from flexcal.validation.prototype.providers import stiffness_provider
+    from flexcal.validation.prototype.scenario import load_scenario
+    from flexcal.validation.prototype.truth import make_truth
+
+    verify_argv = ["verify", "--scenario", args.scenario, "--seed", str(args.seed), "--noise-urad",
+                   str(args.noise_urad), "--model", args.model, "--provider", args.provider, "--out", args.out, "--quiet", "--force"]
+    if args.trajectory:
+        verify_argv += ["--trajectory", args.trajectory]
+    captured = {}
+
+    # flexcal verify's own run, with its space and values kept for the held-out walk
+    from flexcal.validation.runs import verify as runs_verify
+
+    run_verify = runs_verify.run_verify
+
+    def keep(measurement, space, *a, **k):
+        result = run_verify(measurement, space, *a, **k)
+        captured.update(space=space, result=result, measurement=measurement)
+        return result
+
+    runs_verify.run_verify = keep
+    try:
+        status = main_cli(verify_argv)
+    finally:
+        runs_verify.run_verify = run_verify
+    if status != 0 or "result" not in captured:
+        raise SystemExit(f"flexcal verify failed (status {status})")
+    space, result, measurement = captured["space"], captured["result"], captured["measurement"]
+    report = result.report
+
+    scenario = load_scenario(args.scenario, seed=args.seed, noise_urad=args.noise_urad)
+    amplitudes = standard_trajectory(scenario.space.mechanism).amplitudes
+    walk_inputs = random_walk(amplitudes, args.walk_points, 1.0, args.walk_seed)
+    walk = dataclasses.replace(scenario, inputs=walk_inputs, leg=np.ones(args.walk_points, int), noise=np.zeros(3))
+    walk_angles = make_truth(walk, stiffness_provider(args.provider, progress=False), progress=False).measurement.angles
+    problem = CalibrationProblem(space=space, inputs=walk_inputs, angles=walk_angles)
+    unit = space.to_unit(result.values[space.active_indices])
+    true_unit = space.to_unit(scenario.values[space.active_indices])
+    residual, floor = problem.residuals(np.vstack([unit, true_unit]))
+
+    pure = set(report.get("base_parameters", {}).get("pure", []))
+    rows = {r["name"]: r for r in report["parameters"]}
+    alone = [n for n in DRIVES if n in pure]
+    out = {"scenario": args.scenario, "provider": args.provider, "seed": args.seed, "trajectory": args.trajectory or "standard",
+           "model": args.model, "n_points": int(measurement.n_points), "fit_rms_urad": report["fit_rms_urad"],
+           "alone": alone, "pure": sorted(pure),
+           "abs_error": {n: rows[n]["abs_error"] for n in alone},  # display units (x0 mm, CL mm, mu -)
+           "z": {n: rows[n]["z_score"] for n in alone},
+           "heldout_rms_urad": float(np.sqrt(np.mean(residual ** 2)) * 1e6),
+           "heldout_floor_urad": float(np.sqrt(np.mean(floor ** 2)) * 1e6),
+           "walk": {"points": args.walk_points, "stroke": "standard", "seed": args.walk_seed}}
+    Path(args.out, "heldout.json").write_text(json.dumps(out, indent=1))
+    print(json.dumps(out))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
