@@ -106,37 +106,10 @@ def greedy_i_optimal(J_candidates: np.ndarray, prior_precision: np.ndarray, n_se
                      progress: Callable[[str], None] | None = None) -> tuple[np.ndarray, float]:
     """Indices (n_select,) of candidates minimizing trace(M^-1 A) (``i_criterion``), and that
     value; the arguments and the greedy + Fedorov exchange passes as ``greedy_d_optimal``."""
-    J_candidates = np.asarray(J_candidates, float)
-    n, _, d = J_candidates.shape
-    if n_select < 1:
-        raise ValueError(f"n_select={n_select} must be >= 1")
-    precision = np.asarray(prior_precision, float)
-    if precision.shape != (d,) or np.any(precision <= 0):
-        raise ValueError("prior_precision must be (d,) and > 0 (an I-optimal design needs an invertible start)")
-    M = np.diag(precision)
-    if fixed is not None:
-        M = M + fixed.T @ fixed
-    contributions = J_candidates.transpose(0, 2, 1) @ J_candidates
-    chosen = []
-    for _ in range(n_select):
-        best = int(np.argmax(_i_gains(J_candidates, np.linalg.inv(M), A)))
-        chosen.append(best)
-        M = M + contributions[best]
-    chosen = np.array(chosen)
-    for pass_number in range(max_passes):
-        swaps = 0
-        for position in range(n_select):
-            M_without = M - contributions[chosen[position]]
-            gains = _i_gains(J_candidates, np.linalg.inv(M_without), A)
-            best = int(np.argmax(gains))
-            if best != chosen[position] and gains[best] > gains[chosen[position]] * (1 + 1e-9) + 1e-12:
-                chosen[position] = best
-                M = M_without + contributions[best]
-                swaps += 1
-        if progress is not None:
-            progress(f"exchange pass {pass_number + 1}: {swaps} swaps")
-        if swaps == 0:
-            break
+    # a swap must lower the (positive) criterion by a relative 1e-9 (+1e-12 near zero)
+    chosen, M = _greedy_exchange(J_candidates, prior_precision, n_select, lambda J, M_inv: _i_gains(J, M_inv, A),
+                                 lambda new, old: new > old * (1 + 1e-9) + 1e-12, fixed=fixed, max_passes=max_passes,
+                                 progress=progress, criterion="an I-optimal")
     return chosen, float(np.trace(np.linalg.solve(M, A)))
 
 
@@ -159,21 +132,34 @@ def greedy_d_optimal(J_candidates: np.ndarray, prior_precision: np.ndarray, n_se
     Fedorov exchange passes (each selected posture swapped for the best candidate when that
     raises log det M by more than 1e-9) until a pass changes nothing or ``max_passes``.
     """
+    chosen, M = _greedy_exchange(J_candidates, prior_precision, n_select, _gains, lambda new, old: new > old + 1e-9,
+                                 fixed=fixed, max_passes=max_passes, progress=progress, criterion="a D-optimal")
+    sign, value = np.linalg.slogdet(M)
+    return chosen, float(value)
+
+
+def _greedy_exchange(J_candidates: np.ndarray, prior_precision: np.ndarray, n_select: int,
+                     gains: Callable[[np.ndarray, np.ndarray], np.ndarray], better: Callable[[float, float], bool], *,
+                     fixed: np.ndarray | None, max_passes: int, progress: Callable[[str], None] | None,
+                     criterion: str) -> tuple[np.ndarray, np.ndarray]:
+    """The selection both criteria share: greedy forward selection of the candidate with the
+    largest ``gains(J_candidates, M^-1)``, then Fedorov exchange passes (a selected posture is
+    swapped for the best candidate when ``better(its gain, the selected one's)``) until a pass
+    changes nothing or ``max_passes``. Returns the indices (n_select,) and M (d, d)."""
     J_candidates = np.asarray(J_candidates, float)
     n, _, d = J_candidates.shape
     if n_select < 1:
         raise ValueError(f"n_select={n_select} must be >= 1")
     precision = np.asarray(prior_precision, float)
     if precision.shape != (d,) or np.any(precision <= 0):
-        raise ValueError("prior_precision must be (d,) and > 0 (a D-optimal design needs an invertible start)")
+        raise ValueError(f"prior_precision must be (d,) and > 0 ({criterion} design needs an invertible start)")
     M = np.diag(precision)
     if fixed is not None:
         M = M + fixed.T @ fixed
     contributions = J_candidates.transpose(0, 2, 1) @ J_candidates  # (n, d, d)
     chosen = []
     for _ in range(n_select):
-        gains = _gains(J_candidates, np.linalg.inv(M))
-        best = int(np.argmax(gains))
+        best = int(np.argmax(gains(J_candidates, np.linalg.inv(M))))
         chosen.append(best)
         M = M + contributions[best]
     chosen = np.array(chosen)
@@ -181,10 +167,9 @@ def greedy_d_optimal(J_candidates: np.ndarray, prior_precision: np.ndarray, n_se
         swaps = 0
         for position in range(n_select):
             M_without = M - contributions[chosen[position]]
-            gains = _gains(J_candidates, np.linalg.inv(M_without))
-            best = int(np.argmax(gains))
-            current = gains[chosen[position]]
-            if best != chosen[position] and gains[best] > current + 1e-9:
+            gain = gains(J_candidates, np.linalg.inv(M_without))
+            best = int(np.argmax(gain))
+            if best != chosen[position] and better(gain[best], gain[chosen[position]]):
                 chosen[position] = best
                 M = M_without + contributions[best]
                 swaps += 1
@@ -192,8 +177,7 @@ def greedy_d_optimal(J_candidates: np.ndarray, prior_precision: np.ndarray, n_se
             progress(f"exchange pass {pass_number + 1}: {swaps} swaps")
         if swaps == 0:
             break
-    sign, value = np.linalg.slogdet(M)
-    return chosen, float(value)
+    return chosen, M
 
 
 def order_postures(inputs: np.ndarray, scale: np.ndarray, start: np.ndarray | None = None) -> np.ndarray:
