@@ -399,8 +399,10 @@ def _slopes_condensed(space: ParameterSpace, provider: StiffnessProvider) -> np.
 def corrected_space(space: ParameterSpace, provider: StiffnessProvider, *, slopes: bool = False) -> ParameterSpace:
     """``space`` whose model uses ``compliance_factors(space, provider)``; slopes: with their
     ``compliance_slopes`` too (the factors then follow the dimensions, docs/model.md 7)."""
-    factors = compliance_factors(space, provider)
+    # the slopes first: the condensed slopes solve the nominal segments once and leave them in the
+    # cache under the provider's own keys, so the factors that follow build only what they lack
     extra = {"compliance_slopes": tuple(float(v) for v in compliance_slopes(space, provider).ravel())} if slopes else {}
+    factors = compliance_factors(space, provider)
     return dataclasses.replace(space, compliance_factors=tuple(tuple(float(v) for v in row) for row in factors),
                                **extra)
 
