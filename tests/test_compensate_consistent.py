@@ -29,8 +29,9 @@ def test_the_ordered_model_is_path_dependent_and_its_jacobian_is_the_difference(
     moved = sequence_angles(values, x + step, space)
     # a 2 um move: the Jacobian predicts the change to its second order (~1e-3 of it) and the
     # cross-target term it leaves out; 2 % of the change is 20x that
-    np.testing.assert_allclose(moved - forward_then_back, predicted - forward_then_back,
-                               rtol=0, atol=0.02 * np.max(np.abs(moved - forward_then_back)))
+    change = moved - forward_then_back
+    bound = 0.02 * np.max(np.abs(change))  # 20x the second-order and cross-target terms (above)
+    np.testing.assert_allclose(change, predicted - forward_then_back, rtol=0, atol=bound)  # bound: line above
 
 
 @pytest.mark.slow
