@@ -43,7 +43,7 @@ def test_compensate_with_the_consistent_model_runs_beats_the_uncompensated_error
     assert cli.main(["truth", "--scenario", "table1", "--provider", "analytic", "--noise-urad", "0.5",
                      "--out", str(tmp_path / "t"), "-q"]) == 0
     argv = ["compensate", "--data", str(tmp_path / "t" / "curves.csv"), "--model", "consistent",
-            "--model-stiffness", "closed-form", "--particles", "30", "--iterations", "5", "--sobol-n", "16",
+            "--model-stiffness", "closed-form", "--particles", "60", "--iterations", "10", "--sobol-n", "32",
             "--max-rounds", "2"]
     reports = []
     for k in range(2):
