@@ -144,14 +144,17 @@ def compliance_slopes(space: ParameterSpace, provider: StiffnessProvider,
     condensation's, U^T (dK/dp) U (``segment_stiffness_slopes``: assembly on meshes whose
     nodes the dimension moves, no factorisation), composed along the chain to the tangent
     of each factor; a mesher other than the mapped one, or ``elements_through`` set: "builds".
+    "condensed-secant": the same segment derivatives composed at +-``steps`` (``SLOPE_STEPS``):
+    the builds' secant with each segment's stiffness linear in the dimension.
     "builds" (the default): the central difference of full FEM builds at +-``steps``
     (``SLOPE_STEPS``), ``_slopes_by_builds`` (sessions 13-15): a secant, which follows the
     mapper's cell-count changes between the dimensions (docs/model.md 7, session 16)."""
     method = SLOPE_METHOD if method is None else method
     if method not in SLOPE_METHODS:
         raise ValueError(f"slope method {method!r} must be one of {', '.join(SLOPE_METHODS)}")
-    if method == "condensed" and elements_through is None and getattr(provider, "mesher", None) == "mapped":
-        return _slopes_condensed(space, provider)
+    if method != "builds" and elements_through is None and getattr(provider, "mesher", None) == "mapped":
+        secant = SLOPE_STEPS if steps is None else steps
+        return _slopes_condensed(space, provider, secant if method == "condensed-secant" else None)
     return _slopes_by_builds(space, provider, steps, elements_through=elements_through)
 
 
@@ -222,7 +225,7 @@ def _slopes_by_builds(space: ParameterSpace, provider: StiffnessProvider,
 # table1, cold `flexcal verify --model consistent` fits the noise-free curve to 0.0179 urad max
 # with the tangent (paper 0.015: misses) against 0.0094 with the builds, at 179 s against 427 s
 # wall (load 6-9).
-SLOPE_METHODS = ("condensed", "builds")
+SLOPE_METHODS = ("condensed", "condensed-secant", "builds")
 SLOPE_METHOD = "builds"
 # The relative step of a dimension that morphs a segment's mesh for dK/dp: small enough that
 # the mapped mesher keeps its connectivity on at least one side (table1's nominal leaves sit
@@ -337,8 +340,11 @@ def _slopes_job(item, **options) -> dict[str, np.ndarray]:
     return segment_stiffness_slopes(chain, index, **options)
 
 
-def _slopes_condensed(space: ParameterSpace, provider: StiffnessProvider) -> np.ndarray:
-    """``compliance_slopes`` by the condensation's derivative (method "condensed")."""
+def _slopes_condensed(space: ParameterSpace, provider: StiffnessProvider,
+                      secant: dict[str, float] | None = None) -> np.ndarray:
+    """``compliance_slopes`` by the condensation's derivative: the tangent (method "condensed"),
+    or with ``secant`` {symbol: relative step} the central difference over those steps with each
+    segment's stiffness linear in the dimension (method "condensed-secant")."""
     import sys
     import time
 
@@ -390,8 +396,9 @@ def _slopes_condensed(space: ParameterSpace, provider: StiffnessProvider) -> np.
         base = [results[nominal, index] for index in range(3)]
         for k, symbol in enumerate(DIMENSION_SYMBOLS):
             factors = {}
+            step = TANGENT_STEP if secant is None else secant[symbol]
             for sign in (1, -1):
-                s = sign * TANGENT_STEP
+                s = sign * step
                 moved = _moved(nominal, symbol, s)
                 # the five slices: 0, 1, 2 meshed, 3 and 4 the mirror images of 1 and 0
                 linear = [base[i]["stiffness"] + s * base[i]["slopes"][k] for i in range(3)]
@@ -399,7 +406,7 @@ def _slopes_condensed(space: ParameterSpace, provider: StiffnessProvider) -> np.
                 richer = _composed_compliance(moved, segments)
                 closed = chain_compliance_matrix(moved, mech.material)
                 factors[sign] = np.array([richer[i, j] / closed[i, j] for i, j in ENTRY_INDEX.values()])
-            out[c, k] = (factors[1] - factors[-1]) / (2.0 * TANGENT_STEP)
+            out[c, k] = (factors[1] - factors[-1]) / (2.0 * step)
     return out[design]
 
 
