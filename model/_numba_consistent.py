@@ -304,7 +304,7 @@ def _equilibrium(cand, x, c, command, compliance, wrench, x0, gain, axial, pack,
 
 @njit(cache=True, nogil=True, parallel=True, fastmath=_FAST)
 def solve(compliance, wrench, gain, axial, pack, point_b, defect_index, defect, weight, coupling, mu, limit, x0, nut,
-          band, play, inputs, clearance, tol, max_iter, divergence,
+          band, play, inputs, revisit, clearance, tol, max_iter, divergence,
           faces, state_tol, input_gain,
           pose_out, load_out, c_out, release_out, r_out, state_out, class_out, code_out, iter_out):
     """All candidates (in parallel) at all points (in order). Each fixed point starts from the
@@ -326,6 +326,9 @@ def solve(compliance, wrench, gain, axial, pack, point_b, defect_index, defect, 
         drift = np.zeros(6)
         drift_prev = np.zeros(6)
         drift_prev2 = np.zeros(6)
+        drift_prev3 = np.zeros(6)
+        x_seen = np.empty((n_p, 6))  # every point's solution, for a later point with the same command
+        c_seen = np.empty((n_p, 3))
         uniform = 0
         x_start = np.zeros(6)
         last_step = np.zeros(3)
@@ -393,9 +396,19 @@ def solve(compliance, wrench, gain, axial, pack, point_b, defect_index, defect, 
                 uniform += 1  # equal steps in a row
             else:
                 uniform = 0
-            if p > 0 and size > 0.0:
+            seen = revisit[p]
+            if seen >= 0:  # the same command and offsets solved before: the same equilibrium
+                for i in range(3):
+                    if c_seen[seen, i] != c[i]:
+                        seen = -1
+            if seen >= 0:
                 for k in range(6):
-                    if uniform >= 3:  # the drift extrapolated as a quadratic in the step count
+                    x[k] = x_seen[seen, k]
+            elif p > 0 and size > 0.0:
+                for k in range(6):
+                    if uniform >= 4:  # the drift extrapolated as a cubic in the step count
+                        x[k] += 4.0 * drift[k] - 6.0 * drift_prev[k] + 4.0 * drift_prev2[k] - drift_prev3[k]
+                    elif uniform >= 3:  # the drift extrapolated as a quadratic in the step count
                         x[k] += 3.0 * drift[k] - 3.0 * drift_prev[k] + drift_prev2[k]
                     elif uniform == 2:
                         x[k] += 2.0 * drift[k] - drift_prev[k]
@@ -509,10 +522,15 @@ def solve(compliance, wrench, gain, axial, pack, point_b, defect_index, defect, 
                 c_prev[i] = c[i]
             class_out[cand, p] = 2 if in_clearance else (1 if compressed else 3)
             for k in range(6):  # the second-order part of this point's change (beyond the linear start)
+                drift_prev3[k] = drift_prev2[k]
                 drift_prev2[k] = drift_prev[k]
                 drift_prev[k] = drift[k]
                 drift[k] = x[k] - x_start[k]
                 for i in range(3):
                     drift[k] -= input_gain[cand, k, 3 + i] * (c[i] - c_start[i])
             code_out[cand, p] = code
+            for k in range(6):
+                x_seen[p, k] = x[k]
+            for i in range(3):
+                c_seen[p, i] = c[i]
             iter_out[cand, p] = iterations
