@@ -132,9 +132,11 @@ def revisits(inputs: np.ndarray) -> np.ndarray:
 
 
 def solve_points_consistent(matrices, inputs: np.ndarray, *, clearance: bool, tol: float, max_iter: int,
-                            divergence: float, state_tolerance: float, n_threads: int = 1) -> dict[str, np.ndarray]:
+                            divergence: float, state_tolerance: float, n_threads: int = 1,
+                            revisit: bool = True) -> dict[str, np.ndarray]:
     """Run the compiled consistent kernel; same outputs as ``kernel.solve_points_compiled``
-    (force_only clearance; ``tol`` [m, rad] on the pose update per point)."""
+    (force_only clearance; ``tol`` [m, rad] on the pose update per point). ``revisit=False``
+    starts no point from an earlier one with the same command (``revisits``; for the tests)."""
     import numba
 
     from . import _numba_consistent
@@ -150,12 +152,13 @@ def solve_points_consistent(matrices, inputs: np.ndarray, *, clearance: bool, to
            "codes": np.empty((n_c, n_p), dtype=np.int64), "iterations": np.empty((n_c, n_p), dtype=np.int64)}
     compliance = np.linalg.inv(m.frame_stiffness)
     wrench = np.einsum("cab,cb->ca", m.frame_stiffness, m.gravity_pose)
+    seen = revisits(inputs) if revisit else np.full(inputs.shape[0], -1, dtype=np.int64)
     arguments = (
         c(compliance), c(wrench), c(m.axial_gain), c(m.axial_stiffness), pack_chains(m), c(m.point_b),
         *defect_terms(m.lateral_defect), c(m.payload),
         c(m.coupling[:, DRIVING][:, :, DRIVING]), c(m.mu), c(m.clearance),
         c(m.initial_position), c(m.nut_stiffness), c(np.maximum(m.breakaway_band, 0.0)),
-        bool(clearance and np.all(m.breakaway_band >= 0)), c(inputs, dtype=float), revisits(inputs), bool(clearance), float(tol),
+        bool(clearance and np.all(m.breakaway_band >= 0)), c(inputs, dtype=float), seen, bool(clearance), float(tol),
         int(max_iter), float(divergence), _FACES, float(state_tolerance), c(m.input_gain), out["pose"], out["loads"], out["clearance"],
         out["release"], out["parasitic"], out["states"], out["point_class"], out["codes"], out["iterations"])
     previous = numba.get_num_threads()
