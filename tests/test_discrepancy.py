@@ -194,12 +194,12 @@ def test_model_error_budget_covers_a_form_error_the_fit_absorbs_whole():
     """delta in the range of J: the residual is white, so no residual-fitted discrepancy widens
     the bars (z RMS >> 2: the consistent model on FEM table1 had base parameters at 13-24 sigma,
     docs/calibration.md 6 session 16); the budget (the same model error sampled at other
-    mounts, ``model_error``) makes them honest: z RMS within [0.6, 1.6] over 20 draws x 6
-    parameters (1 +- 0.15 at 2 sigma for 120 honest z-scores, plus the spread of a second
-    moment estimated from 8 samples)."""
+    mounts, ``model_error``) makes them honest: z RMS within [0.6, 1.6] over 10 draws x 6
+    parameters (1 +- 0.2 at 2 sigma for 60 honest z-scores, plus the spread of a second
+    moment estimated from 8 samples; measured 0.88 with the budget, 7.5 without; ~16 s CPU)."""
     rng = np.random.default_rng(11)
     z_budget, z_without = [], []
-    for _ in range(20):
+    for _ in range(10):
         c, J, truth, y, samples = _absorbed_problem(rng)
         residuals = lambda X, J=J, y=y: X @ J.T - y  # noqa: E731
         with_budget = estimate(residuals, uniform_prior(N_PARAMS, 4.0), coordinates=c, model_error=samples)
@@ -210,7 +210,7 @@ def test_model_error_budget_covers_a_form_error_the_fit_absorbs_whole():
         z_budget.extend((with_budget.x - truth) / with_budget.std)
         z_without.extend((with_budget.x - truth) / np.sqrt(np.diag(cov)))
     rms = lambda z: float(np.sqrt(np.mean(np.square(z))))  # noqa: E731
-    # RMS of 120 honest z-scores: 1 +- 0.15 at 2 sigma, plus the spread of an 8-sample second moment
+    # RMS of 60 honest z-scores: 1 +- 0.2 at 2 sigma, plus the spread of an 8-sample second moment
     assert 0.6 <= rms(z_budget) <= 1.6, (rms(z_budget), rms(z_without))
     # the issue's band ends at 2: without the budget the bars must be outside it (the test can fail)
     assert rms(z_without) > 2.0, rms(z_without)
