@@ -38,7 +38,12 @@ for the sources delta does not look like (z RMS 0.1-0.5 on the ``paper`` mount).
   A = (J^T J / sigma_w^2 + P)^+, has ``Cov = A (J^T Sigma J / sigma_w^4 + P) A`` with
   ``Sigma = sigma^2 I + K`` (equal to A when Sigma = sigma_w^2 I: white noise gives back the
   Gauss-Newton bars). Every source's standard error and every base parameter's (c^T Cov c)
-  come from this one matrix.
+  come from this one matrix;
+- **model-error budget** (issue 28, session 16): a form error the sources absorb whole leaves
+  no trace in the residual, so nothing fitted from it can carry it. When the caller has
+  samples of the model's error on these postures (prototype - model at the nominal mount and
+  at the estimate, computed outside the calibration model: ``validation.runs.error_budget``),
+  their second moment E E^T (``model_error_factor``) is added to Sigma in the sandwich.
 """
 
 from __future__ import annotations
@@ -119,8 +124,8 @@ class Discrepancy:
                 "model_error_budget": None if self.model_error is None else {
                     "n_samples": int(self.model_error.shape[1]),
                     "rms_urad": float(np.sqrt(np.sum(self.model_error ** 2) / self.model_error.shape[0]) * 1e6),
-                    "what": "prototype - model on the measured trajectory at the nominal mount and prior draws "
-                            "(second moment), in the sandwich next to the fitted discrepancy"}}
+                    "what": "second moment of the given samples of the model's error on the measured postures "
+                            "(prototype - model), in the sandwich next to the fitted discrepancy"}}
 
 
 def discrepancy_covariance(coordinates: np.ndarray, noise: float, amplitude: np.ndarray, length: float,
