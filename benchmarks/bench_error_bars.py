@@ -234,8 +234,8 @@ def main(argv=None) -> int:
     parser.add_argument("--model-stiffness", default="fem", choices=("fem", "closed-form"))
     parser.add_argument("--no-second-order", action="store_true")
     parser.add_argument("--budget-draws", type=int, default=None, metavar="K",
-                        help="give identify_all the model-error budget flexcal verify computes (nominal mount, the "
-                             "estimate, K prior draws: validation/runs/error_budget.py); default: none (the fit "
+                        help="give identify_all the model-error budget flexcal verify computes (the estimate, K "
+                             "prior draws: validation/runs/error_budget.py); default: none (the fit "
                              "does not depend on it; --recompute-bars scores it on the saved fits)")
     args = parser.parse_args(argv)
     out = Path(args.out)

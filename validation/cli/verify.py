@@ -37,7 +37,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
     add_calibration_options(parser)
     parser.add_argument("--error-budget-draws", type=int, default=None, metavar="K",
                         help="the error bars of --method map/free carry the model's error measured on the "
-                             "virtual prototype (--provider) at the nominal mount and at the estimate "
+                             "virtual prototype (--provider) at the estimate "
                              "(validation/runs/error_budget.py), plus K prior draws of the non-geometric "
                              "sources (default 0)")
     parser.add_argument("--no-error-budget", action="store_true",
