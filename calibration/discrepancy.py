@@ -41,8 +41,8 @@ for the sources delta does not look like (z RMS 0.1-0.5 on the ``paper`` mount).
   come from this one matrix;
 - **model-error budget** (issue 28, session 16): a form error the sources absorb whole leaves
   no trace in the residual, so nothing fitted from it can carry it. When the caller has
-  samples of the model's error on these postures (prototype - model at the nominal mount and
-  at the estimate, computed outside the calibration model: ``validation.runs.error_budget``),
+  samples of the model's error on these postures (prototype - model at the estimate,
+  computed outside the calibration model: ``validation.runs.error_budget``),
   their second moment E E^T (``model_error_factor``) is added to Sigma in the sandwich.
 """
 

@@ -1,5 +1,5 @@
 """The model-error budget (validation.runs.error_budget) in the error bars: the virtual
-prototype against the calibration model at the nominal mount and at the estimate, carried by
+prototype against the calibration model at the estimate, carried by
 the sandwich covariance (calibration.discrepancy.model_error_factor)."""
 
 import numpy as np

@@ -1,5 +1,5 @@
 """Model-error budget for the error bars: the virtual prototype against the calibration model
-on the measured trajectory, at the nominal mount and at prior draws (issue #28 item 1).
+on the measured trajectory, at the estimate (issue #28 item 1).
 
 The error bars of ``identify_all`` carry a discrepancy fitted from the residual
 (``calibration.discrepancy``). That cannot see the part of the model's error the sources
@@ -43,7 +43,7 @@ from flexcal.model.parameters import ParameterSpace
 __all__ = ["ErrorBudget", "model_error_budget", "budget_at_estimate", "budget_values", "GEOMETRIC_SYMBOLS", "DEFAULT_DRAWS", "BUDGET_SEED"]
 
 GEOMETRIC_SYMBOLS = ("w", "a", "l", "t1", "t2")  # chain dimensions: changing one needs a new FEM build
-DEFAULT_DRAWS = 0  # prior draws besides the nominal mount and the estimate (module doc: 8 were 6-19x too wide)
+DEFAULT_DRAWS = 0  # prior draws besides the estimate (module doc: 8 made the bars 6-19x too wide)
 BUDGET_SEED = 2028  # the draws' own stream, never a scenario's (scenarios draw from [seed, 1])
 
 
