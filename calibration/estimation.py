@@ -47,7 +47,7 @@ import numpy as np
 from flexcal.calibration.discrepancy import Discrepancy, fit_discrepancy, sandwich_covariance
 from flexcal.calibration.polish import batched_jacobian_fd, least_squares_polish
 
-__all__ = ["Prior", "uniform_prior", "Estimate", "estimate", "posterior", "residual_autocorrelation", "choose_prior_scale", "CrossValidation",
+__all__ = ["Prior", "uniform_prior", "Estimate", "estimate", "with_model_error", "posterior", "residual_autocorrelation", "choose_prior_scale", "CrossValidation",
            "held_out_folds", "PRIOR_SCALES"]
 
 Residuals = Callable[[np.ndarray], np.ndarray]
@@ -170,7 +170,8 @@ def residual_autocorrelation(r: np.ndarray, point_size: int = 3) -> float:
 
 def estimate(residuals: Residuals, prior: Prior, *, noise: float | None = None, x0: np.ndarray | None = None,
              max_noise_rounds: int = 4, noise_rtol: float = 0.05, max_evaluations: int | None = None,
-             point_size: int = 3, correlated: bool = True, coordinates: np.ndarray | None = None) -> Estimate:
+             point_size: int = 3, correlated: bool = True, coordinates: np.ndarray | None = None,
+             model_error: np.ndarray | None = None) -> Estimate:
     """MAP (or free least squares when ``prior.is_free``) estimate on the unit box.
 
     residuals: ``r(X (n, d)) -> (n, m)`` [residual units, e.g. rad]; noise: sigma in those
@@ -183,7 +184,11 @@ def estimate(residuals: Residuals, prior: Prior, *, noise: float | None = None, 
     layout for the autocorrelation); correlated: inflate an estimated noise by the residual's
     AR(1) factor (module doc); coordinates (m / point_size, k) [workspace units]: the postures,
     for the model-discrepancy error bars (``calibration.discrepancy``; needs point_size 3 and a
-    prior on every source, else ValueError); None: Gauss-Newton error bars.
+    prior on every source, else ValueError); None: Gauss-Newton error bars; model_error (K, m)
+    [residual units]: samples of the model's error on these rows (prototype - model at the
+    nominal mount and prior draws: a model-error budget computed outside the calibration
+    model, ``validation.runs.error_budget``), carried by the discrepancy error bars
+    (``calibration.discrepancy.model_error_factor``); needs coordinates.
     """
     d = prior.mean.size
     x = np.clip(prior.mean if x0 is None else np.asarray(x0, float), 0.0, 1.0)
@@ -228,10 +233,13 @@ def estimate(residuals: Residuals, prior: Prior, *, noise: float | None = None, 
     rho = 0.0 if given or not correlated else residual_autocorrelation(r, point_size)
     at_bound = (x <= 1e-9) | (x >= 1.0 - 1e-9)
     discrepancy, gauss_newton = None, None
+    if model_error is not None and coordinates is None:
+        raise ValueError("a model-error budget enters the discrepancy error bars: give the postures' coordinates too")
     if coordinates is not None:
         if point_size != 3:
             raise ValueError(f"discrepancy error bars need 3 angles a point, got point_size={point_size}")
-        discrepancy = fit_discrepancy(r, J, x, prior.mean, prior.std, coordinates, noise=noise)
+        discrepancy = fit_discrepancy(r, J, x, prior.mean, prior.std, coordinates, noise=noise,
+                                      model_error=model_error)
         gauss_newton = sigma_matrix
         sigma_matrix = sandwich_covariance(sigma_matrix, J, sigma, prior.precision, discrepancy.covariance)
         std = np.where(np.isfinite(std), np.sqrt(np.maximum(np.diag(sigma_matrix), 0.0)), np.inf)
@@ -242,6 +250,24 @@ def estimate(residuals: Residuals, prior: Prior, *, noise: float | None = None, 
                     autocorrelation=rho, inflation=(1.0 + rho) / (1.0 - rho),
                     n_observations=m, p_eff=p_eff, residual=r, jacobian=J, rss=rss, at_bound=at_bound,
                     n_evaluations=n_evaluations, prior=prior)
+
+
+def with_model_error(fit: Estimate, coordinates: np.ndarray, model_error: np.ndarray) -> Estimate:
+    """``fit`` with its error bars recomputed to carry a model-error budget (K, m) [residual
+    units] (``estimate``'s ``model_error``; for a budget that needs the estimate first, e.g. the
+    prototype run at it): the same x, the discrepancy refitted with the budget as a known
+    covariance, the sandwich on the same weighting."""
+    import dataclasses
+
+    if fit.gauss_newton_covariance is None:
+        raise ValueError("the fit has Gauss-Newton error bars; estimate it with coordinates first")
+    found = fit_discrepancy(fit.residual, fit.jacobian, fit.x, fit.prior.mean, fit.prior.std, coordinates,
+                            noise=fit.noise if fit.discrepancy is not None and fit.discrepancy.noise_given else None,
+                            model_error=model_error)
+    covariance = sandwich_covariance(fit.gauss_newton_covariance, fit.jacobian, fit.noise, fit.prior.precision,
+                                     found.covariance)
+    std = np.where(np.isfinite(fit.std), np.sqrt(np.maximum(np.diag(covariance), 0.0)), np.inf)
+    return dataclasses.replace(fit, covariance=covariance, std=std, discrepancy=found)
 
 
 def held_out_folds(leg: Sequence[int], n_folds: int = 5) -> list[np.ndarray]:
