@@ -52,6 +52,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 __all__ = ["Discrepancy", "fit_discrepancy", "discrepancy_covariance", "sandwich_covariance", "matern52",
            "polynomial_features", "model_error_factor"]
@@ -206,8 +207,6 @@ def fit_discrepancy(residual: np.ndarray, jacobian: np.ndarray, x: np.ndarray, p
     sees mostly the part of E the sources absorb and the fitted parts mostly the rest, so the
     sum double-counts little and a bar never narrows.
     """
-    from scipy.optimize import minimize
-
     r = np.asarray(residual, float)
     J = np.asarray(jacobian, float)
     c = np.asarray(coordinates, float)
@@ -230,9 +229,22 @@ def fit_discrepancy(residual: np.ndarray, jacobian: np.ndarray, x: np.ndarray, p
         z, G = keep.T @ z, keep.T @ G
     distance = np.linalg.norm(c[:, None, :] - c[None, :, :], axis=-1)
     scale = max(float(np.sqrt(np.mean(r ** 2))), 1e-12)
+    features = polynomial_features(c) if polynomial else None
+    # one BLAS thread: the likelihood works on (3n, 3n) matrices of a few hundred rows, where a
+    # multi-threaded BLAS on a shared 2-core machine was measured 5-150x slower (session 15-16)
+    with threadpool_limits(1, user_api="blas"):
+        best = _maximize_likelihood(z, G, distance, noise, keep, features, scale, polynomial)
+    sigma, amplitude, length, tau = _unpack(best.x, noise, polynomial)
+    return Discrepancy(noise=sigma, noise_given=noise is not None, amplitude=amplitude, length=length,
+                       polynomial=tau, log_likelihood=-float(best.fun), coordinates=c, model_error=E)
+
+
+def _maximize_likelihood(z, G, distance, noise, keep, features, scale, polynomial):
+    """The L-BFGS-B optimum of the marginal likelihood over a few starting length scales."""
+    from scipy.optimize import minimize
+
     lo, hi = math.log(LENGTH_BOUNDS[0]), math.log(LENGTH_BOUNDS[1])
     amplitude_bounds = (math.log(scale * 1e-3), math.log(scale * 1e2))
-    features = polynomial_features(c) if polynomial else None
     best = None
     for start_length in (0.1, 0.5, 2.0):  # a few starts: the likelihood can have a short and a long mode
         theta0 = [math.log(scale)] * 3 + [math.log(start_length)]
@@ -246,9 +258,7 @@ def fit_discrepancy(residual: np.ndarray, jacobian: np.ndarray, x: np.ndarray, p
                          method="L-BFGS-B", bounds=bounds)
         if best is None or found.fun < best.fun:
             best = found
-    sigma, amplitude, length, tau = _unpack(best.x, noise, polynomial)
-    return Discrepancy(noise=sigma, noise_given=noise is not None, amplitude=amplitude, length=length,
-                       polynomial=tau, log_likelihood=-float(best.fun), coordinates=c, model_error=E)
+    return best
 
 
 def sandwich_covariance(posterior_covariance: np.ndarray, J: np.ndarray, weight_noise: float,
