@@ -222,9 +222,10 @@ def _slopes_by_builds(space: ParameterSpace, provider: StiffnessProvider,
 # The default stays "builds" (session 16, docs/model.md 7): the condensed tangent is the exact
 # derivative of the nominal mesh's stiffness, but the mapper's cell counts change within the
 # +-10 % the true dimensions span, and the builds' secant over +-3 % follows that better: on
-# table1, cold `flexcal verify --model consistent` fits the noise-free curve to 0.0179 urad max
-# with the tangent (paper 0.015: misses) against 0.0094 with the builds, at 179 s against 427 s
-# wall (load 6-9).
+# table1, cold `flexcal verify --model consistent` (idle, session 16's end) gives the same fit
+# (max 0.0179 urad both; the 0.0094 once measured for the builds was another prior scale) but
+# base-parameter z RMS 5.19 with the tangent against 1.29 with the builds, at 97.5 s against
+# 147.8 s wall (docs/scale.md, session 16).
 SLOPE_METHODS = ("condensed", "condensed-secant", "builds")
 SLOPE_METHOD = "builds"
 # The relative step of a dimension that morphs a segment's mesh for dK/dp: small enough that
