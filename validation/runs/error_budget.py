@@ -38,11 +38,10 @@ from typing import Callable
 
 import numpy as np
 
-from flexcal.model.parameters import ParameterSpace
+from flexcal.model.parameters import DIMENSION_SYMBOLS, ParameterSpace  # a dimension moved needs a new FEM build
 
-__all__ = ["ErrorBudget", "model_error_budget", "budget_at_estimate", "budget_values", "GEOMETRIC_SYMBOLS", "DEFAULT_DRAWS", "BUDGET_SEED"]
+__all__ = ["ErrorBudget", "model_error_budget", "budget_at_estimate", "budget_values", "DEFAULT_DRAWS", "BUDGET_SEED"]
 
-GEOMETRIC_SYMBOLS = ("w", "a", "l", "t1", "t2")  # chain dimensions: changing one needs a new FEM build
 DEFAULT_DRAWS = 0  # prior draws besides the estimate (module doc: 8 made the bars 6-19x too wide)
 BUDGET_SEED = 2028  # the draws' own stream, never a scenario's (scenarios draw from [seed, 1])
 
@@ -73,7 +72,7 @@ def budget_values(space: ParameterSpace, n_draws: int = DEFAULT_DRAWS, seed: int
     nominal = np.array([p.nominal for p in space.parameters], float)
     lower = np.array([p.lower for p in space.parameters], float)
     upper = np.array([p.upper for p in space.parameters], float)
-    geometric = np.array([name.split(".")[-1] in GEOMETRIC_SYMBOLS for name in space.all_names])
+    geometric = np.array([name.split(".")[-1] in DIMENSION_SYMBOLS for name in space.all_names])
     rng = np.random.default_rng([seed, 28])
     rows = [nominal if estimate is None else np.clip(np.asarray(estimate, float), lower, upper)]
     for _ in range(n_draws):
