@@ -59,3 +59,35 @@ def test_budget_values_never_take_the_true_values():
     np.testing.assert_array_equal(budget_values(space, 0)[0], nominal)
     np.testing.assert_array_equal(values[1:, geometric], np.broadcast_to(nominal[geometric], (3, geometric.sum())))
     assert np.all(values[1:, ~geometric] != nominal[~geometric])
+
+
+def test_identify_carries_the_budget_and_no_bar_narrows(tmp_path):
+    """``flexcal identify --method map`` builds the same budget as ``verify`` (the prototype at
+    the estimate, on the measured inputs): report.json names it, and every source's standard
+    error is at least the one ``--no-error-budget`` gives (the budget adds a positive
+    semi-definite term to the sandwich's data covariance; the estimate itself is the same fit).
+    Analytic prototype, table1 drive sources, 0.5 urad: ~10 s CPU a run."""
+    import json
+
+    from flexcal.validation import cli
+
+    reports = {}
+    for name, extra in (("with", []), ("without", ["--no-error-budget"])):
+        out = tmp_path / name
+        assert cli.main(["identify", "--scenario", "table1", "--provider", "analytic", "--method", "map",
+                         "--sources", "table1", "--noise-urad", "0.5", "--model-stiffness", "closed-form",
+                         "--out", str(out), "-q", *extra]) == 0
+        reports[name] = json.loads((out / "report.json").read_text())
+    budget = reports["with"]["estimation"]["discrepancy"]["model_error_budget_samples"]
+    assert budget is not None and budget["n_samples"] == 1
+    # the analytic prototype's kinematics are exact, the model's second order: a real, nonzero error
+    assert budget["rms_urad_per_sample"][0] > 0.05  # 0.71 urad measured; 0.05 = a tenth of the noise
+    assert reports["without"]["estimation"]["discrepancy"]["model_error_budget_samples"] is None
+    with_std = {p["name"]: p["std_error"] for p in reports["with"]["parameters"] if p["was_identified"]}
+    without_std = {p["name"]: p["std_error"] for p in reports["without"]["parameters"] if p["was_identified"]}
+    assert with_std.keys() == without_std.keys() and with_std
+    # same fit, covariance larger by a PSD term: each bar at least as wide (1e-9: round-off of the sandwich)
+    assert all(with_std[n] >= without_std[n] * (1 - 1e-9) for n in with_std)
+    # and it reaches them: the fitted discrepancy (amplitudes 31 / 51 urad here) already carries most of
+    # the 0.71 urad, so the budget moves D3.CL's bar by 0.35 % (measured); 1e-6 is far above round-off
+    assert any(with_std[n] > without_std[n] * (1 + 1e-6) for n in with_std)

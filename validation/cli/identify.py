@@ -18,7 +18,7 @@ import dataclasses
 import time
 
 from .options import add_out, calibration_defaults
-from .options import add_source_options
+from .options import add_error_budget_options, add_source_options
 
 __all__ = ["configure", "run", "parse_sources", "EXAMPLES", "DEFAULT_CONFIG"]
 
@@ -43,6 +43,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
     add_identification_options(parser)
     add_model_options(parser)
     parser.add_argument("--calibration-seed", type=int, metavar="N", help="seed of the PSO (default %(default)s)")
+    add_error_budget_options(parser)
     add_out(parser, what="report.json, report.md, fit.png, convergence.png")
 
 
@@ -71,7 +72,7 @@ def run(args: argparse.Namespace) -> int:
     from .opening import open_calibration
     from ..runs.verify import VerifySettings, run_verify
     from .common import show_progress
-    from .options import prior_scale_option
+    from .options import error_budget_option, prior_scale_option
 
     if args.particles < 2 or args.iterations < 1:
         raise ValueError(f"--particles={args.particles} must be >= 2 and --iterations={args.iterations} >= 1")
@@ -89,8 +90,9 @@ def run(args: argparse.Namespace) -> int:
     measurement, presets, truth, space = opening.measurement, opening.presets, opening.truth, opening.space
     start = time.perf_counter()
     # bars on stderr for the long loops (PSO iterations, least-squares fits); identify prints its own summary
+    budget = error_budget_option(args, space, measurement.inputs, progress=progress)
     result = run_verify(measurement, space, settings, presets=presets, truth=truth, progress=progress,
-                        log=lambda *a, **k: None)
+                        log=lambda *a, **k: None, budget=budget)
     wall_s = time.perf_counter() - start
     verified = result.report
     rows = verified["parameters"]

@@ -270,6 +270,37 @@ def add_calibration_options(parser: argparse.ArgumentParser) -> None:
     add_model_options(parser)
 
 
+def add_error_budget_options(parser: argparse.ArgumentParser) -> None:
+    """``--error-budget-draws K`` and ``--no-error-budget`` (``verify``, ``identify``): the
+    model-error budget of the error bars (validation/runs/error_budget.py)."""
+    parser.add_argument("--error-budget-draws", type=int, default=None, metavar="K",
+                        help="the error bars of --method map/free carry the model's error measured on the "
+                             "virtual prototype (--provider) at the estimate "
+                             "(validation/runs/error_budget.py), plus K prior draws of the non-geometric "
+                             "sources (default 0)")
+    parser.add_argument("--no-error-budget", action="store_true",
+                        help="error bars from the residual-fitted discrepancy alone (no prototype runs)")
+
+
+def error_budget_option(args: argparse.Namespace, space, inputs, *, progress: bool):
+    """The budget callable ``run_verify`` takes (values (45,) [SI] of the estimate ->
+    ``runs.error_budget.ErrorBudget`` on ``inputs`` (n, 3) [m]), or None: ``--method paper``
+    (no error bars to carry it) or ``--no-error-budget``."""
+    if args.method == "paper" or args.no_error_budget:
+        return None
+    from ..prototype.providers import stiffness_provider
+    from ..runs.error_budget import DEFAULT_DRAWS, model_error_budget
+
+    draws = DEFAULT_DRAWS if args.error_budget_draws is None else args.error_budget_draws
+    if draws < 0:
+        raise ValueError(f"--error-budget-draws={draws} must be >= 0")
+    provider = stiffness_provider(args.provider, progress=progress, **executor_options(args))
+
+    def budget(values):
+        return model_error_budget(space, inputs, provider, n_draws=draws, estimate=values)
+    return budget
+
+
 def add_source_options(parser: argparse.ArgumentParser) -> None:
     """``--scenario`` | ``--data`` (one required), ``--seed``, ``--noise-urad``, ``--provider``."""
     source = parser.add_mutually_exclusive_group(required=True)

@@ -13,7 +13,8 @@ from __future__ import annotations
 import argparse
 import dataclasses
 
-from .options import CALIBRATION_DEFAULTS, add_calibration_options, add_out, prior_scale_option
+from .options import CALIBRATION_DEFAULTS, add_calibration_options, add_error_budget_options, add_out
+from .options import prior_scale_option
 
 __all__ = ["configure", "run", "EXAMPLES", "DEFAULT_CONFIG"]
 
@@ -35,20 +36,14 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
     add_source_options(parser)
     add_calibration_options(parser)
-    parser.add_argument("--error-budget-draws", type=int, default=None, metavar="K",
-                        help="the error bars of --method map/free carry the model's error measured on the "
-                             "virtual prototype (--provider) at the estimate "
-                             "(validation/runs/error_budget.py), plus K prior draws of the non-geometric "
-                             "sources (default 0)")
-    parser.add_argument("--no-error-budget", action="store_true",
-                        help="error bars from the residual-fitted discrepancy alone (no prototype runs)")
+    add_error_budget_options(parser)
     add_out(parser, what="report.json, report.md, fit/convergence/residuals/sensitivity PNGs, curves.csv")
 
 
 def run(args: argparse.Namespace) -> int:
     from flexcal.calibration.pso_settings import PSOSettings
 
-    from .options import check_sobol_options
+    from .options import check_sobol_options, error_budget_option
     from ..measurements import write_measurement
     from ..output import staged_output, write_report
     from ..reports.verify import verify_lines, verify_markdown, write_verify_figures
@@ -66,19 +61,7 @@ def run(args: argparse.Namespace) -> int:
                                                       max_iterations=args.iterations))
     opening = open_calibration(args, progress=not args.quiet)
     measurement, space = opening.measurement, opening.space
-    budget = None
-    if args.method != "paper" and not args.no_error_budget:
-        from ..prototype.providers import stiffness_provider
-        from ..runs.error_budget import DEFAULT_DRAWS, model_error_budget
-        from .options import executor_options
-
-        draws = DEFAULT_DRAWS if args.error_budget_draws is None else args.error_budget_draws
-        if draws < 0:
-            raise ValueError(f"--error-budget-draws={draws} must be >= 0")
-        provider = stiffness_provider(args.provider, progress=not args.quiet, **executor_options(args))
-
-        def budget(values):
-            return model_error_budget(space, measurement.inputs, provider, n_draws=draws, estimate=values)
+    budget = error_budget_option(args, space, measurement.inputs, progress=not args.quiet)
     result = run_verify(measurement, space, settings, presets=opening.presets, truth=opening.truth,
                         progress=not args.quiet, budget=budget)
     result.report["model_stiffness"] = ("closed-form chains scaled by FEM factors at the nominal design "
