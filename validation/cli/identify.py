@@ -18,7 +18,7 @@ import dataclasses
 import time
 
 from .options import add_out, calibration_defaults
-from .options import add_error_budget_options, add_source_options
+from .options import add_error_bar_options, add_source_options
 
 __all__ = ["configure", "run", "parse_sources", "EXAMPLES", "DEFAULT_CONFIG"]
 
@@ -43,7 +43,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
     add_identification_options(parser)
     add_model_options(parser)
     parser.add_argument("--calibration-seed", type=int, metavar="N", help="seed of the PSO (default %(default)s)")
-    add_error_budget_options(parser)
+    add_error_bar_options(parser)
     add_out(parser, what="report.json, report.md, fit.png, convergence.png")
 
 
@@ -72,13 +72,14 @@ def run(args: argparse.Namespace) -> int:
     from .opening import open_calibration
     from ..runs.verify import VerifySettings, run_verify
     from .common import show_progress
-    from .options import error_budget_option, prior_scale_option
+    from .options import error_budget_option, prior_scale_option, refits_option
 
     if args.particles < 2 or args.iterations < 1:
         raise ValueError(f"--particles={args.particles} must be >= 2 and --iterations={args.iterations} >= 1")
     selected = parse_sources(args.sources, parameter_space().names)
     progress = show_progress(args)
     settings = VerifySettings(method=args.method, prior_scale=prior_scale_option(args), sources=selected,
+                              refits=refits_option(args),
                               polish=args.polish, seed=args.calibration_seed, remove_offset=args.remove_offset,
                               noise_urad=args.noise_urad if args.noise_urad else None,
                               pso=dataclasses.replace(PSOSettings(), n_particles=args.particles,

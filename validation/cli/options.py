@@ -270,9 +270,10 @@ def add_calibration_options(parser: argparse.ArgumentParser) -> None:
     add_model_options(parser)
 
 
-def add_error_budget_options(parser: argparse.ArgumentParser) -> None:
-    """``--error-budget-draws K`` and ``--no-error-budget`` (``verify``, ``identify``): the
-    model-error budget of the error bars (validation/runs/error_budget.py)."""
+def add_error_bar_options(parser: argparse.ArgumentParser) -> None:
+    """``--error-budget-draws K``, ``--no-error-budget`` and ``--refits K`` (``verify``,
+    ``identify``): what the error bars of --method map/free carry besides the noise and the
+    residual-fitted discrepancy (validation/runs/error_budget.py, calibration/refit_spread.py)."""
     parser.add_argument("--error-budget-draws", type=int, default=None, metavar="K",
                         help="the error bars of --method map/free carry the model's error measured on the "
                              "virtual prototype (--provider) at the estimate "
@@ -280,6 +281,10 @@ def add_error_budget_options(parser: argparse.ArgumentParser) -> None:
                              "sources (default 0)")
     parser.add_argument("--no-error-budget", action="store_true",
                         help="error bars from the residual-fitted discrepancy alone (no prototype runs)")
+    parser.add_argument("--refits", type=int, default=None, metavar="K",
+                        help="K refits on the fitted curve + fresh noise; the spread they show beyond the linear "
+                             "error bars (a curved misfit valley) widens them (calibration/refit_spread.py; 0: none; "
+                             "default: by --model, validation/runs/model_names.py DEFAULT_REFITS)")
 
 
 def error_budget_option(args: argparse.Namespace, space, inputs, *, progress: bool):
@@ -299,6 +304,18 @@ def error_budget_option(args: argparse.Namespace, space, inputs, *, progress: bo
     def budget(values):
         return model_error_budget(space, inputs, provider, n_draws=draws, estimate=values)
     return budget
+
+
+def refits_option(args: argparse.Namespace) -> int:
+    """``--refits`` as VerifySettings takes it: the given K, else the model's default
+    (``runs.model_names.DEFAULT_REFITS``); 0 for --method paper (no error bars to widen)."""
+    from ..runs.model_names import DEFAULT_REFITS
+
+    if args.refits is not None and (args.refits < 0 or args.refits == 1):
+        raise ValueError(f"--refits={args.refits} must be 0 (none) or >= 2")
+    if args.method == "paper":
+        return 0
+    return DEFAULT_REFITS.get(args.model, 0) if args.refits is None else args.refits
 
 
 def add_source_options(parser: argparse.ArgumentParser) -> None:

@@ -21,7 +21,9 @@ class VerifySettings:
     noise_urad: the sensor noise level [urad] (the paper method's identifiability; the
     noise floor of the fit-RMS goal; None: from the fit); method: "map", "free" or "paper";
     prior_scale: the MAP prior scale (None: cross-validated); sources: identify only these
-    (the others at nominal; with "paper" instead of the Sobol selection; ``flexcal identify``)."""
+    (the others at nominal; with "paper" instead of the Sobol selection; ``flexcal identify``);
+    refits: refits whose nonlinear spread widens the map/free error bars (0: none;
+    ``calibration.refit_spread``)."""
 
     sobol_n: int = 512
     sobol_threshold: float = 0.01
@@ -33,6 +35,7 @@ class VerifySettings:
     method: str = "map"
     prior_scale: float | None = None
     sources: tuple[str, ...] | None = None
+    refits: int = 0
 
     def __post_init__(self) -> None:
         if self.method not in ("map", "free", "paper"):

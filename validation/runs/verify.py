@@ -234,7 +234,8 @@ def _estimated_identification(measurement: Measurement, angles: np.ndarray, spac
         def plan(total: int) -> None:
             bar.total = total
         result = identify_all(space, measurement.inputs, angles, measurement.leg,
-                              IdentificationSettings(method=settings.method, prior_scale=settings.prior_scale),
+                              IdentificationSettings(method=settings.method, prior_scale=settings.prior_scale,
+                                                     refits=settings.refits),
                               log=log, on_fit=lambda: bar.update(1), on_plan=plan,
                               model_error=model_error)
     fit = result.estimate
@@ -261,8 +262,11 @@ def _estimated_identification(measurement: Measurement, angles: np.ndarray, spac
                     "error_bars": "sandwich covariance with the noise + model-discrepancy covariance "
                                   "(flexcal.calibration.discrepancy)"
                                   + ("" if budget is None else " + the model-error budget (flexcal.validation.runs."
-                                                               "error_budget)"),
-                    "model_error_budget_samples": made[-1].as_dict() if made else None},
+                                                               "error_budget)")
+                                  + ("" if fit.refit_spread is None else " + the refits' nonlinear spread "
+                                                                         "(flexcal.calibration.refit_spread)"),
+                    "model_error_budget_samples": made[-1].as_dict() if made else None,
+                    "refit_spread": None if fit.refit_spread is None else fit.refit_spread.as_dict()},
                 "effective_parameters": fit.p_eff, "n_observations": fit.n_observations,
                 "base_parameters": result.base.as_dict()}}}
 
