@@ -46,7 +46,7 @@ def _z(x, truth, covariance, C):
 
 def run_case(scenario_name: str, seed: int, trajectory: str | None, provider, noise_urad: float,
              walk_seed: int, model: tuple[str, str, bool] = ("second-order", "fem", True),
-             arrays: Path | None = None, budget_draws: int | None = None, refits: int = 0) -> dict:
+             arrays: Path | None = None, budget_draws: int | None = None, profile: bool = False) -> dict:
     from flexcal.calibration.pipeline import identify_all
     from flexcal.model.trajectory import standard_trajectory
     from flexcal.validation.measurements import read_trajectory
@@ -70,7 +70,7 @@ def run_case(scenario_name: str, seed: int, trajectory: str | None, provider, no
     from flexcal.calibration.pipeline import IdentificationSettings
 
     found = identify_all(space, measurement.inputs, measurement.angles, measurement.leg, model_error=budget,
-                         settings=IdentificationSettings(refits=refits))
+                         settings=IdentificationSettings(profile=profile))
     budget = made[-1].samples if budget is not None else None
     fit, base, names = found.estimate, found.base, list(space.names)
     truth = space.to_unit(scenario.values[space.active_indices])
@@ -101,11 +101,11 @@ def run_case(scenario_name: str, seed: int, trajectory: str | None, provider, no
             "z_sources_old": _z(fit.x, truth, old, E).tolist(),
             "z_base_new": _z(fit.x, truth, fit.covariance, base.reported_combinations(names)).tolist(),
             "z_base_old": _z(fit.x, truth, old, base.combinations(names)).tolist(),
-            **({} if fit.refit_spread is None else {  # the same bars without the refits' term (--refits)
-                "z_sources_no_refits": _z(fit.x, truth, fit.covariance - fit.refit_spread.added, E).tolist(),
-                "z_base_no_refits": _z(fit.x, truth, fit.covariance - fit.refit_spread.added,
-                                       base.reported_combinations(names)).tolist(),
-                "refit_spread": fit.refit_spread.as_dict()}),
+            **({} if fit.profile_bars is None else {  # the same bars without the profile's term (--profile-bars)
+                "z_sources_no_profile": _z(fit.x, truth, fit.covariance - fit.profile_bars.added, E).tolist(),
+                "z_base_no_profile": _z(fit.x, truth, fit.covariance - fit.profile_bars.added,
+                                        base.reported_combinations(names)).tolist(),
+                "profile_bars": fit.profile_bars.as_dict()}),
             "width_ratio": (np.sqrt(np.diag(E @ fit.covariance @ E.T)) / np.sqrt(np.diag(E @ old @ E.T))).tolist(),
             "abs_errors_si": errors, "walk_rms_urad": float(np.sqrt(np.mean(predicted ** 2)) * 1e6),
             "walk_seed": [walk_seed, seed], "model": list(model),
@@ -245,10 +245,10 @@ def main(argv=None) -> int:
                         help="give identify_all the model-error budget flexcal verify computes (the estimate, K "
                              "prior draws: validation/runs/error_budget.py); default: none (the fit "
                              "does not depend on it; --recompute-bars scores it on the saved fits)")
-    parser.add_argument("--refits", type=int, default=0, metavar="K",
-                        help="K refits whose nonlinear spread widens the bars (calibration/refit_spread.py; flexcal "
-                             "verify's default for --model consistent is 30); the cases record the z-scores "
-                             "without that term too")
+    parser.add_argument("--profile-bars", action="store_true",
+                        help="widen the base combinations' bars by their profile likelihood (calibration/"
+                             "profile_bars.py; flexcal verify's default for --model consistent); the cases record the "
+                             "z-scores without that term too")
     args = parser.parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -270,13 +270,13 @@ def main(argv=None) -> int:
                         continue
                     case = run_case(name, seed, trajectory, provider, args.noise_urad, args.walk_seed,
                                     (args.model, args.model_stiffness, not args.no_second_order), out / "arrays",
-                                    args.budget_draws, args.refits)
+                                    args.budget_draws, args.profile_bars)
                     cases.append(case)
                     with log.open("a") as handle:
                         handle.write(json.dumps(case) + "\n")
-                    if "z_base_no_refits" in case:
-                        print(f"{key}: base z RMS without refits {_rms(case['z_base_no_refits']):.3g}, with "
-                              f"{_rms(case['z_base_new']):.3g}; sources {_rms(case['z_sources_no_refits']):.3g}, "
+                    if "z_base_no_profile" in case:
+                        print(f"{key}: base z RMS without the profile {_rms(case['z_base_no_profile']):.3g}, with "
+                              f"{_rms(case['z_base_new']):.3g}; sources {_rms(case['z_sources_no_profile']):.3g}, "
                               f"{_rms(case['z_sources_new']):.3g}", flush=True)
                     print(f"{key}: z sources {np.round(case['z_sources_old'], 2)} -> "
                           f"{np.round(case['z_sources_new'], 2)}, base RMS {_rms(case['z_base_old']):.3g} -> "

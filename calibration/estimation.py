@@ -46,7 +46,7 @@ import numpy as np
 
 from flexcal.calibration.discrepancy import Discrepancy, fit_discrepancy, sandwich_covariance
 from flexcal.calibration.polish import batched_jacobian_fd, least_squares_polish
-from flexcal.calibration.refit_spread import RefitSpread
+from flexcal.calibration.profile_bars import ProfileBars
 
 __all__ = ["Prior", "uniform_prior", "Estimate", "estimate", "with_model_error", "posterior", "residual_autocorrelation", "choose_prior_scale", "CrossValidation",
            "held_out_folds", "PRIOR_SCALES", "one_standard_error_choice"]
@@ -108,8 +108,8 @@ class Estimate:
     (residual rows, Jacobians included); prior: the prior used; discrepancy: the model
     discrepancy the error bars carry (None: white misfit assumed, ``covariance`` is the
     Gauss-Newton one); gauss_newton_covariance (d, d): the white-misfit covariance at the same
-    weighting, kept for comparison (None when it is ``covariance``); refit_spread: the
-    nonlinear excess refits added to ``covariance`` (``calibration.refit_spread``), or None."""
+    weighting, kept for comparison (None when it is ``covariance``); profile_bars: the
+    profile-likelihood widening added to ``covariance`` (``calibration.profile_bars``), or None."""
 
     x: np.ndarray
     std: np.ndarray
@@ -128,7 +128,7 @@ class Estimate:
     prior: Prior
     discrepancy: Discrepancy | None = None
     gauss_newton_covariance: np.ndarray | None = None
-    refit_spread: RefitSpread | None = None
+    profile_bars: ProfileBars | None = None
 
     @property
     def rms(self) -> float:

@@ -30,7 +30,7 @@ from flexcal.calibration.estimation import (PRIOR_SCALES, CrossValidation, Estim
 from flexcal.calibration.identifiability import IdentifiabilityReport, identifiability
 from flexcal.calibration.polish import PolishResult, norm_sum_polish, polish_candidates
 from flexcal.calibration.problem import CalibrationProblem
-from flexcal.calibration.refit_spread import with_refit_spread
+from flexcal.calibration.profile_bars import with_profile_bars
 from flexcal.calibration.pso import identify
 from flexcal.calibration.pso_settings import PSOResult, PSOSettings
 from flexcal.model.parameters import ParameterSpace
@@ -51,8 +51,8 @@ class IdentificationSettings:
     ``scales``); noise [rad] of the sensors, or None (estimated from the residual);
     max_std [fraction of range]: a base source's data-alone standard deviation limit
     (``base_parameters``); n_folds: held-out blocks when the trajectory has fewer than 3 legs;
-    refits: refits on perturbed data whose nonlinear spread widens the error bars
-    (``calibration.refit_spread``; 0: none, else >= 2)."""
+    profile: widen the bars of the base combinations not identified alone by their profile
+    likelihood (``calibration.profile_bars``)."""
 
     method: str = "map"
     prior_scale: float | None = None
@@ -60,7 +60,7 @@ class IdentificationSettings:
     noise: float | None = None
     max_std: float = 0.01
     n_folds: int = 5
-    refits: int = 0
+    profile: bool = False
 
     def __post_init__(self) -> None:
         if self.method not in ("map", "free"):
@@ -69,8 +69,6 @@ class IdentificationSettings:
             raise ValueError(f"prior scale={self.prior_scale} must be > 0")
         if self.noise is not None and not self.noise > 0:
             raise ValueError(f"noise={self.noise} rad must be > 0")
-        if self.refits == 1 or self.refits < 0:
-            raise ValueError(f"refits={self.refits} must be 0 (none) or >= 2")
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -118,7 +116,8 @@ def identify_all(space: ParameterSpace, inputs: np.ndarray, angles: np.ndarray, 
     budget on these inputs the error bars carry (``calibration.discrepancy``), (K, n, 3) [rad]
     prototype - model at K mounts, or a callable values (45,) [SI] of the estimate -> such an
     array (``validation.runs.error_budget``); it does not change the estimate. With
-    ``settings.refits`` the bars carry the refits' nonlinear spread too (``calibration.refit_spread``)."""
+    ``settings.profile`` the base combinations' bars carry their profile likelihood
+    (``calibration.profile_bars``)."""
     inputs, angles = np.asarray(inputs, float), np.asarray(angles, float)
     check_determined(inputs.shape[0], space.n_params)
     directions = travel_directions(inputs)
@@ -135,14 +134,14 @@ def identify_all(space: ParameterSpace, inputs: np.ndarray, angles: np.ndarray, 
         scale = settings.prior_scale
     else:
         folds = held_out_folds(leg, settings.n_folds)
-        on_plan((settings.noise is None) + len(settings.scales) * len(folds) + 1 + settings.refits)
+        on_plan((settings.noise is None) + len(settings.scales) * len(folds) + 1)
         cv = choose_prior_scale(residuals_for, space.n_params, folds, inputs.shape[0], scales=settings.scales,
                                 noise=settings.noise, on_fit=on_fit)
         scale = cv.best
         log(f"prior scale {scale:g} by {cv.n_folds}-fold held-out cross-validation "
             f"(held-out RMS {', '.join(f'{s:g}: {r * 1e6:.3g}' for s, r in zip(cv.scales, cv.held_out_rms))} urad)")
     if cv is None:
-        on_plan(1 + settings.refits)
+        on_plan(1)
     prior = uniform_prior(space.n_params, scale)
     # error bars with the model's discrepancy, a process over the postures: the measured angles
     # in workspace half-widths (calibration.discrepancy)
@@ -154,12 +153,15 @@ def identify_all(space: ParameterSpace, inputs: np.ndarray, angles: np.ndarray, 
         samples = model_error(space.full_values(space.from_unit(fit.x))) if callable(model_error) else model_error
         samples = np.asarray(samples, float)
         fit = with_model_error(fit, angles / WORKSPACE, samples.reshape(len(samples), -1))
-    if settings.refits:
-        def residuals_on(measured: np.ndarray):
-            return CalibrationProblem(space=space, inputs=inputs, angles=measured, directions=directions).residuals
-        fit = with_refit_spread(fit, residuals_on, problem.model_angles(fit.x[None])[0][0], settings.refits,
-                                on_refit=on_fit)
     base = base_parameters(fit.jacobian / fit.noise, space.names, max_std=settings.max_std)
+    if settings.profile:
+        names = list(space.names)
+        alone = set(base.pure())
+        rows = [row for name, row in zip(base.base, base.reported_combinations(names)) if name not in alone]
+        if rows:
+            fit = with_profile_bars(fit, problem.residuals, np.array(rows))
+            log(f"profile likelihood of {len(rows)} base combinations: {fit.profile_bars.n_fits} constrained fits, "
+                f"bars widened x{', '.join(f'{f:.3g}' for f in fit.profile_bars.factors)}")
     ranges = space.upper - space.lower
     values = space.full_values(space.from_unit(fit.x))
     std = np.zeros(len(space.parameters))

@@ -72,14 +72,14 @@ def run(args: argparse.Namespace) -> int:
     from .opening import open_calibration
     from ..runs.verify import VerifySettings, run_verify
     from .common import show_progress
-    from .options import error_budget_option, prior_scale_option, refits_option
+    from .options import error_budget_option, prior_scale_option, profile_option
 
     if args.particles < 2 or args.iterations < 1:
         raise ValueError(f"--particles={args.particles} must be >= 2 and --iterations={args.iterations} >= 1")
     selected = parse_sources(args.sources, parameter_space().names)
     progress = show_progress(args)
     settings = VerifySettings(method=args.method, prior_scale=prior_scale_option(args), sources=selected,
-                              refits=refits_option(args),
+                              profile=profile_option(args),
                               polish=args.polish, seed=args.calibration_seed, remove_offset=args.remove_offset,
                               noise_urad=args.noise_urad if args.noise_urad else None,
                               pso=dataclasses.replace(PSOSettings(), n_particles=args.particles,

@@ -271,9 +271,9 @@ def add_calibration_options(parser: argparse.ArgumentParser) -> None:
 
 
 def add_error_bar_options(parser: argparse.ArgumentParser) -> None:
-    """``--error-budget-draws K``, ``--no-error-budget`` and ``--refits K`` (``verify``,
+    """``--error-budget-draws K``, ``--no-error-budget`` and ``--profile-bars`` (``verify``,
     ``identify``): what the error bars of --method map/free carry besides the noise and the
-    residual-fitted discrepancy (validation/runs/error_budget.py, calibration/refit_spread.py)."""
+    residual-fitted discrepancy (validation/runs/error_budget.py, calibration/profile_bars.py)."""
     parser.add_argument("--error-budget-draws", type=int, default=None, metavar="K",
                         help="the error bars of --method map/free carry the model's error measured on the "
                              "virtual prototype (--provider) at the estimate "
@@ -281,10 +281,10 @@ def add_error_bar_options(parser: argparse.ArgumentParser) -> None:
                              "sources (default 0)")
     parser.add_argument("--no-error-budget", action="store_true",
                         help="error bars from the residual-fitted discrepancy alone (no prototype runs)")
-    parser.add_argument("--refits", type=int, default=None, metavar="K",
-                        help="K refits on the fitted curve + fresh noise; the spread they show beyond the linear "
-                             "error bars (a curved misfit valley) widens them (calibration/refit_spread.py; 0: none; "
-                             "default: by --model, validation/runs/model_names.py DEFAULT_REFITS)")
+    parser.add_argument("--profile-bars", action=argparse.BooleanOptionalAction, default=None,
+                        help="widen the bars of the base combinations not identified alone by their profile "
+                             "likelihood, the other sources re-optimised (calibration/profile_bars.py; default: by "
+                             "--model, on for consistent: validation/runs/model_names.py PROFILE_BARS_MODELS)")
 
 
 def error_budget_option(args: argparse.Namespace, space, inputs, *, progress: bool):
@@ -306,16 +306,14 @@ def error_budget_option(args: argparse.Namespace, space, inputs, *, progress: bo
     return budget
 
 
-def refits_option(args: argparse.Namespace) -> int:
-    """``--refits`` as VerifySettings takes it: the given K, else the model's default
-    (``runs.model_names.DEFAULT_REFITS``); 0 for --method paper (no error bars to widen)."""
-    from ..runs.model_names import DEFAULT_REFITS
+def profile_option(args: argparse.Namespace) -> bool:
+    """``--profile-bars`` as VerifySettings takes it: as given, else the model's default
+    (``runs.model_names.PROFILE_BARS_MODELS``); off for --method paper (no error bars)."""
+    from ..runs.model_names import PROFILE_BARS_MODELS
 
-    if args.refits is not None and (args.refits < 0 or args.refits == 1):
-        raise ValueError(f"--refits={args.refits} must be 0 (none) or >= 2")
     if args.method == "paper":
-        return 0
-    return DEFAULT_REFITS.get(args.model, 0) if args.refits is None else args.refits
+        return False
+    return args.model in PROFILE_BARS_MODELS if args.profile_bars is None else bool(args.profile_bars)
 
 
 def add_source_options(parser: argparse.ArgumentParser) -> None:

@@ -43,7 +43,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from flexcal.calibration.pso_settings import PSOSettings
 
-    from .options import check_sobol_options, error_budget_option, refits_option
+    from .options import check_sobol_options, error_budget_option, profile_option
     from ..measurements import write_measurement
     from ..output import staged_output, write_report
     from ..reports.verify import verify_lines, verify_markdown, write_verify_figures
@@ -55,7 +55,7 @@ def run(args: argparse.Namespace) -> int:
     check_sobol_options(args)
     settings = VerifySettings(sobol_n=args.sobol_n, sobol_threshold=args.sobol_threshold, seed=args.calibration_seed,
                               polish=args.polish, remove_offset=args.remove_offset, method=args.method,
-                              prior_scale=prior_scale_option(args), refits=refits_option(args),
+                              prior_scale=prior_scale_option(args), profile=profile_option(args),
                               noise_urad=args.noise_urad if args.noise_urad else None,
                               pso=dataclasses.replace(PSOSettings(), n_particles=args.particles,
                                                       max_iterations=args.iterations))

@@ -22,8 +22,8 @@ class VerifySettings:
     noise floor of the fit-RMS goal; None: from the fit); method: "map", "free" or "paper";
     prior_scale: the MAP prior scale (None: cross-validated); sources: identify only these
     (the others at nominal; with "paper" instead of the Sobol selection; ``flexcal identify``);
-    refits: refits whose nonlinear spread widens the map/free error bars (0: none;
-    ``calibration.refit_spread``)."""
+    profile: widen the map/free bars of the base combinations not identified alone by their
+    profile likelihood (``calibration.profile_bars``)."""
 
     sobol_n: int = 512
     sobol_threshold: float = 0.01
@@ -35,7 +35,7 @@ class VerifySettings:
     method: str = "map"
     prior_scale: float | None = None
     sources: tuple[str, ...] | None = None
-    refits: int = 0
+    profile: bool = False
 
     def __post_init__(self) -> None:
         if self.method not in ("map", "free", "paper"):

@@ -235,7 +235,7 @@ def _estimated_identification(measurement: Measurement, angles: np.ndarray, spac
             bar.total = total
         result = identify_all(space, measurement.inputs, angles, measurement.leg,
                               IdentificationSettings(method=settings.method, prior_scale=settings.prior_scale,
-                                                     refits=settings.refits),
+                                                     profile=settings.profile),
                               log=log, on_fit=lambda: bar.update(1), on_plan=plan,
                               model_error=model_error)
     fit = result.estimate
@@ -263,10 +263,10 @@ def _estimated_identification(measurement: Measurement, angles: np.ndarray, spac
                                   "(flexcal.calibration.discrepancy)"
                                   + ("" if budget is None else " + the model-error budget (flexcal.validation.runs."
                                                                "error_budget)")
-                                  + ("" if fit.refit_spread is None else " + the refits' nonlinear spread "
-                                                                         "(flexcal.calibration.refit_spread)"),
+                                  + ("" if fit.profile_bars is None else " + the base combinations' profile "
+                                                                         "likelihood (flexcal.calibration.profile_bars)"),
                     "model_error_budget_samples": made[-1].as_dict() if made else None,
-                    "refit_spread": None if fit.refit_spread is None else fit.refit_spread.as_dict()},
+                    "profile_bars": None if fit.profile_bars is None else fit.profile_bars.as_dict()},
                 "effective_parameters": fit.p_eff, "n_observations": fit.n_observations,
                 "base_parameters": result.base.as_dict()}}}
 
