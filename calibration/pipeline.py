@@ -161,7 +161,7 @@ def identify_all(space: ParameterSpace, inputs: np.ndarray, angles: np.ndarray, 
         if rows:
             fit = with_profile_bars(fit, problem.residuals, np.array(rows))
             log(f"profile likelihood of {len(rows)} base combinations: {fit.profile_bars.n_fits} constrained fits, "
-                f"bars widened x{', '.join(f'{f:.3g}' for f in fit.profile_bars.factors)}")
+                f"bars widened x{', '.join(f'{w:.3g}' for w in fit.profile_bars.widening)}")
     ranges = space.upper - space.lower
     values = space.full_values(space.from_unit(fit.x))
     std = np.zeros(len(space.parameters))

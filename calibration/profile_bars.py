@@ -15,12 +15,22 @@ MAP objective the fit minimised (``||r(x) / sigma||^2 + ||(x - mean) / std||^2``
 sigma), solved by the same bounded least squares with the constraint as one heavily weighted
 row, from the linear conditional point ``x_hat + (v - c x_hat) A c / (c^T A c)``. Its rise
 ``dP(v) = P(v) - Phi(x_hat)`` is the likelihood-ratio statistic: ``sqrt(dP)`` standard errors.
-Probed at ``v = c x_hat +- k s`` (s the linear standard error, k on ``LADDER``) until dP reaches
-4 or the unit box ends, each probe bounds the profile's own standard error from below by
-``k s / max(sqrt(dP), 1)`` (a probe inside dP < 1 is inside one standard error); the largest
-bound over the probes, as a factor f >= 1 on s, widens the sandwich's bar of c by f:
-``Cov += (f^2 - 1) (S c)(S c)^T / (c^T S c)`` (S the sandwich covariance), positive
-semi-definite, so no bar narrows. A linear problem gives dP = 4 at k = 2: f = 1, two probes.
+Probed at ``v = c x_hat +- k s`` (s the linear standard error sqrt(c^T A c), k on ``LADDER``)
+until dP reaches 1 or the unit box ends, each side gives where the profile crosses one standard
+error: interpolated linearly in sqrt(dP) between probes (exact for a quadratic profile), or the
+last k probed when it stays below 1 up to the box. The larger side, f s, is the combination's
+profile standard error; the sandwich's bar of c (which carries the discrepancy and the budget)
+becomes ``max(sqrt(c^T S c), f s)``: ``Cov += (t - c^T S c) (S c)(S c)^T / (c^T S c)^2`` with t
+the new variance, positive semi-definite, so no bar narrows. A linear problem crosses at k = 1:
+f = 1, one probe a side.
+
+Why the crossing and the larger of the two bars, measured (FEM prototype, consistent model,
+0.5 urad, fresh fits of session 17, table1 seeds 1-3 and paper seed 1): a first version widened
+the sandwich's bar by the largest lower bound k / max(sqrt(dP), 1) over probes up to dP = 4;
+the far probes (dP 1.7-2.7 at 54 s on flat sides) made f 13-33 *on top of* the discrepancy's own
+widening, and z RMS fell to 0.12-0.30 (sources alone 0.27): bars far wider than needed. The
+1-sigma crossing against the linear bar gives table1 base z RMS 3.40 -> 0.93 (19 values),
+sources alone 0.80 -> 0.64 (12); paper seed 1 base 1.12 -> 0.63, sources 1.16 -> 0.79.
 
 Only the reported combinations that are not a source alone are profiled (the sources alone
 sit inside the z-score band with the linear bars: 0.79 RMS over 12, session 17): those are
@@ -37,38 +47,52 @@ import numpy as np
 
 from flexcal.calibration.polish import least_squares_polish
 
-__all__ = ["ProfileBars", "with_profile_bars", "profile_factor", "LADDER"]
+__all__ = ["ProfileBars", "with_profile_bars", "profile_factor", "one_sigma_crossing", "LADDER"]
 
 LADDER = (2.0, 6.0, 18.0, 54.0)  # probe distances [linear standard errors]; 54: a bar at most ~54x the linear one
-REACHED = 4.0  # dP at which a side stops: two standard errors of the profile
-WIDEN_FROM = 1.05  # a factor below this is the probes' round-off (a linear problem's dP = 4 at k = 2 to ~1e-6), not a valley
 CONSTRAINT_WEIGHT = 1e3  # the constraint row's weight per linear standard error (met to 1e-3 s or better)
 FD_STEP = 1e-6  # [unit box] as the fit's own (estimation.FD_STEP)
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
 class ProfileBars:
-    """combinations (k, d) [unit box] profiled; factors (k,) f >= 1 on each one's bar; probes:
-    per combination the (k, dP) pairs measured; added (d, d) [unit box^2] the covariance added;
-    n_fits the constrained fits run."""
+    """combinations (k, d) [unit box] profiled; factors (k,) f: each one's profile standard
+    error in linear ones; widening (k,) >= 1 its bar after / before (the sandwich's); probes:
+    per combination and side the (k, dP) pairs measured; added (d, d) [unit box^2] the
+    covariance added; n_fits the constrained fits run."""
 
     combinations: np.ndarray
     factors: np.ndarray
+    widening: np.ndarray
     probes: tuple
     added: np.ndarray
     n_fits: int
 
     def as_dict(self) -> dict:
-        return {"factors": self.factors.tolist(), "n_fits": self.n_fits,
-                "probes": [[[float(k), float(dp)] for k, dp in p] for p in self.probes],
+        return {"factors": self.factors.tolist(), "widening": self.widening.tolist(), "n_fits": self.n_fits,
+                "probes": [[[[float(k), float(dp)] for k, dp in side] for side in sides] for sides in self.probes],
                 "what": "profile likelihood of each base combination not identified alone: probes at +-k linear "
-                        "standard errors (k in 2, 6, 18, 54) with the other sources re-optimised; the bar widened "
-                        "to the largest k / max(sqrt(rise), 1) (flexcal.calibration.profile_bars)"}
+                        "standard errors (k in 2, 6, 18, 54) with the other sources re-optimised, until the rise "
+                        "reaches 1; the bar becomes the larger of the sandwich's and the 1-sigma crossing "
+                        "(flexcal.calibration.profile_bars)"}
 
 
-def profile_factor(probes) -> float:
-    """f >= 1 from probes [(k, dP), ...]: the largest lower bound k / max(sqrt(dP), 1)."""
-    return max([1.0] + [k / max(np.sqrt(max(dp, 0.0)), 1.0) for k, dp in probes])
+def one_sigma_crossing(side) -> float:
+    """k [linear standard errors] where a side's probes [(k, dP), ...] (k increasing) cross
+    dP = 1, interpolated linearly in sqrt(dP) from (0, 0); the last k when they stay below; 0
+    for no probe."""
+    previous_k, previous_root = 0.0, 0.0
+    for k, rise in side:
+        root = float(np.sqrt(max(rise, 0.0)))
+        if root >= 1.0:
+            return previous_k + (k - previous_k) * (1.0 - previous_root) / (root - previous_root)
+        previous_k, previous_root = k, max(previous_root, root)
+    return float(side[-1][0]) if side else 0.0
+
+
+def profile_factor(sides) -> float:
+    """f: the larger side's 1-sigma crossing (``one_sigma_crossing``) [linear standard errors]."""
+    return max([one_sigma_crossing(side) for side in sides], default=0.0)
 
 
 def with_profile_bars(fit, residuals: Callable[[np.ndarray], np.ndarray], combinations: np.ndarray, *,
@@ -91,19 +115,15 @@ def with_profile_bars(fit, residuals: Callable[[np.ndarray], np.ndarray], combin
 
     phi_hat = float(np.sum(objective_rows(x_hat[None])[0] ** 2))
     added = np.zeros_like(linear)
-    factors, probes, n_fits = [], [], 0
+    factors, widening, probes, n_fits = [], [], [], 0
     for c in combinations:
         s = float(np.sqrt(c @ linear @ c))
-        if not s > 0:
-            factors.append(1.0)
-            probes.append(())
-            continue
-        step = linear @ c / s ** 2  # x moves by (v - c x_hat) step on the linear conditional path
-        seen = []
-        for side in (-1.0, 1.0):
+        sides = []
+        for side in (-1.0, 1.0) if s > 0 else ():
+            seen = []
             for k in ladder:
                 v = float(c @ x_hat) + side * k * s
-                start = np.clip(x_hat + (v - c @ x_hat) * step, 0.0, 1.0)
+                start = np.clip(x_hat + (v - c @ x_hat) * (linear @ c) / s ** 2, 0.0, 1.0)  # linear conditional point
 
                 def constrained(X, v=v, c=c, s=s):
                     return np.concatenate([objective_rows(X), ((X @ c - v) * CONSTRAINT_WEIGHT / s)[:, None]], axis=1)
@@ -113,18 +133,21 @@ def with_profile_bars(fit, residuals: Callable[[np.ndarray], np.ndarray], combin
                 on_fit()
                 if abs(c @ found.x - v) > 1e-2 * s:  # the box ends before v: nothing beyond to probe
                     break
-                rise = float(np.sum(objective_rows(found.x[None])[0] ** 2)) - phi_hat
-                seen.append((k, rise))
-                if rise >= REACHED * (1.0 - 1e-3):  # 1e-3: the constrained fit's own tolerance on the rise
+                seen.append((k, float(np.sum(objective_rows(found.x[None])[0] ** 2)) - phi_hat))
+                if seen[-1][1] >= 1.0:
                     break
-        f = profile_factor(seen)
-        factors.append(f if f > WIDEN_FROM else 1.0)
-        probes.append(tuple(seen))
-        if f > WIDEN_FROM:
+            sides.append(tuple(seen))
+        f = profile_factor(sides)
+        before = float(c @ fit.covariance @ c)
+        target = max(before, (f * s) ** 2)
+        if target > before > 0:
             sc = fit.covariance @ c
-            added += (f ** 2 - 1.0) * np.outer(sc, sc) / float(c @ sc)
+            added += (target - before) * np.outer(sc, sc) / before ** 2
+        factors.append(f)
+        widening.append(np.sqrt(target / before) if before > 0 else 1.0)
+        probes.append(tuple(sides))
     covariance = fit.covariance + added
     std = np.where(np.isfinite(fit.std), np.sqrt(np.maximum(np.diag(covariance), 0.0)), np.inf)
-    bars = ProfileBars(combinations=combinations, factors=np.array(factors), probes=tuple(probes), added=added,
-                       n_fits=n_fits)
+    bars = ProfileBars(combinations=combinations, factors=np.array(factors), widening=np.array(widening),
+                       probes=tuple(probes), added=added, n_fits=n_fits)
     return dataclasses.replace(fit, covariance=covariance, std=std, profile_bars=bars)

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from flexcal.calibration.estimation import Prior, estimate
-from flexcal.calibration.profile_bars import profile_factor, with_profile_bars
+from flexcal.calibration.profile_bars import one_sigma_crossing, profile_factor, with_profile_bars
 
 SIGMA = 0.01  # the noise of the toy problems [residual units]
 POINTS = np.linspace(-1.0, 1.0, 40)
@@ -43,38 +43,47 @@ def _valley(X):
     return sharp + weak
 
 
-def test_profile_factor_is_the_largest_lower_bound_of_the_probes():
-    """A probe inside one standard error (rise < 1) bounds f by its k; outside, by k / sqrt(rise)."""
-    assert profile_factor([(2.0, 4.0)]) == pytest.approx(1.0, rel=1e-12)  # linear: rise k^2; exact arithmetic
-    # k = 2 and 6 inside one standard error bound f by 2 and 6; 18 at rise 4.5 by 18 / sqrt(4.5); exact arithmetic
-    assert profile_factor([(2.0, 0.25), (6.0, 0.5), (18.0, 4.5)]) == pytest.approx(18.0 / np.sqrt(4.5), rel=1e-12)
-    assert profile_factor([]) == 1.0
+def test_the_one_sigma_crossing_of_the_probes():
+    """Linear in sqrt(dP) between probes from (0, 0): a quadratic profile (dP = k^2) crosses
+    at k = 1 wherever it is probed; a flat side that never reaches 1 gives its last k; f is the
+    larger side."""
+    assert one_sigma_crossing([(2.0, 4.0)]) == pytest.approx(1.0, rel=1e-12)  # exact arithmetic
+    assert one_sigma_crossing([(6.0, 36.0)]) == pytest.approx(1.0, rel=1e-12)  # exact arithmetic
+    # between (6, 0.25) and (18, 4): sqrt 0.5 -> 2, one at 6 + 12 x 0.5 / 1.5 = 10; exact arithmetic
+    assert one_sigma_crossing([(2.0, 0.04), (6.0, 0.25), (18.0, 4.0)]) == pytest.approx(10.0, rel=1e-12)
+    assert one_sigma_crossing([(2.0, 0.1), (6.0, 0.5)]) == 6.0  # the box ended below one standard error
+    assert one_sigma_crossing([]) == 0.0
+    assert profile_factor([((2.0, 4.0),), ((2.0, 0.04), (6.0, 0.25), (18.0, 4.0))]) == 10.0
 
 
 def test_a_linear_problem_is_not_widened():
-    """Linear: every probe rises by k^2 (the linear prediction), so each side stops at k = 2
-    and no combination is widened; the covariance is the sandwich's, unchanged."""
+    """Linear: the first probe a side (2 linear standard errors) rises by 4, so each side
+    crosses one standard error at k = 1 and stops; f = 1, and the bar stays the sandwich's
+    (which is at least the linear one here: the noise is given and the fitted discrepancy
+    adds to it), so the covariance is unchanged."""
     fit, residuals = _fit(_linear, [0.4, 0.6, 0.5])
     combinations = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, -1.0]])
     profiled = with_profile_bars(fit, residuals, combinations)
-    np.testing.assert_array_equal(profiled.profile_bars.factors, [1.0, 1.0])
-    for probes in profiled.profile_bars.probes:
-        assert [k for k, _ in probes] == [2.0, 2.0]
-        # the linear rise 4 at two standard errors, to the fit's own tolerance (1e-3: trf's 1e-10 on a ~120 cost)
-        assert all(rise == pytest.approx(4.0, rel=1e-3) for _, rise in probes)
+    # 1e-3: the constrained fits' tolerance on the rise (trf's 1e-10 on a ~120 cost)
+    np.testing.assert_allclose(profiled.profile_bars.factors, [1.0, 1.0], rtol=1e-3)
+    for sides in profiled.profile_bars.probes:
+        assert [[k for k, _ in side] for side in sides] == [[2.0], [2.0]]
+        assert all(rise == pytest.approx(4.0, rel=1e-3) for side in sides for _, rise in side)  # the same tolerance
     np.testing.assert_array_equal(profiled.covariance, fit.covariance)
 
 
 def test_a_curved_valley_widens_the_pinned_looking_combination():
     """Near the vertex of the valley the linear bar of a is the sharp one; its profile is flat
-    towards lower a (measured: rise 0.79 at 2 linear standard errors, 3.02 at 6; the box ends
-    before 18), so its bar widens 3.45x; no bar narrows and the added covariance is positive
-    semi-definite."""
+    towards lower a (measured: rise 0.79 at 2 linear standard errors, 3.02 at 6), so it crosses
+    one standard error at 2.53 of them, and a's bar becomes that (2.3x the sandwich's); no bar
+    narrows and the added covariance is positive semi-definite."""
     fit, residuals = _fit(_valley, [0.3, 0.5])
     profiled = with_profile_bars(fit, residuals, np.array([[1.0, 0.0]]))
     factor = profiled.profile_bars.factors[0]
-    assert factor > 2.5  # measured 3.45 (6 / sqrt(3.02)); a linear problem gives 1
-    assert profiled.std[0] == pytest.approx(fit.std[0] * factor, rel=1e-9)  # the bar of c itself scales by f
+    assert factor > 2.0  # measured 2.53; a linear problem gives 1
+    linear = np.sqrt(fit.gauss_newton_covariance[0, 0])
+    assert profiled.std[0] == pytest.approx(factor * linear, rel=1e-9)  # the bar of c is f linear ones; round-off
+    assert profiled.std[0] > 2.0 * fit.std[0]  # and wider than the sandwich's (measured 2.3x)
     assert np.all(profiled.std >= fit.std * (1 - 1e-12))  # no bar narrows (round-off only)
     added = profiled.profile_bars.added
     assert np.linalg.eigvalsh(added).min() > -1e-12 * np.abs(added).max()  # PSD up to round-off
