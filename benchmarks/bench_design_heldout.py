@@ -22,6 +22,7 @@ import argparse
 import dataclasses
 import json
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -30,6 +31,33 @@ sys.path.insert(0, str(Path(__file__).parent))
 from bench_form_error import random_walk  # noqa: E402
 
 DRIVES = ("D1.x0", "D2.x0", "D3.x0", "D1.CL", "D2.CL", "D3.CL", "D1.mu", "D2.mu", "D3.mu")
+
+
+def _table1_error(name: str, row: dict) -> float:
+    """The error of a drive row as Table 1 gives it: x0 in um, CL in mm, mu relative in %."""
+    if name.endswith(".x0"):
+        return row["abs_error"] * 1e3  # display mm -> um
+    if name.endswith(".CL"):
+        return row["abs_error"]
+    return 100 * row["rel_error"]
+
+
+def drive_rows(report: dict) -> dict:
+    """Every drive row of Table 1 from a verify report.json, alone (a pure base parameter) or not:
+    identified and true value (display units), the error as Table 1 gives it, the z-score."""
+    pure = set(report.get("base_parameters", {}).get("pure", []))
+    rows = {r["name"]: r for r in report["parameters"]}
+    return {n: {"alone": n in pure, "identified": rows[n]["identified"], "preset": rows[n]["preset"],
+                "error": _table1_error(n, rows[n]), "z": rows[n]["z_score"]} for n in DRIVES}
+
+
+def form_floor(report: dict) -> dict:
+    """The report's model-form floor, overall: RMS per angle and max [urad] per model."""
+    floor = report.get("model_form_floor", {})
+    if not floor.get("available"):
+        return {"available": False}
+    return {m["model"]: {"name": m["name"], "rms_urad": m["all"]["rms_urad"], "max_urad": m["all"]["max_urad"]}
+            for m in floor["models"]}
 
 
 def main(argv=None) -> int:
@@ -69,10 +97,12 @@ def main(argv=None) -> int:
         return result
 
     runs_verify.run_verify = keep
+    started = time.perf_counter()
     try:
         status = main_cli(verify_argv)
     finally:
         runs_verify.run_verify = run_verify
+    verify_wall = time.perf_counter() - started
     if status != 0 or "result" not in captured:
         raise SystemExit(f"flexcal verify failed (status {status})")
     space, result, measurement = captured["space"], captured["result"], captured["measurement"]
@@ -93,9 +123,14 @@ def main(argv=None) -> int:
     alone = [n for n in DRIVES if n in pure]
     out = {"scenario": args.scenario, "provider": args.provider, "seed": args.seed, "trajectory": args.trajectory or "standard",
            "model": args.model, "n_points": int(measurement.n_points), "fit_rms_urad": report["fit_rms_urad"],
+           "fit_over_noise": report.get("fit_rms_over_noise_floor"),
            "alone": alone, "pure": sorted(pure),
            "abs_error": {n: rows[n]["abs_error"] for n in alone},  # display units (x0 mm, CL mm, mu -)
            "z": {n: rows[n]["z_score"] for n in alone},
+           # every drive row of Table 1, alone or not: x0 error in um, CL in mm, mu relative in %
+           "drives": drive_rows(report),
+           "form_floor": form_floor(report),
+           "verify_wall_s": verify_wall,
            "heldout_rms_urad": float(np.sqrt(np.mean(residual ** 2)) * 1e6),
            "heldout_floor_urad": float(np.sqrt(np.mean(floor ** 2)) * 1e6),
            "walk": {"points": args.walk_points, "stroke": "standard", "seed": args.walk_seed}}
