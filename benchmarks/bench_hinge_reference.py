@@ -1,0 +1,56 @@
+"""The mapped hinge mesher's converged compliance against an independent reference (issue 26,
+"Verification"): every dominant entry of the 6 x 6 compliance of circular notch hinges
+(R 5 mm, b 10 mm, blocks 5 mm; t given), its Richardson limit on nested mapped P2-tet meshes,
+the Richardson limit of 27-node hexahedra (``flexcal.fem.reference_hex``) with that limit's
+own uncertainty, and their relative difference.
+
+    python benchmarks/bench_hinge_reference.py --thickness 2.5 1 0.5 --dir /tmp/hinge_ref
+
+Mapped: ``mapped_mesh_part``'s own pipeline (``mapped_grid`` at --mapped-base cells through,
+every cell of that grid split into r^3 for r in --mapped-levels, then the mesher's snapping and
+isoparametric mid-nodes; ``nested_mapped_mesh``), condensed by ``flexcal.fem.condense``.
+Reference: ``hex27_hinge_compliance`` at --ref-base cells through, refinement r in
+--ref-levels (nested in parameter space). Each level's h = 1 / r; ``richardson`` fits rate
+and limit over three levels. With four reference levels the limit is that of the finest three
+and its uncertainty the difference from the limit of the coarsest three; with three, the
+uncertainty is the spread of two-level limits at rates p -+ 1 (half of it).
+
+The table: entry, mapped rate and limit, reference rate, limit +- uncertainty, relative
+difference 100 (mapped - reference) / |reference| [%], and "ok" when it is within 0.1 %
+(nothing added for the uncertainty, which is printed beside it). Each compliance is stored
+as DIR/<tag>.npy and reused. Not a test (tests/test_hinge_reference.py is).
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from flexcal.validation.reports.hinge_reference import AGREEMENT, compare
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--thickness", type=float, nargs="+", default=[2.5, 1.0, 0.5], help="t [mm]")
+    parser.add_argument("--mapped-base", type=int, default=2)
+    parser.add_argument("--mapped-levels", type=int, nargs=3, default=[1, 2, 3])
+    parser.add_argument("--ref-base", type=int, default=2)
+    parser.add_argument("--ref-levels", type=int, nargs="+", default=[1, 2, 3])
+    parser.add_argument("--dir", default="bench_hinge_reference")
+    args = parser.parse_args()
+    folder = Path(args.dir).resolve()
+    folder.mkdir(parents=True, exist_ok=True)
+    for t in args.thickness:
+        rows = compare(t, folder, args.mapped_base, args.mapped_levels, args.ref_base, args.ref_levels)
+        print(f"\nnotch R 5, t {t:g}, b 10 mm: mapped nested at {args.mapped_base} through, r = {args.mapped_levels}; "
+              f"Q2 hex reference at {args.ref_base} through, r = {args.ref_levels}")
+        print("| entry | mapped rate | mapped limit | ref rate | reference limit +- uncertainty | "
+              "mapped - ref [%] | finest mapped - ref [%] | within 0.1 % |")
+        print("|---|---:|---:|---:|---:|---:|---:|---|")
+        for name, p, lim, q, ref, unc, diff, finest in rows:
+            print(f"| {name} | {p:.2f} | {lim:.6e} | {q:.2f} | {ref:.6e} +- {100 * unc / abs(ref):.3f} % | "
+                  f"{100 * diff:+.3f} | {100 * finest:+.3f} | {'ok' if abs(diff) <= AGREEMENT else 'MISS'} |")
+
+
+if __name__ == "__main__":
+    main()

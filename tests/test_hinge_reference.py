@@ -1,0 +1,72 @@
+"""The mapped hinge mesher's Richardson limit against an independent reference: 27-node
+hexahedra on their own grid (flexcal.fem.reference_hex; issue 26 "Verification",
+docs/hinge-verification.md "Independent reference (session 17)")."""
+
+import numpy as np
+import pytest
+
+from flexcal.fem.reference_hex import _notch_profile, _stiffness, hex27_hinge_compliance, reference_grid
+from flexcal.geometry.exact import exact_volume
+from flexcal.geometry.params import STEEL
+from flexcal.validation.reports.hinge_reference import AGREEMENT, compare, notch
+
+
+def _lame():
+    E, nu = STEEL.youngs_modulus, STEEL.poisson_ratio
+    return E * nu / ((1 + nu) * (1 - 2 * nu)), E / (2 * (1 + nu))
+
+
+def test_reference_element_keeps_rigid_motions_and_linear_fields_exact():
+    # isoparametric Q2: a rigid rotation stores no energy, a uniform strain the energy of
+    # the meshed volume; that volume converges on the exact one as the grid is refined
+    hinge = notch(1.0)
+    lam, mu = _lame()
+    errors = []
+    for r in (1, 2, 4):
+        K, nodes = _stiffness(hinge, reference_grid(hinge, 1, refinement=r), STEEL)
+        X, Y, Z = nodes.T
+        zero = np.zeros_like(X)
+        for u in (np.c_[-Y, X, zero], np.c_[zero, -Z, Y], np.c_[Z, zero, -X], np.c_[np.ones_like(X), zero, zero]):
+            # round-off of a sum of ~1e5 terms of size mu V: 1e-10 of the strain energy scale
+            assert abs(u.ravel() @ (K @ u.ravel())) < 1e-10 * mu * exact_volume(hinge)
+        stretch = np.c_[X, zero, zero].ravel()
+        errors.append(stretch @ (K @ stretch) / ((lam + 2 * mu) * exact_volume(hinge)) - 1.0)
+    # measured 3.8e-4, 5.1e-5, 7.6e-6: the geometry converges at h^2.7-2.9 (nested in the arc angle)
+    assert 0 < errors[2] < errors[1] / 4 < errors[0] / 16
+
+
+def test_reference_profile_is_the_notch():
+    hinge = notch(1.0)
+    x = np.array([0.0, 2e-3, 4.9e-3, 5e-3, 7e-3])
+    h, _ = _notch_profile(hinge, x)
+    R, t = hinge.radius, hinge.thickness
+    expected = [t, t + 2 * R - 2 * np.sqrt(R**2 - 4e-6), t + 2 * R - 2 * np.sqrt(R**2 - 4.9e-3**2), t + 2 * R, t + 2 * R]
+    np.testing.assert_allclose(h, expected, rtol=1e-14)  # the same formula, round-off only
+
+
+def test_reference_working_rotation_converges_from_below():
+    # displacement FE is too stiff: the compliance grows with refinement towards the limit
+    hinge = notch(2.5)
+    values = [hex27_hinge_compliance(hinge, n_through=1, refinement=r, aspect=2.0)[0][5, 5] for r in (1, 2, 3)]
+    assert values[0] < values[1] < values[2]
+
+
+def _check(rows):
+    misses = [(name, 100 * diff) for name, *_, diff, _ in rows if abs(diff) > AGREEMENT]
+    assert not misses, f"mapped Richardson limit more than 0.1 % from the Q2-hex reference: {misses}"
+
+
+@pytest.mark.slow
+def test_mapped_limit_agrees_with_the_hex27_reference_thick_notch():
+    # t = 2.5 mm: mapped nested at 2 through r = 1, 2, 3 (5.5k / 38k / 122k DOF), Q2 hexes
+    # at 1 through r = 3..6. Fails if the mapped family's limit moves by more than 0.1 %
+    rows = compare(2.5, None, 2, (1, 2, 3), 1, (3, 4, 5, 6))
+    assert len(rows) == 8  # six diagonal terms, uy/Mz and uz/My
+    _check(rows)
+
+
+@pytest.mark.slow
+def test_mapped_limit_agrees_with_the_hex27_reference_reference_notch():
+    rows = compare(1.0, None, 2, (1, 2, 3), 1, (3, 4, 5, 6))
+    assert len(rows) == 8
+    _check(rows)
