@@ -19,8 +19,8 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["AGREEMENT", "notch", "nested_mapped_mesh", "mapped_compliance", "reference_compliance",
-           "reference_limit", "compare"]
+__all__ = ["AGREEMENT", "notch", "nested_mapped_mesh", "mapped_compliance", "default_compliance",
+           "reference_compliance", "reference_limit", "compare"]
 
 NAMES = ("ux", "uy", "uz", "rx", "ry", "rz")
 LOADS = ("Fx", "Fy", "Fz", "Mx", "My", "Mz")
@@ -68,6 +68,21 @@ def mapped_compliance(hinge, n_base: int, refinement: int) -> tuple[np.ndarray, 
     return hinge_compliance(mesh, STEEL, planes["fixed"], planes["free"], planes["free"][0]), mesh.n_dof
 
 
+def default_compliance(hinge) -> tuple[np.ndarray, int]:
+    """The compliance ``flexcal hinge`` computes by default (``mapped_mesh_part`` at the CLI's
+    default cells through, ``DEFAULT_CONFIG`` of ``flexcal.validation.cli.hinge``)."""
+    from flexcal.fem.condense import hinge_compliance
+    from flexcal.fem.mesh_mapped import mapped_mesh_part
+    from flexcal.geometry.exact import end_planes
+    from flexcal.geometry.params import STEEL
+    from flexcal.geometry.solids import hinge_solid
+    from flexcal.validation.cli.hinge import DEFAULT_CONFIG
+
+    mesh, _ = mapped_mesh_part(hinge_solid(hinge), elements_through_thickness=DEFAULT_CONFIG["elements_through"])
+    planes = end_planes(hinge)
+    return hinge_compliance(mesh, STEEL, planes["fixed"], planes["free"], planes["free"][0]), mesh.n_dof
+
+
 def reference_compliance(hinge, n_base: int, refinement: int) -> tuple[np.ndarray, int]:
     from flexcal.fem.reference_hex import hex27_hinge_compliance
 
@@ -104,10 +119,12 @@ def _cached(folder: Path | None, tag: str, compute) -> np.ndarray:
     return np.load(path)
 
 
-def compare(thickness_mm: float, folder: Path | None, mapped_base: int, mapped_levels, ref_base: int, ref_levels):
+def compare(thickness_mm: float, folder: Path | None, mapped_base: int, mapped_levels, ref_base: int, ref_levels,
+            default: bool = False):
     """Rows (entry, mapped rate, mapped limit, reference rate, reference limit, its
     uncertainty, (mapped limit - reference limit) / |reference limit|, (finest mapped -
-    reference limit) / |reference limit|) for every dominant entry (``DOMINANT_FRACTION`` on
+    reference limit) / |reference limit|, and with ``default`` (``flexcal hinge``'s default mesh -
+    reference limit) / |reference limit| (else NaN)) for every dominant entry (``DOMINANT_FRACTION`` on
     the finest reference) of the upper triangle of the 6 x 6 compliance [SI]."""
     from flexcal.fem.convergence import dominant_entries, richardson
     from flexcal.validation.reports.fem import DOMINANT_FRACTION
@@ -118,6 +135,7 @@ def compare(thickness_mm: float, folder: Path | None, mapped_base: int, mapped_l
                                lambda r=r: mapped_compliance(hinge, mapped_base, r)) for r in mapped_levels])
     reference = np.array([_cached(folder, f"hex27_{stem}_n{ref_base}_r{r}",
                                   lambda r=r: reference_compliance(hinge, ref_base, r)) for r in ref_levels])
+    dflt = _cached(folder, f"default_{stem}", lambda: default_compliance(hinge)) if default else None
     fit = richardson(1.0 / np.asarray(mapped_levels[-3:], float), mapped[-3:])
     ref_rate, ref_lim, ref_unc = reference_limit(ref_levels, reference)
     mask = np.triu(dominant_entries(reference[-1], DOMINANT_FRACTION))
@@ -125,7 +143,8 @@ def compare(thickness_mm: float, folder: Path | None, mapped_base: int, mapped_l
     for i, j in zip(*np.nonzero(mask)):
         diff = (fit.limit[i, j] - ref_lim[i, j]) / abs(ref_lim[i, j])
         rows.append((f"{NAMES[i]}/{LOADS[j]}", fit.rate[i, j], fit.limit[i, j], ref_rate[i, j], ref_lim[i, j],
-                     ref_unc[i, j], diff, (mapped[-1, i, j] - ref_lim[i, j]) / abs(ref_lim[i, j])))
+                     ref_unc[i, j], diff, (mapped[-1, i, j] - ref_lim[i, j]) / abs(ref_lim[i, j]),
+                     np.nan if dflt is None else (dflt[i, j] - ref_lim[i, j]) / abs(ref_lim[i, j])))
     return rows
 
 
