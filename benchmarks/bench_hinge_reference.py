@@ -32,6 +32,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from flexcal.validation.cli.hinge import DEFAULT_CONFIG
 from flexcal.validation.reports.hinge_reference import AGREEMENT, compare
 
 
@@ -48,7 +49,8 @@ def main() -> None:
     folder = Path(args.dir).resolve()
     folder.mkdir(parents=True, exist_ok=True)
     for t in args.thickness:
-        rows = compare(t, folder, args.mapped_base, args.mapped_levels, args.ref_base, args.ref_levels, args.default)
+        default = DEFAULT_CONFIG["elements_through"] if args.default else None
+        rows = compare(t, folder, args.mapped_base, args.mapped_levels, args.ref_base, args.ref_levels, default)
         print(f"\nnotch R 5, t {t:g}, b 10 mm: mapped nested at {args.mapped_base} through, r = {args.mapped_levels}; "
               f"Q2 hex reference at {args.ref_base} through, r = {args.ref_levels}")
         print("| entry | mapped rate | mapped limit | ref rate | reference limit +- uncertainty | "

@@ -46,11 +46,14 @@ def test_reference_profile_is_the_notch():
     np.testing.assert_allclose(h, expected, rtol=1e-14)  # the same formula, round-off only
 
 
-def test_reference_working_rotation_converges_from_below():
-    # displacement FE is too stiff: the compliance grows with refinement towards the limit
+def test_reference_compliance_grows_under_refinement():
+    # displacement FE is too stiff: the diagonal compliances grow with refinement towards the
+    # limit (measured on every level r = 1..5 at 2 through; the levels' quadratic geometry is
+    # not nested, so this is a measured property of these levels, not a theorem)
     hinge = notch(2.5)
-    values = [hex27_hinge_compliance(hinge, n_through=1, refinement=r, aspect=2.0)[0][5, 5] for r in (1, 2, 3)]
-    assert values[0] < values[1] < values[2]
+    values = np.array([np.diag(hex27_hinge_compliance(hinge, n_through=2, refinement=r, aspect=2.0)[0])
+                       for r in (1, 2, 3)])
+    assert np.all(np.diff(values, axis=0) > 0)
 
 
 @pytest.fixture(scope="module")
