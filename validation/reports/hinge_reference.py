@@ -89,20 +89,29 @@ def reference_compliance(hinge, n_base: int, refinement: int) -> tuple[np.ndarra
     return hex27_hinge_compliance(hinge, n_through=n_base, refinement=refinement, aspect=2.0)
 
 
-def reference_limit(levels, values) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(rate, limit, uncertainty) of the reference levels (see the module docstring)."""
+def _rate_spread(h, values, rate) -> np.ndarray:
+    """Half the spread of the finest two levels' limits at rates p -+ 1 (p >= 0.5; p = 2 where
+    the three levels gave no rate)."""
+    p = np.where(np.isfinite(rate), rate, 2.0)
+    ratio = h[-2] / h[-1]
+    low = values[-1] + (values[-1] - values[-2]) / (ratio ** np.maximum(p - 1.0, 0.5) - 1.0)
+    high = values[-1] + (values[-1] - values[-2]) / (ratio ** (p + 1.0) - 1.0)
+    return 0.5 * np.abs(low - high)
+
+
+def reference_limit(levels, values) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(rate, limit, uncertainty, rate spread) of the reference levels: the limit of the
+    finest three; the uncertainty is the difference from the limit of the three before them
+    (four levels or more) or else the rate spread (``_rate_spread``), which is also returned."""
     from flexcal.fem.convergence import richardson
 
     h = 1.0 / np.asarray(levels, float)
     fine = richardson(h[-3:], values[-3:])
+    spread = _rate_spread(h, values, fine.rate)
     if len(levels) >= 4:
         coarse = richardson(h[-4:-1], values[-4:-1])
-        return fine.rate, fine.limit, np.abs(fine.limit - coarse.limit)
-    p = np.where(np.isfinite(fine.rate), fine.rate, 2.0)
-    ratio = h[-2] / h[-1]
-    low = values[-1] + (values[-1] - values[-2]) / (ratio ** np.maximum(p - 1.0, 0.5) - 1.0)
-    high = values[-1] + (values[-1] - values[-2]) / (ratio ** (p + 1.0) - 1.0)
-    return fine.rate, fine.limit, 0.5 * np.abs(low - high)
+        return fine.rate, fine.limit, np.abs(fine.limit - coarse.limit), spread
+    return fine.rate, fine.limit, spread, spread
 
 
 def _cached(folder: Path | None, tag: str, compute) -> np.ndarray:
@@ -125,7 +134,7 @@ def compare(thickness_mm: float, folder: Path | None, mapped_base: int, mapped_l
     uncertainty, (mapped limit - reference limit) / |reference limit|, (finest mapped -
     reference limit) / |reference limit|, and with ``default`` cells through (``flexcal hinge``'s mesh at that n -
     reference limit) / |reference limit| (else NaN)) for every dominant entry (``DOMINANT_FRACTION`` on
-    the finest reference) of the upper triangle of the 6 x 6 compliance [SI]."""
+    the finest reference), and the reference's rate spread, of the upper triangle of the 6 x 6 compliance [SI]."""
     from flexcal.fem.convergence import dominant_entries, richardson
     from flexcal.validation.reports.fem import DOMINANT_FRACTION
 
@@ -138,14 +147,15 @@ def compare(thickness_mm: float, folder: Path | None, mapped_base: int, mapped_l
     dflt = None if default is None else _cached(folder, f"default{default:g}_{stem}",
                                                 lambda: default_compliance(hinge, default))
     fit = richardson(1.0 / np.asarray(mapped_levels[-3:], float), mapped[-3:])
-    ref_rate, ref_lim, ref_unc = reference_limit(ref_levels, reference)
+    ref_rate, ref_lim, ref_unc, ref_spread = reference_limit(ref_levels, reference)
     mask = np.triu(dominant_entries(reference[-1], DOMINANT_FRACTION))
     rows = []
     for i, j in zip(*np.nonzero(mask)):
         diff = (fit.limit[i, j] - ref_lim[i, j]) / abs(ref_lim[i, j])
         rows.append((f"{NAMES[i]}/{LOADS[j]}", fit.rate[i, j], fit.limit[i, j], ref_rate[i, j], ref_lim[i, j],
                      ref_unc[i, j], diff, (mapped[-1, i, j] - ref_lim[i, j]) / abs(ref_lim[i, j]),
-                     np.nan if dflt is None else (dflt[i, j] - ref_lim[i, j]) / abs(ref_lim[i, j])))
+                     np.nan if dflt is None else (dflt[i, j] - ref_lim[i, j]) / abs(ref_lim[i, j]),
+                     ref_spread[i, j]))
     return rows
 
 
