@@ -44,6 +44,7 @@ def main() -> None:
     parser.add_argument("--mapped-levels", type=int, nargs=3, default=[1, 2, 3])
     parser.add_argument("--ref-base", type=int, default=2)
     parser.add_argument("--ref-levels", type=int, nargs="+", default=[1, 2, 3])
+    parser.add_argument("--ref-width", type=int, default=None, help="reference cells across the width at r = 1")
     parser.add_argument("--default", action="store_true", help="also flexcal hinge's default mesh against the reference")
     parser.add_argument("--dir", default="bench_hinge_reference")
     args = parser.parse_args()
@@ -51,7 +52,8 @@ def main() -> None:
     folder.mkdir(parents=True, exist_ok=True)
     for t in args.thickness:
         default = DEFAULT_CONFIG["elements_through"] if args.default else None
-        rows = compare(t, folder, args.mapped_base, args.mapped_levels, args.ref_base, args.ref_levels, default)
+        rows = compare(t, folder, args.mapped_base, args.mapped_levels, args.ref_base, args.ref_levels, default,
+                       args.ref_width)
         print(f"\nnotch R 5, t {t:g}, b 10 mm: mapped nested at {args.mapped_base} through, r = {args.mapped_levels}; "
               f"Q2 hex reference at {args.ref_base} through, r = {args.ref_levels}")
         print("| entry | mapped rate | mapped limit | ref rate | reference limit +- uncertainty (rate p -+ 1) | "

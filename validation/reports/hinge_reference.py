@@ -83,10 +83,12 @@ def default_compliance(hinge, elements_through: float) -> tuple[np.ndarray, int]
     return hinge_compliance(mesh, STEEL, planes["fixed"], planes["free"], planes["free"][0]), mesh.n_dof
 
 
-def reference_compliance(hinge, n_base: int, refinement: int) -> tuple[np.ndarray, int]:
+def reference_compliance(hinge, n_base: int, refinement: int, width_cells: int | None = None
+                         ) -> tuple[np.ndarray, int]:
     from flexcal.fem.reference_hex import hex27_hinge_compliance
 
-    return hex27_hinge_compliance(hinge, n_through=n_base, refinement=refinement, aspect=2.0)
+    return hex27_hinge_compliance(hinge, n_through=n_base, refinement=refinement, aspect=2.0,
+                                  width_cells=width_cells)
 
 
 def _rate_spread(h, values, rate) -> np.ndarray:
@@ -129,7 +131,7 @@ def _cached(folder: Path | None, tag: str, compute) -> np.ndarray:
 
 
 def compare(thickness_mm: float, folder: Path | None, mapped_base: int, mapped_levels, ref_base: int, ref_levels,
-            default: float | None = None):
+            default: float | None = None, ref_width: int | None = None):
     """Rows (entry, mapped rate, mapped limit, reference rate, reference limit, its
     uncertainty, (mapped limit - reference limit) / |reference limit|, (finest mapped -
     reference limit) / |reference limit|, and with ``default`` cells through (``flexcal hinge``'s mesh at that n -
@@ -142,8 +144,9 @@ def compare(thickness_mm: float, folder: Path | None, mapped_base: int, mapped_l
     stem = f"notch_t{thickness_mm:g}"
     mapped = np.array([_cached(folder, f"mapped_{stem}_n{mapped_base}_r{r}",
                                lambda r=r: mapped_compliance(hinge, mapped_base, r)) for r in mapped_levels])
-    reference = np.array([_cached(folder, f"hex27_{stem}_n{ref_base}_r{r}",
-                                  lambda r=r: reference_compliance(hinge, ref_base, r)) for r in ref_levels])
+    width = "" if ref_width is None else f"_w{ref_width}"
+    reference = np.array([_cached(folder, f"hex27_{stem}_n{ref_base}{width}_r{r}",
+                                  lambda r=r: reference_compliance(hinge, ref_base, r, ref_width)) for r in ref_levels])
     dflt = None if default is None else _cached(folder, f"default{default:g}_{stem}",
                                                 lambda: default_compliance(hinge, default))
     fit = richardson(1.0 / np.asarray(mapped_levels[-3:], float), mapped[-3:])
