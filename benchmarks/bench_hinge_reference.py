@@ -45,7 +45,8 @@ def main() -> None:
     parser.add_argument("--ref-base", type=int, default=2)
     parser.add_argument("--ref-levels", type=int, nargs="+", default=[1, 2, 3])
     parser.add_argument("--ref-width", type=int, default=None, help="reference cells across the width at r = 1")
-    parser.add_argument("--default", action="store_true", help="also flexcal hinge's default mesh against the reference")
+    parser.add_argument("--default", action="store_true",
+                        help="also flexcal hinge's default mesh against the reference")
     parser.add_argument("--dir", default="bench_hinge_reference")
     args = parser.parse_args()
     folder = Path(args.dir).resolve()
@@ -62,7 +63,8 @@ def main() -> None:
         for name, p, lim, q, ref, unc, diff, finest, dflt, spread in rows:
             print(f"| {name} | {p:.2f} | {lim:.6e} | {q:.2f} | {ref:.6e} +- {100 * unc / abs(ref):.3f} % "
                   f"({100 * spread / abs(ref):.3f} %) | "
-                  f"{100 * diff:+.3f} | {100 * finest:+.3f} | {100 * dflt:+.3f} | {'ok' if abs(diff) <= AGREEMENT else 'MISS'} |")
+                  f"{100 * diff:+.3f} | {100 * finest:+.3f} | {100 * dflt:+.3f} | "
+                  f"{'ok' if abs(diff) <= AGREEMENT else 'MISS'} |")
 
 
 if __name__ == "__main__":
