@@ -7,7 +7,9 @@ own uncertainty, and their relative difference.
     python benchmarks/bench_hinge_reference.py --thickness 2.5 --mapped-levels 2 3 4 \\
         --ref-base 2 --ref-levels 2 3 4 5 --default --dir /tmp/hinge_ref
 
-(the runs of docs/hinge-verification.md, "Independent reference (session 17)"; one
+(t = 1: --mapped-levels 1 2 3 --ref-levels 1 2 3 4; t = 0.5: --mapped-levels 1 2 3
+--ref-width 10 --ref-levels 2 3 4: the runs of docs/hinge-verification.md, "Independent
+reference (session 17)"; one
 OMP/MKL thread; the finest levels there take 270k-570k DOF and up to ~12 GB).
 
 Mapped: ``mapped_mesh_part``'s own pipeline (``mapped_grid`` at --mapped-base cells through,
