@@ -70,13 +70,10 @@ __all__ = ["ChainGrid", "cells_through", "chain_grid", "chain_mapped_supported",
 # which bought the most accuracy per DOF of the in-plane sizes tried on L1.
 DEFAULT_CHAIN_OPTIONS = {"aspect": 3.0, "n_arc": 8, "width_aspect": 12.0, "side_aspect": 1.5, "edge_aspect": 3.0,
                          "grading": 0.5, "max_aspect": 24.0, "slenderness": 5.5}
-# The grid of the virtual prototype's segments and the structure assessment (session 13's:
-# n as given, side cells of 3 neck cells), used at n = 6: L1's leaf segments within 0.85 %
-# of the nested limit, D1's 0.61 % (docs/meshing.md, "Convergence"), at a third of the CPU
-# of the accurate default (cold `flexcal truth --scenario table1` 54 s against 162 s CPU).
-# The prototype keeps it because the calibration model's FEM factors come from the same
-# segments (the mesh error is in both) and Table 1 does not move between the two grids
-# (seed 1: 0.03 standard errors), while the cold main job would take ~3x longer.
+# Session 13's grid (n as given, side cells of 3 neck cells), used at n = 6: L1's leaf segments
+# within 0.85 % of the nested limit, D1's 0.61 % (docs/meshing.md, "Convergence"). The
+# structure assessment (validation/structure/fem_segments.py) still uses it; the virtual
+# prototype's segments did until session 15 and have PROTOTYPE_CHAIN_OPTIONS since.
 FAST_CHAIN_OPTIONS = {**DEFAULT_CHAIN_OPTIONS, "side_aspect": 3.0, "slenderness": None}
 # The grid of the virtual prototype's segments (session 16), used at n = 7 asked for (8 through
 # the L leaves, 7 through the D leaves): the accurate default's cells through, but its DOF
@@ -84,7 +81,7 @@ FAST_CHAIN_OPTIONS = {**DEFAULT_CHAIN_OPTIONS, "side_aspect": 3.0, "slenderness"
 # 1 neck cell graded fast (2 per unit distance) into the width, blocks graded twice as fast
 # (block_grading 1), no refinement at the part's end faces and section rims (rim_aspect
 # 24 = max_aspect), 6 cells per fillet arc, flat-part cells 2 neck cells long. Every dominant
-# entry of the L1 and D1 leaf segments within 0.46 % of the nested limit at 72k-86k DOF.
+# entry of the L1 and D1 leaf segments within 0.48 % of the nested limit at 75k-86k DOF.
 PROTOTYPE_CHAIN_OPTIONS = {**DEFAULT_CHAIN_OPTIONS, "aspect": 2.0, "n_arc": 6, "side_aspect": 1.0, "grading": 2.0,
                            "rim_aspect": 24.0, "block_grading": 1.0}
 # Options of ``chain_grid`` that the defaults leave out (None there: as the defaults'
@@ -248,7 +245,11 @@ def chain_grid(params, n_thickness: int, *, aspect: float = 3.0, n_arc: int = 8,
     grading: growth of the cell size per unit distance away from the leaves, the end faces
     and the section's edges [-]; max_aspect: largest cell / neck cell (at most half the
     section); refinement: every cell split
-    into refinement^3 (nested meshes for convergence studies).
+    into refinement^3 (nested meshes for convergence studies); rim_aspect: the cells at the
+    part's end faces and the section's rims / neck cell (None: edge_aspect; max_aspect: no
+    refinement there); block_grading: the grading along x in the blocks (None: grading);
+    section_grading: the grading of the section lines outside the leaves' footprint (None:
+    block_grading). The last three are the prototype's (``PROTOTYPE_CHAIN_OPTIONS``).
     """
     if not chain_mapped_supported(params):
         raise ValueError(f"the chain mapper takes a FlexureChain or ChainSegment of leaves, got {type(params).__name__}")

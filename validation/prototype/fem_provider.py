@@ -38,7 +38,7 @@ __all__ = ["fem_provider", "segment_stiffness_fem", "mirror_segment_stiffness", 
 # ``cells_through``) on the prototype's grid (``PROTOTYPE_CHAIN_OPTIONS``, session 16): every
 # dominant entry of the 12 x 12 of the L1 and D1 leaf segments within 0.48 % of the Richardson
 # limit of a nested reference sequence (session 13's fast grid at 6 through: 0.85 %), at
-# 72k-86k DOF per leaf segment; docs/meshing.md, "The prototype's grid". The calibration
+# 75k-86k DOF per leaf segment; docs/meshing.md, "The prototype's grid". The calibration
 # model's FEM factors come from this same provider (validation/runs/model_correction.py),
 # so they moved with it. fTetWild keeps its own default (TETWILD_ELEMENTS_THROUGH).
 DEFAULT_ELEMENTS_THROUGH = 7
