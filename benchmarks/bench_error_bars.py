@@ -46,7 +46,7 @@ def _z(x, truth, covariance, C):
 
 def run_case(scenario_name: str, seed: int, trajectory: str | None, provider, noise_urad: float,
              walk_seed: int, model: tuple[str, str, bool] = ("second-order", "fem", True),
-             arrays: Path | None = None) -> dict:
+             arrays: Path | None = None, budget_draws: int | None = None) -> dict:
     from flexcal.calibration.pipeline import identify_all
     from flexcal.model.trajectory import standard_trajectory
     from flexcal.validation.measurements import read_trajectory
@@ -61,7 +61,14 @@ def run_case(scenario_name: str, seed: int, trajectory: str | None, provider, no
     measurement = make_truth(scenario, provider).measurement
     kind, stiffness, second_order = model
     space = model_space(stiffness, second_order, progress=False, mechanism=scenario.space.mechanism, model=kind)
-    found = identify_all(space, measurement.inputs, measurement.angles, measurement.leg)
+    budget = None
+    if budget_draws is not None:  # the model-error budget flexcal verify computes (validation.runs.error_budget)
+        from flexcal.validation.runs.error_budget import budget_at_estimate
+
+        made = []
+        budget = budget_at_estimate(space, measurement.inputs, provider, n_draws=budget_draws, record=made)
+    found = identify_all(space, measurement.inputs, measurement.angles, measurement.leg, model_error=budget)
+    budget = made[-1].samples if budget is not None else None
     fit, base, names = found.estimate, found.base, list(space.names)
     truth = space.to_unit(scenario.values[space.active_indices])
     pure = list(base.pure())
@@ -83,7 +90,8 @@ def run_case(scenario_name: str, seed: int, trajectory: str | None, provider, no
                  residual=fit.residual, jacobian=fit.jacobian, x=fit.x, truth=truth, prior_mean=fit.prior.mean,
                  prior_std=fit.prior.std, prior_precision=fit.prior.precision, noise=fit.noise,
                  posterior=old, coordinates=measurement.angles / WORKSPACE, pure=E,
-                 base=base.reported_combinations(names), base_old=base.combinations(names))
+                 base=base.reported_combinations(names), base_old=base.combinations(names),
+                 **({} if budget is None else {"model_error": budget.reshape(len(budget), -1)}))
     return {"scenario": scenario_name, "seed": seed, "trajectory": trajectory or "standard",
             "n_points": int(measurement.n_points), "fit_rms_urad": fit.rms * 1e6, "pure": pure,
             "z_sources_new": _z(fit.x, truth, fit.covariance, E).tolist(),
@@ -142,18 +150,23 @@ def summarize(cases: list[dict]) -> None:
 
 def recompute_bars(out: Path) -> list[dict]:
     """The error bars of each saved fit (OUT/arrays/*.npz, written by run_case) recomputed with
-    the Matern discrepancy alone (before issue 28's item 1) and with the Matern + quadratic
-    polynomial one (``fit_discrepancy``'s default): same fit, same sandwich, two discrepancies.
-    Returns one row per fit with both sets of z-scores and the bar widths."""
+    the Matern discrepancy alone (before issue 28's item 1), with the Matern + quadratic
+    polynomial one (``fit_discrepancy``'s default) and, when the file holds a model-error
+    budget (``model_error`` (K, 3n): run with --budget-draws, or added to an older fit's file),
+    with that budget too ("budget"): same fit, same sandwich. Returns one row per fit with the
+    z-scores and the bar widths."""
     from flexcal.calibration.discrepancy import fit_discrepancy, sandwich_covariance
 
     rows = []
     for path in sorted((out / "arrays").glob("*.npz")):
         a = dict(np.load(path))
         row = {"case": path.stem}
-        for label, polynomial in (("matern", False), ("polynomial", True)):
+        variants = [("matern", False, None), ("polynomial", True, None)]
+        if "model_error" in a:
+            variants.append(("budget", True, a["model_error"]))
+        for label, polynomial, model_error in variants:
             found = fit_discrepancy(a["residual"], a["jacobian"], a["x"], a["prior_mean"], a["prior_std"],
-                                    a["coordinates"], polynomial=polynomial)
+                                    a["coordinates"], polynomial=polynomial, model_error=model_error)
             cov = sandwich_covariance(a["posterior"], a["jacobian"], float(a["noise"]), a["prior_precision"],
                                       found.covariance)
             row[f"z_sources_{label}"] = _z(a["x"], a["truth"], cov, a["pure"]).tolist()
@@ -164,15 +177,18 @@ def recompute_bars(out: Path) -> list[dict]:
         print(f"{path.stem}: z sources {np.round(row['z_sources_matern'], 2)} -> "
               f"{np.round(row['z_sources_polynomial'], 2)}; base RMS {_rms(row['z_base_matern']):.3g} -> "
               f"{_rms(row['z_base_polynomial']):.3g}; tau {row['discrepancy_polynomial']['polynomial_tau_urad']:.3g} "
-              f"urad", flush=True)
+              f"urad" + ("" if "z_base_budget" not in row else
+                         f"; with the budget: z sources {np.round(row['z_sources_budget'], 2)}, base RMS "
+                         f"{_rms(row['z_base_budget']):.3g} {np.round(row['z_base_budget'], 1)}"), flush=True)
     return rows
 
 
 def summarize_recomputed(rows: list[dict]) -> None:
     """Pooled table of ``recompute_bars`` by mount and trajectory (case names scenario-seed-trajectory)."""
     print("| mount | trajectory | fits | z RMS sources Matern -> + polynomial (n) | z RMS base Matern -> + polynomial (n) "
-          "| width + polynomial / Matern (geo. mean, sources) |")
-    print("|---|---|---|---|---|---:|")
+          "| width + polynomial / Matern (geo. mean, sources) | with the budget: z RMS sources / base, width budget / "
+          "polynomial (sources, base) |")
+    print("|---|---|---|---|---|---:|---|")
     groups: dict[tuple[str, str], list[dict]] = {}
     for row in rows:
         mount, seed, trajectory = row["case"].split("-", 2)
@@ -184,7 +200,19 @@ def summarize_recomputed(rows: list[dict]) -> None:
               f"{_rms(cat('z_sources_matern')):.3g} -> {_rms(cat('z_sources_polynomial')):.3g} "
               f"({len(cat('z_sources_polynomial'))}) | {_rms(cat('z_base_matern')):.3g} -> "
               f"{_rms(cat('z_base_polynomial')):.3g} ({len(cat('z_base_polynomial'))}) | "
-              f"{float(np.exp(np.mean(np.log(ratio)))) if ratio.size else float('nan'):.3g} |")
+              f"{float(np.exp(np.mean(np.log(ratio)))) if ratio.size else float('nan'):.3g} | "
+              + (_budget_cell(group) if all("z_base_budget" in r for r in group) else "-") + " |")
+
+
+def _budget_cell(group: list[dict]) -> str:
+    """z RMS sources / base with the budget and its bar widths against the polynomial ones
+    (geometric means; a base parameter's width from |error| / |z|, the same error both times)."""
+    cat = lambda key: np.asarray(sum((r[key] for r in group), []), float)  # noqa: E731
+    sources = cat("std_sources_budget") / cat("std_sources_polynomial")
+    base = np.abs(cat("z_base_polynomial")) / np.maximum(np.abs(cat("z_base_budget")), 1e-300)
+    geo = lambda v: float(np.exp(np.mean(np.log(v)))) if v.size else float("nan")  # noqa: E731
+    return (f"{_rms(cat('z_sources_budget')):.3g} / {_rms(cat('z_base_budget')):.3g}, widths "
+            f"{geo(sources):.3g}, {geo(base):.3g}")
 
 
 def main(argv=None) -> int:
@@ -205,6 +233,10 @@ def main(argv=None) -> int:
     parser.add_argument("--model", default="second-order", choices=("paper", "second-order", "consistent"))
     parser.add_argument("--model-stiffness", default="fem", choices=("fem", "closed-form"))
     parser.add_argument("--no-second-order", action="store_true")
+    parser.add_argument("--budget-draws", type=int, default=None, metavar="K",
+                        help="give identify_all the model-error budget flexcal verify computes (the estimate, K "
+                             "prior draws: validation/runs/error_budget.py); default: none (the fit "
+                             "does not depend on it; --recompute-bars scores it on the saved fits)")
     args = parser.parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -225,7 +257,8 @@ def main(argv=None) -> int:
                     if any((c["scenario"], c["seed"], c["trajectory"]) == key for c in cases):
                         continue
                     case = run_case(name, seed, trajectory, provider, args.noise_urad, args.walk_seed,
-                                    (args.model, args.model_stiffness, not args.no_second_order), out / "arrays")
+                                    (args.model, args.model_stiffness, not args.no_second_order), out / "arrays",
+                                    args.budget_draws)
                     cases.append(case)
                     with log.open("a") as handle:
                         handle.write(json.dumps(case) + "\n")

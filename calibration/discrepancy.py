@@ -38,7 +38,12 @@ for the sources delta does not look like (z RMS 0.1-0.5 on the ``paper`` mount).
   A = (J^T J / sigma_w^2 + P)^+, has ``Cov = A (J^T Sigma J / sigma_w^4 + P) A`` with
   ``Sigma = sigma^2 I + K`` (equal to A when Sigma = sigma_w^2 I: white noise gives back the
   Gauss-Newton bars). Every source's standard error and every base parameter's (c^T Cov c)
-  come from this one matrix.
+  come from this one matrix;
+- **model-error budget** (issue 28, session 16): a form error the sources absorb whole leaves
+  no trace in the residual, so nothing fitted from it can carry it. When the caller has
+  samples of the model's error on these postures (prototype - model at the estimate,
+  computed outside the calibration model: ``validation.runs.error_budget``),
+  their second moment E E^T (``model_error_factor``) is added to Sigma in the sandwich.
 """
 
 from __future__ import annotations
@@ -47,9 +52,10 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 __all__ = ["Discrepancy", "fit_discrepancy", "discrepancy_covariance", "sandwich_covariance", "matern52",
-           "polynomial_features"]
+           "polynomial_features", "model_error_factor"]
 
 LENGTH_BOUNDS = (0.03, 10.0)  # [workspace units] 3 % of a half-width (shorter is indistinguishable from
 # noise at 77 postures: neighbours are ~0.1 apart) to 10 (longer is a constant, which the offsets absorb)
@@ -88,7 +94,9 @@ class Discrepancy:
     """noise sigma [rad] (white, every channel) and whether it was given; amplitude (3,) [rad]
     the Matern part's standard deviation per angle; length [workspace units]; polynomial: tau
     [rad], the std of each coefficient of the quadratic part (None: no polynomial part);
-    log_likelihood at the optimum; coordinates (n, k) the posture coordinates it lives on."""
+    log_likelihood at the optimum; coordinates (n, k) the posture coordinates it lives on;
+    model_error (3n, K) [rad]: the factor E of the model-error budget (``model_error_factor``),
+    E E^T its covariance, or None (no budget given)."""
 
     noise: float
     noise_given: bool
@@ -97,11 +105,13 @@ class Discrepancy:
     polynomial: float | None
     log_likelihood: float
     coordinates: np.ndarray
+    model_error: np.ndarray | None = None
 
     @property
     def covariance(self) -> np.ndarray:
-        """Sigma (3n, 3n) [rad^2] = sigma^2 I + K, points major."""
-        return discrepancy_covariance(self.coordinates, self.noise, self.amplitude, self.length, self.polynomial)
+        """Sigma (3n, 3n) [rad^2] = sigma^2 I + K (+ the model-error budget E E^T), points major."""
+        S = discrepancy_covariance(self.coordinates, self.noise, self.amplitude, self.length, self.polynomial)
+        return S if self.model_error is None else S + self.model_error @ self.model_error.T
 
     def as_dict(self) -> dict:
         return {"noise_urad": self.noise * 1e6, "noise_given": self.noise_given,
@@ -111,7 +121,12 @@ class Discrepancy:
                           + ("" if self.polynomial is None else
                              " + a quadratic polynomial per angle (features 1, c_i, c_i^2, c_i c_j; each "
                              "coefficient N(0, tau^2))"),
-                "log_likelihood": self.log_likelihood}
+                "log_likelihood": self.log_likelihood,
+                "model_error_budget": None if self.model_error is None else {
+                    "n_samples": int(self.model_error.shape[1]),
+                    "rms_urad": float(np.sqrt(np.sum(self.model_error ** 2) / self.model_error.shape[0]) * 1e6),
+                    "what": "second moment of the given samples of the model's error on the measured postures "
+                            "(prototype - model), in the sandwich next to the fitted discrepancy"}}
 
 
 def discrepancy_covariance(coordinates: np.ndarray, noise: float, amplitude: np.ndarray, length: float,
@@ -162,9 +177,21 @@ def _negative_log_likelihood(theta: np.ndarray, z: np.ndarray, G: np.ndarray, di
     return float(0.5 * (w @ w - u @ u) + np.sum(np.log(np.diag(L))) + np.sum(np.log(np.diag(M))))
 
 
+def model_error_factor(samples: np.ndarray) -> np.ndarray:
+    """(m, K) [rad] factor E of the model-error budget from K samples (K, m) [rad] of
+    "prototype - model" on the measured trajectory (points major, 3 angles a point): E E^T =
+    the samples' second moment (1/K) sum d_k d_k^T, not their centred covariance: the error the
+    model makes everywhere (its form error at the nominal mount) is a bias of the estimate as
+    much as the part that changes between mounts."""
+    d = np.atleast_2d(np.asarray(samples, float))
+    if d.ndim != 2 or not np.all(np.isfinite(d)):
+        raise ValueError(f"model-error samples must be a finite (K, m) array, got shape {d.shape}")
+    return d.T / math.sqrt(d.shape[0])
+
+
 def fit_discrepancy(residual: np.ndarray, jacobian: np.ndarray, x: np.ndarray, prior_mean: np.ndarray,
                     prior_std: np.ndarray, coordinates: np.ndarray, *, noise: float | None = None,
-                    polynomial: bool = True) -> Discrepancy:
+                    polynomial: bool = True, model_error: np.ndarray | None = None) -> Discrepancy:
     """Noise and discrepancy by maximum marginal likelihood (module doc).
 
     residual (3n,) [rad] model - data at the estimate x (d,) [unit box]; jacobian (3n, d) [rad per
@@ -172,10 +199,14 @@ def fit_discrepancy(residual: np.ndarray, jacobian: np.ndarray, x: np.ndarray, p
     projected out of z instead, the restricted likelihood proper); coordinates (n, k) posture
     coordinates [workspace units]; noise: the sensor noise [rad] if known, else estimated;
     polynomial: with the quadratic part (False: the Matern part alone, as before issue 28's
-    item 1 was built; kept to measure against).
+    item 1 was built; kept to measure against); model_error (K, 3n) [rad]: samples of the
+    model's error on these postures (prototype - model, ``model_error_factor``), a known
+    covariance E E^T added to Sigma after the fit; None: none known. It is not put into the
+    likelihood: there it "explains" part of z and the fitted parts shrink (measured on the
+    analytic prototype, 2026-11-28: some bars then narrowed, z 2.1 -> 4.1), while the sandwich
+    sees mostly the part of E the sources absorb and the fitted parts mostly the rest, so the
+    sum double-counts little and a bar never narrows.
     """
-    from scipy.optimize import minimize
-
     r = np.asarray(residual, float)
     J = np.asarray(jacobian, float)
     c = np.asarray(coordinates, float)
@@ -185,6 +216,11 @@ def fit_discrepancy(residual: np.ndarray, jacobian: np.ndarray, x: np.ndarray, p
     offset = np.where(finite, np.asarray(x, float) - prior_mean, 0.0)
     z = J @ offset - r
     G = J[:, finite] * prior_std[finite]  # the prior's part: J D J^T = G G^T
+    E = None
+    if model_error is not None:  # added to Sigma after the fit, not to the likelihood (docstring)
+        E = model_error_factor(model_error)
+        if E.shape[0] != r.size:
+            raise ValueError(f"model-error samples have {E.shape[0]} rows, the residual {r.size}")
     keep = None
     if not np.all(finite):  # free directions: project them out (restricted likelihood)
         from scipy.linalg import null_space
@@ -193,9 +229,22 @@ def fit_discrepancy(residual: np.ndarray, jacobian: np.ndarray, x: np.ndarray, p
         z, G = keep.T @ z, keep.T @ G
     distance = np.linalg.norm(c[:, None, :] - c[None, :, :], axis=-1)
     scale = max(float(np.sqrt(np.mean(r ** 2))), 1e-12)
+    features = polynomial_features(c) if polynomial else None
+    # one BLAS thread: the likelihood works on (3n, 3n) matrices of a few hundred rows, where a
+    # multi-threaded BLAS on a shared 2-core machine was measured 5-150x slower (session 15-16)
+    with threadpool_limits(1, user_api="blas"):
+        best = _maximize_likelihood(z, G, distance, noise, keep, features, scale, polynomial)
+    sigma, amplitude, length, tau = _unpack(best.x, noise, polynomial)
+    return Discrepancy(noise=sigma, noise_given=noise is not None, amplitude=amplitude, length=length,
+                       polynomial=tau, log_likelihood=-float(best.fun), coordinates=c, model_error=E)
+
+
+def _maximize_likelihood(z, G, distance, noise, keep, features, scale, polynomial):
+    """The L-BFGS-B optimum of the marginal likelihood over a few starting length scales."""
+    from scipy.optimize import minimize
+
     lo, hi = math.log(LENGTH_BOUNDS[0]), math.log(LENGTH_BOUNDS[1])
     amplitude_bounds = (math.log(scale * 1e-3), math.log(scale * 1e2))
-    features = polynomial_features(c) if polynomial else None
     best = None
     for start_length in (0.1, 0.5, 2.0):  # a few starts: the likelihood can have a short and a long mode
         theta0 = [math.log(scale)] * 3 + [math.log(start_length)]
@@ -209,9 +258,7 @@ def fit_discrepancy(residual: np.ndarray, jacobian: np.ndarray, x: np.ndarray, p
                          method="L-BFGS-B", bounds=bounds)
         if best is None or found.fun < best.fun:
             best = found
-    sigma, amplitude, length, tau = _unpack(best.x, noise, polynomial)
-    return Discrepancy(noise=sigma, noise_given=noise is not None, amplitude=amplitude, length=length,
-                       polynomial=tau, log_likelihood=-float(best.fun), coordinates=c)
+    return best
 
 
 def sandwich_covariance(posterior_covariance: np.ndarray, J: np.ndarray, weight_noise: float,

@@ -25,6 +25,7 @@ import numpy as np
 
 from flexcal.calibration.base_parameters import BaseParameters, base_parameters
 from flexcal.calibration.estimation import (PRIOR_SCALES, CrossValidation, Estimate, choose_prior_scale, estimate,
+                                            with_model_error,
                                             held_out_folds, uniform_prior)
 from flexcal.calibration.identifiability import IdentifiabilityReport, identifiability
 from flexcal.calibration.polish import PolishResult, norm_sum_polish, polish_candidates
@@ -103,10 +104,14 @@ def check_determined(n_points: int, n_unknowns: int, what: str = "sources") -> N
 def identify_all(space: ParameterSpace, inputs: np.ndarray, angles: np.ndarray, leg: np.ndarray,
                  settings: IdentificationSettings = IdentificationSettings(), *,
                  log: Callable[[str], None] = lambda _: None, on_fit: Callable[[], None] = lambda: None,
-                 on_plan: Callable[[int], None] = lambda _: None) -> Identification:
+                 on_plan: Callable[[int], None] = lambda _: None,
+                 model_error: np.ndarray | None = None) -> Identification:
     """Identify every active source of ``space`` from ordered inputs (n, 3) [m] and measured
     angles (n, 3) [rad]; leg (n,) labels the trajectory's legs (held-out folds). Progress:
-    on_plan(number of least-squares fits) once, on_fit() after each."""
+    on_plan(number of least-squares fits) once, on_fit() after each. model_error: a model-error
+    budget on these inputs the error bars carry (``calibration.discrepancy``), (K, n, 3) [rad]
+    prototype - model at K mounts, or a callable values (45,) [SI] of the estimate -> such an
+    array (``validation.runs.error_budget``); it does not change the estimate."""
     inputs, angles = np.asarray(inputs, float), np.asarray(angles, float)
     check_determined(inputs.shape[0], space.n_params)
     directions = travel_directions(inputs)
@@ -138,6 +143,10 @@ def identify_all(space: ParameterSpace, inputs: np.ndarray, angles: np.ndarray, 
                    max_evaluations=FREE_MAX_EVALUATIONS if math.isinf(scale) else None,
                    coordinates=angles / WORKSPACE)
     on_fit()
+    if model_error is not None:
+        samples = model_error(space.full_values(space.from_unit(fit.x))) if callable(model_error) else model_error
+        samples = np.asarray(samples, float)
+        fit = with_model_error(fit, angles / WORKSPACE, samples.reshape(len(samples), -1))
     base = base_parameters(fit.jacobian / fit.noise, space.names, max_std=settings.max_std)
     ranges = space.upper - space.lower
     values = space.full_values(space.from_unit(fit.x))

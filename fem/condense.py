@@ -10,6 +10,9 @@ in the axes given by ``frame`` ((3, 3), columns = frame axes in mesh coordinates
 * ``solve_chain``: static condensation of the whole part onto the 12 master DOFs of the
   two reference points, ``K_c = K_mm - K_mi K_ii^-1 K_im`` -> stiffness (12, 12), DOF
   order (A then B), and the 12 displacement fields of unit master motions.
+* ``chain_stiffness_derivative``: dK_c/dp of that condensation for a parameter p that
+  moves the mesh nodes (same connectivity) from the solved modes and assembly alone:
+  ``U_r^T (dK_r/dp) U_r`` (no new factorisation).
 
 The fields feed ``flexcal.fem.results.write_vtu`` for any load case by linearity
 (``hinge_displacement``, ``chain_displacement``).
@@ -42,6 +45,8 @@ __all__ = [
     "reduced_system",
     "condensation_blocks",
     "reduced_rigid_body_modes",
+    "MorphedChain",
+    "chain_stiffness_derivative",
 ]
 
 Plane = tuple[np.ndarray, np.ndarray]
@@ -323,3 +328,111 @@ def chain_stiffness(
 def chain_displacement(solution: ChainSolution, motions: np.ndarray) -> np.ndarray:
     """Displacement (..., n_nodes, 3) [m] for master motions (..., 12) [m, rad] (A then B)."""
     return np.einsum("...k,kni->...ni", np.asarray(motions, float), solution.unit_motion_fields)
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class MorphedChain:
+    """The part of a ``solve_chain`` with its nodes moved by a parameter change: ``mesh``
+    with the solved mesh's connectivity (node for node), the end planes and reference
+    points [m] of that geometry (as ``solve_chain`` takes them)."""
+
+    mesh: object
+    plane_a: Plane
+    point_a: np.ndarray
+    plane_b: Plane
+    point_b: np.ndarray
+
+
+def _morphed_modes(solution: ChainSolution, morphed: MorphedChain, U_r: np.ndarray) -> np.ndarray:
+    """(n_nodes, 3, 12) T U_r: the reduced modes ``U_r`` with the couplings of ``solution`` (the
+    same node sets) on ``morphed``'s nodes and reference points (the slaves follow the masters
+    rigidly about the moved points)."""
+    nodes, _ = check_mesh(morphed.mesh)
+    couplings = [RigidCoupling(nodes=solution.nodes_a, reference_point=np.asarray(morphed.point_a, float).reshape(3)),
+                 RigidCoupling(nodes=solution.nodes_b, reference_point=np.asarray(morphed.point_b, float).reshape(3))]
+    for coupling, plane in zip(couplings, (morphed.plane_a, morphed.plane_b)):
+        selected = select_plane_nodes(morphed.mesh, plane)
+        if not np.array_equal(np.sort(selected), np.sort(coupling.nodes)):
+            raise ValueError("the morphed mesh's end face has other nodes than the solved one's: not the same "
+                             "mesh with its nodes moved")
+    return (coupling_map(len(nodes), nodes, couplings).transform @ U_r).reshape(len(nodes), 3, 12)
+
+
+def _energy(coords: np.ndarray, modes: np.ndarray, tets: np.ndarray, affine: np.ndarray,
+            material: Material) -> np.ndarray:
+    """(12, 12) sum over the elements ``tets`` (n_e, 10) of V_e^T K_e V_e [SI] for the geometry
+    ``coords`` (n_nodes, 3) [m] and the modes V (n_nodes, 3, 12): the strain energy's bilinear
+    form int lam tr(e_k) tr(e_l) + 2 mu e_k : e_l dV at the quadrature points (the element
+    matrices' own integrand, ``fem.elements``, without forming them), on the rules of
+    ``affine`` (n_e,) (the nominal mesh's choice, held fixed so a morph never switches rule)."""
+    from .elements import TET_4POINT, TET_14POINT, _physical_gradients, lame_parameters
+
+    lam, mu = lame_parameters(material)
+    total = np.zeros((12, 12))
+    for flags, rule in ((affine, TET_4POINT), (~affine, TET_14POINT)):
+        group = tets[flags]
+        for start in range(0, len(group), 4096):
+            chunk = group[start:start + 4096]
+            G, det = _physical_gradients(coords[chunk], rule)  # (e, q, 10, 3), (e, q)
+            n_e, n_q = det.shape
+            # displacement gradients of the 12 modes: H[e, q, j, i, k] = sum_a dN_a/dx_j V[a, i, k]
+            H = np.matmul(G.transpose(0, 1, 3, 2), modes[chunk].reshape(len(chunk), 1, 10, 36)).reshape(
+                n_e, n_q, 3, 3, 12)
+            strain = 0.5 * (H + H.transpose(0, 1, 3, 2, 4))
+            weight = np.sqrt(det * rule.weights).reshape(n_e * n_q, 1)
+            trace = (strain[:, :, 0, 0] + strain[:, :, 1, 1] + strain[:, :, 2, 2]).reshape(n_e * n_q, 12) * weight
+            flat = (strain.reshape(n_e * n_q, 9, 12) * weight[:, :, None]).reshape(n_e * n_q * 9, 12)
+            total += lam * (trace.T @ trace) + 2.0 * mu * (flat.T @ flat)
+    return total
+
+
+def chain_stiffness_derivative(mesh, solution: ChainSolution, material: Material, plus: MorphedChain,
+                               minus: MorphedChain | None, span: float, *,
+                               plus_2: MorphedChain | None = None) -> np.ndarray:
+    """dK_c/dp (12, 12) [SI per unit p] of the condensed stiffness of ``solve_chain`` (no
+    ``frame``) for a parameter p that moves the nodes of ``mesh`` smoothly (same
+    connectivity), without a new factorisation.
+
+    K_c = U_r^T K_r U_r with U_r = [-K_ii^-1 K_im; I] the reduced unit-motion modes (the
+    solution's fields on the free DOFs, the identity on the masters) and K_r = T^T K T
+    (the rigid couplings T depend on the node positions too). K_c is the minimum of the
+    energy over the interior DOFs, so its derivative takes no derivative of U_r:
+    dK_c/dp = U_r^T (dK_r/dp) U_r exactly, and dK_r/dp needs element matrices only: with
+    E(q) = U_r^T K_r(q) U_r = sum_e V_e^T K_e V_e (V = T(q) U_r) of the morphed geometry q,
+    central (E(plus) - E(minus)) / span, span = p_plus - p_minus; ``minus`` None and
+    ``plus_2`` (p + 2h, span = h): the one-sided second order (-3 E(p) + 4 E(p + h)
+    - E(p + 2h)) / (2h), for a mesh whose connectivity changes on the other side of p.
+    Only the elements whose nodes or modes differ between the geometries are summed (the
+    others' terms cancel exactly), each on the nominal mesh's quadrature rule."""
+    from .elements import affine_elements
+
+    nodes, tets = check_mesh(mesh)
+    couplings = [RigidCoupling(nodes=solution.nodes_a, reference_point=solution.point_a),
+                 RigidCoupling(nodes=solution.nodes_b, reference_point=solution.point_b)]
+    cmap = coupling_map(len(nodes), nodes, couplings)
+    fields = solution.unit_motion_fields.reshape(12, -1).T  # (3 n_nodes, 12), mesh axes
+    U_r = np.zeros((cmap.n_reduced, 12))
+    n_i = cmap.free_node_dofs.size
+    U_r[:n_i] = fields[cmap.free_node_dofs]
+    U_r[np.concatenate(cmap.master_dofs)] = np.eye(12)
+    affine = affine_elements(nodes[tets])
+    if minus is None:
+        if plus_2 is None:
+            raise ValueError("a one-sided derivative needs plus_2 (the nodes at p + 2h)")
+        states = [(nodes, (cmap.transform @ U_r).reshape(len(nodes), 3, 12), -3.0),
+                  (check_mesh(plus.mesh)[0], _morphed_modes(solution, plus, U_r), 4.0),
+                  (check_mesh(plus_2.mesh)[0], _morphed_modes(solution, plus_2, U_r), -1.0)]
+        scale = 2.0 * float(span)
+    else:
+        states = [(check_mesh(plus.mesh)[0], _morphed_modes(solution, plus, U_r), 1.0),
+                  (check_mesh(minus.mesh)[0], _morphed_modes(solution, minus, U_r), -1.0)]
+        scale = float(span)
+    first_x, first_v, _ = states[0]
+    moved_node = np.zeros(len(nodes), bool)
+    for x, v, _ in states[1:]:
+        moved_node |= np.any(x != first_x, axis=1) | np.any(v != first_v, axis=(1, 2))
+    changed = np.any(moved_node[tets], axis=1)
+    total = np.zeros((12, 12))
+    for x, v, weight in states:
+        total += weight * _energy(x, v, tets[changed], affine[changed], material)
+    return total / scale

@@ -11,7 +11,11 @@ the linear model's Schur complement s_i misses the second-order load change, 2-5
 the nut amplifies by mu / (1 - mu)). Each Newton step measures dN/dC on the equilibrium itself
 (one more equilibrium per nut off its flank, C_k + h), linearises rho and solves the linearised
 box/play problem exactly (``solve_box`` / ``solve_play``). With the linear model's tangent (the
-plain fixed point of before) the iteration locked into 2-cycles on random candidates.
+plain fixed point of before) the iteration locked into 2-cycles on random candidates. Where
+a nut is off its flank, the first Newton step of a point runs its equilibrium and probes to
+``LOOSE_TOL`` only and never ends the point: it moves C most of the way, the tight steps after
+it (whose rates give the release) end it, so the results are those of tight steps throughout to
+the iteration's own tolerance (session 16).
 """
 
 import numpy as np
@@ -27,6 +31,10 @@ MAX_NEWTON = 40  # Newton steps on the offsets per point (2-4 where a nut leaves
 # coupling ~0.9, (I - B)^-1 amplifies the pose's rounding by up to ~100 in the offsets
 INNER_SHARE = 1e-2
 PROBE_TOL = 1e-14  # [m, rad] a probe's pose: its rate error ~ 1e-12 / TANGENT_STEP x 1e8 N/m, 5e-5 relative
+# [m, rad] the pose and probes of a point's first Newton step on the offsets where a nut is off
+# its flank: that step only moves C towards the solution (its rates 1e-3 off at most), the next
+# ones, at the tight tolerances, end it (session 16: 16.8 -> 15.0 evaluations per posture)
+LOOSE_TOL = 1e-9
 MIN_STIFFNESS = 0.2  # a measured nut stiffness below this share of the linear one is not trusted (linear used)
 
 
@@ -45,6 +53,27 @@ GAIN = 36  # axial_gain[:, j] (J^T K[:, 0])
 AXIAL_ROW = 37  # K[0, :3]
 K_ROW0 = 38  # K[0, :]
 N_PACK = 39
+
+
+@njit(inline="always", fastmath=_FAST)
+def _dot3(p, row, col, a0, a1, a2):
+    """sum_k a_k p[row + k, col] over three rows of a packed block."""
+    return a0 * p[row, col] + a1 * p[row + 1, col] + a2 * p[row + 2, col]
+
+
+@njit(inline="always", fastmath=_FAST)
+def _dot5(p, row, col, a0, a1, a2, a3, a4):
+    """sum_k a_k p[row + k, col] over five rows."""
+    return (a0 * p[row, col] + a1 * p[row + 1, col] + a2 * p[row + 2, col] + a3 * p[row + 3, col]
+            + a4 * p[row + 4, col])
+
+
+@njit(inline="always", fastmath=_FAST)
+def _dot6(p, row, col, a0, a1, a2, a3, a4, a5):
+    """sum_k a_k p[row + k, col] over six rows: one lane of a 6x6 product (a column of the
+    packed matrix times the vector a)."""
+    return (a0 * p[row, col] + a1 * p[row + 1, col] + a2 * p[row + 2, col] + a3 * p[row + 3, col]
+            + a4 * p[row + 4, col] + a5 * p[row + 5, col])
 
 
 @njit(cache=True, nogil=True, fastmath=_FAST)
@@ -74,94 +103,56 @@ def _terms(cand, x, c, command, x0, axial, pack, point_b, defect_index, defect, 
         e0 = 0.5 * (t0 * tp - pb0 * tt)  # ext = 1/2 theta x (theta x p_j)
         e1 = 0.5 * (t1 * tp - pb1 * tt)
         e2 = 0.5 * (t2 * tp - pb2 * tt)
-        # the 6x6 products written out lane by lane into locals (no scratch stores between them,
-        # so the compiler keeps the lanes in registers and pairs them into vector instructions)
-        ec0 = e0 * p[R_ROW, 0] + e1 * p[R_ROW + 1, 0] + e2 * p[R_ROW + 2, 0]
-        ec1 = e0 * p[R_ROW, 1] + e1 * p[R_ROW + 1, 1] + e2 * p[R_ROW + 2, 1]
-        ec2 = e0 * p[R_ROW, 2] + e1 * p[R_ROW + 1, 2] + e2 * p[R_ROW + 2, 2]
-        d0 = ((xs0 * p[J_COL + 0, 0] + xs1 * p[J_COL + 1, 0] + xs2 * p[J_COL + 2, 0] + xs3 * p[J_COL + 3, 0]
-              + xs4 * p[J_COL + 4, 0] + xs5 * p[J_COL + 5, 0]) + ec0)
-        d1 = ((xs0 * p[J_COL + 0, 1] + xs1 * p[J_COL + 1, 1] + xs2 * p[J_COL + 2, 1] + xs3 * p[J_COL + 3, 1]
-              + xs4 * p[J_COL + 4, 1] + xs5 * p[J_COL + 5, 1]) + ec1)
-        d2 = ((xs0 * p[J_COL + 0, 2] + xs1 * p[J_COL + 1, 2] + xs2 * p[J_COL + 2, 2] + xs3 * p[J_COL + 3, 2]
-              + xs4 * p[J_COL + 4, 2] + xs5 * p[J_COL + 5, 2]) + ec2)
-        d3 = (xs0 * p[J_COL + 0, 3] + xs1 * p[J_COL + 1, 3] + xs2 * p[J_COL + 2, 3] + xs3 * p[J_COL + 3, 3]
-              + xs4 * p[J_COL + 4, 3] + xs5 * p[J_COL + 5, 3])
-        d4 = (xs0 * p[J_COL + 0, 4] + xs1 * p[J_COL + 1, 4] + xs2 * p[J_COL + 2, 4] + xs3 * p[J_COL + 3, 4]
-              + xs4 * p[J_COL + 4, 4] + xs5 * p[J_COL + 5, 4])
-        d5 = (xs0 * p[J_COL + 0, 5] + xs1 * p[J_COL + 1, 5] + xs2 * p[J_COL + 2, 5] + xs3 * p[J_COL + 3, 5]
-              + xs4 * p[J_COL + 4, 5] + xs5 * p[J_COL + 5, 5])
-        s0 = (d0 * p[S_COL + 0, 0] + d1 * p[S_COL + 1, 0] + d2 * p[S_COL + 2, 0] + d3 * p[S_COL + 3, 0]
-              + d4 * p[S_COL + 4, 0] + d5 * p[S_COL + 5, 0])
-        s1 = (d0 * p[S_COL + 0, 1] + d1 * p[S_COL + 1, 1] + d2 * p[S_COL + 2, 1] + d3 * p[S_COL + 3, 1]
-              + d4 * p[S_COL + 4, 1] + d5 * p[S_COL + 5, 1])
-        s2 = (d0 * p[S_COL + 0, 2] + d1 * p[S_COL + 1, 2] + d2 * p[S_COL + 2, 2] + d3 * p[S_COL + 3, 2]
-              + d4 * p[S_COL + 4, 2] + d5 * p[S_COL + 5, 2])
-        s3 = (d0 * p[S_COL + 0, 3] + d1 * p[S_COL + 1, 3] + d2 * p[S_COL + 2, 3] + d3 * p[S_COL + 3, 3]
-              + d4 * p[S_COL + 4, 3] + d5 * p[S_COL + 5, 3])
-        s4 = (d0 * p[S_COL + 0, 4] + d1 * p[S_COL + 1, 4] + d2 * p[S_COL + 2, 4] + d3 * p[S_COL + 3, 4]
-              + d4 * p[S_COL + 4, 4] + d5 * p[S_COL + 5, 4])
-        s5 = (d0 * p[S_COL + 0, 5] + d1 * p[S_COL + 1, 5] + d2 * p[S_COL + 2, 5] + d3 * p[S_COL + 3, 5]
-              + d4 * p[S_COL + 4, 5] + d5 * p[S_COL + 5, 5])
+        # the 6x6 products lane by lane into locals (inlined helpers, no scratch stores between
+        # them, so the compiler keeps the lanes in registers and pairs them into vector instructions)
+        ec0 = _dot3(p, R_ROW, 0, e0, e1, e2)
+        ec1 = _dot3(p, R_ROW, 1, e0, e1, e2)
+        ec2 = _dot3(p, R_ROW, 2, e0, e1, e2)
+        d0 = _dot6(p, J_COL, 0, xs0, xs1, xs2, xs3, xs4, xs5) + ec0
+        d1 = _dot6(p, J_COL, 1, xs0, xs1, xs2, xs3, xs4, xs5) + ec1
+        d2 = _dot6(p, J_COL, 2, xs0, xs1, xs2, xs3, xs4, xs5) + ec2
+        d3 = _dot6(p, J_COL, 3, xs0, xs1, xs2, xs3, xs4, xs5)
+        d4 = _dot6(p, J_COL, 4, xs0, xs1, xs2, xs3, xs4, xs5)
+        d5 = _dot6(p, J_COL, 5, xs0, xs1, xs2, xs3, xs4, xs5)
+        s0 = _dot6(p, S_COL, 0, d0, d1, d2, d3, d4, d5)
+        s1 = _dot6(p, S_COL, 1, d0, d1, d2, d3, d4, d5)
+        s2 = _dot6(p, S_COL, 2, d0, d1, d2, d3, d4, d5)
+        s3 = _dot6(p, S_COL, 3, d0, d1, d2, d3, d4, d5)
+        s4 = _dot6(p, S_COL, 4, d0, d1, d2, d3, d4, d5)
+        s5 = _dot6(p, S_COL, 5, d0, d1, d2, d3, d4, d5)
         rr = d0 * s0 + d1 * s1 + d2 * s2 + d3 * s3 + d4 * s4 + d5 * s5
         r[j] = -rr
         u_j = r[j] + ((command[j - 3] + x0[cand, j - 3] + c[j - 3]) if j >= 3 else 0.0)
         u[j] = u_j
         # the lateral compatibility defect m_c = sum_t q_t d_a d_b (c = y..rz) and K m
-        d[0] = d0
-        ml[0] = 0.0
-        d[1] = d1
-        ml[1] = 0.0
-        d[2] = d2
-        ml[2] = 0.0
-        d[3] = d3
-        ml[3] = 0.0
-        d[4] = d4
-        ml[4] = 0.0
-        d[5] = d5
-        ml[5] = 0.0
+        d[0], d[1], d[2], d[3], d[4], d[5] = d0, d1, d2, d3, d4, d5
+        ml[0], ml[1], ml[2], ml[3], ml[4], ml[5] = 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
         for t in range(defect_index.shape[0]):
             ml[defect_index[t, 0]] += defect[cand, j, t] * d[defect_index[t, 1]] * d[defect_index[t, 2]]
         m1, m2, m3, m4, m5 = ml[1], ml[2], ml[3], ml[4], ml[5]
         # K m, and the lateral chain force (K e)_c = K m - K[:, 0] u + K D (c = y..rz)
-        k0 = (m1 * p[K_COL + 1, 0] + m2 * p[K_COL + 2, 0] + m3 * p[K_COL + 3, 0] + m4 * p[K_COL + 4, 0]
-              + m5 * p[K_COL + 5, 0])
-        k1 = (m1 * p[K_COL + 1, 1] + m2 * p[K_COL + 2, 1] + m3 * p[K_COL + 3, 1] + m4 * p[K_COL + 4, 1]
-              + m5 * p[K_COL + 5, 1])
-        k2 = (m1 * p[K_COL + 1, 2] + m2 * p[K_COL + 2, 2] + m3 * p[K_COL + 3, 2] + m4 * p[K_COL + 4, 2]
-              + m5 * p[K_COL + 5, 2])
-        k3 = (m1 * p[K_COL + 1, 3] + m2 * p[K_COL + 2, 3] + m3 * p[K_COL + 3, 3] + m4 * p[K_COL + 4, 3]
-              + m5 * p[K_COL + 5, 3])
-        k4 = (m1 * p[K_COL + 1, 4] + m2 * p[K_COL + 2, 4] + m3 * p[K_COL + 3, 4] + m4 * p[K_COL + 4, 4]
-              + m5 * p[K_COL + 5, 4])
-        k5 = (m1 * p[K_COL + 1, 5] + m2 * p[K_COL + 2, 5] + m3 * p[K_COL + 3, 5] + m4 * p[K_COL + 4, 5]
-              + m5 * p[K_COL + 5, 5])
-        f1 = ((k1 - p[K_COL, 1] * u_j) + (d0 * p[K_COL + 0, 1] + d1 * p[K_COL + 1, 1] + d2 * p[K_COL + 2, 1]
-              + d3 * p[K_COL + 3, 1] + d4 * p[K_COL + 4, 1] + d5 * p[K_COL + 5, 1]))
-        f2 = ((k2 - p[K_COL, 2] * u_j) + (d0 * p[K_COL + 0, 2] + d1 * p[K_COL + 1, 2] + d2 * p[K_COL + 2, 2]
-              + d3 * p[K_COL + 3, 2] + d4 * p[K_COL + 4, 2] + d5 * p[K_COL + 5, 2]))
-        f3 = ((k3 - p[K_COL, 3] * u_j) + (d0 * p[K_COL + 0, 3] + d1 * p[K_COL + 1, 3] + d2 * p[K_COL + 2, 3]
-              + d3 * p[K_COL + 3, 3] + d4 * p[K_COL + 4, 3] + d5 * p[K_COL + 5, 3]))
-        f4 = ((k4 - p[K_COL, 4] * u_j) + (d0 * p[K_COL + 0, 4] + d1 * p[K_COL + 1, 4] + d2 * p[K_COL + 2, 4]
-              + d3 * p[K_COL + 3, 4] + d4 * p[K_COL + 4, 4] + d5 * p[K_COL + 5, 4]))
-        f5 = ((k5 - p[K_COL, 5] * u_j) + (d0 * p[K_COL + 0, 5] + d1 * p[K_COL + 1, 5] + d2 * p[K_COL + 2, 5]
-              + d3 * p[K_COL + 3, 5] + d4 * p[K_COL + 4, 5] + d5 * p[K_COL + 5, 5]))
+        k0 = _dot5(p, K_COL + 1, 0, m1, m2, m3, m4, m5)
+        k1 = _dot5(p, K_COL + 1, 1, m1, m2, m3, m4, m5)
+        k2 = _dot5(p, K_COL + 1, 2, m1, m2, m3, m4, m5)
+        k3 = _dot5(p, K_COL + 1, 3, m1, m2, m3, m4, m5)
+        k4 = _dot5(p, K_COL + 1, 4, m1, m2, m3, m4, m5)
+        k5 = _dot5(p, K_COL + 1, 5, m1, m2, m3, m4, m5)
+        f1 = (k1 - p[K_COL, 1] * u_j) + _dot6(p, K_COL, 1, d0, d1, d2, d3, d4, d5)
+        f2 = (k2 - p[K_COL, 2] * u_j) + _dot6(p, K_COL, 2, d0, d1, d2, d3, d4, d5)
+        f3 = (k3 - p[K_COL, 3] * u_j) + _dot6(p, K_COL, 3, d0, d1, d2, d3, d4, d5)
+        f4 = (k4 - p[K_COL, 4] * u_j) + _dot6(p, K_COL, 4, d0, d1, d2, d3, d4, d5)
+        f5 = (k5 - p[K_COL, 5] * u_j) + _dot6(p, K_COL, 5, d0, d1, d2, d3, d4, d5)
         load = -axial[cand, j] * u_j + k0
         load += (p[GAIN, 0] * xs0 + p[GAIN, 1] * xs1 + p[GAIN, 2] * xs2 + p[GAIN, 3] * xs3 + p[GAIN, 4] * xs4
                  + p[GAIN, 5] * xs5)
         load += p[AXIAL_ROW, 0] * ec0 + p[AXIAL_ROW, 1] * ec1 + p[AXIAL_ROW, 2] * ec2
         # the chain's own P-delta inside: energy 1/2 N^2 D^T T D with N the load above, so the
         # tension is N (1 + k q) and the shortening D^T (S + N T) D (T has no axial row)
-        tq1 = (d1 * p[T_COL + 1, 1] + d2 * p[T_COL + 2, 1] + d3 * p[T_COL + 3, 1] + d4 * p[T_COL + 4, 1]
-               + d5 * p[T_COL + 5, 1])
-        tq2 = (d1 * p[T_COL + 1, 2] + d2 * p[T_COL + 2, 2] + d3 * p[T_COL + 3, 2] + d4 * p[T_COL + 4, 2]
-               + d5 * p[T_COL + 5, 2])
-        tq3 = (d1 * p[T_COL + 1, 3] + d2 * p[T_COL + 2, 3] + d3 * p[T_COL + 3, 3] + d4 * p[T_COL + 4, 3]
-               + d5 * p[T_COL + 5, 3])
-        tq4 = (d1 * p[T_COL + 1, 4] + d2 * p[T_COL + 2, 4] + d3 * p[T_COL + 3, 4] + d4 * p[T_COL + 4, 4]
-               + d5 * p[T_COL + 5, 4])
-        tq5 = (d1 * p[T_COL + 1, 5] + d2 * p[T_COL + 2, 5] + d3 * p[T_COL + 3, 5] + d4 * p[T_COL + 4, 5]
-               + d5 * p[T_COL + 5, 5])
+        tq1 = _dot5(p, T_COL + 1, 1, d1, d2, d3, d4, d5)
+        tq2 = _dot5(p, T_COL + 1, 2, d1, d2, d3, d4, d5)
+        tq3 = _dot5(p, T_COL + 1, 3, d1, d2, d3, d4, d5)
+        tq4 = _dot5(p, T_COL + 1, 4, d1, d2, d3, d4, d5)
+        tq5 = _dot5(p, T_COL + 1, 5, d1, d2, d3, d4, d5)
         q = d1 * tq1 + d2 * tq2 + d3 * tq3 + d4 * tq4 + d5 * tq5
         tension = load * (1.0 + axial[cand, j] * q)
         n[j] = tension
@@ -186,24 +177,12 @@ def _terms(cand, x, c, command, x0, axial, pack, point_b, defect_index, defect, 
         v3 = two_t * s3 + grad[3]
         v4 = two_t * s4 + grad[4]
         v5 = two_t * s5 + grad[5]
-        force[0] += (((v0 * p[J_ROW + 0, 0] + v1 * p[J_ROW + 1, 0] + v2 * p[J_ROW + 2, 0] + v3 * p[J_ROW + 3, 0]
-                     + v4 * p[J_ROW + 4, 0] + v5 * p[J_ROW + 5, 0]))
-                      + (e0 * p[W_COL, 0] + e1 * p[W_COL + 1, 0] + e2 * p[W_COL + 2, 0]))
-        force[1] += (((v0 * p[J_ROW + 0, 1] + v1 * p[J_ROW + 1, 1] + v2 * p[J_ROW + 2, 1] + v3 * p[J_ROW + 3, 1]
-                     + v4 * p[J_ROW + 4, 1] + v5 * p[J_ROW + 5, 1]))
-                      + (e0 * p[W_COL, 1] + e1 * p[W_COL + 1, 1] + e2 * p[W_COL + 2, 1]))
-        force[2] += (((v0 * p[J_ROW + 0, 2] + v1 * p[J_ROW + 1, 2] + v2 * p[J_ROW + 2, 2] + v3 * p[J_ROW + 3, 2]
-                     + v4 * p[J_ROW + 4, 2] + v5 * p[J_ROW + 5, 2]))
-                      + (e0 * p[W_COL, 2] + e1 * p[W_COL + 1, 2] + e2 * p[W_COL + 2, 2]))
-        force[3] += (((v0 * p[J_ROW + 0, 3] + v1 * p[J_ROW + 1, 3] + v2 * p[J_ROW + 2, 3] + v3 * p[J_ROW + 3, 3]
-                     + v4 * p[J_ROW + 4, 3] + v5 * p[J_ROW + 5, 3]))
-                      + (e0 * p[W_COL, 3] + e1 * p[W_COL + 1, 3] + e2 * p[W_COL + 2, 3]))
-        force[4] += (((v0 * p[J_ROW + 0, 4] + v1 * p[J_ROW + 1, 4] + v2 * p[J_ROW + 2, 4] + v3 * p[J_ROW + 3, 4]
-                     + v4 * p[J_ROW + 4, 4] + v5 * p[J_ROW + 5, 4]))
-                      + (e0 * p[W_COL, 4] + e1 * p[W_COL + 1, 4] + e2 * p[W_COL + 2, 4]))
-        force[5] += (((v0 * p[J_ROW + 0, 5] + v1 * p[J_ROW + 1, 5] + v2 * p[J_ROW + 2, 5] + v3 * p[J_ROW + 3, 5]
-                     + v4 * p[J_ROW + 4, 5] + v5 * p[J_ROW + 5, 5]))
-                      + (e0 * p[W_COL, 5] + e1 * p[W_COL + 1, 5] + e2 * p[W_COL + 2, 5]))
+        force[0] += _dot6(p, J_ROW, 0, v0, v1, v2, v3, v4, v5) + _dot3(p, W_COL, 0, e0, e1, e2)
+        force[1] += _dot6(p, J_ROW, 1, v0, v1, v2, v3, v4, v5) + _dot3(p, W_COL, 1, e0, e1, e2)
+        force[2] += _dot6(p, J_ROW, 2, v0, v1, v2, v3, v4, v5) + _dot3(p, W_COL, 2, e0, e1, e2)
+        force[3] += _dot6(p, J_ROW, 3, v0, v1, v2, v3, v4, v5) + _dot3(p, W_COL, 3, e0, e1, e2)
+        force[4] += _dot6(p, J_ROW, 4, v0, v1, v2, v3, v4, v5) + _dot3(p, W_COL, 4, e0, e1, e2)
+        force[5] += _dot6(p, J_ROW, 5, v0, v1, v2, v3, v4, v5) + _dot3(p, W_COL, 5, e0, e1, e2)
         # the chain force F (tension n_j along the axis, lateral K e) works through the second-order
         # displacement of B: d ext / d theta^T F = 1/2 (p (theta.F) + (theta.p) F - 2 theta (p.F))
         f1 = ml[1]
@@ -304,14 +283,19 @@ def _equilibrium(cand, x, c, command, compliance, wrench, x0, gain, axial, pack,
 
 @njit(cache=True, nogil=True, parallel=True, fastmath=_FAST)
 def solve(compliance, wrench, gain, axial, pack, point_b, defect_index, defect, weight, coupling, mu, limit, x0, nut,
-          band, play, inputs, clearance, tol, max_iter, divergence,
+          band, play, inputs, revisit, clearance, tol, max_iter, divergence,
           faces, state_tol, input_gain,
           pose_out, load_out, c_out, release_out, r_out, state_out, class_out, code_out, iter_out):
     """All candidates (in parallel) at all points (in order). Each fixed point starts from the
     previous solution moved by the response to what changed: the linear model's ``input_gain``
     (n_c, 6, 6), dX/du_j, to the command's step (plus the previous points' second-order drift),
     the last probe's measured dX/dC_k to an offset's step or a probe's. A start off by the
-    change's second-order part only needs fewer fixed-point steps; where they end is unchanged."""
+    change's second-order part only needs fewer fixed-point steps; where they end is unchanged.
+    Inside a leg of equal steps the drift is extrapolated (linear, quadratic, then cubic in the
+    step count). A point whose command an earlier point had (``revisit`` (n_p,), the latest such
+    point or -1; ``consistent.revisits``) starts from that point's equilibrium when the nut offsets
+    are those it ended with there: the same equations, so the start is the fixed point (the legs'
+    way back; session 16)."""
     n_c = compliance.shape[0]
     n_p = inputs.shape[0]
     inner_tol = INNER_SHARE * tol
@@ -326,6 +310,9 @@ def solve(compliance, wrench, gain, axial, pack, point_b, defect_index, defect, 
         drift = np.zeros(6)
         drift_prev = np.zeros(6)
         drift_prev2 = np.zeros(6)
+        drift_prev3 = np.zeros(6)
+        x_seen = np.empty((n_p, 6))  # every point's solution, for a later point with the same command
+        c_seen = np.empty((n_p, 3))
         uniform = 0
         x_start = np.zeros(6)
         last_step = np.zeros(3)
@@ -393,9 +380,19 @@ def solve(compliance, wrench, gain, axial, pack, point_b, defect_index, defect, 
                 uniform += 1  # equal steps in a row
             else:
                 uniform = 0
-            if p > 0 and size > 0.0:
+            seen = revisit[p]
+            if seen >= 0:  # the same command and offsets solved before: the same equilibrium
+                for i in range(3):
+                    if c_seen[seen, i] != c[i]:
+                        seen = -1
+            if seen >= 0:
                 for k in range(6):
-                    if uniform >= 3:  # the drift extrapolated as a quadratic in the step count
+                    x[k] = x_seen[seen, k]
+            elif p > 0 and size > 0.0:
+                for k in range(6):
+                    if uniform >= 4:  # the drift extrapolated as a cubic in the step count
+                        x[k] += 4.0 * drift[k] - 6.0 * drift_prev[k] + 4.0 * drift_prev2[k] - drift_prev3[k]
+                    elif uniform >= 3:  # the drift extrapolated as a quadratic in the step count
                         x[k] += 3.0 * drift[k] - 3.0 * drift_prev[k] + drift_prev2[k]
                     elif uniform == 2:
                         x[k] += 2.0 * drift[k] - drift_prev[k]
@@ -411,8 +408,10 @@ def solve(compliance, wrench, gain, axial, pack, point_b, defect_index, defect, 
                     for k in range(3):
                         if mu[cand, k] > 0 and c[k] > state_tol:
                             probed = True
+                loose = probed and step == 0
                 code, its = _equilibrium(cand, x, c, command, compliance, wrench, x0, gain, axial, pack, point_b,
-                                         defect_index, defect, weight, inner_tol, max_iter, divergence, probed, r, u,
+                                         defect_index, defect, weight, LOOSE_TOL if loose else inner_tol, max_iter,
+                                         divergence, probed and not loose, r, u,
                                          n, force, d, ml, grad, work, secant)
                 iterations += its
                 if code != OK or not use_clearance:
@@ -429,8 +428,9 @@ def solve(compliance, wrench, gain, axial, pack, point_b, defect_index, defect, 
                             c_probe[i] = c[i]
                         c_probe[k] += TANGENT_STEP
                         code, its = _equilibrium(cand, x_probe, c_probe, command, compliance, wrench, x0, gain,
-                                                 axial, pack, point_b, defect_index, defect, weight, PROBE_TOL,
-                                                 max_iter, divergence, True, r, u, n_probe, force, d, ml,
+                                                 axial, pack, point_b, defect_index, defect, weight,
+                                                 LOOSE_TOL if loose else PROBE_TOL,
+                                                 max_iter, divergence, not loose, r, u, n_probe, force, d, ml,
                                                  grad, work, secant)
                         iterations += its
                         if code != OK:
@@ -476,6 +476,9 @@ def solve(compliance, wrench, gain, axial, pack, point_b, defect_index, defect, 
                     for k in range(6):  # the start of the next equilibrium (see the docstring)
                         x[k] += response[i, k] * (c_new[i] - c[i])
                     c[i] = c_new[i]
+                if loose:  # a first step at the loose tolerance: the next one at the tight ones
+                    code = NOT_CONVERGED
+                    continue
                 if change == 0.0:
                     break
                 if change <= tol:  # the offsets moved by <= tol: one more equilibrium settles the pose
@@ -509,10 +512,15 @@ def solve(compliance, wrench, gain, axial, pack, point_b, defect_index, defect, 
                 c_prev[i] = c[i]
             class_out[cand, p] = 2 if in_clearance else (1 if compressed else 3)
             for k in range(6):  # the second-order part of this point's change (beyond the linear start)
+                drift_prev3[k] = drift_prev2[k]
                 drift_prev2[k] = drift_prev[k]
                 drift_prev[k] = drift[k]
                 drift[k] = x[k] - x_start[k]
                 for i in range(3):
                     drift[k] -= input_gain[cand, k, 3 + i] * (c[i] - c_start[i])
             code_out[cand, p] = code
+            for k in range(6):
+                x_seen[p, k] = x[k]
+            for i in range(3):
+                c_seen[p, i] = c[i]
             iter_out[cand, p] = iterations

@@ -118,10 +118,25 @@ def pack_chains(m) -> np.ndarray:
     return pack
 
 
+def revisits(inputs: np.ndarray) -> np.ndarray:
+    """(n_p,) int64: for each point the latest earlier point with the very same command (-1 if
+    none); the kernel starts there when the nut offsets are the same too (a leg's way back)."""
+    inputs = np.asarray(inputs, dtype=float)
+    out = np.full(inputs.shape[0], -1, dtype=np.int64)
+    last: dict[bytes, int] = {}
+    for p, row in enumerate(inputs):
+        key = np.ascontiguousarray(row).tobytes()
+        out[p] = last.get(key, -1)
+        last[key] = p
+    return out
+
+
 def solve_points_consistent(matrices, inputs: np.ndarray, *, clearance: bool, tol: float, max_iter: int,
-                            divergence: float, state_tolerance: float, n_threads: int = 1) -> dict[str, np.ndarray]:
+                            divergence: float, state_tolerance: float, n_threads: int = 1,
+                            revisit: bool = True) -> dict[str, np.ndarray]:
     """Run the compiled consistent kernel; same outputs as ``kernel.solve_points_compiled``
-    (force_only clearance; ``tol`` [m, rad] on the pose update per point)."""
+    (force_only clearance; ``tol`` [m, rad] on the pose update per point). ``revisit=False``
+    starts no point from an earlier one with the same command (``revisits``; for the tests)."""
     import numba
 
     from . import _numba_consistent
@@ -137,12 +152,13 @@ def solve_points_consistent(matrices, inputs: np.ndarray, *, clearance: bool, to
            "codes": np.empty((n_c, n_p), dtype=np.int64), "iterations": np.empty((n_c, n_p), dtype=np.int64)}
     compliance = np.linalg.inv(m.frame_stiffness)
     wrench = np.einsum("cab,cb->ca", m.frame_stiffness, m.gravity_pose)
+    seen = revisits(inputs) if revisit else np.full(inputs.shape[0], -1, dtype=np.int64)
     arguments = (
         c(compliance), c(wrench), c(m.axial_gain), c(m.axial_stiffness), pack_chains(m), c(m.point_b),
         *defect_terms(m.lateral_defect), c(m.payload),
         c(m.coupling[:, DRIVING][:, :, DRIVING]), c(m.mu), c(m.clearance),
         c(m.initial_position), c(m.nut_stiffness), c(np.maximum(m.breakaway_band, 0.0)),
-        bool(clearance and np.all(m.breakaway_band >= 0)), c(inputs, dtype=float), bool(clearance), float(tol),
+        bool(clearance and np.all(m.breakaway_band >= 0)), c(inputs, dtype=float), seen, bool(clearance), float(tol),
         int(max_iter), float(divergence), _FACES, float(state_tolerance), c(m.input_gain), out["pose"], out["loads"], out["clearance"],
         out["release"], out["parasitic"], out["states"], out["point_class"], out["codes"], out["iterations"])
     previous = numba.get_num_threads()

@@ -173,3 +173,25 @@ def test_many_legs_are_merged_into_five_folds():
     assert len(folds) == 5
     assert sorted(np.concatenate(folds).tolist()) == list(range(1, 78))  # every point but the start, once
     assert all(len(set(leg[f])) in (1, 2) for f in folds)  # whole legs only
+
+
+def test_the_narrowest_scale_within_one_standard_error_is_chosen():
+    """The one-standard-error rule: a wider prior is chosen only when its held-out RMS beats
+    the narrowest's by more than the best score's standard error."""
+    from flexcal.calibration.estimation import one_standard_error_choice
+
+    scores = np.array([1.57, 1.54, 2.17])  # session 16's flip: scale 2 better by 0.03
+    assert one_standard_error_choice(scores, np.array([0.05, 0.05, 0.05])) == 0  # 0.03 < one error
+    assert one_standard_error_choice(scores, np.array([0.01, 0.01, 0.01])) == 1  # 0.03 > one error
+    assert one_standard_error_choice(scores, np.zeros(3)) == 1  # no spread: the lowest score
+
+
+def test_the_held_out_error_comes_from_the_folds_spread():
+    from flexcal.calibration.estimation import _held_out_rms_and_error
+
+    same = _held_out_rms_and_error(np.array([4.0, 4.0, 4.0]), np.array([4, 4, 4]))
+    assert same == (1.0, 0.0)  # equal folds: RMS 1 exactly, no spread
+    rms, error = _held_out_rms_and_error(np.array([2.0, 4.0, 6.0]), np.array([4, 4, 4]))
+    assert rms == pytest.approx(1.0)  # pooled 12 / 12
+    # fold mean squares 0.5, 1, 1.5: std 0.5, / sqrt(3), halved for the RMS (delta method)
+    assert error == pytest.approx(0.5 / np.sqrt(3) / 2.0, rel=1e-12)  # 1e-12: round-off

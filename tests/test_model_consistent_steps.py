@@ -9,6 +9,7 @@ import pytest
 
 from flexcal.model import kernel
 from flexcal.model.assembly import mechanism_matrices
+from flexcal.model import consistent
 from flexcal.model.consistent import solve_points_consistent
 from flexcal.model.forward import CONSISTENT_MAX_ITER, CONSISTENT_TOL, DIVERGENCE_LIMIT, STATE_TOLERANCE
 from flexcal.model.parameters import parameter_space
@@ -57,3 +58,35 @@ def test_the_default_tolerances_agree_with_tighter_ones():
     np.testing.assert_allclose(runs[0]["pose"], runs[1]["pose"], rtol=0, atol=5e-13)
     # 2e-13 m: ~6x the measured 3.5e-14 m of the offsets, the Newton steps' own stop (1e-13 m) x 2
     np.testing.assert_allclose(runs[0]["clearance"], runs[1]["clearance"], rtol=0, atol=2e-13)
+
+
+def test_a_revisited_command_starts_from_its_earlier_equilibrium():
+    """The standard trajectory goes out and back along each leg: a point whose command was solved
+    before, with the nut offsets it had then, starts from that equilibrium (``consistent.revisits``;
+    session 16). Where every nut stays on its flank that start is the fixed point itself: one
+    evaluation of the map confirms it (4.2 on average from the drift-extrapolated start). The
+    results are those of the solve without it, to the iteration's own tolerance."""
+    assert consistent.revisits(np.array([[0.0, 0, 0], [1, 0, 0], [0, 0, 0], [1, 0, 0], [0, 0, 1]])).tolist() == [
+        -1, -1, 0, 1, -1]
+    space = dataclasses.replace(parameter_space(), second_order=True, chain_shortening=tuple(np.zeros(216)),
+                                breakaway_force=2.0)
+    values = space.from_unit(np.random.default_rng(0).random((40, 45)))
+    matrices = mechanism_matrices(values, space)
+    inputs = standard_trajectory().inputs
+    runs = [solve_points_consistent(matrices, inputs, clearance=True, tol=CONSISTENT_TOL, max_iter=CONSISTENT_MAX_ITER,
+                                    divergence=DIVERGENCE_LIMIT, state_tolerance=STATE_TOLERANCE, revisit=revisit)
+            for revisit in (True, False)]
+    assert all(np.all(run["codes"] == 0) for run in runs)
+    # 5e-13 rad, the bound of test_the_default_tolerances_agree_with_tighter_ones: another start
+    # ends the iteration elsewhere inside its tolerance (measured 8.7e-14 rad here)
+    np.testing.assert_allclose(runs[0]["pose"], runs[1]["pose"], rtol=0, atol=5e-13)
+    # 2e-13 m: the Newton steps' own stop on the offsets (1e-13 m) x 2, as in that test
+    np.testing.assert_allclose(runs[0]["clearance"], runs[1]["clearance"], rtol=0, atol=2e-13)
+    earlier = consistent.revisits(inputs)
+    engaged = np.all(runs[0]["states"] == 0, axis=2)  # (n_c, n_p): every nut on its flank
+    points = np.nonzero(earlier >= 0)[0]
+    points = points[points > 0]
+    same = engaged[:, points] & engaged[:, points - 1] & engaged[:, earlier[points]]  # same offsets (0) then and now
+    assert same.sum() > 200  # enough such points to count (317 of the 40 x 77 here)
+    assert np.all(runs[0]["iterations"][:, points][same] == 1)
+    assert np.mean(runs[1]["iterations"][:, points][same]) > 3.0  # without: 4.2 from the drift-extrapolated start

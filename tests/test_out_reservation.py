@@ -221,6 +221,30 @@ def test_the_reservation_is_reentrant_and_released_on_error(tmp_path):
     assert not (out / LOCK_NAME).exists()
 
 
+def test_a_ctrl_c_before_the_release_is_deferred_still_releases_the_lock(tmp_path, monkeypatch):
+    """The race CI met once (session 16): Ctrl-C lands in the reservation's end before its
+    interrupts are held back. Made deterministic: the first deferral raises KeyboardInterrupt
+    on entry, as the signal would; the lock must be gone and the Ctrl-C still raised."""
+    import flexcal.validation.out_lock as out_lock
+
+    real = out_lock.interrupts_deferred
+    calls = []
+
+    def interrupted_once():
+        calls.append(1)
+        if len(calls) == 1:  # the first try of the release (patched after the lock was taken)
+            raise KeyboardInterrupt
+        return real()
+
+    out = tmp_path / "out"
+    with pytest.raises(KeyboardInterrupt):
+        with reserved(out, command="test"):
+            assert any(path.exists() for path in lock_paths(out))
+            monkeypatch.setattr(out_lock, "interrupts_deferred", interrupted_once)
+    assert len(calls) == 2  # the release was tried again after the interrupt
+    assert sorted(p.name for p in tmp_path.iterdir()) == []  # no lock left beside or inside
+
+
 
 @pytest.fixture
 def ctrl_c_raises():

@@ -153,10 +153,6 @@ def test_identify_goes_through_the_one_pipeline_with_error_bars(tmp_path):
     assert not (out / "convergence.png").exists()  # no swarm, no convergence picture
 
 
-@pytest.mark.xfail(strict=True, raises=AssertionError, reason="measured 2026-11-27 (session 15) with the quadratic-polynomial "
-                   "discrepancy part: sources alone z RMS 0.56 (in the band), base parameters 2.13 (0.13 above it: the two "
-                   "drive-gain combinations at -2.3 to -4.5); Matern alone was 0.33 / 2.24 (docs/calibration.md 6); "
-                   "issue 28 open")
 def test_error_bars_stay_honest_with_a_deliberately_imperfect_model(tmp_path):
     """The paper's model (no second-order terms) on the analytic prototype, seeds 1-2: its form
     error (model at the true values 2.5-3.7 urad RMS from the data, residual 0.77 urad after the

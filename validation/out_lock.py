@@ -263,13 +263,36 @@ def reserved(out_dir: str | os.PathLike, *, command: str) -> Iterator[Path]:
         yield out
     finally:
         if reservation is not None:  # None: not taken (OutInUse, an error)
+            _let_go(out, reservation)
+
+
+def _let_go(out: Path, reservation: _Reservation) -> None:
+    """One ``reserved`` block's end: the count down, the lock released with the last one,
+    interrupts held back meanwhile. A Ctrl-C or SIGTERM can still land in the few bytecodes
+    before the deferral is in place (CI, session 16: the lock was left after a Ctrl-C just
+    after the run's last line); then the release is done all the same and the signal's
+    exception raised after it. The body runs once: it cannot be interrupted (deferred), and a
+    second pass after a signal finds it done."""
+    done = False
+    pending: BaseException | None = None
+    for _attempt in range(3):  # a signal before the deferral, one more delivered after it
+        try:
             with interrupts_deferred(), _held_guard:
-                reservation.count -= 1
-                if reservation.count == 0:
-                    del _held[out]
-                    _release(reservation.lock, reservation.text)
-                    if not out.exists():
-                        _remove_empty(reservation.made)
+                if not done:
+                    done = True
+                    reservation.count -= 1
+                    if reservation.count == 0:
+                        del _held[out]
+                        _release(reservation.lock, reservation.text)
+                        if not out.exists():
+                            _remove_empty(reservation.made)
+            break
+        except BaseException as stop:  # noqa: BLE001 - only the signals' exceptions are held
+            if isinstance(stop, Exception):
+                raise
+            pending = pending or stop
+    if pending is not None:
+        raise pending
 
 
 @contextlib.contextmanager

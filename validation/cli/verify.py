@@ -35,6 +35,13 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
     add_source_options(parser)
     add_calibration_options(parser)
+    parser.add_argument("--error-budget-draws", type=int, default=None, metavar="K",
+                        help="the error bars of --method map/free carry the model's error measured on the "
+                             "virtual prototype (--provider) at the estimate "
+                             "(validation/runs/error_budget.py), plus K prior draws of the non-geometric "
+                             "sources (default 0)")
+    parser.add_argument("--no-error-budget", action="store_true",
+                        help="error bars from the residual-fitted discrepancy alone (no prototype runs)")
     add_out(parser, what="report.json, report.md, fit/convergence/residuals/sensitivity PNGs, curves.csv")
 
 
@@ -59,8 +66,21 @@ def run(args: argparse.Namespace) -> int:
                                                       max_iterations=args.iterations))
     opening = open_calibration(args, progress=not args.quiet)
     measurement, space = opening.measurement, opening.space
+    budget = None
+    if args.method != "paper" and not args.no_error_budget:
+        from ..prototype.providers import stiffness_provider
+        from ..runs.error_budget import DEFAULT_DRAWS, model_error_budget
+        from .options import executor_options
+
+        draws = DEFAULT_DRAWS if args.error_budget_draws is None else args.error_budget_draws
+        if draws < 0:
+            raise ValueError(f"--error-budget-draws={draws} must be >= 0")
+        provider = stiffness_provider(args.provider, progress=not args.quiet, **executor_options(args))
+
+        def budget(values):
+            return model_error_budget(space, measurement.inputs, provider, n_draws=draws, estimate=values)
     result = run_verify(measurement, space, settings, presets=opening.presets, truth=opening.truth,
-                        progress=not args.quiet)
+                        progress=not args.quiet, budget=budget)
     result.report["model_stiffness"] = ("closed-form chains scaled by FEM factors at the nominal design "
                                         "(docs/model.md 7)" if space.compliance_factors else "closed-form (paper Eq. 1)")
     result.report["model_second_order"] = bool(space.second_order)

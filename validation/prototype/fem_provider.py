@@ -327,6 +327,9 @@ def fem_provider(material: Material = STEEL, *, elements_through_thickness: floa
     provider.prepare = prepare
     provider.on_grid = on_grid
     provider.mesher = mesher
+    # what the compliance slopes' own cached jobs need (validation/runs/model_correction.py)
+    provider.material, provider.cache_directory = material, cache_directory
+    provider.workers, provider.scheduler, provider.progress = workers, scheduler, progress
     provider.elements_through_thickness = float(elements_through_thickness)
     provider.description = (f"FEM (quadratic tets, {mesher} mesh, {elements_through_thickness:g} through the thinnest "
                             f"section)")

@@ -37,7 +37,8 @@ from .verify import VerifyResult, VerifySettings, run_verify
 __all__ = ["Bench", "DriveRecord", "CompensationSettings", "CompensationResult", "approach_sequence",
            "drive_targets", "bench_driver", "bench_effects", "bench_from_metadata", "identified_values",
            "model_zero_angles", "return_offsets", "calibrated_inputs", "small_deflection_inputs",
-           "model_input_jacobian", "model_states", "run_compensation"]
+           "model_input_jacobian", "model_states", "run_compensation", "drives_in_order", "sequence_angles",
+           "sequence_jacobian"]
 
 DEFAULT_READINGS = 10  # samples averaged per posture reading (the paper's "stable interval" mean)
 DEFAULT_DWELL = 2.0  # [s] per driven posture when the curve has no time step (the scenario default)
@@ -207,12 +208,86 @@ def _approach_directions(inputs: np.ndarray) -> np.ndarray:
     return approach_directions(inputs, min_move=0.0)
 
 
+def drives_in_order(space: ParameterSpace) -> bool:
+    """Whether the model is evaluated along the bench's ordered sequence (0, x_1, 0, x_2, ...,
+    ``approach_sequence``) instead of target by target: with the clearance's play state
+    (``breakaway_force``: each nut's offset is carried from posture to posture, so a target's
+    angles depend on the postures driven before it) or the consistent model (its compiled solve
+    has no closed-form input Jacobian, ``model.inverse.forward_jacobian``)."""
+    return space.breakaway_force is not None or bool(space.chain_shortening)
+
+
+# The input step of the ordered model's Jacobian by central differences [m]: ~1e-4 of the
+# workspace's inputs (mm), so the difference keeps ~8 digits of the angles (the fixed point's
+# tolerance 1e-13 m against 1e-7 m of travel) and its truncation (curvature x step) is far below
+# the micro-radian errors the loop corrects.
+SEQUENCE_STEP = 1e-7
+# Newton on the ordered model (``calibrated_inputs``): stop at this angle error [rad] (1e-5 urad,
+# far below the bench's noise and the loop's tolerance) or after this many steps.
+SEQUENCE_TOL, SEQUENCE_MAX_ITER = 1e-11, 30
+
+
+def sequence_angles(values: np.ndarray, inputs: np.ndarray, space: ParameterSpace) -> np.ndarray:
+    """(n, 3) [rad]: the model with ``values`` driven as the bench drives the targets' inputs
+    (n, 3) [m] (0, x_1, 0, x_2, ..., in order, compiled engine): each target's angles minus
+    those at the zero posture just before it (what the bench measures, ``drive_targets``)."""
+    from flexcal.model.forward import forward
+
+    angles = forward(values, approach_sequence(inputs), space=space).angles[0]
+    return angles[1::2] - angles[0::2]
+
+
+def sequence_jacobian(values: np.ndarray, inputs: np.ndarray, space: ParameterSpace) -> np.ndarray:
+    """d theta_k / d x_k (n, 3, 3) [rad/m] of ``sequence_angles`` by central differences of
+    ``SEQUENCE_STEP``, every target's input i moved at once (6 ordered runs; a target's
+    dependence on the inputs before it, through the nuts' offsets, is not in its block)."""
+    x = np.asarray(inputs, dtype=float)
+    out = np.zeros(x.shape + (3,))
+    for i in range(3):
+        step = np.zeros(3)
+        step[i] = SEQUENCE_STEP
+        out[:, :, i] = (sequence_angles(values, x + step, space) - sequence_angles(values, x - step, space)) / (
+            2.0 * SEQUENCE_STEP)
+    return out
+
+
+def _ordered_inverse(values: np.ndarray, targets: np.ndarray, space: ParameterSpace, start: np.ndarray) -> np.ndarray:
+    """Inputs (n, 3) [m] with ``sequence_angles`` = ``targets`` (n, 3) [rad]: Newton from ``start``
+    with ``sequence_jacobian``, halving a step that does not reduce the largest error."""
+    from flexcal.calibration.compensation import correction_step
+
+    x = np.array(start, dtype=float)
+    error = sequence_angles(values, x, space) - targets
+    for _ in range(SEQUENCE_MAX_ITER):
+        if np.max(np.abs(error)) <= SEQUENCE_TOL:
+            return x
+        step = correction_step(sequence_jacobian(values, x, space), error)
+        for _half in range(20):
+            trial = x + step
+            trial_error = sequence_angles(values, trial, space) - targets
+            if np.max(np.abs(trial_error)) < np.max(np.abs(error)):
+                break
+            step = 0.5 * step
+        else:
+            break
+        x, error = trial, trial_error
+    if np.max(np.abs(error)) > 1e3 * SEQUENCE_TOL:
+        point = int(np.argmax(np.max(np.abs(error), axis=1)))
+        raise ValueError(f"the calibrated model's ordered inverse did not converge for target {point} (error "
+                         f"{np.max(np.abs(error[point])) * 1e6:.3g} urad); drop or move that target")
+    return x
+
+
 def calibrated_inputs(values: np.ndarray, targets: np.ndarray, space: ParameterSpace) -> np.ndarray:
     """Inputs (n, 3) [m] that bring the model with ``values`` (45,) [SI] to each relative
-    target (n, 3) [rad] from its zero posture (step 3). ``ValueError`` if not invertible."""
+    target (n, 3) [rad] from its zero posture (step 3). ``ValueError`` if not invertible.
+    A model that ``drives_in_order``: along the bench's sequence (``sequence_angles``)."""
     from flexcal.model.forward import ConvergenceError
     from flexcal.model.inverse import inverse
 
+    if drives_in_order(space):
+        return _ordered_inverse(values, np.asarray(targets, dtype=float), space,
+                                small_deflection_inputs(targets, space))
     absolute = model_zero_angles(values, space) + np.asarray(targets, dtype=float)
     guess = small_deflection_inputs(targets, space)
     try:
@@ -232,11 +307,14 @@ def small_deflection_inputs(targets: np.ndarray, space: ParameterSpace) -> np.nd
 
 
 def model_input_jacobian(values: np.ndarray, inputs: np.ndarray, space: ParameterSpace) -> np.ndarray:
-    """d theta / d x (n, 3, 3) [rad/m] of the model with ``values`` at inputs (n, 3) [m]."""
+    """d theta / d x (n, 3, 3) [rad/m] of the model with ``values`` at inputs (n, 3) [m]; a
+    model that ``drives_in_order``: of its ordered run (``sequence_jacobian``)."""
     from flexcal.model.assembly import mechanism_matrices
     from flexcal.model.forward import solve_matrices
     from flexcal.model.inverse import forward_jacobian
 
+    if drives_in_order(space):
+        return sequence_jacobian(values, inputs, space)
     matrices = mechanism_matrices(values, space)
     directions = _approach_directions(inputs)
     solution = solve_matrices(matrices, np.asarray(inputs, dtype=float), directions, engine="numpy")
@@ -248,6 +326,9 @@ def model_states(values: np.ndarray, inputs: np.ndarray, space: ParameterSpace) 
     [m]: each driving chain's distance from its clearance zero (paper Fig. 12 d, h, l)."""
     from flexcal.model.forward import CLASS_NAMES, forward
 
+    if drives_in_order(space):  # at each target as the bench reaches it
+        result = forward(values, approach_sequence(inputs), space=space)
+        return (np.array([CLASS_NAMES[int(c)] for c in result.point_class[0, 1::2]]), result.release[0, 1::2])
     result = forward(values, inputs, _approach_directions(inputs), space=space)
     return np.array([CLASS_NAMES[int(c)] for c in result.point_class[0]]), result.release[0]
 

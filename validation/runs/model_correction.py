@@ -31,15 +31,22 @@ from ..prototype.segments import (StiffnessProvider, chain_slices, end_stiffness
 from .model_names import DEFAULT_BREAKAWAY_N, MODELS
 
 __all__ = ["provider_chain_compliance", "compliance_factors", "compliance_slopes", "slope_provider", "unchanged_slices", "same_design", "corrected_space",
-           "model_space", "MODELS", "DEFAULT_BREAKAWAY_N", "SLOPE_STEPS", "SLOPE_ELEMENTS_THROUGH"]
+           "model_space", "MODELS", "DEFAULT_BREAKAWAY_N", "SLOPE_STEPS", "SLOPE_ELEMENTS_THROUGH",
+           "SLOPE_METHODS", "SLOPE_METHOD", "segment_stiffness_slopes", "DERIVATIVE_STEP"]
 
 
 def provider_chain_compliance(chain: FlexureChain, provider: StiffnessProvider) -> np.ndarray:
     """(6, 6) compliance at end B of ``chain`` (A clamped, chain frame) [SI] from a
     segment stiffness provider: each segment's end compliance moved to B and summed (Eq. 1)."""
     nodes = section_nodes(chain)
-    stiffness = np.array([end_stiffness(provider(chain, float(start), float(end)))
-                          for start, end in zip(nodes[:-1], nodes[1:])])
+    return _composed_compliance(chain, [provider(chain, float(start), float(end))
+                                        for start, end in zip(nodes[:-1], nodes[1:])])
+
+
+def _composed_compliance(chain: FlexureChain, segments) -> np.ndarray:
+    """``provider_chain_compliance`` from the chain's five segment stiffnesses (12, 12) in order."""
+    nodes = section_nodes(chain)
+    stiffness = np.array([end_stiffness(k) for k in segments])
     compliance = np.linalg.inv(0.5 * (stiffness + np.swapaxes(stiffness, -1, -2)))
     ends = np.stack([nodes[1:], np.zeros(len(compliance)), np.zeros(len(compliance))], axis=-1)
     total = serial_compliance(compliance, np.broadcast_to(np.eye(3), compliance.shape[:1] + (3, 3)), ends,
@@ -126,6 +133,33 @@ def same_design(chains) -> np.ndarray:
 
 def compliance_slopes(space: ParameterSpace, provider: StiffnessProvider,
                       steps: dict[str, float] | None = None, *,
+                      elements_through: float | None = SLOPE_ELEMENTS_THROUGH,
+                      method: str | None = None) -> np.ndarray:
+    """(n_chains, 5, 8): the change of each factor of ``compliance_factors`` per relative change
+    of each chain dimension (``DIMENSION_SYMBOLS``: w, a, l, t1, t2) at the nominal chains of
+    ``space`` [-].
+
+    method (``SLOPE_METHODS``; None: ``SLOPE_METHOD``, "builds"): "condensed" (session 16):
+    each nominal segment is solved once and its stiffness's derivative per dimension is the
+    condensation's, U^T (dK/dp) U (``segment_stiffness_slopes``: assembly on meshes whose
+    nodes the dimension moves, no factorisation), composed along the chain to the tangent
+    of each factor; a mesher other than the mapped one, or ``elements_through`` set: "builds".
+    "condensed-secant": the same segment derivatives composed at +-``steps`` (``SLOPE_STEPS``):
+    the builds' secant with each segment's stiffness linear in the dimension.
+    "builds" (the default): the central difference of full FEM builds at +-``steps``
+    (``SLOPE_STEPS``), ``_slopes_by_builds`` (sessions 13-15): a secant, which follows the
+    mapper's cell-count changes between the dimensions (docs/model.md 7, session 16)."""
+    method = SLOPE_METHOD if method is None else method
+    if method not in SLOPE_METHODS:
+        raise ValueError(f"slope method {method!r} must be one of {', '.join(SLOPE_METHODS)}")
+    if method != "builds" and elements_through is None and getattr(provider, "mesher", None) == "mapped":
+        secant = SLOPE_STEPS if steps is None else steps
+        return _slopes_condensed(space, provider, secant if method == "condensed-secant" else None)
+    return _slopes_by_builds(space, provider, steps, elements_through=elements_through)
+
+
+def _slopes_by_builds(space: ParameterSpace, provider: StiffnessProvider,
+                      steps: dict[str, float] | None = None, *,
                       elements_through: float | None = SLOPE_ELEMENTS_THROUGH) -> np.ndarray:
     """(n_chains, 5, 8): the change of each factor of ``compliance_factors`` per relative change
     of each chain dimension (``DIMENSION_SYMBOLS``: w, a, l, t1, t2), by a central difference of
@@ -182,11 +216,210 @@ def compliance_slopes(space: ParameterSpace, provider: StiffnessProvider,
     return out[design]
 
 
+# The slopes' methods (``compliance_slopes``): "condensed", the derivative of the nominal
+# segments' condensation (one factorisation a segment, session 16), and "builds", the central
+# difference of full FEM builds at +-SLOPE_STEPS (a factorisation a moved segment).
+# The default stays "builds" (session 16, docs/model.md 7): the condensed tangent is the exact
+# derivative of the nominal mesh's stiffness, but the mapper's cell counts change within the
+# +-10 % the true dimensions span, and the builds' secant over +-3 % follows that better: on
+# table1, cold `flexcal verify --model consistent` (idle, session 16's end) gives the same fit
+# (max 0.0179 urad both; the 0.0094 once measured for the builds was another prior scale) but
+# base-parameter z RMS 5.19 with the tangent against 1.29 with the builds, at 97.5 s against
+# 147.8 s wall (docs/scale.md, session 16).
+SLOPE_METHODS = ("condensed", "condensed-secant", "builds")
+SLOPE_METHOD = "builds"
+# The relative step of a dimension that morphs a segment's mesh for dK/dp: small enough that
+# the mapped mesher keeps its connectivity on at least one side (table1's nominal leaves sit
+# on a cell-count boundary for a, l and t1, where the other side's mesh has another topology:
+# one-sided second order there), large enough that K(p + h) - K(p - h) keeps ~10 digits.
+DERIVATIVE_STEP = 1e-4
+# The step of the factors' central difference through the (cheap, closed-form) chain
+# composition with the segments' stiffness linear in the dimension: a tangent, to O(1e-8).
+TANGENT_STEP = 1e-4
+_FIELDS = {"w": "width", "a": "fillet", "l": "hinge_length", "t1": "thickness_1", "t2": "thickness_2"}
+
+
+def _moved(chain: FlexureChain, symbol: str, relative: float) -> FlexureChain:
+    return dataclasses.replace(chain, **{_FIELDS[symbol]: getattr(chain, _FIELDS[symbol]) * (1.0 + relative)})
+
+
+def _slice_segment(chain: FlexureChain, index: int):
+    """The meshed (canonical, first-half) segment of the slice ``index`` (0, 1, 2) of ``chain``."""
+    from ..prototype.fem_provider import canonical_segment
+
+    nodes = section_nodes(chain)
+    segment, mirrored = canonical_segment(chain, float(nodes[index]), float(nodes[index + 1]))
+    assert not mirrored
+    return segment
+
+
+def _slopes_parts(chain: FlexureChain, index: int, symbols, material, elements_through_thickness: float,
+                  mesher: str, step: float) -> dict:
+    from ..prototype.fem_provider import _segment_parts
+
+    parts = _segment_parts(_slice_segment(chain, index), material, elements_through_thickness, mesher)
+    return {**parts, "kind": "chain_segment_stiffness_slopes", "dimensions": list(symbols),
+            "method": "condensed derivative U^T dK_r U, central or one-sided second order", "relative_step": step}
+
+
+def segment_stiffness_slopes(chain: FlexureChain, index: int, symbols=None, *, material, elements_through_thickness,
+                             mesher: str = "mapped", cache_directory=None, step: float = DERIVATIVE_STEP,
+                             solver_threads: int = 0) -> dict[str, np.ndarray]:
+    """{"stiffness": (12, 12), "slopes": (n_symbols, 12, 12)} [SI]: the FEM stiffness of the
+    slice ``index`` (0, 1, 2: the meshed first half, ``section_nodes``) of ``chain`` and its
+    derivative per relative change of each dimension ``symbols`` (``DIMENSION_SYMBOLS`` by
+    default), cached (its own key, which names the method and ``step``). One mapped mesh and
+    one factorisation (``fem.condense.solve_chain``, the same numbers as the provider's build,
+    whose cache entry it writes too); each dimension then costs two meshes and assemblies
+    (``fem.condense.chain_stiffness_derivative``), or none when it leaves the slice as it was."""
+    import contextlib
+
+    from flexcal.fem.cache import cached, keep_cached, load_cached
+    from flexcal.fem.condense import MorphedChain, chain_stiffness_derivative, solve_chain
+    from flexcal.fem.mesh_mapped_chain import FAST_CHAIN_OPTIONS, mapped_mesh_chain
+    from flexcal.fem.solve import solver_threads as mkl_threads
+    from flexcal.geometry.exact import end_planes, pieces, reference_points
+    from flexcal.model.parameters import DIMENSION_SYMBOLS
+
+    from ..prototype.fem_provider import segment_cache_key
+
+    if mesher != "mapped":
+        raise ValueError("the condensed slopes need the mapped mesher (a mesh whose nodes a dimension moves)")
+    symbols = tuple(DIMENSION_SYMBOLS if symbols is None else symbols)
+    segment = _slice_segment(chain, index)
+
+    def mesh_of(seg):
+        return mapped_mesh_chain(seg, elements_through_thickness=elements_through_thickness, measure=False,
+                                 quality=False, **FAST_CHAIN_OPTIONS)[0]
+
+    def morphed(seg):
+        planes, points = end_planes(seg), reference_points(seg)
+        return MorphedChain(mesh=mesh_of(seg), plane_a=planes["A"], point_a=points["A"], plane_b=planes["B"],
+                            point_b=points["B"])
+
+    def compute() -> dict[str, np.ndarray]:
+        mesh = mesh_of(segment)
+        planes, points = end_planes(segment), reference_points(segment)
+        with mkl_threads(solver_threads) if solver_threads else contextlib.nullcontext():
+            solution = solve_chain(mesh, material, planes["A"], points["A"], planes["B"], points["B"])
+        stiffness = 0.5 * (solution.stiffness + solution.stiffness.T)
+        key = segment_cache_key(segment, material, elements_through_thickness=elements_through_thickness,
+                                mesher=mesher)
+        if load_cached(key, cache_directory) is None:  # the provider's own entry: the same numbers
+            keep_cached(key, {"stiffness": stiffness}, cache_directory)
+
+        def same_mesh(other):
+            return (other.mesh.nodes.shape == mesh.nodes.shape
+                    and np.array_equal(np.asarray(other.mesh.tets), np.asarray(mesh.tets)))
+
+        slopes = np.zeros((len(symbols), 12, 12))
+        for k, symbol in enumerate(symbols):
+            at = {sign: _slice_segment(_moved(chain, symbol, sign * step), index) for sign in (1, -1)}
+            if all(pieces(at[sign]) == pieces(segment) and at[sign].x_start == segment.x_start
+                   and at[sign].x_end == segment.x_end for sign in (1, -1)):
+                continue  # the dimension leaves this slice as it was
+            plus, minus = morphed(at[1]), morphed(at[-1])
+            if same_mesh(plus) and same_mesh(minus):
+                d = chain_stiffness_derivative(mesh, solution, material, plus, minus, 2.0 * step)
+            else:  # the mesher's cell counts change on one side of nominal: second order on the other
+                sign = 1 if same_mesh(plus) else -1
+                far = morphed(_slice_segment(_moved(chain, symbol, 2 * sign * step), index))
+                if not (same_mesh(plus if sign > 0 else minus) and same_mesh(far)):
+                    raise ValueError(f"the mapped mesh of [{segment.x_start * 1e3:.1f}, {segment.x_end * 1e3:.1f}] "
+                                     f"mm changes its cells within +-{2 * step:g} of {symbol}: no derivative")
+                d = chain_stiffness_derivative(mesh, solution, material, plus if sign > 0 else minus, None,
+                                               sign * step, plus_2=far)
+            slopes[k] = 0.5 * (d + d.T)
+        return {"stiffness": stiffness, "slopes": slopes}
+
+    parts = _slopes_parts(chain, index, symbols, material, elements_through_thickness, mesher, step)
+    return cached(parts, compute, cache_directory)
+
+
+def _slopes_job(item, **options) -> dict[str, np.ndarray]:
+    chain, index = item
+    return segment_stiffness_slopes(chain, index, **options)
+
+
+def _slopes_condensed(space: ParameterSpace, provider: StiffnessProvider,
+                      secant: dict[str, float] | None = None) -> np.ndarray:
+    """``compliance_slopes`` by the condensation's derivative: the tangent (method "condensed"),
+    or with ``secant`` {symbol: relative step} the central difference over those steps with each
+    segment's stiffness linear in the dimension (method "condensed-secant")."""
+    import sys
+    import time
+
+    from flexcal.model.parameters import DIMENSION_SYMBOLS
+
+    from ..executor import run_jobs, usable_cores, where
+    from ..prototype.fem_provider import mirror_segment_stiffness, plan_local_builds
+
+    mech = space.mechanism
+    design = same_design(mech.chains)
+    material = getattr(provider, "material", mech.material)
+    options = {"symbols": tuple(DIMENSION_SYMBOLS), "material": material,
+               "elements_through_thickness": float(provider.elements_through_thickness), "mesher": provider.mesher,
+               "cache_directory": getattr(provider, "cache_directory", None)}
+    items = [(mech.chains[c].chain, index) for c in range(len(mech.chains)) if design[c] == c for index in range(3)]
+    results: dict = {}
+    workers, scheduler = getattr(provider, "workers", 0), getattr(provider, "scheduler", None)
+    if scheduler is None:
+        import psutil
+
+        n_workers, cores_each = plan_local_builds(workers, len(items), cores=usable_cores(),
+                                                  available_bytes=psutil.virtual_memory().available)
+    else:
+        n_workers, cores_each = 0, 0
+    progress = getattr(provider, "progress", False)
+    start = time.perf_counter()
+    if progress:
+        print(f"  FEM slopes: {len(items)} segments (one factorisation each) on "
+              f"{where(n_workers, scheduler, n_workers > 0)}", file=sys.stderr, flush=True)
+
+    def on_done(item, result):
+        results[item[0], item[1]] = result
+
+    # the leaves first, the cheap strut last (as the builds)
+    ordered = sorted(items, key=lambda item: item[1] == 2)
+    failures = run_jobs(ordered, _slopes_job, on_done, key=lambda item: f"{hash(item[0]) & 0xffffffff:08x}-{item[1]}",
+                        workers=n_workers, scheduler=scheduler, job_options={**options, "solver_threads": cores_each},
+                        task_prefix="fem-slopes", in_threads=n_workers > 0)
+    if failures:
+        raise RuntimeError(f"{len(failures)} FEM slope job(s) failed, e.g. {next(iter(failures.values()))}")
+    if progress:
+        print(f"  FEM slopes: done in {time.perf_counter() - start:.1f} s", file=sys.stderr, flush=True)
+
+    out = np.zeros((len(mech.chains), len(DIMENSION_SYMBOLS), 8))
+    for c in range(len(mech.chains)):
+        if design[c] != c:
+            continue
+        nominal = mech.chains[c].chain
+        base = [results[nominal, index] for index in range(3)]
+        for k, symbol in enumerate(DIMENSION_SYMBOLS):
+            factors = {}
+            step = TANGENT_STEP if secant is None else secant[symbol]
+            for sign in (1, -1):
+                s = sign * step
+                moved = _moved(nominal, symbol, s)
+                # the five slices: 0, 1, 2 meshed, 3 and 4 the mirror images of 1 and 0
+                linear = [base[i]["stiffness"] + s * base[i]["slopes"][k] for i in range(3)]
+                segments = linear + [mirror_segment_stiffness(linear[1]), mirror_segment_stiffness(linear[0])]
+                richer = _composed_compliance(moved, segments)
+                closed = chain_compliance_matrix(moved, mech.material)
+                factors[sign] = np.array([richer[i, j] / closed[i, j] for i, j in ENTRY_INDEX.values()])
+            out[c, k] = (factors[1] - factors[-1]) / (2.0 * step)
+    return out[design]
+
+
 def corrected_space(space: ParameterSpace, provider: StiffnessProvider, *, slopes: bool = False) -> ParameterSpace:
     """``space`` whose model uses ``compliance_factors(space, provider)``; slopes: with their
     ``compliance_slopes`` too (the factors then follow the dimensions, docs/model.md 7)."""
-    factors = compliance_factors(space, provider)
+    # the slopes first: the condensed slopes solve the nominal segments once and leave them in the
+    # cache under the provider's own keys, so the factors that follow build only what they lack
+    # (the builds ask for the nominal segments of the slices a dimension leaves as they were:
+    # the same segments either way, the same numbers)
     extra = {"compliance_slopes": tuple(float(v) for v in compliance_slopes(space, provider).ravel())} if slopes else {}
+    factors = compliance_factors(space, provider)
     return dataclasses.replace(space, compliance_factors=tuple(tuple(float(v) for v in row) for row in factors),
                                **extra)
 

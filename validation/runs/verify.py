@@ -218,17 +218,25 @@ def _paper_identification(measurement: Measurement, angles: np.ndarray, space: P
 
 
 def _estimated_identification(measurement: Measurement, angles: np.ndarray, space: ParameterSpace,
-                              settings: VerifySettings, log, progress: bool = False) -> dict[str, Any]:
+                              settings: VerifySettings, log, progress: bool = False,
+                              budget=None) -> dict[str, Any]:
     """MAP (cross-validated prior) or free least squares over all sources (``identify_all``)."""
     start = time.perf_counter()
     if settings.sources is not None:
         space = space.subset(settings.sources)
+    made = []  # the ErrorBudget the callable makes (for the report)
+    model_error = None
+    if budget is not None:
+        def model_error(values: np.ndarray) -> np.ndarray:
+            made.append(budget(values))
+            return made[-1].samples
     with progress_bar(None, f"{settings.method} estimate", enabled=progress, unit="fit") as bar:
         def plan(total: int) -> None:
             bar.total = total
         result = identify_all(space, measurement.inputs, angles, measurement.leg,
                               IdentificationSettings(method=settings.method, prior_scale=settings.prior_scale),
-                              log=log, on_fit=lambda: bar.update(1), on_plan=plan)
+                              log=log, on_fit=lambda: bar.update(1), on_plan=plan,
+                              model_error=model_error)
     fit = result.estimate
     log(f"verify: {settings.method} estimate of {space.n_params} sources, {fit.n_evaluations} model runs in "
         f"{time.perf_counter() - start:.1f} s; {result.base.n_base} base parameters")
@@ -251,7 +259,10 @@ def _estimated_identification(measurement: Measurement, angles: np.ndarray, spac
                 "discrepancy": None if fit.discrepancy is None else {
                     **fit.discrepancy.as_dict(),
                     "error_bars": "sandwich covariance with the noise + model-discrepancy covariance "
-                                  "(flexcal.calibration.discrepancy)"},
+                                  "(flexcal.calibration.discrepancy)"
+                                  + ("" if budget is None else " + the model-error budget (flexcal.validation.runs."
+                                                               "error_budget)"),
+                    "model_error_budget_samples": made[-1].as_dict() if made else None},
                 "effective_parameters": fit.p_eff, "n_observations": fit.n_observations,
                 "base_parameters": result.base.as_dict()}}}
 
@@ -292,13 +303,15 @@ def _base_table(identification, space: ParameterSpace, presets: np.ndarray | Non
 
 def run_verify(measurement: Measurement, space: ParameterSpace, settings: VerifySettings = VerifySettings(), *,
                presets: np.ndarray | None = None, truth: TruthCurve | None = None,
-               progress: bool = True, log: Callable[..., None] | None = None) -> VerifyResult:
+               progress: bool = True, log: Callable[..., None] | None = None, budget=None) -> VerifyResult:
     """Identify and report on one measurement: ``settings.method`` "map" (default: all sources,
     cross-validated prior), "free" (all sources, no prior) or "paper" (Sobol screening +
     improved PSO); ``presets`` (45,) [SI] are the true values when the data are synthetic
     (for the error columns and z-scores); ``truth`` the curve and values the model-form
     floor is measured against (``runs.form_floor``; default: the measured curve with
-    ``presets``, and "not available" without them)."""
+    ``presets``, and "not available" without them); budget: values (45,) [SI] of the estimate
+    -> its model-error budget on the measurement's inputs (``runs.error_budget.ErrorBudget``),
+    for the error bars of "map" and "free" (None: the residual-fitted discrepancy alone)."""
     from flexcal.model.forward import CLASS_NAMES, forward, ideal_angles
 
     if log is None:  # progress bars on stderr, the stage lines on stdout
@@ -308,7 +321,7 @@ def run_verify(measurement: Measurement, space: ParameterSpace, settings: Verify
     if settings.method == "paper":
         core = _paper_identification(measurement, angles, space, settings, log, progress)
     else:
-        core = _estimated_identification(measurement, angles, space, settings, log, progress)
+        core = _estimated_identification(measurement, angles, space, settings, log, progress, budget)
     values, fitted = core["values"], core["fitted"]
     residual = fitted - angles
     fit_rms = float(np.sqrt(np.mean(residual ** 2)))
