@@ -58,6 +58,7 @@ from .mesh_snap import _jacobian_ratios, snap_to_part
 from .structured import _EDGES, _folded_tets, _straighten, grid_tet_mesh
 
 __all__ = ["ChainGrid", "cells_through", "chain_grid", "chain_mapped_supported", "mapped_mesh_chain",
+           "mapped_mesh_chain_mirror_part",
            "DEFAULT_CHAIN_OPTIONS", "FAST_CHAIN_OPTIONS",
            "PROTOTYPE_CHAIN_OPTIONS", "EXTRA_CHAIN_OPTIONS"]
 
@@ -376,6 +377,41 @@ def mapped_mesh_chain(params, *, elements_through_thickness: float = 7, refineme
                      n_cells=[len(grid.x) - 1, len(grid.p) - 1, len(grid.q) - 1], n_hexes=int(grid.active.sum())),
         timings=timings, **measured)
     return mesh, report
+
+
+def mapped_mesh_chain_mirror_part(params, *, elements_through_thickness: float = 7,
+                                  **options) -> tuple[TetMesh, tuple[int, ...]]:
+    """(mesh, mirror axes): the mapped mesh's part on y >= 0 and / or z >= 0, for a
+    condensation that uses the part's two mirror planes (``flexcal.fem.condense.
+    mirrored_chain_stiffness``). A chain or segment is symmetric about y = 0 and z = 0 (its
+    leaves are centred in the square section); a mirror axis is one whose grid lines hold
+    the exact 0 (an even number of cells across the section: on the prototype's grid both
+    for the L leaf segments, 8 through, z alone for the D leaf segments, 7 through, whose
+    thin axis y has its middle inside a cell), so the part's nodes on the plane have the
+    coordinate 0 exactly. The part keeps the full mesh's cells in that quadrant or half
+    (the same Kuhn split in every cell); its mirror images make a conforming mesh of the
+    whole part, the full grid with the diagonals of the mirrored cells mirrored.
+    Options and n as ``mapped_mesh_chain`` (no report, no measuring)."""
+    n_float = float(elements_through_thickness)
+    if not (math.isfinite(n_float) and n_float >= 1):
+        raise ValueError(f"elements_through_thickness={elements_through_thickness!r} must be >= 1")
+    unknown = set(options) - set(DEFAULT_CHAIN_OPTIONS) - set(EXTRA_CHAIN_OPTIONS)
+    if unknown:
+        raise ValueError(f"unknown chain mesh options {sorted(unknown)}")
+    grid = chain_grid(params, math.ceil(n_float - 1e-9), **{**DEFAULT_CHAIN_OPTIONS, **options})
+    p, q, active = grid.p, grid.q, grid.active
+    axes = []
+    if np.any(p == 0.0):
+        axes.append(1)
+        active, p = active[:, p[:-1] >= 0.0], p[p >= 0.0]
+    if np.any(q == 0.0):
+        axes.append(2)
+        active, q = active[:, :, q[:-1] >= 0.0], q[q >= 0.0]
+    part = ChainGrid(x=grid.x, p=p, q=q, active=active, cores=grid.cores)
+    parent, tets, _ = _quadratic_mesh(part)
+    nodes = part.physical(parent)
+    _unfold(nodes, parent, tets)
+    return TetMesh(nodes, tets), tuple(axes)
 
 
 def _unfold(nodes: np.ndarray, parent: np.ndarray, tets: np.ndarray) -> int:

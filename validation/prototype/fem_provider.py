@@ -71,7 +71,7 @@ def _segment_parts(segment: ChainSegment, material: Material, elements_through_t
         raise ValueError(f"mesher={mesher!r} must be one of {', '.join(MESHERS)}")
     return {"kind": "chain_segment_stiffness", "segment": segment, "material": material,
             "mesh": {"mesher": mesher, "elements_through_thickness": float(elements_through_thickness),
-                     **({"options": PROTOTYPE_CHAIN_OPTIONS} if mesher == "mapped" else {})}}
+                     **({"options": PROTOTYPE_CHAIN_OPTIONS, "mirrored": True} if mesher == "mapped" else {})}}
 
 
 def segment_cache_key(segment: ChainSegment, material: Material = STEEL, *,
@@ -117,20 +117,26 @@ def segment_stiffness_fem(segment: ChainSegment, material: Material = STEEL, *,
         from flexcal.fem.condense import chain_stiffness
         from flexcal.geometry.exact import end_planes, reference_points
 
-        if mesher == "mapped":
-            from flexcal.fem.mesh_mapped_chain import PROTOTYPE_CHAIN_OPTIONS, mapped_mesh_chain
-
-            mesh, _report = mapped_mesh_chain(segment, elements_through_thickness=elements_through_thickness,
-                                              measure=False, quality=False, **PROTOTYPE_CHAIN_OPTIONS)
-        else:
-            from flexcal.fem.mesh import mesh_part
-            from flexcal.geometry.solids import segment_solid
-
-            with _CAD_LOCK:
-                part = segment_solid(segment)
-            mesh, _report = mesh_part(part, elements_through_thickness=elements_through_thickness,
-                                      num_threads=mesher_threads)
         planes, points = end_planes(segment), reference_points(segment)
+        if mesher == "mapped":
+            # MIRRORED: the segment is symmetric about y = 0 and z = 0; its mapped mesh's part
+            # on the non-negative side of the planes whose grid holds the exact 0, condensed
+            # once per parity class (docs/meshing.md, "The prototype's grid, mirrored")
+            from flexcal.fem.condense import mirrored_chain_stiffness
+            from flexcal.fem.mesh_mapped_chain import PROTOTYPE_CHAIN_OPTIONS, mapped_mesh_chain_mirror_part
+
+            part, axes = mapped_mesh_chain_mirror_part(segment, elements_through_thickness=elements_through_thickness,
+                                                       **PROTOTYPE_CHAIN_OPTIONS)
+            stiffness = mirrored_chain_stiffness(part, material, planes["A"], points["A"], planes["B"], points["B"],
+                                                 axes)
+            return {"stiffness": 0.5 * (stiffness + stiffness.T)}
+        from flexcal.fem.mesh import mesh_part
+        from flexcal.geometry.solids import segment_solid
+
+        with _CAD_LOCK:
+            part = segment_solid(segment)
+        mesh, _report = mesh_part(part, elements_through_thickness=elements_through_thickness,
+                                  num_threads=mesher_threads)
         stiffness = chain_stiffness(mesh, material, planes["A"], points["A"], planes["B"], points["B"])
         return {"stiffness": 0.5 * (stiffness + stiffness.T)}
 
