@@ -130,7 +130,8 @@ def test_the_prototypes_grid_within_half_a_percent_of_the_converged_stiffness(na
     (``segment_stiffness_fem``: ``DEFAULT_ELEMENTS_THROUGH`` asked for, ``PROTOTYPE_CHAIN_OPTIONS``;
     its own empty cache), against the nested reference computed here (measured 2026-11-27:
     L1 0.435 % and 0.437 %, D1 0.451 % and 0.479 %; session 13's fast grid 0.848 %, 0.843 %,
-    0.606 %, 0.578 %)."""
+    0.606 %, 0.578 %; since session 17 the provider condenses the mirror part,
+    ``mirrored_chain_stiffness``: L1 0.446 % and 0.448 %, D1 0.451 % and 0.479 %, 2026-11-28)."""
     from flexcal.validation.prototype.fem_provider import segment_stiffness_fem
 
     limit, mask = _reference(name, k)
