@@ -38,7 +38,10 @@ __all__ = ["fem_provider", "segment_stiffness_fem", "mirror_segment_stiffness", 
 # ``cells_through``) on the prototype's grid (``PROTOTYPE_CHAIN_OPTIONS``, session 16): every
 # dominant entry of the 12 x 12 of the L1 and D1 leaf segments within 0.48 % of the Richardson
 # limit of a nested reference sequence (session 13's fast grid at 6 through: 0.85 %), at
-# 75k-86k DOF per leaf segment; docs/meshing.md, "The prototype's grid". The calibration
+# 75k-86k DOF per leaf segment; docs/meshing.md, "The prototype's grid". Since session 17
+# condensed on the mirror part of that grid (a quarter for the L leaf segments, a half for the
+# D ones; MIRRORED below): L1 0.446 % / 0.448 %, D1 unchanged, 0.46x main's cold-truth CPU
+# (docs/meshing.md, "The prototype's grid, mirrored"; docs/scale.md, session 17). The calibration
 # model's FEM factors come from this same provider (validation/runs/model_correction.py),
 # so they moved with it. fTetWild keeps its own default (TETWILD_ELEMENTS_THROUGH).
 DEFAULT_ELEMENTS_THROUGH = 7
