@@ -58,7 +58,9 @@ from .mesh_snap import _jacobian_ratios, snap_to_part
 from .structured import _EDGES, _folded_tets, _straighten, grid_tet_mesh
 
 __all__ = ["ChainGrid", "cells_through", "chain_grid", "chain_mapped_supported", "mapped_mesh_chain",
-           "DEFAULT_CHAIN_OPTIONS", "FAST_CHAIN_OPTIONS"]
+           "mapped_mesh_chain_mirror_part",
+           "DEFAULT_CHAIN_OPTIONS", "FAST_CHAIN_OPTIONS",
+           "PROTOTYPE_CHAIN_OPTIONS", "EXTRA_CHAIN_OPTIONS"]
 
 # The defaults of the chain mapper, chosen by accuracy with n = 7 through the neck
 # (docs/meshing.md, "Convergence": against the Richardson limit of a nested reference
@@ -69,14 +71,23 @@ __all__ = ["ChainGrid", "cells_through", "chain_grid", "chain_mapped_supported",
 # which bought the most accuracy per DOF of the in-plane sizes tried on L1.
 DEFAULT_CHAIN_OPTIONS = {"aspect": 3.0, "n_arc": 8, "width_aspect": 12.0, "side_aspect": 1.5, "edge_aspect": 3.0,
                          "grading": 0.5, "max_aspect": 24.0, "slenderness": 5.5}
-# The grid of the virtual prototype's segments and the structure assessment (session 13's:
-# n as given, side cells of 3 neck cells), used at n = 6: L1's leaf segments within 0.85 %
-# of the nested limit, D1's 0.61 % (docs/meshing.md, "Convergence"), at a third of the CPU
-# of the accurate default (cold `flexcal truth --scenario table1` 54 s against 162 s CPU).
-# The prototype keeps it because the calibration model's FEM factors come from the same
-# segments (the mesh error is in both) and Table 1 does not move between the two grids
-# (seed 1: 0.03 standard errors), while the cold main job would take ~3x longer.
+# Session 13's grid (n as given, side cells of 3 neck cells), used at n = 6: L1's leaf segments
+# within 0.85 % of the nested limit, D1's 0.61 % (docs/meshing.md, "Convergence"). The
+# structure assessment (validation/structure/fem_segments.py) still uses it; the virtual
+# prototype's segments did until session 15 and have PROTOTYPE_CHAIN_OPTIONS since.
 FAST_CHAIN_OPTIONS = {**DEFAULT_CHAIN_OPTIONS, "side_aspect": 3.0, "slenderness": None}
+# The grid of the virtual prototype's segments (session 16), used at n = 7 asked for (8 through
+# the L leaves, 7 through the D leaves): the accurate default's cells through, but its DOF
+# moved to where they buy accuracy (docs/meshing.md, "The prototype's grid"): side cells of
+# 1 neck cell graded fast (2 per unit distance) into the width, blocks graded twice as fast
+# (block_grading 1), no refinement at the part's end faces and section rims (rim_aspect
+# 24 = max_aspect), 6 cells per fillet arc, flat-part cells 2 neck cells long. Every dominant
+# entry of the L1 and D1 leaf segments within 0.48 % of the nested limit at 75k-86k DOF.
+PROTOTYPE_CHAIN_OPTIONS = {**DEFAULT_CHAIN_OPTIONS, "aspect": 2.0, "n_arc": 6, "side_aspect": 1.0, "grading": 2.0,
+                           "rim_aspect": 24.0, "block_grading": 1.0}
+# Options of ``chain_grid`` that the defaults leave out (None there: as the defaults'
+# edge_aspect and grading), so the default grid and its cache keys stay as they were.
+EXTRA_CHAIN_OPTIONS = ("rim_aspect", "block_grading", "section_grading")
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -138,7 +149,8 @@ def _graded(a: float, b: float, h_a: float | None, h_b: float | None, grading: f
 
 
 def _section_lines(axis: int, leaves: list[LeafPiece], half_section: float, n: int, width_cell: float,
-                   side_cell: float, edge_cell: float, grading: float, h_max: float) -> tuple[np.ndarray, float | None]:
+                   side_cell: float, edge_cell: float, grading: float, h_max: float,
+                   outer_grading: float | None = None) -> tuple[np.ndarray, float | None]:
     """Cross-section lines along ``axis`` (1 = y, 2 = z) [m], symmetric, and the half core
     height [m] (None when no leaf is thin along this axis): n uniform cells across the core
     t + 2a of the leaves thin along this axis, then graded towards the side faces of the
@@ -152,8 +164,9 @@ def _section_lines(axis: int, leaves: list[LeafPiece], half_section: float, n: i
         if len(heights) > 1:
             raise ValueError("the chain mapper needs every leaf thin along one axis to reach the same height t + 2a")
         core = 0.5 * heights.pop()
+    outer = grading if outer_grading is None else outer_grading
     if not thin and not wide:
-        half = _graded(0.0, half_section, None, edge_cell, grading, h_max)[1:]
+        half = _graded(0.0, half_section, None, edge_cell, outer, h_max)[1:]
         return np.concatenate([-half[::-1], [0.0], half]), None
     if core is not None:
         # (2 k - n) / n exactly: symmetric, and 0 exactly in the middle for even n, where
@@ -171,7 +184,7 @@ def _section_lines(axis: int, leaves: list[LeafPiece], half_section: float, n: i
             reach = half_width
         size = side_cell
     if half_section > reach * (1 + 1e-9):  # graded towards the section's edges too (the end faces' rims)
-        positive.append(_graded(reach, half_section, size, edge_cell, grading, h_max)[1:])
+        positive.append(_graded(reach, half_section, size, edge_cell, outer, h_max)[1:])
     half = np.concatenate(positive)
     half = half[half > 0]
     middle = [0.0] if (core is None or n % 2 == 0) else []
@@ -219,7 +232,8 @@ def cells_through(params, n_thickness: int, slenderness: float | None) -> int:
 
 def chain_grid(params, n_thickness: int, *, aspect: float = 3.0, n_arc: int = 8, width_aspect: float = 12.0,
                side_aspect: float = 1.5, edge_aspect: float = 3.0, grading: float = 0.5, max_aspect: float = 24.0,
-               slenderness: float | None = 5.5, refinement: int = 1) -> ChainGrid:
+               slenderness: float | None = 5.5, refinement: int = 1, rim_aspect: float | None = None,
+               block_grading: float | None = None, section_grading: float | None = None) -> ChainGrid:
     """The parent grid of a chain or segment (module docstring).
 
     n_thickness: cells across every leaf's core (so across t at its neck), raised by
@@ -232,7 +246,11 @@ def chain_grid(params, n_thickness: int, *, aspect: float = 3.0, n_arc: int = 8,
     grading: growth of the cell size per unit distance away from the leaves, the end faces
     and the section's edges [-]; max_aspect: largest cell / neck cell (at most half the
     section); refinement: every cell split
-    into refinement^3 (nested meshes for convergence studies).
+    into refinement^3 (nested meshes for convergence studies); rim_aspect: the cells at the
+    part's end faces and the section's rims / neck cell (None: edge_aspect; max_aspect: no
+    refinement there); block_grading: the grading along x in the blocks (None: grading);
+    section_grading: the grading of the section lines outside the leaves' footprint (None:
+    block_grading). The last three are the prototype's (``PROTOTYPE_CHAIN_OPTIONS``).
     """
     if not chain_mapped_supported(params):
         raise ValueError(f"the chain mapper takes a FlexureChain or ChainSegment of leaves, got {type(params).__name__}")
@@ -246,9 +264,14 @@ def chain_grid(params, n_thickness: int, *, aspect: float = 3.0, n_arc: int = 8,
     h_max = min(max_aspect * cell, half_section)
     width_cell = min(width_aspect * cell, h_max)
     edge_cell = min(edge_aspect * cell, h_max)
+    rim_cell = edge_cell if rim_aspect is None else min(rim_aspect * cell, h_max)
+    block_grading = grading if block_grading is None else block_grading
+    outer_grading = block_grading if section_grading is None else section_grading
     side_cell = min(side_aspect * cell, h_max)
-    p, core_y = _section_lines(1, leaves, half_section, n, width_cell, side_cell, edge_cell, grading, h_max)
-    q, core_z = _section_lines(2, leaves, half_section, n, width_cell, side_cell, edge_cell, grading, h_max)
+    p, core_y = _section_lines(1, leaves, half_section, n, width_cell, side_cell, rim_cell, grading, h_max,
+                               outer_grading)
+    q, core_z = _section_lines(2, leaves, half_section, n, width_cell, side_cell, rim_cell, grading, h_max,
+                               outer_grading)
     # x: leaves as the hinge mapper, blocks graded away from the leaf faces
     x_parts: list[np.ndarray] = []
     for i, piece in enumerate(ps):
@@ -257,9 +280,11 @@ def chain_grid(params, n_thickness: int, *, aspect: float = 3.0, n_arc: int = 8,
         else:
             def face_cell(j: int) -> float | None:  # fine at a leaf's face and at the part's end
                 # faces (where the stress is singular: re-entrant edges, rims of the coupled faces)
-                return edge_cell if j < 0 or j >= len(ps) or isinstance(ps[j], LeafPiece) else None
+                if j < 0 or j >= len(ps):
+                    return rim_cell
+                return edge_cell if isinstance(ps[j], LeafPiece) else None
 
-            lines = _graded(piece.x0, piece.x1, face_cell(i - 1), face_cell(i + 1), grading, h_max)
+            lines = _graded(piece.x0, piece.x1, face_cell(i - 1), face_cell(i + 1), block_grading, h_max)
         x_parts.append(lines if not x_parts else lines[1:])
     x = np.concatenate(x_parts)
     r = int(refinement)
@@ -315,9 +340,10 @@ def mapped_mesh_chain(params, *, elements_through_thickness: float = 7, refineme
         raise ValueError(f"elements_through_thickness={elements_through_thickness!r} must be >= 1")
     if int(refinement) != refinement or refinement < 1:
         raise ValueError(f"refinement={refinement!r} must be a positive integer")
-    unknown = set(options) - set(DEFAULT_CHAIN_OPTIONS)
+    unknown = set(options) - set(DEFAULT_CHAIN_OPTIONS) - set(EXTRA_CHAIN_OPTIONS)
     if unknown:
-        raise ValueError(f"unknown chain mesh options {sorted(unknown)}; use {sorted(DEFAULT_CHAIN_OPTIONS)}")
+        raise ValueError(f"unknown chain mesh options {sorted(unknown)}; use "
+                         f"{sorted(set(DEFAULT_CHAIN_OPTIONS) | set(EXTRA_CHAIN_OPTIONS))}")
     settings = {**DEFAULT_CHAIN_OPTIONS, **options}
     n = math.ceil(n_float - 1e-9)
     timings: dict[str, float] = {}
@@ -351,6 +377,41 @@ def mapped_mesh_chain(params, *, elements_through_thickness: float = 7, refineme
                      n_cells=[len(grid.x) - 1, len(grid.p) - 1, len(grid.q) - 1], n_hexes=int(grid.active.sum())),
         timings=timings, **measured)
     return mesh, report
+
+
+def mapped_mesh_chain_mirror_part(params, *, elements_through_thickness: float = 7,
+                                  **options) -> tuple[TetMesh, tuple[int, ...]]:
+    """(mesh, mirror axes): the mapped mesh's part on y >= 0 and / or z >= 0, for a
+    condensation that uses the part's two mirror planes (``flexcal.fem.condense.
+    mirrored_chain_stiffness``). A chain or segment is symmetric about y = 0 and z = 0 (its
+    leaves are centred in the square section); a mirror axis is one whose grid lines hold
+    the exact 0 (an even number of cells across the section: on the prototype's grid both
+    for the L leaf segments, 8 through, z alone for the D leaf segments, 7 through, whose
+    thin axis y has its middle inside a cell), so the part's nodes on the plane have the
+    coordinate 0 exactly. The part keeps the full mesh's cells in that quadrant or half
+    (the same Kuhn split in every cell); its mirror images make a conforming mesh of the
+    whole part, the full grid with the diagonals of the mirrored cells mirrored.
+    Options and n as ``mapped_mesh_chain`` (no report, no measuring)."""
+    n_float = float(elements_through_thickness)
+    if not (math.isfinite(n_float) and n_float >= 1):
+        raise ValueError(f"elements_through_thickness={elements_through_thickness!r} must be >= 1")
+    unknown = set(options) - set(DEFAULT_CHAIN_OPTIONS) - set(EXTRA_CHAIN_OPTIONS)
+    if unknown:
+        raise ValueError(f"unknown chain mesh options {sorted(unknown)}")
+    grid = chain_grid(params, math.ceil(n_float - 1e-9), **{**DEFAULT_CHAIN_OPTIONS, **options})
+    p, q, active = grid.p, grid.q, grid.active
+    axes = []
+    if np.any(p == 0.0):
+        axes.append(1)
+        active, p = active[:, p[:-1] >= 0.0], p[p >= 0.0]
+    if np.any(q == 0.0):
+        axes.append(2)
+        active, q = active[:, :, q[:-1] >= 0.0], q[q >= 0.0]
+    part = ChainGrid(x=grid.x, p=p, q=q, active=active, cores=grid.cores)
+    parent, tets, _ = _quadratic_mesh(part)
+    nodes = part.physical(parent)
+    _unfold(nodes, parent, tets)
+    return TetMesh(nodes, tets), tuple(axes)
 
 
 def _unfold(nodes: np.ndarray, parent: np.ndarray, tets: np.ndarray) -> int:

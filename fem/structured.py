@@ -218,5 +218,11 @@ def _folded_tets(nodes: np.ndarray, tets: np.ndarray) -> np.ndarray:
     from .elements import REFERENCE_NODES, TET_14POINT, jacobians, shape_gradients
 
     points = np.vstack([REFERENCE_NODES, TET_14POINT.points])
-    det = np.linalg.det(jacobians(nodes[tets], shape_gradients(points)))
+    J = jacobians(nodes[tets], shape_gradients(points))
+    # the 3 x 3 determinants in closed form (cofactors of the first row): np.linalg.det's
+    # batched LU took 1.1 s of a cold table1 truth's 18 segment meshes (profiled, session 17);
+    # only the sign is used, and det J >= 0.77 of its mean on the prototype's leaves
+    det = (J[..., 0, 0] * (J[..., 1, 1] * J[..., 2, 2] - J[..., 1, 2] * J[..., 2, 1])
+           - J[..., 0, 1] * (J[..., 1, 0] * J[..., 2, 2] - J[..., 1, 2] * J[..., 2, 0])
+           + J[..., 0, 2] * (J[..., 1, 0] * J[..., 2, 1] - J[..., 1, 1] * J[..., 2, 0]))
     return np.flatnonzero((det <= 0.0).any(axis=1))

@@ -34,13 +34,17 @@ __all__ = ["fem_provider", "segment_stiffness_fem", "mirror_segment_stiffness", 
            "canonical_segment", "segment_cache_key", "build_segments", "build_segment_job", "segment_build_cost",
            "plan_local_builds", "BUILD_MEMORY_BYTES", "DEFAULT_MESHER", "MESHERS", "TETWILD_ELEMENTS_THROUGH"]
 
-# 6 cells through the thinnest leaf section of the mapped multi-block mesh, on its fast grid
-# (``FAST_CHAIN_OPTIONS``, session 13's): every dominant entry of the 12 x 12 of the L1 leaf
-# segments within 0.85 % of the Richardson limit of a nested reference sequence, D1's 0.61 %,
-# at a third of the CPU of the mapper's accurate default (7 asked for, raised on stubby
-# leaves: 0.49 %); docs/meshing.md, "Convergence" (why the prototype keeps the fast grid).
-# fTetWild keeps its own default (TETWILD_ELEMENTS_THROUGH).
-DEFAULT_ELEMENTS_THROUGH = 6
+# 7 cells through the thinnest leaf section asked for (raised to 8 on the stubby L leaves,
+# ``cells_through``) on the prototype's grid (``PROTOTYPE_CHAIN_OPTIONS``, session 16): every
+# dominant entry of the 12 x 12 of the L1 and D1 leaf segments within 0.48 % of the Richardson
+# limit of a nested reference sequence (session 13's fast grid at 6 through: 0.85 %), at
+# 75k-86k DOF per leaf segment; docs/meshing.md, "The prototype's grid". Since session 17
+# condensed on the mirror part of that grid (a quarter for the L leaf segments, a half for the
+# D ones; MIRRORED below): L1 0.446 % / 0.448 %, D1 unchanged, 0.46x main's cold-truth CPU
+# (docs/meshing.md, "The prototype's grid, mirrored"; docs/scale.md, session 17). The calibration
+# model's FEM factors come from this same provider (validation/runs/model_correction.py),
+# so they moved with it. fTetWild keeps its own default (TETWILD_ELEMENTS_THROUGH).
+DEFAULT_ELEMENTS_THROUGH = 7
 # 3 quadratic tets through the thinnest leaf section of a fTetWild mesh: within ~0.3 % of the
 # converged bending compliance on the reference notch hinge after snapping (docs/meshing.md),
 # at a third of the cost of 4; the leaf segment D1 [0, m1]: within 0.4 % of the mapped
@@ -64,13 +68,13 @@ def mirror_segment_stiffness(stiffness: np.ndarray) -> np.ndarray:
 
 def _segment_parts(segment: ChainSegment, material: Material, elements_through_thickness: float,
                    mesher: str = DEFAULT_MESHER) -> dict:
-    from flexcal.fem.mesh_mapped_chain import FAST_CHAIN_OPTIONS
+    from flexcal.fem.mesh_mapped_chain import PROTOTYPE_CHAIN_OPTIONS
 
     if mesher not in MESHERS:
         raise ValueError(f"mesher={mesher!r} must be one of {', '.join(MESHERS)}")
     return {"kind": "chain_segment_stiffness", "segment": segment, "material": material,
             "mesh": {"mesher": mesher, "elements_through_thickness": float(elements_through_thickness),
-                     **({"options": FAST_CHAIN_OPTIONS} if mesher == "mapped" else {})}}
+                     **({"options": PROTOTYPE_CHAIN_OPTIONS, "mirrored": True} if mesher == "mapped" else {})}}
 
 
 def segment_cache_key(segment: ChainSegment, material: Material = STEEL, *,
@@ -116,20 +120,26 @@ def segment_stiffness_fem(segment: ChainSegment, material: Material = STEEL, *,
         from flexcal.fem.condense import chain_stiffness
         from flexcal.geometry.exact import end_planes, reference_points
 
-        if mesher == "mapped":
-            from flexcal.fem.mesh_mapped_chain import FAST_CHAIN_OPTIONS, mapped_mesh_chain
-
-            mesh, _report = mapped_mesh_chain(segment, elements_through_thickness=elements_through_thickness,
-                                              measure=False, quality=False, **FAST_CHAIN_OPTIONS)
-        else:
-            from flexcal.fem.mesh import mesh_part
-            from flexcal.geometry.solids import segment_solid
-
-            with _CAD_LOCK:
-                part = segment_solid(segment)
-            mesh, _report = mesh_part(part, elements_through_thickness=elements_through_thickness,
-                                      num_threads=mesher_threads)
         planes, points = end_planes(segment), reference_points(segment)
+        if mesher == "mapped":
+            # MIRRORED: the segment is symmetric about y = 0 and z = 0; its mapped mesh's part
+            # on the non-negative side of the planes whose grid holds the exact 0, condensed
+            # once per parity class (docs/meshing.md, "The prototype's grid, mirrored")
+            from flexcal.fem.condense import mirrored_chain_stiffness
+            from flexcal.fem.mesh_mapped_chain import PROTOTYPE_CHAIN_OPTIONS, mapped_mesh_chain_mirror_part
+
+            part, axes = mapped_mesh_chain_mirror_part(segment, elements_through_thickness=elements_through_thickness,
+                                                       **PROTOTYPE_CHAIN_OPTIONS)
+            stiffness = mirrored_chain_stiffness(part, material, planes["A"], points["A"], planes["B"], points["B"],
+                                                 axes)
+            return {"stiffness": 0.5 * (stiffness + stiffness.T)}
+        from flexcal.fem.mesh import mesh_part
+        from flexcal.geometry.solids import segment_solid
+
+        with _CAD_LOCK:
+            part = segment_solid(segment)
+        mesh, _report = mesh_part(part, elements_through_thickness=elements_through_thickness,
+                                  num_threads=mesher_threads)
         stiffness = chain_stiffness(mesh, material, planes["A"], points["A"], planes["B"], points["B"])
         return {"stiffness": 0.5 * (stiffness + stiffness.T)}
 

@@ -269,19 +269,17 @@ def segment_stiffness_slopes(chain: FlexureChain, index: int, symbols=None, *, m
     slice ``index`` (0, 1, 2: the meshed first half, ``section_nodes``) of ``chain`` and its
     derivative per relative change of each dimension ``symbols`` (``DIMENSION_SYMBOLS`` by
     default), cached (its own key, which names the method and ``step``). One mapped mesh and
-    one factorisation (``fem.condense.solve_chain``, the same numbers as the provider's build,
-    whose cache entry it writes too); each dimension then costs two meshes and assemblies
+    one factorisation (``fem.condense.solve_chain`` on the whole mesh of ``FAST_CHAIN_OPTIONS``;
+    not the provider's numbers, whose cache entry it leaves alone); each dimension then costs two meshes and assemblies
     (``fem.condense.chain_stiffness_derivative``), or none when it leaves the slice as it was."""
     import contextlib
 
-    from flexcal.fem.cache import cached, keep_cached, load_cached
+    from flexcal.fem.cache import cached
     from flexcal.fem.condense import MorphedChain, chain_stiffness_derivative, solve_chain
     from flexcal.fem.mesh_mapped_chain import FAST_CHAIN_OPTIONS, mapped_mesh_chain
     from flexcal.fem.solve import solver_threads as mkl_threads
     from flexcal.geometry.exact import end_planes, pieces, reference_points
     from flexcal.model.parameters import DIMENSION_SYMBOLS
-
-    from ..prototype.fem_provider import segment_cache_key
 
     if mesher != "mapped":
         raise ValueError("the condensed slopes need the mapped mesher (a mesh whose nodes a dimension moves)")
@@ -303,10 +301,9 @@ def segment_stiffness_slopes(chain: FlexureChain, index: int, symbols=None, *, m
         with mkl_threads(solver_threads) if solver_threads else contextlib.nullcontext():
             solution = solve_chain(mesh, material, planes["A"], points["A"], planes["B"], points["B"])
         stiffness = 0.5 * (solution.stiffness + solution.stiffness.T)
-        key = segment_cache_key(segment, material, elements_through_thickness=elements_through_thickness,
-                                mesher=mesher)
-        if load_cached(key, cache_directory) is None:  # the provider's own entry: the same numbers
-            keep_cached(key, {"stiffness": stiffness}, cache_directory)
+        # not written under the provider's key (segment_cache_key): the provider's segments are on
+        # PROTOTYPE_CHAIN_OPTIONS and condensed on their mirror part (session 16 / 17), other
+        # numbers than this whole FAST_CHAIN_OPTIONS mesh's
 
         def same_mesh(other):
             return (other.mesh.nodes.shape == mesh.nodes.shape
