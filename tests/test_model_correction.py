@@ -171,7 +171,8 @@ def test_a_slice_a_dimension_leaves_as_it_was_is_the_nominal_segment_bit_for_bit
 @pytest.mark.slow
 def test_slopes_on_a_coarser_grid_agree_with_the_prototypes_grid():
     """The option of FEM slopes on a coarser mapped grid (3 through) against those on the
-    prototype's grid (6 through, the default), as what they change in the factors at `table1`'s
+    provider's default grid (the prototype's: 7 through on PROTOTYPE_CHAIN_OPTIONS since session
+    16, 6 through on the fast grid before; the docs' figures are of the latter), as what they change in the factors at `table1`'s
     true dimensions (up to +-10 % off nominal): sum_k (slope_coarse - slope_fine)_k (P_k / P0_k - 1),
     per chain and entry, relative to the factor. (Close at the factors, yet the form error on a
     designed trajectory nearly doubles: why 6 through stays the default, docs/model.md 7.) Slow:
