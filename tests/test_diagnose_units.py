@@ -287,3 +287,34 @@ def test_the_ridge_solver_equals_the_augmented_least_squares():
                                    rcond=None)[0]
         # both backward stable; condition ~1e6 times round-off 1e-16, with room
         np.testing.assert_allclose(solve(b), expected, rtol=1e-8, atol=1e-8 * np.abs(expected).max())
+
+
+def test_a_nonlinear_winner_is_screened_at_its_fitted_parameters():
+    """The look-alike test skips effects whose signature space barely meets the winner's. A
+    nonlinear winner (amplitudes times a shape with a free rate, as sensor_settling and creep)
+    has zero columns at zero parameters, so screened there it met no effect, none was tried and
+    the winner counted as separated without a test (sensor_settling's `high` on the designed
+    trajectory, docs/diagnosis.md session 17). Screened at its fitted parameters, a ramp (which
+    the slow exponential imitates) is tried, and the winner is not separated from it."""
+    from flexcal.validation.diagnosis.diagnose import _collinearity
+    from flexcal.validation.diagnosis.separation import SKIP_COSINE, fitted_cosines, separation
+
+    data = _data()
+    n = data.inputs.shape[0]
+    rng = np.random.default_rng(7)
+    lag = ModelTerm(id="lag", parameter_names=("ax", "ay", "az", "k"), parameter_units=("rad",) * 3 + ("1/s",),
+                    scale=np.array([1e-6, 1e-6, 1e-6, 1e-2]),
+                    evaluate=lambda p, d: np.outer(1 - np.exp(-p[3] * d.time), p[:3]))
+    sigma = 0.05e-6
+    residual = np.outer(1 - np.exp(-0.01 * data.time), [2e-6, -1e-6, 1.5e-6]) + rng.normal(size=(n, 3)) * sigma
+    problem = make_problem(residual, np.full(3, sigma), rng.normal(size=(n, 3, 4)) * 1e-6, np.full(4, 1.0), data,
+                           [_linear_double(), lag])
+    at_zero = _collinearity(problem, ["ramp", "lag"])["max_principal_cosine"]["lag"]
+    assert at_zero["ramp"] == 0.0  # the amplitude 0 hides the shape: the screen at zero sees nothing
+    fitted = fitted_cosines(problem, "lag", fit_terms(problem, ["lag"]).params["lag"])
+    assert fitted["ramp"] > SKIP_COSINE  # 1 - exp(-0.01 t) over t = 0..119 s is mostly a ramp
+    folds = [data.leg <= 2, (data.leg == 3) | (data.leg == 4), data.leg >= 5]  # 3 folds: fewer nonlinear fits
+    result = separation(problem, "lag", ["lag"], folds, 0.7, at_zero)
+    assert result["screen"] == "fitted"
+    assert "ramp" in result["closures"]  # tried (skipped before: closures {}, separated True)
+    assert not result["separated"] and result["closest"] == "ramp", result

@@ -22,13 +22,16 @@ import numpy as np
 
 from .which import TERM_PRIOR, FitProblem, _closure, cross_validate, fit_terms
 
-__all__ = ["heldout_linear", "lookalike_closures", "separation", "runner_up", "LOOKALIKE_DRAWS", "RUNNER_UP_RATIO"]
+__all__ = ["heldout_linear", "lookalike_closures", "separation", "fitted_cosines", "runner_up", "LOOKALIKE_DRAWS", "RUNNER_UP_RATIO"]
 
 LOOKALIKE_DRAWS = 2  # random shapes of each left-out effect (seeded): its typical shape, not the data's
 # an effect whose (baseline-residualized, linearized) signature space meets the winner's at a
 # largest principal cosine below this is not tried: a linear winner explains at most cos^2 =
-# 0.36 of any of its signatures in sample, far below the confident closure 0.7 (a nonlinear
-# winner's shape parameters add directions its columns at zero do not show: approximate there)
+# 0.36 of any of its signatures in sample, far below the confident closure 0.7. A nonlinear
+# winner is screened with its columns linearized at its fitted parameters (``fitted_cosines``):
+# at zero they can be zero (an amplitude times a shape: the amplitude 0 hides the shape) or
+# show the shape of the default time constant only, and then every effect was skipped and the
+# test passed without trying one (sensor_settling on the designed trajectory, session 17)
 SKIP_COSINE = 0.6
 # a term outside the winner's group that closes this share of what the winner closes on the data
 # itself (but < the group's 0.9) leaves the answer resting on a 10-20 % difference between two
@@ -109,14 +112,45 @@ def lookalike_closures(problem: FitProblem, winner: str, others: Sequence[str], 
     return out
 
 
+def _residualized_columns(problem: FitProblem, columns: np.ndarray) -> np.ndarray:
+    """(3 n, k) whitened ``columns`` (n, 3, k) [rad per term unit] minus what the ridge
+    baseline fits of them (as ``diagnose._collinearity`` residualizes every term)."""
+    w = 1.0 / problem.sigma
+    J = (problem.baseline * w[None, :, None]).reshape(-1, problem.baseline.shape[-1])
+    augmented = np.vstack([J, np.diag(1.0 / problem.prior_sd)])
+    G = (columns * w[None, :, None]).reshape(J.shape[0], -1)
+    return G - J @ np.linalg.lstsq(augmented, np.vstack([G, np.zeros((J.shape[1], G.shape[1]))]), rcond=None)[0]
+
+
+def fitted_cosines(problem: FitProblem, winner: str, params: np.ndarray) -> dict[str, float]:
+    """{E: largest principal cosine [-] between the winner's columns linearized at its fitted
+    ``params`` (differences with its scale, as ``which.term_columns`` at zero) and E's columns
+    (at zero, the shapes ``lookalike_closures`` draws), both with the baseline's part removed}."""
+    from .which import principal_cosines
+
+    term = problem.terms[winner]
+    params = np.asarray(params, float)
+    base = term.evaluate(params, problem.data)
+    columns = np.stack([term.evaluate(params + np.eye(term.n_params)[j] * term.scale, problem.data) - base
+                        for j in range(term.n_params)], axis=-1)
+    mine = _residualized_columns(problem, columns)
+    return {other: float(principal_cosines(mine, _residualized_columns(problem, problem.columns[other]))[:1]
+                         .max(initial=0.0)) for other in problem.terms if other != winner}
+
+
 def separation(problem: FitProblem, winner: str, group: Sequence[str], folds: Sequence[np.ndarray],
                confident_closure: float, cosines: dict | None = None) -> dict[str, Any]:
     """{"separated": bool, "closest": E or None, "closure_on_closest": [-], "closures": {E: [-]},
-    "signature_rms_noise": [-]}: whether the winner would have closed < ``confident_closure``
-    of every left-out effect's signature of its size. cosines {E: largest principal cosine
-    between E and the winner}: effects below ``SKIP_COSINE`` are not tried."""
+    "signature_rms_noise": [-], "screen": "zero" or "fitted"}: whether the winner would have
+    closed < ``confident_closure`` of every left-out effect's signature of its size. cosines
+    {E: largest principal cosine between E and the winner at zero parameters}: effects below
+    ``SKIP_COSINE`` are not tried; a nonlinear winner is screened with ``fitted_cosines``
+    instead (its columns at its fitted parameters)."""
     fit = fit_terms(problem, [winner])
     size = float(np.sqrt(np.mean((fit.terms_only / problem.sigma) ** 2)))
+    screen = "zero"
+    if cosines is not None and not problem.linear[winner]:
+        cosines, screen = fitted_cosines(problem, winner, fit.params[winner]), "fitted"
     others = [t for t in problem.terms if t not in group
               and (cosines is None or cosines.get(t, 1.0) >= SKIP_COSINE)]
     closures = lookalike_closures(problem, winner, others, folds, size)
@@ -124,7 +158,7 @@ def separation(problem: FitProblem, winner: str, group: Sequence[str], folds: Se
     worst = closures[closest] if closest else -np.inf
     return {"separated": bool(worst < confident_closure), "closest": closest,
             "closure_on_closest": None if closest is None else worst, "closures": closures,
-            "signature_rms_noise": size}
+            "signature_rms_noise": size, "screen": screen}
 
 
 def runner_up(ranking: Sequence[dict], winner: str, group: Sequence[str]) -> dict[str, Any] | None:
