@@ -89,15 +89,14 @@ def test_a_curved_valley_widens_the_pinned_looking_combination():
     assert np.linalg.eigvalsh(added).min() > -1e-12 * np.abs(added).max()  # PSD up to round-off
 
 
-def test_profile_bars_default_by_model():
-    """--profile-bars: on for the consistent model, off for the others and for --method paper,
-    as given when given."""
+def test_profile_bars_are_opt_in():
+    """--profile-bars: off unless asked (its cost on noise-free data, docs/calibration.md 6),
+    and off for --method paper whatever is asked."""
     from flexcal.validation.cli.options import profile_option
 
     def args(**kw):
-        return argparse.Namespace(**{"profile_bars": None, "method": "map", "model": "second-order", **kw})
-    assert profile_option(args(model="consistent")) is True
+        return argparse.Namespace(**{"profile_bars": False, "method": "map", "model": "consistent", **kw})
     assert profile_option(args()) is False
     assert profile_option(args(profile_bars=True)) is True
-    assert profile_option(args(model="consistent", profile_bars=False)) is False
-    assert profile_option(args(method="paper", model="consistent")) is False
+    assert profile_option(args(profile_bars=True, method="free")) is True
+    assert profile_option(args(profile_bars=True, method="paper")) is False
