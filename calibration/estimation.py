@@ -46,9 +46,8 @@ import numpy as np
 
 from flexcal.calibration.discrepancy import Discrepancy, fit_discrepancy, sandwich_covariance
 from flexcal.calibration.polish import batched_jacobian_fd, least_squares_polish
-from flexcal.calibration.profile_bars import ProfileBars
 
-__all__ = ["Prior", "uniform_prior", "Estimate", "estimate", "with_model_error", "posterior", "residual_autocorrelation", "choose_prior_scale", "CrossValidation",
+__all__ = ["Prior", "uniform_prior", "Estimate", "estimate", "map_objective_rows", "fit_evaluations", "with_model_error", "posterior", "residual_autocorrelation", "choose_prior_scale", "CrossValidation",
            "held_out_folds", "PRIOR_SCALES", "one_standard_error_choice"]
 
 Residuals = Callable[[np.ndarray], np.ndarray]
@@ -128,7 +127,7 @@ class Estimate:
     prior: Prior
     discrepancy: Discrepancy | None = None
     gauss_newton_covariance: np.ndarray | None = None
-    profile_bars: ProfileBars | None = None
+    profile_bars: object | None = None  # calibration.profile_bars.ProfileBars (which imports this module)
 
     @property
     def rms(self) -> float:
@@ -171,6 +170,23 @@ def residual_autocorrelation(r: np.ndarray, point_size: int = 3) -> float:
     return float(np.clip(np.sum(R[1:] * R[:-1]) / denominator, 0.0, 0.95))
 
 
+def map_objective_rows(residuals: Residuals, prior: Prior, sigma: float) -> Residuals:
+    """X (n, d) -> (n, m + d_prior): the rows whose sum of squares is the MAP objective,
+    ``||r(X) / sigma||^2 + ||(X - mean) / std||^2`` over the sources with a prior."""
+    finite = np.isfinite(prior.std)
+    weight = 1.0 / sigma  # multiplied, as the fits always did (the same bits)
+
+    def rows(X: np.ndarray) -> np.ndarray:
+        return np.concatenate([np.asarray(residuals(X), float) * weight,
+                               (X[:, finite] - prior.mean[finite]) / prior.std[finite]], axis=1)
+    return rows
+
+
+def fit_evaluations(n_params: int) -> int:
+    """A fit's budget of residual rows: 100 Jacobians' worth (module doc of ``estimate``)."""
+    return 100 * (n_params + 2)
+
+
 def estimate(residuals: Residuals, prior: Prior, *, noise: float | None = None, x0: np.ndarray | None = None,
              max_noise_rounds: int = 4, noise_rtol: float = 0.05, max_evaluations: int | None = None,
              point_size: int = 3, correlated: bool = True, coordinates: np.ndarray | None = None,
@@ -204,18 +220,12 @@ def estimate(residuals: Residuals, prior: Prior, *, noise: float | None = None, 
         raise ValueError(f"noise={noise} must be > 0")
     sigma = float(noise) if given else max(float(np.sqrt(np.mean(r_start ** 2))) / 10.0, 1e-12)
     n_evaluations = 1
-    finite = np.isfinite(prior.std)
     for _ in range(1 if given else max_noise_rounds):
-        weight = 1.0 / sigma
-
-        def augmented(X: np.ndarray, weight: float = weight) -> np.ndarray:
-            r = np.asarray(residuals(X), float) * weight
-            return np.concatenate([r, (X[:, finite] - prior.mean[finite]) / prior.std[finite]], axis=1)
-
+        augmented = map_objective_rows(residuals, prior, sigma)
         # tolerances 1e-8 (relative change of the cost / of x): far below what the noise
         # resolves; the budget keeps a kinked residual (a clearance opening inside a step) from
         # making trf crawl: 100 Jacobians' worth of rows, where smooth fits take 10-40
-        budget = max_evaluations if max_evaluations is not None else 100 * (d + 2)
+        budget = max_evaluations if max_evaluations is not None else fit_evaluations(d)
         fit = least_squares_polish(augmented, x, fd_step=FD_STEP, ftol=1e-8, xtol=1e-8, gtol=1e-8,
                                    max_evaluations=budget)
         n_evaluations += fit.n_evaluations

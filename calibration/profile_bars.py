@@ -51,13 +51,13 @@ from typing import Callable
 
 import numpy as np
 
+from flexcal.calibration.estimation import FD_STEP, fit_evaluations, map_objective_rows
 from flexcal.calibration.polish import least_squares_polish
 
 __all__ = ["ProfileBars", "with_profile_bars", "profile_factor", "one_sigma_crossing", "LADDER"]
 
 LADDER = (2.0, 6.0, 18.0, 54.0)  # probe distances [linear standard errors]; 54: a bar at most ~54x the linear one
 CONSTRAINT_WEIGHT = 1e3  # the constraint row's weight per linear standard error (met to 1e-3 s or better)
-FD_STEP = 1e-6  # [unit box] as the fit's own (estimation.FD_STEP)
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -111,13 +111,9 @@ def with_profile_bars(fit, residuals: Callable[[np.ndarray], np.ndarray], combin
         raise ValueError("the fit has Gauss-Newton error bars; estimate it with coordinates first")
     combinations = np.atleast_2d(np.asarray(combinations, float))
     prior, sigma, x_hat = fit.prior, fit.noise, fit.x
-    finite = np.isfinite(prior.std)
     linear = fit.gauss_newton_covariance
-    budget = max_evaluations if max_evaluations is not None else 100 * (x_hat.size + 2)
-
-    def objective_rows(X: np.ndarray) -> np.ndarray:
-        r = np.asarray(residuals(X), float) / sigma
-        return np.concatenate([r, (X[:, finite] - prior.mean[finite]) / prior.std[finite]], axis=1)
+    budget = max_evaluations if max_evaluations is not None else fit_evaluations(x_hat.size)
+    objective_rows = map_objective_rows(residuals, prior, sigma)
 
     phi_hat = float(np.sum(objective_rows(x_hat[None])[0] ** 2))
     added = np.zeros_like(linear)

@@ -248,6 +248,26 @@ def hinge_displacement(solution: HingeSolution, wrench: np.ndarray) -> np.ndarra
     return np.einsum("...k,kni->...ni", np.asarray(wrench, float), solution.unit_load_fields)
 
 
+def _end_couplings(mesh, plane_a: Plane, point_a: np.ndarray, plane_b: Plane, point_b: np.ndarray,
+                   relative_tolerance: float) -> list[RigidCoupling]:
+    """The faces of ``mesh`` on the end planes rigidly coupled to the reference points A, B."""
+    return [RigidCoupling(nodes=select_plane_nodes(mesh, plane, relative_tolerance=relative_tolerance),
+                          reference_point=np.asarray(point, float).reshape(3))
+            for plane, point in ((plane_a, point_a), (plane_b, point_b))]
+
+
+def _coupled_blocks(mesh, material: Material, couplings: list[RigidCoupling], stiffness: sp.spmatrix | None = None):
+    """(nodes, coupling map, upper triangle of K_ii, K_im, K_mm) straight from K for PARDISO,
+    which reads the upper triangle only (``condensation_blocks``: the same bits as slicing
+    T^T K T, in a fifth of the time)."""
+    nodes, _ = check_mesh(mesh)
+    K = assemble_stiffness(mesh, material) if stiffness is None else sp.csr_matrix(stiffness)
+    if K.shape != (3 * len(nodes),) * 2:
+        raise ValueError(f"stiffness has shape {K.shape}; expected {(3 * len(nodes),) * 2}")
+    cmap = coupling_map(len(nodes), nodes, couplings)
+    return (nodes, cmap, *condensation_blocks(K, cmap))
+
+
 def solve_chain(
     mesh,
     material: Material,
@@ -264,20 +284,10 @@ def solve_chain(
     """Condense the part onto the reference points A and B (faces on ``plane_a`` and
     ``plane_b`` rigidly coupled to them): stiffness (12, 12) and the unit-motion fields.
     Options as in ``solve_hinge``; ``frame`` rotates both points' DOFs."""
-    nodes_a = select_plane_nodes(mesh, plane_a, relative_tolerance=relative_tolerance)
-    nodes_b = select_plane_nodes(mesh, plane_b, relative_tolerance=relative_tolerance)
-    point_a = np.asarray(point_a, float).reshape(3)
-    point_b = np.asarray(point_b, float).reshape(3)
-    couplings = [RigidCoupling(nodes=nodes_a, reference_point=point_a), RigidCoupling(nodes=nodes_b, reference_point=point_b)]
+    couplings = _end_couplings(mesh, plane_a, point_a, plane_b, point_b, relative_tolerance)
+    (nodes_a, point_a), (nodes_b, point_b) = ((c.nodes, c.reference_point) for c in couplings)
     if method in ("auto", "pardiso") and (method == "pardiso" or pardiso_available()):
-        # PARDISO reads the upper triangle only: take it and the coupled blocks straight from
-        # K (``condensation_blocks``; the same bits as slicing T^T K T, in a fifth of the time)
-        nodes, _ = check_mesh(mesh)
-        K = assemble_stiffness(mesh, material) if stiffness is None else sp.csr_matrix(stiffness)
-        if K.shape != (3 * len(nodes),) * 2:
-            raise ValueError(f"stiffness has shape {K.shape}; expected {(3 * len(nodes),) * 2}")
-        cmap = coupling_map(len(nodes), nodes, couplings)
-        upper_ii, K_im, K_mm = condensation_blocks(K, cmap)
+        nodes, cmap, upper_ii, K_im, K_mm = _coupled_blocks(mesh, material, couplings, stiffness)
         n_i = cmap.free_node_dofs.size
         X = solve_spd(upper_ii, K_im, method="pardiso", upper_triangle=True)  # K_ii^-1 K_im
     else:
@@ -356,21 +366,13 @@ def mirrored_chain_stiffness(mesh, material: Material, plane_a: Plane, point_a: 
     axes = tuple(int(a) for a in axes)
     if any(a not in MIRROR_PARITY for a in axes) or len(set(axes)) != len(axes):
         raise ValueError(f"axes={axes!r}: mirror axes are 1 (y) and / or 2 (z), each once")
-    point_a = np.asarray(point_a, float).reshape(3)
-    point_b = np.asarray(point_b, float).reshape(3)
-    if any(point[a] != 0.0 for point in (point_a, point_b) for a in axes):
+    couplings = _end_couplings(mesh, plane_a, point_a, plane_b, point_b, relative_tolerance)
+    if any(c.reference_point[a] != 0.0 for c in couplings for a in axes):
         raise ValueError("the reference points must lie on the mirror planes")
-    nodes_a = select_plane_nodes(mesh, plane_a, relative_tolerance=relative_tolerance)
-    nodes_b = select_plane_nodes(mesh, plane_b, relative_tolerance=relative_tolerance)
-    couplings = [RigidCoupling(nodes=nodes_a, reference_point=point_a),
-                 RigidCoupling(nodes=nodes_b, reference_point=point_b)]
-    nodes, _ = check_mesh(mesh)
+    nodes, cmap, upper_ii, K_im, K_mm = _coupled_blocks(mesh, material, couplings)
     for a in axes:
         if nodes[:, a].min() != 0.0:
             raise ValueError(f"the mesh must lie on the non-negative side of its mirror plane (axis {a}) and touch it")
-    K = assemble_stiffness(mesh, material)
-    cmap = coupling_map(len(nodes), nodes, couplings)
-    upper_ii, K_im, K_mm = condensation_blocks(K, cmap)
     free = cmap.free_node_dofs
     node, component = free // 3, free % 3
     stiffness = np.zeros((12, 12))

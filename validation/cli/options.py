@@ -283,7 +283,7 @@ def add_error_bar_options(parser: argparse.ArgumentParser) -> None:
                         help="error bars from the residual-fitted discrepancy alone (no prototype runs)")
     # opt-in: measured on the consistent model it brings the base bars into the z-score band with
     # 0.5 urad noise (9-28 constrained fits), but on the noise-free table1 scenario it ran 99
-    # constrained fits (430 s idle) and made the bars ~6x too wide (docs/calibration.md 6, session 17)
+    # constrained fits (~450 of a 530 s idle verify) and made the bars ~6x too wide (docs/calibration.md 6, session 17)
     parser.add_argument("--profile-bars", action="store_true",
                         help="widen the bars of the base combinations not identified alone by their profile "
                              "likelihood, the other sources re-optimised (calibration/profile_bars.py; for a "
