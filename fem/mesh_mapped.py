@@ -30,7 +30,8 @@ from .structured import _EDGES, _folded_tets, _straighten, grid_tet_mesh
 if TYPE_CHECKING:
     from flexcal.geometry.solids import Part
 
-__all__ = ["mapped_mesh_supported", "mapped_grid", "mapped_mesh_part", "MAX_MAPPED_DOF"]
+__all__ = ["mapped_mesh_supported", "mapped_grid", "mapped_mesh_part", "hinge_outline", "isoparametric_mesh",
+           "MAX_MAPPED_DOF"]
 
 # Largest mesh built on request, an estimate (not measured): 136k DOF took 6.5 GB with
 # spsolve (docs/fem.md), so 11x that would not fit a workstation; beyond it the run would
@@ -45,7 +46,7 @@ def mapped_mesh_supported(params) -> bool:
     return outline_of(params) is not None
 
 
-def _outline(hinge) -> MappedOutline:
+def hinge_outline(hinge) -> MappedOutline:
     outline = outline_of(hinge)
     if outline is None:
         raise ValueError(f"the mapped mesher has no outline for this {type(hinge).__name__} (a leaf with blocks "
@@ -61,7 +62,7 @@ def mapped_grid(hinge, n_thickness: int, *, aspect: float = 2.0,
     and wide as they are high at the neck, growing with the height along the arcs, and at
     least ``n_arc`` cells along each quarter arc; about square cells on the blocks.
     """
-    outline = _outline(hinge)
+    outline = hinge_outline(hinge)
     c, rho, t = outline.flat_half_length, outline.arc_half_length, outline.neck_thickness
     block, width = outline.block_length, outline.width
     n = int(n_thickness)
@@ -88,7 +89,7 @@ def mapped_grid(hinge, n_thickness: int, *, aspect: float = 2.0,
     return x, np.linspace(-0.5, 0.5, n + 1), np.linspace(-width / 2, width / 2, n_width + 1)
 
 
-def _isoparametric(mesh: TetMesh, height) -> tuple[TetMesh, int]:
+def isoparametric_mesh(mesh: TetMesh, height) -> tuple[TetMesh, int]:
     """The mesh with every mid-edge node at the image of its edge's midpoint in the
     parent grid (x, eta = y / h(x), z; h = ``height(x)`` [m]): curved elements that follow the profile inside
     the part too, not only on its surface (measured: C_rz,Mz -1.3 % of converged with
@@ -161,7 +162,7 @@ def mapped_mesh_part(part: "Part", *, elements_through_thickness: float = 3, asp
     h_min = t / n
     tolerance = 0.3 * h_min
     snapped, measured = snap_to_part(params, nodes, tets4, tolerance=tolerance, project=True, morph=False)
-    mesh, n_straight = _isoparametric(snapped, outline.height)
+    mesh, n_straight = isoparametric_mesh(snapped, outline.height)
     jacobian = float(_jacobian_ratios(mesh.nodes, mesh.tets).min())
     measured.update(min_jacobian_ratio=jacobian, volume=mesh.volume,
                     volume_error=mesh.volume / measured["volume_exact"] - 1.0, n_straight_mid=n_straight)

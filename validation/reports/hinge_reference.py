@@ -38,7 +38,7 @@ def nested_mapped_mesh(hinge, n_base: int, refinement: int):
     """The mapped mesher's mesh (``flexcal.fem.mesh_mapped.mapped_mesh_part``'s steps: grid,
     y scaled by the local height, ``snap_to_part``, isoparametric mid-nodes) on its grid at
     ``n_base`` through with every cell split into refinement^3 (nested levels, h = 1 / r)."""
-    from flexcal.fem.mesh_mapped import _isoparametric, _outline, mapped_grid
+    from flexcal.fem.mesh_mapped import hinge_outline, isoparametric_mesh, mapped_grid
     from flexcal.fem.mesh_snap import snap_to_part
     from flexcal.fem.structured import grid_tet_mesh
 
@@ -47,14 +47,14 @@ def nested_mapped_mesh(hinge, n_base: int, refinement: int):
     for axis in mapped_grid(hinge, n_base):
         a, b = axis[:-1, None], axis[1:, None]
         lines.append(np.append((a + (b - a) * np.arange(r)[None, :] / r).ravel(), axis[-1]))
-    outline = _outline(hinge)
+    outline = hinge_outline(hinge)
     grid = grid_tet_mesh(*lines)
     used, tets4 = np.unique(grid.tets[:, :4], return_inverse=True)
     nodes = grid.nodes[used].copy()
     nodes[:, 1] *= outline.height(nodes[:, 0])
     tolerance = 0.3 * outline.neck_thickness / (n_base * r)  # as mapped_mesh_part: 0.3 of a neck cell
     snapped, _ = snap_to_part(hinge, nodes, tets4.reshape(-1, 4), tolerance=tolerance, project=True, morph=False)
-    mesh, _ = _isoparametric(snapped, outline.height)
+    mesh, _ = isoparametric_mesh(snapped, outline.height)
     return mesh
 
 
