@@ -1,0 +1,93 @@
+"""The mapped chain mesher's Richardson limit on the prototype's leaf segments against an
+independent reference: 27-node hexahedra on their own multi-block grid
+(flexcal.fem.reference_hex_chain; issue 26 "Verification", docs/meshing.md "Independent
+reference: Q2 hexahedra (session 18)")."""
+
+import numpy as np
+import pytest
+
+from flexcal.fem.reference_hex_chain import hex27_segment_stiffness, leaf_height, segment_grid
+from flexcal.fem.reference_hex_element import full_stiffness, grid_nodes
+from flexcal.geometry.exact import BoxPiece, exact_volume, pieces
+from flexcal.geometry.params import STEEL
+from flexcal.validation.reports.chain_reference import segment
+
+
+def _lame():
+    E, nu = STEEL.youngs_modulus, STEEL.poisson_ratio
+    return E * nu / ((1 + nu) * (1 - 2 * nu)), E / (2 * (1 + nu))
+
+
+def _leaf(part):
+    return next(p for p in pieces(part) if not isinstance(p, BoxPiece))
+
+
+def test_segment_element_keeps_rigid_motions_and_linear_fields_exact():
+    # isoparametric Q2 on the blocks and the mapped leaf core: a rigid motion stores no
+    # energy, a uniform strain the energy of the meshed volume, which converges on the exact one
+    part = segment("L1")
+    lam, mu = _lame()
+    errors = []
+    for r in (1, 2, 3):
+        K, nodes = full_stiffness(segment_grid(part, refinement=r), STEEL)
+        X, Y, Z = nodes.T
+        zero = np.zeros_like(X)
+        for u in (np.c_[-Y, X, zero], np.c_[zero, -Z, Y], np.c_[Z, zero, -X], np.c_[np.ones_like(X), zero, zero]):
+            v = u.ravel()
+            scale = np.abs(v) @ (abs(K) @ np.abs(v))  # the sum of the terms' magnitudes
+            # round-off: measured <= 2.3e-17 of the sum of the magnitudes; 1e-13 leaves 4000x
+            assert abs(v @ (K @ v)) < 1e-13 * scale
+        stretch = np.c_[X, zero, zero].ravel()
+        errors.append(stretch @ (K @ stretch) / ((lam + 2 * mu) * exact_volume(part)) - 1.0)
+    # measured 9.6e-4, 1.4e-4, 4.3e-5 (r = 1, 2, 3): the fillets' quadratic geometry converges
+    # at h^2.8-2.9 (cells uniform in the arc angle); 2.5 per level is faster than h^2 at r 2 -> 3
+    assert 0 < errors[2] < errors[1] / 2.5 < errors[0] / 2.5 ** 2
+
+
+def test_segment_profile_is_the_leaf():
+    # the reference writes the leaf height itself; the geometry package's leaf agrees
+    part = segment("D1")
+    leaf = _leaf(part)
+    x = np.linspace(leaf.x0 - 1e-3, leaf.x1 + 1e-3, 81)
+    # two formulas: at the leaf's ends (d -> a) sqrt(a^2 - d^2) turns the round-off of d^2
+    # (~1e-19 m^2) into ~3e-10 m (measured 2.9e-10 m); 1e-9 m is 1.7e-7 of the fillet
+    np.testing.assert_allclose(leaf_height(leaf, x), leaf.local_thickness(x), rtol=0, atol=1e-9)
+
+
+def test_segment_grid_keeps_the_material_and_conforms_at_the_block_faces():
+    part = segment("L1")
+    leaf = _leaf(part)
+    grid = segment_grid(part, refinement=2)
+    xm = 0.5 * (grid.x[1:] + grid.x[:-1])
+    pm, zm = 0.5 * (grid.p[1:] + grid.p[:-1]), 0.5 * (grid.z[1:] + grid.z[:-1])
+    in_leaf = (xm > leaf.x0) & (xm < leaf.x1)
+    assert grid.active[~in_leaf].all()
+    footprint = (np.abs(pm) < grid.core_half)[:, None] & (np.abs(zm) < leaf.half_width)[None, :]
+    assert np.array_equal(grid.active[in_leaf], np.broadcast_to(footprint, grid.active[in_leaf].shape))
+    nodes, _ = grid_nodes(grid)
+    # one node per point (conforming, no duplicates at the block faces), every node in the part
+    assert np.unique(np.round(nodes / 1e-9).astype(np.int64), axis=0).shape[0] == nodes.shape[0]
+    here = (nodes[:, 0] > leaf.x0) & (nodes[:, 0] < leaf.x1)
+    # 1e-12 m: the map puts the leaf's surface nodes on the exact height to round-off
+    assert np.all(np.abs(nodes[here, 1]) <= 0.5 * leaf.local_thickness(nodes[here, 0]) + 1e-12)
+    assert np.all(np.abs(nodes[here, 2]) <= leaf.half_width + 1e-12)
+
+
+def test_segment_stiffness_is_symmetric_with_the_six_rigid_modes():
+    part = segment("D1")
+    k, _ = hex27_segment_stiffness(part, refinement=1)
+    length = part.x_end - part.x_start
+    for mode in np.eye(6):
+        u, theta = mode[:3], mode[3:]
+        rigid = np.concatenate([u, theta, u + np.cross(theta, [length, 0.0, 0.0]), theta])
+        # in energy units (each row by sqrt(K_ii), against sqrt(sum_j K_jj v_j^2)): round-off of
+        # K_mm - K_im^T K_ii^-1 K_im, which cancels the tied blocks' far larger stiffness;
+        # measured 1.1e-13 to 4.1e-10 (the rotations); 1e-8 leaves 25x
+        diagonal = np.abs(np.diag(k))
+        assert np.all(np.abs(k @ rigid) / np.sqrt(diagonal) <= 1e-8 * np.sqrt(diagonal @ rigid**2))
+    np.testing.assert_allclose(k, k.T, rtol=0, atol=1e-12 * np.abs(k).max())  # symmetrised: exact
+
+
+def test_segment_reference_rejects_a_leaf_thin_along_z():
+    with pytest.raises(ValueError, match="thin along y"):
+        segment_grid(segment("L1", 1))
