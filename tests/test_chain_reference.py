@@ -10,12 +10,11 @@ from flexcal.fem.reference_hex_chain import hex27_segment_stiffness, leaf_height
 from flexcal.fem.reference_hex_element import full_stiffness, grid_nodes
 from flexcal.geometry.exact import BoxPiece, exact_volume, pieces
 from flexcal.geometry.params import STEEL
-from flexcal.validation.reports.chain_reference import segment
+from flexcal.validation.reports.chain_reference import AGREEMENT, compare, segment
 
+from helpers import rigid_energy_and_stretch_volume_error
 
-def _lame():
-    E, nu = STEEL.youngs_modulus, STEEL.poisson_ratio
-    return E * nu / ((1 + nu) * (1 - 2 * nu)), E / (2 * (1 + nu))
+PROTOTYPE_GOAL = 5e-3  # issue 26: the default mesh within 0.5 % of the converged stiffness
 
 
 def _leaf(part):
@@ -26,19 +25,13 @@ def test_segment_element_keeps_rigid_motions_and_linear_fields_exact():
     # isoparametric Q2 on the blocks and the mapped leaf core: a rigid motion stores no
     # energy, a uniform strain the energy of the meshed volume, which converges on the exact one
     part = segment("L1")
-    lam, mu = _lame()
     errors = []
     for r in (1, 2, 3):
         K, nodes = full_stiffness(segment_grid(part, refinement=r), STEEL)
-        X, Y, Z = nodes.T
-        zero = np.zeros_like(X)
-        for u in (np.c_[-Y, X, zero], np.c_[zero, -Z, Y], np.c_[Z, zero, -X], np.c_[np.ones_like(X), zero, zero]):
-            v = u.ravel()
-            scale = np.abs(v) @ (abs(K) @ np.abs(v))  # the sum of the terms' magnitudes
-            # round-off: measured <= 2.3e-17 of the sum of the magnitudes; 1e-13 leaves 4000x
-            assert abs(v @ (K @ v)) < 1e-13 * scale
-        stretch = np.c_[X, zero, zero].ravel()
-        errors.append(stretch @ (K @ stretch) / ((lam + 2 * mu) * exact_volume(part)) - 1.0)
+        rigid, volume_error = rigid_energy_and_stretch_volume_error(K, nodes, exact_volume(part), STEEL)
+        # round-off: measured <= 2.3e-17 of the sum of the magnitudes; 1e-13 leaves 4000x
+        assert rigid < 1e-13
+        errors.append(volume_error)
     # measured 9.6e-4, 1.4e-4, 4.3e-5 (r = 1, 2, 3): the fillets' quadratic geometry converges
     # at h^2.8-2.9 (cells uniform in the arc angle); 2.5 per level is faster than h^2 at r 2 -> 3
     assert 0 < errors[2] < errors[1] / 2.5 < errors[0] / 2.5 ** 2
@@ -70,6 +63,7 @@ def test_segment_grid_keeps_the_material_and_conforms_at_the_block_faces():
     here = (nodes[:, 0] > leaf.x0) & (nodes[:, 0] < leaf.x1)
     # 1e-12 m: the map puts the leaf's surface nodes on the exact height to round-off
     assert np.all(np.abs(nodes[here, 1]) <= 0.5 * leaf.local_thickness(nodes[here, 0]) + 1e-12)
+    # 1e-12 m: the width lines are the leaf's side faces exactly
     assert np.all(np.abs(nodes[here, 2]) <= leaf.half_width + 1e-12)
 
 
@@ -84,10 +78,42 @@ def test_segment_stiffness_is_symmetric_with_the_six_rigid_modes():
         # K_mm - K_im^T K_ii^-1 K_im, which cancels the tied blocks' far larger stiffness;
         # measured 1.1e-13 to 4.1e-10 (the rotations); 1e-8 leaves 25x
         diagonal = np.abs(np.diag(k))
+        # 1e-8: the measured round-off above, 25x
         assert np.all(np.abs(k @ rigid) / np.sqrt(diagonal) <= 1e-8 * np.sqrt(diagonal @ rigid**2))
-    np.testing.assert_allclose(k, k.T, rtol=0, atol=1e-12 * np.abs(k).max())  # symmetrised: exact
+    # symmetrised (0.5 (K + K^T)): equal to round-off, 1e-12 of the largest entry
+    np.testing.assert_allclose(k, k.T, rtol=0, atol=1e-12 * np.abs(k).max())
 
 
 def test_segment_reference_rejects_a_leaf_thin_along_z():
     with pytest.raises(ValueError, match="thin along y"):
         segment_grid(segment("L1", 1))
+
+
+ENTRIES = ["K[uxA,uxA]", "K[uxA,uxB]", "K[uyA,uyA]", "K[uyA,rzA]", "K[uyA,uyB]", "K[uyA,rzB]", "K[uzA,uzA]",
+           "K[uzA,ryA]", "K[uzA,uzB]", "K[uzA,ryB]", "K[rxA,rxA]", "K[rxA,rxB]", "K[ryA,ryA]", "K[ryA,uzB]",
+           "K[ryA,ryB]", "K[rzA,rzA]", "K[rzA,uyB]", "K[rzA,rzB]", "K[uxB,uxB]", "K[uyB,uyB]", "K[uyB,rzB]",
+           "K[uzB,uzB]", "K[uzB,ryB]", "K[rxB,rxB]", "K[ryB,ryB]", "K[rzB,rzB]"]
+
+
+@pytest.fixture(scope="module")
+def l1_leaf_segment_rows():
+    # L1 [0, m1]: mapped nested at 2 through, r = 2, 3, 4 (62k / 198k / 455k DOF); Q2 hexes
+    # r = 2, 3, 4 (19k / 62k / 143k DOF); the prototype's mesh; measured SLOW_TIME
+    return {row[0]: row for row in compare("L1", None, (2, 3, 4), (2, 3, 4), prototype=True)}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("entry", ENTRIES)
+def test_leaf_segment_mapped_limit_within_a_tenth_of_a_percent_of_the_hex27_reference(l1_leaf_segment_rows, entry):
+    assert sorted(l1_leaf_segment_rows) == sorted(ENTRIES)  # the dominant entries of the 12 x 12
+    name, _, mapped, _, reference, uncertainty, diff, *_ = l1_leaf_segment_rows[entry]
+    assert abs(diff) <= AGREEMENT, (f"{name}: mapped limit {mapped:.6e} is {100 * diff:+.3f} % from the Q2-hex "
+                                    f"reference {reference:.6e} (+- {100 * uncertainty / abs(reference):.3f} %)")
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("entry", ENTRIES)
+def test_prototype_segment_mesh_within_half_a_percent_of_the_hex27_reference(l1_leaf_segment_rows, entry):
+    # the issue's goal for the default mesh: 0.5 % of the converged value, here the reference's limit
+    name, *_, prototype, _ = l1_leaf_segment_rows[entry]
+    assert abs(prototype) <= PROTOTYPE_GOAL, f"{name}: the prototype's mesh is {100 * prototype:+.3f} % off"
