@@ -33,13 +33,16 @@ def main() -> None:
     parser.add_argument("--mapped-levels", type=int, nargs=3, default=[2, 3, 4])
     parser.add_argument("--ref-levels", type=int, nargs="+", default=[3, 4, 5, 6])
     parser.add_argument("--prototype", action="store_true", help="also the prototype's segment mesh")
+    parser.add_argument("--mirrored", action="store_true",
+                        help="mapped levels condensed on their quarter (D1's r = 4 whole needs > 8 GB)")
     parser.add_argument("--dir", default="bench_chain_reference")
     args = parser.parse_args()
     folder = Path(args.dir).resolve()
     folder.mkdir(parents=True, exist_ok=True)
     for chain in args.chain:
-        rows = compare(chain, folder, args.mapped_levels, args.ref_levels, args.prototype)
-        print(f"\n{chain} [0, m1]: mapped nested at 2 through, r = {args.mapped_levels}; "
+        rows = compare(chain, folder, args.mapped_levels, args.ref_levels, args.prototype, args.mirrored)
+        print(f"\n{chain} [0, m1]: mapped nested at 2 through{', mirrored' if args.mirrored else ''}, "
+              f"r = {args.mapped_levels}; "
               f"Q2 hex reference r = {args.ref_levels}")
         print("| entry | mapped rate | mapped limit | ref rate | reference limit +- uncertainty (rate p -+ 1) | "
               "mapped - ref [%] | finest mapped - ref [%] | prototype - ref [%] | within 0.1 % |")

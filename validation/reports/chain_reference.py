@@ -49,13 +49,26 @@ def _condensed(part, mesh) -> np.ndarray:
     return 0.5 * (k + k.T)
 
 
-def mapped_stiffness(part, refinement: int) -> tuple[np.ndarray, int]:
-    """(12 x 12 [SI], DOF) of the nested mapped level r (``MAPPED_NESTED``)."""
-    from flexcal.fem.mesh_mapped_chain import mapped_mesh_chain
+def mapped_stiffness(part, refinement: int, mirrored: bool = False) -> tuple[np.ndarray, int]:
+    """(12 x 12 [SI], DOF) of the nested mapped level r (``MAPPED_NESTED``); ``mirrored``:
+    the level's part on y >= 0, z >= 0 condensed per parity class
+    (``mirrored_chain_stiffness``, as the prototype's provider; a quarter of the DOF, another
+    mesh: the mirrored cells' diagonals mirrored), DOF those of the part."""
+    from flexcal.fem.mesh_mapped_chain import mapped_mesh_chain, mapped_mesh_chain_mirror_part
 
-    mesh, _ = mapped_mesh_chain(part, elements_through_thickness=MAPPED_NESTED["n_base"], refinement=refinement,
-                                measure=False, **MAPPED_NESTED["options"])
-    return _condensed(part, mesh), mesh.n_dof
+    options = dict(elements_through_thickness=MAPPED_NESTED["n_base"], refinement=refinement,
+                   **MAPPED_NESTED["options"])
+    if not mirrored:
+        mesh, _ = mapped_mesh_chain(part, measure=False, **options)
+        return _condensed(part, mesh), mesh.n_dof
+    from flexcal.fem.condense import mirrored_chain_stiffness
+    from flexcal.geometry.exact import end_planes, reference_points
+    from flexcal.geometry.params import STEEL
+
+    mesh, axes = mapped_mesh_chain_mirror_part(part, **options)
+    planes, points = end_planes(part), reference_points(part)
+    k = mirrored_chain_stiffness(mesh, STEEL, planes["A"], points["A"], planes["B"], points["B"], axes)
+    return 0.5 * (k + k.T), mesh.n_dof
 
 
 def reference_stiffness(part, refinement: int) -> tuple[np.ndarray, int]:
@@ -71,20 +84,23 @@ def prototype_stiffness(part) -> tuple[np.ndarray, int]:
     return segment_stiffness_fem(part), -1
 
 
-def compare(chain_name: str, folder: Path | None, mapped_levels, ref_levels, prototype: bool = False):
+def compare(chain_name: str, folder: Path | None, mapped_levels, ref_levels, prototype: bool = False,
+            mirrored: bool = False):
     """Rows (entry, mapped rate, mapped limit, reference rate, reference limit, its
     uncertainty, (mapped limit - reference limit) / |reference limit|, (finest mapped -
     reference limit) / |reference limit|, (prototype's mesh - reference limit) / |reference
     limit| (NaN without ``prototype``), the reference's rate spread) for every dominant entry
     (``DOMINANT_FRACTION`` on the finest reference) of the upper triangle of the 12 x 12
-    stiffness [SI] of chain ``chain_name``'s leaf segment [0, m1]."""
+    stiffness [SI] of chain ``chain_name``'s leaf segment [0, m1]. ``mirrored``: the mapped
+    levels condensed on their mirror part (``mapped_stiffness``)."""
     from flexcal.fem.convergence import dominant_entries, richardson
     from flexcal.validation.reports.fem import DOMINANT_FRACTION
 
     part = segment(chain_name, 0)
     stem = f"{chain_name}_0"
     n_base = MAPPED_NESTED["n_base"]
-    mapped = np.array([_cached(folder, f"mapped_{stem}_n{n_base}_r{r}", lambda r=r: mapped_stiffness(part, r))
+    kind = "mapped_mirror" if mirrored else "mapped"
+    mapped = np.array([_cached(folder, f"{kind}_{stem}_n{n_base}_r{r}", lambda r=r: mapped_stiffness(part, r, mirrored))
                        for r in mapped_levels])
     reference = np.array([_cached(folder, f"hex27_{stem}_r{r}", lambda r=r: reference_stiffness(part, r))
                           for r in ref_levels])
