@@ -8,7 +8,13 @@ difference, and the virtual prototype's mesh (``segment_stiffness_fem``) against
 reference limit.
 
     python benchmarks/bench_chain_reference.py --chain L1 --mapped-levels 2 3 4 \\
-        --ref-levels 3 4 5 6 --prototype --dir /tmp/chain_ref
+        --ref-levels 2 3 4 5 6 --prototype --dir /tmp/chain_ref
+    python benchmarks/bench_chain_reference.py --chain L1 D1 --mirrored --mapped-levels 2 3 4 \\
+        --ref-levels 2 3 4 5 6 --prototype --dir /tmp/chain_ref
+
+--mirrored: the mapped levels condensed on their quarter (``mapped_stiffness``; D1's whole
+level r = 4, 727k DOF, needs more than 8 GB). The finest reference level, r = 6, is 474k DOF
+and 6.4 GB.
 
 The reference's limit is that of its finest three levels; its uncertainty the difference
 from the limit of the three levels before them (with four or more levels), else half the
@@ -31,7 +37,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--chain", nargs="+", default=["L1"])
     parser.add_argument("--mapped-levels", type=int, nargs=3, default=[2, 3, 4])
-    parser.add_argument("--ref-levels", type=int, nargs="+", default=[3, 4, 5, 6])
+    parser.add_argument("--ref-levels", type=int, nargs="+", default=[2, 3, 4, 5, 6])
     parser.add_argument("--prototype", action="store_true", help="also the prototype's segment mesh")
     parser.add_argument("--mirrored", action="store_true",
                         help="mapped levels condensed on their quarter (D1's r = 4 whole needs > 8 GB)")

@@ -18,10 +18,10 @@ then B). Its discretisation is its own:
   centre band of each. Every block and band has cosine spacing (fine at its ends: the
   block faces the leaf meets, the re-entrant edges where the leaf's side faces meet them,
   the rims of the tied end faces), except the y core, which is uniform (the leaf's bending
-  field is smooth through its thickness; cosine there made the cells at the fillets' roots,
-  thin along x, 2-4x taller than they need be, and the stiffness alternated between odd and
-  even counts: measured on L1, 1.3620e8 / 1.3184e8 / 1.3203e8 N/m for K[uy,uy] at 3 / 4 / 5
-  cells through); the fillets are cut uniformly in their
+  field is smooth through its thickness; cosine there made the middle cells at the
+  fillets' roots, thin along x, 1.5x taller than uniform ones, and the stiffness alternated
+  between odd and even counts: measured on L1, 1.3620e8 / 1.3184e8 / 1.3203e8 N/m for
+  K[uy,uy] at 3 / 4 / 5 cells through); the fillets are cut uniformly in their
   arc angle (cells shrinking like angle^2 where the arc turns vertical into the block
   face), the flat part uniformly. Conforming at the block faces: the leaf's nodes there are
   the blocks' (no tie, no duplicate);
