@@ -1,7 +1,7 @@
 """The mapped chain mesher's converged stiffness of the prototype's leaf segments against an
 independent reference (issue 26, "Verification"): every dominant entry of the 12 x 12
-stiffness of the [0, m1] segment of L1 or D1, its Richardson limit on nested mapped P2-tet
-meshes (``bench_chain_convergence.py``'s nested study: 2 through, session 13's grid, every
+stiffness of the [0, m1] or [m1, s0] segment of L1 or D1, its Richardson limit on nested
+mapped P2-tet meshes (``bench_chain_convergence.py``'s nested study: 2 through, session 13's grid, every
 cell split into r^3), the Richardson limit of 27-node hexahedra
 (``flexcal.fem.reference_hex_chain``) with that limit's own uncertainty, their relative
 difference, and the virtual prototype's mesh (``segment_stiffness_fem``) against the
@@ -36,6 +36,7 @@ from flexcal.validation.reports.chain_reference import AGREEMENT, compare
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--chain", nargs="+", default=["L1"])
+    parser.add_argument("--segment", type=int, default=0, help="0: [0, m1], 1: [m1, s0]")
     parser.add_argument("--mapped-levels", type=int, nargs=3, default=[2, 3, 4])
     parser.add_argument("--ref-levels", type=int, nargs="+", default=[2, 3, 4, 5, 6])
     parser.add_argument("--prototype", action="store_true", help="also the prototype's segment mesh")
@@ -46,8 +47,10 @@ def main() -> None:
     folder = Path(args.dir).resolve()
     folder.mkdir(parents=True, exist_ok=True)
     for chain in args.chain:
-        rows = compare(chain, folder, args.mapped_levels, args.ref_levels, args.prototype, args.mirrored)
-        print(f"\n{chain} [0, m1]: mapped nested at 2 through{', mirrored' if args.mirrored else ''}, "
+        rows = compare(chain, folder, args.mapped_levels, args.ref_levels, args.prototype, args.mirrored,
+                       args.segment)
+        name = ("[0, m1]", "[m1, s0]")[args.segment]
+        print(f"\n{chain} {name}: mapped nested at 2 through{', mirrored' if args.mirrored else ''}, "
               f"r = {args.mapped_levels}; "
               f"Q2 hex reference r = {args.ref_levels}")
         print("| entry | mapped rate | mapped limit | ref rate | reference limit +- uncertainty (rate p -+ 1) | "

@@ -1,9 +1,10 @@
 """An independent reference for the 12 x 12 stiffness of chain leaf segments: 27-node
 (triquadratic Lagrange) hexahedra on a multi-block grid of the exact geometry.
 
-The part is a ``ChainSegment`` of a square block, one corner-filleted leaf thin along y and
-a block (the prototype's leaf segments [0, m1] of the L and D chains: blocks 50 x 50 mm,
-leaf l 20, a 6, w 40 mm, t 4 or 3 mm). What it shares with the mapped P2-tet meshes it
+The part is a ``ChainSegment`` of a square block, one corner-filleted leaf and a block (the
+prototype's leaf segments of the L and D chains: blocks 50 x 50 mm, leaf l 20, a 6, w 40 mm,
+t 4 or 3 mm; [0, m1] with leaf 1 thin along y, [m1, s0] with leaf 2 thin along z, which is
+computed turned a quarter about x onto y and the 12 x 12 turned back). What it shares with the mapped P2-tet meshes it
 checks (``flexcal.fem.mesh_mapped_chain``, condensed by ``flexcal.fem.condense``) is only the
 problem: the pieces (``flexcal.geometry.exact.pieces``: where the blocks and the leaf are,
 the leaf's t, a, w), the material, and the end conditions (both end faces rigidly tied to
@@ -37,6 +38,7 @@ Chain frame as in ``flexcal.geometry.params``; SI.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -54,16 +56,26 @@ __all__ = ["SEGMENT_BASE_CELLS", "leaf_height", "segment_grid", "segment_unknown
 SEGMENT_BASE_CELLS = {"through": 2, "arc": 2, "flat": 1, "block": 1, "side": 1, "width": 4, "rim": 1}
 
 
+# (x, y, z) -> (x, z, -y): a quarter turn about x that takes a leaf thin along z to one thin
+# along y (the blocks are square, so the part maps onto itself otherwise)
+_QUARTER_TURN = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
+
+
 def _leaf_of(params):
+    """(pieces, the leaf thin along y, half section [m], turned): a leaf thin along z is
+    taken turned by ``_QUARTER_TURN`` (``turned`` True)."""
     parts = pieces(params)
     leaves = [p for p in parts if not isinstance(p, BoxPiece)]
-    if len(leaves) != 1 or leaves[0].thin_axis != 1:
-        raise ValueError("the Q2-hex chain reference takes a segment with one leaf thin along y "
-                         "(the prototype's [0, m1] leaf segments)")
+    if len(leaves) != 1:
+        raise ValueError("the Q2-hex chain reference takes a segment with one leaf (the prototype's leaf segments)")
     boxes = [p for p in parts if isinstance(p, BoxPiece)]
     if len({(b.half_y, b.half_z) for b in boxes}) != 1 or boxes[0].half_y != boxes[0].half_z:
         raise ValueError("the Q2-hex chain reference takes blocks of one square section")
-    return parts, leaves[0], boxes[0].half_y
+    leaf, turned = leaves[0], leaves[0].thin_axis == 2
+    if turned:
+        leaf = dataclasses.replace(leaf, thin_axis=1)
+        parts = [leaf if not isinstance(p, BoxPiece) else p for p in parts]
+    return parts, leaf, boxes[0].half_y, turned
 
 
 def leaf_height(leaf, x: np.ndarray) -> np.ndarray:
@@ -104,13 +116,14 @@ def _bands(inner: float, outer: float, n_inner: int, n_outer: int, *, uniform_in
 
 
 def segment_grid(params, *, refinement: int = 1, cells: dict | None = None) -> HexGrid:
-    """The reference grid (``HexGrid``) of a leaf segment (module docstring); ``cells``:
+    """The reference grid (``HexGrid``) of a leaf segment (module docstring; a leaf thin along z
+    turned onto y by ``_QUARTER_TURN``); ``cells``:
     overrides of ``SEGMENT_BASE_CELLS``; ``refinement`` r multiplies every count."""
     r = int(refinement)
     counts = {**SEGMENT_BASE_CELLS, **(cells or {})}
     if r < 1 or min(counts.values()) < 1:
         raise ValueError(f"refinement={refinement!r} and every cell count {counts} must be >= 1")
-    parts, leaf, half_section = _leaf_of(params)
+    parts, leaf, half_section, _ = _leaf_of(params)
     core = 0.5 * leaf.thickness + leaf.fillet
     x_parts = []
     for piece in parts:
@@ -144,7 +157,11 @@ def hex27_segment_stiffness(params, *, refinement: int = 1, material: Material =
     ends = []
     for x_end in (grid.x[0], grid.x[-1]):
         ends.append((np.isclose(x, x_end, rtol=0.0, atol=1e-12), np.array([x_end, 0.0, 0.0])))
-    return tied_stiffness(grid, material, ends)
+    k, n_unknowns = tied_stiffness(grid, material, ends)
+    if _leaf_of(params)[3]:  # computed turned (v' = T v): K = T^T K' T
+        T = np.kron(np.eye(4), _QUARTER_TURN)
+        k = T.T @ k @ T
+    return k, n_unknowns
 
 
 def segment_unknowns(params, refinement: int, cells: dict | None = None) -> int:

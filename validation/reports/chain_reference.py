@@ -2,8 +2,8 @@
 against an independent reference (issue 26, "Verification"; docs/meshing.md, "Independent
 reference: Q2 hexahedra (session 18)").
 
-Segments: the [0, m1] slice of the L1 or D1 chain (end block, leaf 1, half the connector;
-``segment``). Mapped: ``mapped_mesh_chain`` at ``MAPPED_NESTED`` (2 cells through, session
+Segments: the [0, m1] slice of the L1 or D1 chain (end block, leaf 1, half the connector)
+or [m1, s0] (half the connector, leaf 2, half a section of strut; ``segment``). Mapped: ``mapped_mesh_chain`` at ``MAPPED_NESTED`` (2 cells through, session
 13's side cells, n as given) with every cell split into r^3, condensed by
 ``flexcal.fem.condense.chain_stiffness`` (``benchmarks/bench_chain_convergence.py``'s nested
 study). Reference: 27-node hexahedra (``flexcal.fem.reference_hex_chain``: another element
@@ -85,19 +85,19 @@ def prototype_stiffness(part) -> tuple[np.ndarray, int]:
 
 
 def compare(chain_name: str, folder: Path | None, mapped_levels, ref_levels, prototype: bool = False,
-            mirrored: bool = False):
+            mirrored: bool = False, index: int = 0):
     """Rows (entry, mapped rate, mapped limit, reference rate, reference limit, its
     uncertainty, (mapped limit - reference limit) / |reference limit|, (finest mapped -
     reference limit) / |reference limit|, (prototype's mesh - reference limit) / |reference
     limit| (NaN without ``prototype``), the reference's rate spread) for every dominant entry
     (``DOMINANT_FRACTION`` on the finest reference) of the upper triangle of the 12 x 12
-    stiffness [SI] of chain ``chain_name``'s leaf segment [0, m1]. ``mirrored``: the mapped
-    levels condensed on their mirror part (``mapped_stiffness``)."""
+    stiffness [SI] of chain ``chain_name``'s leaf segment ``index`` (0: [0, m1], 1: [m1, s0]).
+    ``mirrored``: the mapped levels condensed on their mirror part (``mapped_stiffness``)."""
     from flexcal.fem.convergence import dominant_entries, richardson
     from flexcal.validation.reports.fem import DOMINANT_FRACTION
 
-    part = segment(chain_name, 0)
-    stem = f"{chain_name}_0"
+    part = segment(chain_name, index)
+    stem = f"{chain_name}_{index}"
     n_base = MAPPED_NESTED["n_base"]
     kind = "mapped_mirror" if mirrored else "mapped"
     mapped = np.array([_cached(folder, f"{kind}_{stem}_n{n_base}_r{r}", lambda r=r: mapped_stiffness(part, r, mirrored))
