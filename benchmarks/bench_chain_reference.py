@@ -1,8 +1,8 @@
 """The mapped chain mesher's converged stiffness of the prototype's leaf segments against an
 independent reference (issue 26, "Verification"): every dominant entry of the 12 x 12
 stiffness of the [0, m1] or [m1, s0] segment of L1 or D1, its Richardson limit on nested
-mapped P2-tet meshes (``bench_chain_convergence.py``'s nested study: 2 through, session 13's grid, every
-cell split into r^3), the Richardson limit of 27-node hexahedra
+mapped P2-tet meshes (``bench_chain_convergence.py``'s nested study: 2 through, session 13's
+grid, every cell split into r^3), the Richardson limit of 27-node hexahedra
 (``flexcal.fem.reference_hex_chain``) with that limit's own uncertainty, their relative
 difference, and the virtual prototype's mesh (``segment_stiffness_fem``) against the
 reference limit.

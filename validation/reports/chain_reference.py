@@ -3,8 +3,9 @@ against an independent reference (issue 26, "Verification"; docs/meshing.md, "In
 reference: Q2 hexahedra (session 18)").
 
 Segments: the [0, m1] slice of the L1 or D1 chain (end block, leaf 1, half the connector)
-or [m1, s0] (half the connector, leaf 2, half a section of strut; ``segment``). Mapped: ``mapped_mesh_chain`` at ``MAPPED_NESTED`` (2 cells through, session
-13's side cells, n as given) with every cell split into r^3, condensed by
+or [m1, s0] (half the connector, leaf 2, half a section of strut; ``segment``). Mapped:
+``mapped_mesh_chain`` at ``MAPPED_NESTED`` (2 cells through, session 13's side cells, n as
+given) with every cell split into r^3, condensed by
 ``flexcal.fem.condense.chain_stiffness`` (``benchmarks/bench_chain_convergence.py``'s nested
 study). Reference: 27-node hexahedra (``flexcal.fem.reference_hex_chain``: another element
 family, its own grid, geometry, assembly and end conditions) at refinement r. ``richardson``
