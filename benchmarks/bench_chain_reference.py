@@ -11,6 +11,8 @@ reference limit.
         --ref-levels 2 3 4 5 6 --prototype --dir /tmp/chain_ref
     python benchmarks/bench_chain_reference.py --chain L1 D1 --mirrored --mapped-levels 2 3 4 \\
         --ref-levels 2 3 4 5 6 --prototype --dir /tmp/chain_ref
+    python benchmarks/bench_chain_reference.py --chain L1 D1 --segment 1 --mirrored \\
+        --mapped-levels 2 3 4 --ref-levels 2 3 4 5 --prototype --dir /tmp/chain_ref
 
 --mirrored: the mapped levels condensed on their quarter (``mapped_stiffness``; D1's whole
 level r = 4, 727k DOF, needs more than 8 GB). The finest reference level, r = 6, is 474k DOF
