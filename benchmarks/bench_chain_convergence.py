@@ -34,14 +34,12 @@ NAMES = ("ux", "uy", "uz", "rx", "ry", "rz")
 
 
 def _part(chain_name: str, segment: int):
-    from flexcal.geometry.params import ChainSegment, reference_mechanism
-    from flexcal.validation.prototype.segments import section_nodes
+    from flexcal.geometry.params import reference_mechanism
+    from flexcal.validation.reports.chain_reference import segment as chain_segment
 
-    chain = {c.name: c.chain for c in reference_mechanism().chains}[chain_name]
     if segment < 0:
-        return chain
-    nodes = section_nodes(chain)
-    return ChainSegment(chain=chain, x_start=float(nodes[segment]), x_end=float(nodes[segment + 1]))
+        return {c.name: c.chain for c in reference_mechanism().chains}[chain_name]
+    return chain_segment(chain_name, segment)
 
 
 def stiffness(part, mesher: str, n: float, refinement: int = 1, options: dict | None = None

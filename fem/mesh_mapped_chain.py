@@ -379,7 +379,7 @@ def mapped_mesh_chain(params, *, elements_through_thickness: float = 7, refineme
     return mesh, report
 
 
-def mapped_mesh_chain_mirror_part(params, *, elements_through_thickness: float = 7,
+def mapped_mesh_chain_mirror_part(params, *, elements_through_thickness: float = 7, refinement: int = 1,
                                   **options) -> tuple[TetMesh, tuple[int, ...]]:
     """(mesh, mirror axes): the mapped mesh's part on y >= 0 and / or z >= 0, for a
     condensation that uses the part's two mirror planes (``flexcal.fem.condense.
@@ -391,14 +391,17 @@ def mapped_mesh_chain_mirror_part(params, *, elements_through_thickness: float =
     coordinate 0 exactly. The part keeps the full mesh's cells in that quadrant or half
     (the same Kuhn split in every cell); its mirror images make a conforming mesh of the
     whole part, the full grid with the diagonals of the mirrored cells mirrored.
-    Options and n as ``mapped_mesh_chain`` (no report, no measuring)."""
+    Options, n and refinement as ``mapped_mesh_chain`` (no report, no measuring)."""
     n_float = float(elements_through_thickness)
     if not (math.isfinite(n_float) and n_float >= 1):
         raise ValueError(f"elements_through_thickness={elements_through_thickness!r} must be >= 1")
     unknown = set(options) - set(DEFAULT_CHAIN_OPTIONS) - set(EXTRA_CHAIN_OPTIONS)
     if unknown:
         raise ValueError(f"unknown chain mesh options {sorted(unknown)}")
-    grid = chain_grid(params, math.ceil(n_float - 1e-9), **{**DEFAULT_CHAIN_OPTIONS, **options})
+    if int(refinement) != refinement or refinement < 1:
+        raise ValueError(f"refinement={refinement!r} must be a positive integer")
+    grid = chain_grid(params, math.ceil(n_float - 1e-9), refinement=int(refinement),
+                      **{**DEFAULT_CHAIN_OPTIONS, **options})
     p, q, active = grid.p, grid.q, grid.active
     axes = []
     if np.any(p == 0.0):

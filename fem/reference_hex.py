@@ -7,7 +7,8 @@ and the free face rigidly tied to its centre. Everything that makes a discretisa
 its own, written here (of ``flexcal.fem`` it imports only the linear solver):
 
 * element family: Q2 hexahedra (27 nodes, 3 x 3 x 3 tensor-product Lagrange on
-  [-1, 1]^3), not 10-node tets; Gauss-Legendre quadrature (4 x 4 x 3 points);
+  [-1, 1]^3), not 10-node tets; Gauss-Legendre quadrature (4 x 4 x 3 points)
+  (``flexcal.fem.reference_hex_element``, shared with the chain segments' reference);
 * geometry: isoparametric Q2 on a map of the parent box (x, eta, z), eta in [-1/2, 1/2]:
   (x, eta, z) -> (x, eta h_I(x), z), h_I the quadratic interpolant of the exact notch height
   h(x) at the cell's three x nodes (every node on the exact surfaces; rigid motions and
@@ -18,10 +19,10 @@ its own, written here (of ``flexcal.fem`` it imports only the linear solver):
   with the local height at the neck, cosine spacing in the blocks, across the height and the
   width (fine at every surface and end face; ``reference_grid``), its own counts;
   refinement divides the grid's parameters r times (nested);
-* assembly (scipy COO), end conditions (its own elimination of the tied face: u_s =
+* assembly (scipy, ``reference_hex_element``), end conditions (its own elimination of the tied face: u_s =
   u_m + theta x (x_s - x_m)) and condensation onto the free reference point.
 
-Only the sparse direct solve is shared (``flexcal.fem.solve.solve_spd``: PARDISO, else
+Only the sparse direct solve is shared with the tets (``flexcal.fem.solve.solve_spd``: PARDISO, else
 SuperLU): it is exact to round-off and discretises nothing.
 
 Hinge frame as in ``flexcal.geometry.params``; SI. DOF order ux, uy, uz, rx, ry, rz;
@@ -37,21 +38,9 @@ import scipy.sparse as sp
 
 from flexcal.geometry.params import STEEL, Material
 
-from .solve import solve_spd
+from .reference_hex_element import HexGrid, full_stiffness, grid_nodes, tied_stiffness
 
-__all__ = ["reference_grid", "hex27_hinge_compliance"]
-
-# 1-D quadratic Lagrange on [-1, 1], nodes -1, 0, 1
-_NODES_1D = np.array([-1.0, 0.0, 1.0])
-
-
-def _lagrange_1d(s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Values and derivatives (len(s), 3) of the three quadratic Lagrange functions."""
-    s = np.asarray(s, float)[:, None]
-    value = np.hstack([0.5 * s * (s - 1.0), 1.0 - s * s, 0.5 * s * (s + 1.0)])
-    slope = np.hstack([s - 0.5, -2.0 * s, s + 0.5])
-    return value, slope
-
+__all__ = ["reference_grid", "hinge_grid", "hex27_hinge_compliance"]
 
 def _notch_profile(hinge, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """h(x) [m] and dh/dx [-] of the circular notch (exact, its own formula)."""
@@ -115,103 +104,18 @@ def reference_grid(hinge, n_through: int = 1, *, aspect: float = 3.0, n_arc: int
     return x_lines, eta_lines, z_lines
 
 
-def _column_matrices(hinge, x_lines: np.ndarray, eta_lines: np.ndarray, material: Material
-                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Element stiffness of every (x, eta) cell for a unit cell depth dz = 1 m, split by
-    how it scales with dz: K(dz) = dz A + B + C / dz, each (n_x, n_eta, 81, 81).
-    (A: x/y-gradient products, B: mixed with the z-gradient, C: z-gradient products; the
-    physical z-gradient is (2 / dz) d/dzeta and det J carries dz / 2.)"""
-    E, nu = material.youngs_modulus, material.poisson_ratio
-    lam = E * nu / ((1.0 + nu) * (1.0 - 2.0 * nu))
-    mu = E / (2.0 * (1.0 + nu))
-    gx, wx = np.polynomial.legendre.leggauss(4)
-    gz, wz = np.polynomial.legendre.leggauss(3)
-    vx, dx1 = _lagrange_1d(gx)
-    vz, dz1 = _lagrange_1d(gz)
-    # shape gradients in local coords at (qx, qe, qz), node (a, b, c): (4, 4, 3, 27, 3)
-    dN = np.zeros((4, 4, 3, 3, 3, 3, 3))
-    dN[..., 0] = np.einsum("ia,jb,kc->ijkabc", dx1, vx, vz)
-    dN[..., 1] = np.einsum("ia,jb,kc->ijkabc", vx, dx1, vz)
-    dN[..., 2] = np.einsum("ia,jb,kc->ijkabc", vx, vx, dz1)
-    dN = dN.reshape(4, 4, 3, 27, 3)
-    weights = np.einsum("i,j,k->ijk", wx, wx, wz)
-    x0, x1 = x_lines[:-1], x_lines[1:]
-    e0, e1 = eta_lines[:-1], eta_lines[1:]
-    lx, le = x1 - x0, e1 - e0
-    xq = 0.5 * (x0 + x1)[:, None] + 0.5 * lx[:, None] * gx[None, :]  # (n_x, 4)
-    eq = 0.5 * (e0 + e1)[:, None] + 0.5 * le[:, None] * gx[None, :]  # (n_eta, 4)
-    # isoparametric geometry: h at the cell's three x nodes, interpolated by the same
-    # quadratics as the displacement (y = eta h_I(x) is then in the Q2 space, so rigid motions
-    # and linear fields are exact; the exact map's dh/dx is unbounded where the arc turns
-    # vertical, and e h(x) would not be, measured: a rigid rotation kept 11 % of mu V)
-    h_nodes = np.stack([_notch_profile(hinge, x)[0] for x in (x0, 0.5 * (x0 + x1), x1)], axis=1)  # (n_x, 3)
-    h = h_nodes @ vx.T
-    dh = (h_nodes @ dx1.T) * (2.0 / lx)[:, None]
-    nx_, ne_ = lx.size, le.size
-    # parent gradients (d/dx, d/deta, d/dz at dz = 1) then physical
-    gpx = dN[None, None, ..., 0] * (2.0 / lx)[:, None, None, None, None, None]
-    gpe = dN[None, None, ..., 1] * (2.0 / le)[None, :, None, None, None, None]
-    gpz = dN[None, None, ..., 2] * 2.0
-    gpx = np.broadcast_to(gpx, (nx_, ne_, 4, 4, 3, 27))
-    gpe = np.broadcast_to(gpe, (nx_, ne_, 4, 4, 3, 27))
-    gpz = np.broadcast_to(gpz, (nx_, ne_, 4, 4, 3, 27))
-    hq = h[:, None, :, None, None, None]
-    slope = (eq[None, :, None, :, None, None] * dh[:, None, :, None, None, None]) / hq
-    G = np.empty((nx_, ne_, 4, 4, 3, 27, 3))
-    G[..., 0] = gpx - slope * gpe
-    G[..., 1] = gpe / hq
-    G[..., 2] = gpz
-    det = (h[:, None, :, None, None] * (0.5 * lx)[:, None, None, None, None]
-           * (0.5 * le)[None, :, None, None, None] * 0.5)  # dz = 1
-    wdet = det * weights[None, None]  # (n_x, n_eta, 4, 4, 3)
-    G = G.reshape(nx_ * ne_, 48, 27, 3)
-    wdet = np.broadcast_to(wdet, (nx_, ne_, 4, 4, 3)).reshape(nx_ * ne_, 48)
-    out = []
-    masks = ({(0, 0), (0, 1), (1, 0), (1, 1)}, {(0, 2), (1, 2), (2, 0), (2, 1)}, {(2, 2)})
-    Gw = G * np.sqrt(wdet)[:, :, None, None]
-    flat = Gw.reshape(nx_ * ne_, 48, 81)
-    M = np.matmul(flat.transpose(0, 2, 1), flat).reshape(-1, 27, 3, 27, 3)  # sum_q w G_ai G_bj
-    for mask in masks:
-        Mm = np.zeros_like(M)
-        for i, j in mask:
-            Mm[:, :, i, :, j] = M[:, :, i, :, j]
-        K = lam * Mm + mu * Mm.transpose(0, 1, 4, 3, 2)
-        # mu delta_ij sum_k M[a, k, b, k]: only the k-terms of this scaling class
-        trace = sum(Mm[:, :, k, :, k] for k in range(3))
-        for i in range(3):
-            K[:, :, i, :, i] += mu * trace
-        out.append(K.reshape(nx_, ne_, 81, 81))
-    return tuple(out)
+def hinge_grid(hinge, lines) -> HexGrid:
+    """The ``HexGrid`` of the notch on ``reference_grid``'s lines: every cell active,
+    y = eta h(x) (the core is all of eta in [-1/2, 1/2])."""
+    x_lines, eta_lines, z_lines = lines
+    active = np.ones((x_lines.size - 1, eta_lines.size - 1, z_lines.size - 1), bool)
+    return HexGrid(x=x_lines, p=eta_lines, z=z_lines, active=active, core_half=0.5,
+                   scale=lambda x: _notch_profile(hinge, x)[0])
 
 
 def _stiffness(hinge, lines, material: Material) -> tuple[sp.csr_matrix, np.ndarray]:
     """Global stiffness (3 n, 3 n) CSR and node coordinates (n, 3) [m] of the grid."""
-    x_lines, eta_lines, z_lines = lines
-    A, B, C = _column_matrices(hinge, x_lines, eta_lines, material)
-    nx_, ne_, nz_ = x_lines.size - 1, eta_lines.size - 1, z_lines.size - 1
-    shape = (2 * nx_ + 1, 2 * ne_ + 1, 2 * nz_ + 1)
-    fine = []
-    for lines in (x_lines, eta_lines, z_lines):
-        f = np.empty(2 * lines.size - 1)
-        f[0::2], f[1::2] = lines, 0.5 * (lines[:-1] + lines[1:])
-        fine.append(f)
-    X, Eta, Z = np.meshgrid(*fine, indexing="ij")
-    h, _ = _notch_profile(hinge, X.ravel())
-    nodes = np.column_stack([X.ravel(), Eta.ravel() * h, Z.ravel()])
-    local = np.stack(np.meshgrid(np.arange(3), np.arange(3), np.arange(3), indexing="ij"), -1).reshape(27, 3)
-    ix, ie = np.meshgrid(np.arange(nx_), np.arange(ne_), indexing="ij")
-    total = sp.csr_matrix((3 * nodes.shape[0],) * 2)
-    dz = np.diff(z_lines)
-    for k in range(nz_):
-        idx = np.stack([2 * ix[..., None] + local[:, 0], 2 * ie[..., None] + local[:, 1],
-                        np.full((nx_, ne_, 27), 2 * k) + local[:, 2]], 0)
-        node = np.ravel_multi_index(tuple(idx), shape).reshape(nx_ * ne_, 27)
-        dof = (3 * node[:, :, None] + np.arange(3)).reshape(-1, 81)
-        Ke = (dz[k] * A + B + C / dz[k]).reshape(-1, 81, 81)
-        rows = np.repeat(dof, 81, axis=1).ravel()
-        cols = np.tile(dof, (1, 81)).ravel()
-        total = total + sp.csr_matrix((Ke.ravel(), (rows, cols)), shape=total.shape)
-    return total.tocsr(), nodes
+    return full_stiffness(hinge_grid(hinge, lines), material)
 
 
 def hex27_hinge_compliance(hinge, *, n_through: int = 1, refinement: int = 1, material: Material = STEEL,
@@ -220,29 +124,10 @@ def hex27_hinge_compliance(hinge, *, n_through: int = 1, refinement: int = 1, ma
     of unknowns) of a circular notch hinge on the Q2 reference grid
     (``reference_grid(hinge, n_through, refinement=refinement, **grid_options)``)."""
     lines = reference_grid(hinge, n_through, refinement=refinement, **grid_options)
-    K, nodes = _stiffness(hinge, lines, material)
+    grid = hinge_grid(hinge, lines)
+    nodes, _ = grid_nodes(grid)
     x = nodes[:, 0]
-    length = lines[0][-1]
-    fixed = np.flatnonzero(np.isclose(x, lines[0][0], rtol=0.0, atol=1e-12))
-    free = np.flatnonzero(np.isclose(x, length, rtol=0.0, atol=1e-12))
-    point = np.array([length, 0.0, 0.0])
-    n_dof = K.shape[0]
-    slave = (3 * free[:, None] + np.arange(3)).ravel()
-    clamped = (3 * fixed[:, None] + np.arange(3)).ravel()
-    interior = np.setdiff1d(np.arange(n_dof), np.concatenate([slave, clamped]))
-    # u_s = u_m + theta x (x_s - x_m) = [I, -skew(x_s - x_m)] (u_m, theta)
-    d = nodes[free] - point
-    T = np.zeros((free.size, 3, 6))
-    T[:, :, :3] = np.eye(3)
-    T[:, 0, 4], T[:, 0, 5] = d[:, 2], -d[:, 1]
-    T[:, 1, 3], T[:, 1, 5] = -d[:, 2], d[:, 0]
-    T[:, 2, 3], T[:, 2, 4] = d[:, 1], -d[:, 0]
-    T = T.reshape(-1, 6)
-    K_ii = K[interior][:, interior].tocsr()
-    K_is = K[interior][:, slave]
-    K_im = np.asarray((K_is @ T))
-    K_mm = T.T @ (K[slave][:, slave] @ T)
-    X = solve_spd(K_ii, K_im)  # K_ii^-1 K_im
-    K_c = K_mm - K_im.T @ X
-    K_c = 0.5 * (K_c + K_c.T)
-    return np.linalg.inv(K_c), interior.size + 6
+    fixed = np.isclose(x, lines[0][0], rtol=0.0, atol=1e-12)
+    free = np.isclose(x, lines[0][-1], rtol=0.0, atol=1e-12)
+    K_c, n_unknowns = tied_stiffness(grid, material, [(free, np.array([lines[0][-1], 0.0, 0.0]))], clamped=fixed)
+    return np.linalg.inv(K_c), n_unknowns

@@ -85,3 +85,20 @@ def quad_hinge_entries(thickness, free_end, breaks, width, material):
         "ry_My": integral(lambda x: 12 / (e * w**3 * thickness(x))),
         "rx_Mx": integral(lambda x: 1 / (g * float(hinge.torsion_constant(thickness(x), w)))),
     }
+
+
+def rigid_energy_and_stretch_volume_error(K, nodes: np.ndarray, volume: float, material) -> tuple[float, float]:
+    """(largest energy v^T K v of the four rigid motions (three rotations about the axes, a
+    translation) over the sum of its terms' magnitudes |v|^T |K| |v| [-], the relative error
+    of the volume the uniform stretch u = (x, 0, 0) sees: v^T K v / ((lambda + 2 mu) volume) - 1
+    [-]) for a stiffness K (3 n, 3 n) [SI] on nodes (n, 3) [m] of a part of ``volume`` [m^3]."""
+    E, nu = material.youngs_modulus, material.poisson_ratio
+    lam, mu = E * nu / ((1 + nu) * (1 - 2 * nu)), E / (2 * (1 + nu))
+    X, Y, Z = nodes.T
+    zero = np.zeros_like(X)
+    energies = []
+    for u in (np.c_[-Y, X, zero], np.c_[zero, -Z, Y], np.c_[Z, zero, -X], np.c_[np.ones_like(X), zero, zero]):
+        v = u.ravel()
+        energies.append(abs(v @ (K @ v)) / (np.abs(v) @ (abs(K) @ np.abs(v))))
+    stretch = np.c_[X, zero, zero].ravel()
+    return max(energies), stretch @ (K @ stretch) / ((lam + 2 * mu) * volume) - 1.0

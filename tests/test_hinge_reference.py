@@ -11,31 +11,22 @@ from flexcal.geometry.params import STEEL
 from flexcal.validation.cli.hinge import DEFAULT_CONFIG
 from flexcal.validation.reports.hinge_reference import AGREEMENT, compare, notch
 
+from helpers import rigid_energy_and_stretch_volume_error
+
 DEFAULT_THROUGH = DEFAULT_CONFIG["elements_through"]  # flexcal hinge's default mesh
-
-
-def _lame():
-    E, nu = STEEL.youngs_modulus, STEEL.poisson_ratio
-    return E * nu / ((1 + nu) * (1 - 2 * nu)), E / (2 * (1 + nu))
 
 
 def test_reference_element_keeps_rigid_motions_and_linear_fields_exact():
     # isoparametric Q2: a rigid rotation stores no energy, a uniform strain the energy of
     # the meshed volume; that volume converges on the exact one as the grid is refined
     hinge = notch(1.0)
-    lam, mu = _lame()
     errors = []
     for r in (1, 2, 4):
         K, nodes = _stiffness(hinge, reference_grid(hinge, 1, refinement=r), STEEL)
-        X, Y, Z = nodes.T
-        zero = np.zeros_like(X)
-        for u in (np.c_[-Y, X, zero], np.c_[zero, -Z, Y], np.c_[Z, zero, -X], np.c_[np.ones_like(X), zero, zero]):
-            v = u.ravel()
-            scale = np.abs(v) @ (abs(K) @ np.abs(v))  # the sum of the terms' magnitudes
-            # round-off: measured <= 2.4e-17 of the sum of the magnitudes; 1e-13 leaves 4000x
-            assert abs(v @ (K @ v)) < 1e-13 * scale
-        stretch = np.c_[X, zero, zero].ravel()
-        errors.append(stretch @ (K @ stretch) / ((lam + 2 * mu) * exact_volume(hinge)) - 1.0)
+        rigid, volume_error = rigid_energy_and_stretch_volume_error(K, nodes, exact_volume(hinge), STEEL)
+        # round-off: measured <= 2.4e-17 of the sum of the magnitudes; 1e-13 leaves 4000x
+        assert rigid < 1e-13
+        errors.append(volume_error)
     # measured 3.8e-4, 5.1e-5, 7.6e-6: the geometry converges at h^2.7-2.9 (nested in the arc angle)
     assert 0 < errors[2] < errors[1] / 4 < errors[0] / 16
 

@@ -88,3 +88,19 @@ def test_mirror_axes_are_checked():
     shifted = TetMesh(part.nodes + np.array([0.0, 1e-3, 0.0]), part.tets)
     with pytest.raises(ValueError, match="non-negative side"):
         _condense(segment, shifted, (1,))
+
+
+def test_the_refined_mirror_part_is_the_quarter_of_the_refined_grid():
+    # the nested levels of the chain reference study (refinement r) condensed on their quarter:
+    # the part's nodes are exactly the refined whole mesh's nodes on y >= 0, z >= 0
+    from flexcal.fem.mesh_mapped_chain import mapped_mesh_chain
+
+    segment = _segment("D1", 0)
+    options = dict(elements_through_thickness=2, refinement=2, side_aspect=3.0, slenderness=None)
+    part, axes = mapped_mesh_chain_mirror_part(segment, **options)
+    whole, _ = mapped_mesh_chain(segment, measure=False, **options)
+    assert axes == (1, 2)
+    quarter = whole.nodes[(whole.nodes[:, 1] >= 0.0) & (whole.nodes[:, 2] >= 0.0)]
+    assert np.array_equal(np.unique(part.nodes, axis=0), np.unique(quarter, axis=0))
+    with pytest.raises(ValueError, match="refinement"):
+        mapped_mesh_chain_mirror_part(segment, elements_through_thickness=2, refinement=0)
