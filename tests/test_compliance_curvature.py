@@ -62,6 +62,36 @@ def test_curvatures_move_the_factors_quadratically_with_the_dimensions():
                             compliance_curvatures=tuple(curvatures.ravel()))  # curvatures need slopes
 
 
+def test_shortening_slopes_move_the_correction_linearly_with_the_dimensions():
+    """A consistent space with ``shortening_slopes``: each candidate's shortening forms are those
+    of the constant correction ``c + slopes^T (P / P0 - 1)``; at nominal the slopes change nothing;
+    they need the correction."""
+    from flexcal.model.assembly import mechanism_matrices
+
+    space = dataclasses.replace(parameter_space(), second_order=True, chain_shortening=tuple(np.zeros(216)))
+    rng = np.random.default_rng(7)
+    correction = rng.uniform(-0.1, 0.1, (6, 6, 6))
+    correction = 0.5 * (correction + np.swapaxes(correction, 1, 2))
+    slopes = rng.uniform(-0.5, 0.5, (6, 5, 6, 6))
+    sloped = dataclasses.replace(space, chain_shortening=tuple(correction.ravel()),
+                                 shortening_slopes=tuple(slopes.ravel()))
+    dims = space.chain_indices(*DIMENSION_SYMBOLS)
+    values = np.tile(space.nominal_full, (3, 1))
+    values[:, dims] *= rng.uniform(0.9, 1.1, (3,) + dims.shape)
+    batch = mechanism_matrices(values, sloped).shortening
+    for c, candidate in enumerate(values):
+        moved = correction + np.einsum("jk,jkab->jab", candidate[dims] / space.nominal_full[dims] - 1.0, slopes)
+        constant = dataclasses.replace(space, chain_shortening=tuple(moved.ravel()))
+        # 1e-12 of the forms' largest entry (~10 1/m): the same sums in another order
+        np.testing.assert_allclose(batch[c], mechanism_matrices(candidate, constant).shortening[0], rtol=0,
+                                   atol=1e-11)  # as above
+    at_nominal = dataclasses.replace(space, chain_shortening=tuple(correction.ravel()))
+    np.testing.assert_array_equal(mechanism_matrices(space.nominal_full, sloped).shortening,
+                                  mechanism_matrices(space.nominal_full, at_nominal).shortening)  # r = 0 exactly
+    with pytest.raises(ValueError, match="shortening_slopes"):
+        dataclasses.replace(parameter_space(), shortening_slopes=tuple(slopes.ravel()))  # needs the correction
+
+
 @pytest.mark.slow
 def test_the_curvatures_bound_the_form_error_at_the_workspace_corners_on_the_fem_prototype():
     """The `paper` mount's workspace corners, edges and faces (the postures a D-optimal design
