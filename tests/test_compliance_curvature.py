@@ -92,6 +92,25 @@ def test_shortening_slopes_move_the_correction_linearly_with_the_dimensions():
         dataclasses.replace(parameter_space(), shortening_slopes=tuple(slopes.ravel()))  # needs the correction
 
 
+def test_the_ideal_and_the_paper_model_run_on_a_space_with_the_new_terms():
+    """``flexcal verify`` draws the ideal curve and the form floor's paper-model row from the
+    run's space: both drop the chains' shortening, so they drop its slopes too (before: a
+    ValueError from the space, found by bench_form_error --curvatures)."""
+    from flexcal.model.forward import ideal_angles
+    from flexcal.model.trajectory import standard_trajectory
+    from flexcal.validation.runs.form_floor import paper_model_space
+
+    space = parameter_space()
+    curved = dataclasses.replace(space, second_order=True, chain_shortening=tuple(np.zeros(216)),
+                                 shortening_slopes=tuple(np.zeros(1080)), compliance_factors=((1.0,) * 8,) * 6,
+                                 compliance_slopes=tuple(np.zeros(240)), compliance_curvatures=tuple(np.zeros(1200)))
+    inputs = standard_trajectory().inputs[:5]
+    without = dataclasses.replace(curved, shortening_slopes=(), compliance_curvatures=())
+    np.testing.assert_array_equal(ideal_angles(inputs, curved), ideal_angles(inputs, without))  # zero terms: exact
+    paper = paper_model_space(curved)
+    assert not (paper.shortening_slopes or paper.compliance_curvatures or paper.chain_shortening)
+
+
 @pytest.mark.slow
 def test_the_curvatures_bound_the_form_error_at_the_workspace_corners_on_the_fem_prototype():
     """The `paper` mount's workspace corners, edges and faces (the postures a D-optimal design

@@ -101,7 +101,7 @@ def paper_model_space(space: ParameterSpace) -> ParameterSpace:
     compliance (``--model-stiffness closed-form``), no second-order terms (``--no-second-order``)."""
     return dataclasses.replace(space, compliance_factors=(), compliance_slopes=(), compliance_curvatures=(),
                                second_order=False,
-                               breakaway_force=None, chain_shortening=())
+                               breakaway_force=None, chain_shortening=(), shortening_slopes=())
 
 
 def model_name(space: ParameterSpace) -> str:
