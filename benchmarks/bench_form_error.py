@@ -89,8 +89,8 @@ def main(argv=None) -> int:
                              "number of cells through the thinnest section; one model row each")
     parser.add_argument("--curvatures", action="store_true",
                         help="with --slopes: add the consistent model whose factors follow the dimensions to second "
-                             "order (compliance_curvatures, docs/model.md 11 session 18; 20 cold FEM chain builds per "
-                             "chain design the first time)")
+                             "order and whose shortening correction follows them (dimension_terms.curved_space, "
+                             "docs/model.md 11 session 18; 20 cold FEM chain builds per chain design the first time)")
     parser.add_argument("--trajectory", action="append", default=[], metavar="SCENARIO=FILE",
                         help="a trajectory file (columns xa1_mm, xa2_mm, xa3_mm) to add for that scenario")
     args = parser.parse_args(argv)
@@ -140,7 +140,8 @@ def _table(scenario_name, provider, args, strokes, force, trajectory_file) -> No
             from flexcal.validation.runs.dimension_terms import curved_space
 
             sloped = models[-1][1]
-            models += (("+ the factors to second order in the dimensions (curvatures at nominal)",
+            models += (("+ the factors to second order and the shortening correction following the dimensions "
+                        "(curvatures, shortening slopes at nominal)",
                         curved_space(sloped, provider)),)
     amplitudes = standard_trajectory(scenario.space.mechanism).amplitudes
     trajectories = [("standard (77 points)", scenario.inputs, scenario.leg)]
