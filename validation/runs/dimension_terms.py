@@ -43,7 +43,7 @@ from .chain_kinematics import chain_shortening
 from .model_correction import (SLOPE_STEPS, compliance_factors, provider_chain_compliance, same_design,
                                unchanged_slices)
 
-__all__ = ["compliance_curvatures", "shortening_slopes", "curved_space", "moved_chain"]
+__all__ = ["compliance_curvatures", "shortening_slopes", "curved_space", "moved_chain", "moved_factors"]
 
 _FIELDS = {"w": "width", "a": "fillet", "l": "hinge_length", "t1": "thickness_1", "t2": "thickness_2"}
 
@@ -65,7 +65,7 @@ def _shared(nominal: FlexureChain, chain: FlexureChain, provider: StiffnessProvi
     return asked
 
 
-def _factors(nominal: FlexureChain, chain: FlexureChain, provider: StiffnessProvider, material) -> np.ndarray:
+def moved_factors(nominal: FlexureChain, chain: FlexureChain, provider: StiffnessProvider, material) -> np.ndarray:
     """(8,) provider / closed form of ``chain`` (its shared slices the nominal chain's)."""
     richer = provider_chain_compliance(chain, _shared(nominal, chain, provider))
     closed = chain_compliance_matrix(chain, material)
@@ -96,7 +96,8 @@ def compliance_curvatures(space: ParameterSpace, provider: StiffnessProvider,
         nominal, same = mech.chains[c].chain, unchanged_slices(mech.chains[c].chain, chain)
         slices += [(nominal if (x0, x1) in same else chain, x0, x1) for _, x0, x1 in chain_slices([chain])]
     prepare_provider(provider, list(dict.fromkeys(slices)))  # parallel FEM builds
-    ratio = {key: _factors(mech.chains[key[0]].chain, chain, provider, mech.material) for key, chain in chains.items()}
+    ratio = {key: moved_factors(mech.chains[key[0]].chain, chain, provider, mech.material)
+             for key, chain in chains.items()}
     nominal = compliance_factors(space, provider)
     h = np.array([steps[s] for s in DIMENSION_SYMBOLS])
     out = np.zeros((len(mech.chains), len(DIMENSION_SYMBOLS), len(DIMENSION_SYMBOLS), 8))
