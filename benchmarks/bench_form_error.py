@@ -2,7 +2,7 @@
 
     .venv/bin/python benchmarks/bench_form_error.py [--scenario table1[,paper]] [--provider fem]
         [--walks 3] [--points 60] [--strokes 0.5,0.8] [--seed 1] [--breakaway 2] [--slopes]
-        [--slope-grids default,provider]
+        [--slope-grids default,provider] [--curvatures]
         [--trajectory table1=DIR/trajectory.csv ...]
 
 Truth: the scenario's as-built virtual prototype (FEM segment stiffness by default, noise-free
@@ -87,6 +87,10 @@ def main(argv=None) -> int:
                         help="with --slopes: the mapped grid(s) of the slopes' FEM builds, comma-separated: 'default' "
                              "(model_correction.SLOPE_ELEMENTS_THROUGH), 'provider' (the prototype's own grid) or a "
                              "number of cells through the thinnest section; one model row each")
+    parser.add_argument("--curvatures", action="store_true",
+                        help="with --slopes: add the consistent model whose factors follow the dimensions to second "
+                             "order and whose shortening correction follows them (dimension_terms.curved_space, "
+                             "docs/model.md 11 session 18; 20 cold FEM chain builds per chain design the first time)")
     parser.add_argument("--trajectory", action="append", default=[], metavar="SCENARIO=FILE",
                         help="a trajectory file (columns xa1_mm, xa2_mm, xa3_mm) to add for that scenario")
     args = parser.parse_args(argv)
@@ -132,6 +136,13 @@ def _table(scenario_name, provider, args, strokes, force, trajectory_file) -> No
             shown = f"{through:g} through" if through is not None else "the prototype's grid"
             models += ((f"+ FEM compliance factors following the dimensions (slopes at nominal, {shown})",
                         dataclasses.replace(consistent, compliance_slopes=slopes)),)
+        if args.curvatures:
+            from flexcal.validation.runs.dimension_terms import curved_space
+
+            sloped = models[-1][1]
+            models += (("+ the factors to second order and the shortening correction following the dimensions "
+                        "(curvatures, shortening slopes at nominal)",
+                        curved_space(sloped, provider)),)
     amplitudes = standard_trajectory(scenario.space.mechanism).amplitudes
     trajectories = [("standard (77 points)", scenario.inputs, scenario.leg)]
     if trajectory_file:

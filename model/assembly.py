@@ -212,10 +212,14 @@ def mechanism_matrices(values, space: ParameterSpace, *, candidate_offset: int =
             relative = np.stack([w, a, l, t1, t2], axis=-1) / nominal - 1.0
             slopes = np.reshape(space.compliance_slopes, (N_CHAINS, len(DIMENSION_SYMBOLS), 8))
             factors = factors + np.einsum("cjk,jke->cje", relative, slopes)
+            if space.compliance_curvatures:  # and to second order (docs/model.md 11, session 18)
+                curvatures = np.reshape(space.compliance_curvatures, (N_CHAINS, len(DIMENSION_SYMBOLS),
+                                                                      len(DIMENSION_SYMBOLS), 8))
+                factors = factors + 0.5 * np.einsum("cjk,cjm,jkme->cje", relative, relative, curvatures)
             if np.any(factors <= 0):
                 cand = int(np.argwhere(factors <= 0)[0, 0])
                 raise ValueError(f"candidate {cand + candidate_offset}: a chain-compliance factor came out <= 0 from "
-                                 "compliance_slopes; the dimensions are too far from nominal for the linear correction")
+                                 "compliance_slopes; the dimensions are too far from nominal for the correction")
         compliance = {key: entry * factors[..., i] for i, (key, entry) in enumerate(compliance.items())}
     compliance["ux_Fx"] = compliance["ux_Fx"] + 1.0 / actuator  # actuator spring in series (1/inf = 0 for loads)
     stiffness = stiffness_from_entries(compliance)
@@ -271,8 +275,14 @@ def mechanism_matrices(values, space: ParameterSpace, *, candidate_offset: int =
                          f"parameters")
     mu, clearance, initial_position = values[:, space.chain_indices("mu", "CL", "x0")].transpose(2, 0, 1)  # drives
     if space.chain_shortening:
+        correction = np.reshape(space.chain_shortening, (N_CHAINS, 6, 6))
+        if space.shortening_slopes:  # the correction follows the dimensions (docs/model.md 11, session 18)
+            nominal = space.nominal_full[space.chain_indices(*DIMENSION_SYMBOLS)]  # (chains, 5)
+            relative = np.stack([w, a, l, t1, t2], axis=-1) / nominal - 1.0
+            correction = correction + np.einsum(
+                "cjk,jkab->cjab", relative, np.reshape(space.shortening_slopes, (N_CHAINS, len(DIMENSION_SYMBOLS), 6, 6)))
         shortening, lateral_defect, load_shortening = shortening_matrices(
-            np.reshape(space.chain_shortening, (N_CHAINS, 6, 6)), length, l, w, a, t1, t2, section=section,
+            correction, length, l, w, a, t1, t2, section=section,
             connector_length=connector, end_block_length=end_block, material=mech.material)
     else:
         shortening, load_shortening = np.zeros((n_c, N_CHAINS, 6, 6)), np.zeros((n_c, N_CHAINS, 6, 6))

@@ -64,7 +64,7 @@ def pivot_shortening(end_block, hinge_length, connector, length) -> np.ndarray:
 def shortening_matrices(correction, length, hinge_length, width, fillet, thickness_1, thickness_2, *, section,
                         connector_length, end_block_length, material) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(S_j (n_c, 6, 6, 6), L_j (n_c, 6, 5, 6, 6), T_j (n_c, 6, 6, 6)): each candidate's chains' own
-    shortening form plus the measured correction (6, 6, 6), their lateral defect forms and their
+    shortening form plus the measured correction (6, 6, 6) (or per candidate (n_c, 6, 6, 6)), their lateral defect forms and their
     load forms (``shortening.chain_second_order_forms``; dimensions (n_c, 6) [m])."""
     from .shortening import chain_second_order_forms
 

@@ -291,7 +291,7 @@ def ideal_pose(inputs, space: ParameterSpace | None = None) -> np.ndarray:
     clearance, with gravity. inputs (n_p, 3) [m] -> pose (n_p, 6) [m, rad]. The consistent
     second-order model's shortening (``chain_shortening``) is a parasitic term, so it is left out
     here too (its solve has no parasitic-free form)."""
-    space = dataclasses.replace(space or parameter_space(), chain_shortening=())
+    space = dataclasses.replace(space or parameter_space(), chain_shortening=(), shortening_slopes=())
     nominal = np.array([p.nominal for p in space.parameters])
     return forward(nominal, inputs, space=space, parasitic=False, clearance=False).pose[0]
 

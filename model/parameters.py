@@ -123,6 +123,10 @@ class ParameterSpace:
     compliance_slopes: (n_chains, 5, 8) flattened, the factors' change per relative change of
     each dimension (``DIMENSION_SYMBOLS`` order), measured at the nominal chains: the factors
     become ``f + slopes^T (P / P0 - 1)`` (docs/model.md 7), empty = constant factors;
+    compliance_curvatures: (n_chains, 5, 5, 8) flattened, the factors' second derivatives per
+    relative change of two dimensions (symmetric in them), measured at the nominal chains: the
+    factors gain ``1/2 r^T H r`` with r = P / P0 - 1 (docs/model.md 11, session 18), empty = off
+    (needs compliance_slopes);
     second_order: add the second-order geometric terms (chain-force P-delta, rigid
     second-order frame kinematics; ``model.second_order``, docs/model.md section 8);
     breakaway_force [N] or None: None is the paper's memoryless clip of Eq. 7; a value >= 0
@@ -131,7 +135,10 @@ class ParameterSpace:
     engine); chain_shortening: (n_chains, 6, 6) the measured correction of each chain's
     second-order shortening form to the model's own (``model.shortening``) at the nominal chains [1/m, 1, m],
     empty = off; set, the second-order terms are solved inside the fixed point
-    (``model.consistent``, docs/model.md 10). Vectors in the
+    (``model.consistent``, docs/model.md 10); shortening_slopes: (n_chains, 5, 6, 6) flattened,
+    that correction's change per relative change of each dimension, measured at the nominal
+    chains: the correction becomes ``c + slopes^T (P / P0 - 1)`` (docs/model.md 11, session 18),
+    empty = constant (needs chain_shortening). Vectors in the
     methods below are over the *active* parameters, ``(..., n_active)``, except
     ``full_values`` / ``build_values`` which return all 45 (what ``forward`` takes).
     """
@@ -145,8 +152,20 @@ class ParameterSpace:
     breakaway_force: float | None = None
     chain_shortening: tuple[float, ...] = ()
     compliance_slopes: tuple[float, ...] = ()
+    compliance_curvatures: tuple[float, ...] = ()
+    shortening_slopes: tuple[float, ...] = ()
 
     def __post_init__(self) -> None:
+        if self.shortening_slopes and (not self.chain_shortening
+                                       or len(self.shortening_slopes) != 180 * len(self.mechanism.chains)
+                                       or not np.all(np.isfinite(self.shortening_slopes))):
+            raise ValueError(f"shortening_slopes must be {len(self.mechanism.chains)} x 5 x 6 x 6 finite values "
+                             f"(flattened), got {len(self.shortening_slopes)}, and need chain_shortening")
+        if self.compliance_curvatures and (not self.compliance_slopes
+                                           or len(self.compliance_curvatures) != 200 * len(self.mechanism.chains)
+                                           or not np.all(np.isfinite(self.compliance_curvatures))):
+            raise ValueError(f"compliance_curvatures must be {len(self.mechanism.chains)} x 5 x 5 x 8 finite values "
+                             f"(flattened), got {len(self.compliance_curvatures)}, and need compliance_slopes")
         if self.compliance_slopes and (not self.compliance_factors
                                        or len(self.compliance_slopes) != 40 * len(self.mechanism.chains)
                                        or not np.all(np.isfinite(self.compliance_slopes))):

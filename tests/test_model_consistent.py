@@ -302,16 +302,28 @@ def test_the_load_form_is_the_prototype_chains_shortening_under_load():
     assert abs(slope) * load > 1e-3 * shortening[2, 2]  # the effect is there: 0.2 % of S_zz at 3 kN
 
 
+def workspace_corners(space) -> np.ndarray:
+    """(27, 3) [m] commands: zero, then the 26 corners, edges and faces of the workspace box
+    (``WORKSPACE``, reached through the nominal linear input gain of ``space``) in the order a
+    design orders its postures (``calibration.design.order_postures``)."""
+    import itertools
+
+    from flexcal.calibration.design import order_postures
+    from flexcal.model.trajectory import WORKSPACE
+
+    gain = mechanism_matrices(np.asarray(space.base_values)[None], space).input_gain[0, 3:, 3:]
+    angles = np.array([g for g in itertools.product((-1.0, 0.0, 1.0), repeat=3) if any(g)]) * WORKSPACE
+    inputs = np.linalg.solve(gain, angles.T).T
+    amplitudes = standard_trajectory(space.mechanism).amplitudes
+    return np.vstack([np.zeros(3), inputs[order_postures(inputs, amplitudes)]])
+
+
 @pytest.mark.parametrize("name", ["table1", "paper"])
 def test_the_consistent_model_bounds_the_form_error_at_the_workspace_corners(name):
     """The postures a D-optimal design seeks (``flexcal design``: the workspace's corners, edges
     and faces, 2.6 / 2.6 / 1.6 mm strokes, 2-2.5x the standard amplitudes, 9-13 of 27 with a nut
     off its flank), ordered as a design orders them, at the true values against the analytic
     prototype (breakaway force 2 N)."""
-    import itertools
-
-    from flexcal.calibration.design import order_postures
-    from flexcal.model.trajectory import WORKSPACE
     from flexcal.validation.prototype.providers import stiffness_provider
     from flexcal.validation.prototype.scenario import load_scenario
     from flexcal.validation.prototype.truth import make_truth
@@ -319,11 +331,7 @@ def test_the_consistent_model_bounds_the_form_error_at_the_workspace_corners(nam
 
     scenario = load_scenario(name)
     provider = stiffness_provider("analytic", progress=False, workers=None)
-    gain = mechanism_matrices(np.asarray(scenario.space.base_values)[None], scenario.space).input_gain[0, 3:, 3:]
-    angles = np.array([g for g in itertools.product((-1.0, 0.0, 1.0), repeat=3) if any(g)]) * WORKSPACE
-    inputs = np.linalg.solve(gain, angles.T).T
-    amplitudes = standard_trajectory(scenario.space.mechanism).amplitudes
-    inputs = np.vstack([np.zeros(3), inputs[order_postures(inputs, amplitudes)]])
+    inputs = workspace_corners(scenario.space)
     truth = make_truth(dataclasses.replace(scenario, inputs=inputs, leg=np.ones(len(inputs), dtype=int)),
                        provider).run.angles
     space = dataclasses.replace(consistent_space(scenario.space, provider), breakaway_force=scenario.breakaway_force)

@@ -99,8 +99,9 @@ def truth_from_measurement(measurement: Measurement, space: ParameterSpace) -> T
 def paper_model_space(space: ParameterSpace) -> ParameterSpace:
     """The paper's model (Eq. 1-8 as written) on the mount of ``space``: closed-form chain
     compliance (``--model-stiffness closed-form``), no second-order terms (``--no-second-order``)."""
-    return dataclasses.replace(space, compliance_factors=(), compliance_slopes=(), second_order=False,
-                               breakaway_force=None, chain_shortening=())
+    return dataclasses.replace(space, compliance_factors=(), compliance_slopes=(), compliance_curvatures=(),
+                               second_order=False,
+                               breakaway_force=None, chain_shortening=(), shortening_slopes=())
 
 
 def model_name(space: ParameterSpace) -> str:
@@ -121,7 +122,8 @@ def model_description(space: ParameterSpace) -> str:
         return ("the paper's model (Eq. 1-8 as written: closed-form chain stiffness, no second-order terms; "
                 "--model paper)")
     stiffness = ("closed-form chain stiffness (Eq. 1)" if not space.compliance_factors else
-                 "FEM-informed chain stiffness" + (" following the dimensions" if space.compliance_slopes else ""))
+                 "FEM-informed chain stiffness" + (" following the dimensions" if space.compliance_slopes else "")
+                 + (" to second order" if space.compliance_curvatures else ""))
     play = ("" if space.breakaway_force is None
             else f", clearance play state with breakaway force {space.breakaway_force:g} N")
     terms = ("consistent (measured chain shortening, solved with the clearance)" if space.chain_shortening
@@ -191,9 +193,10 @@ def model_form_floor(truth: TruthCurve, inputs: np.ndarray, space: ParameterSpac
     groups = posture_groups(inputs, run.point_class[0], run.release[0], run.directions)
     paper = paper_model_space(space)
     models = [("run", space, run.angles[0])]
-    if ((space.compliance_factors, space.compliance_slopes, space.second_order, space.breakaway_force,
-         space.chain_shortening) != (paper.compliance_factors, paper.compliance_slopes, paper.second_order,
-                                     paper.breakaway_force, paper.chain_shortening)):
+    if ((space.compliance_factors, space.compliance_slopes, space.compliance_curvatures, space.second_order,
+         space.breakaway_force, space.chain_shortening)
+            != (paper.compliance_factors, paper.compliance_slopes, paper.compliance_curvatures, paper.second_order,
+                paper.breakaway_force, paper.chain_shortening)):
         models.append(("paper", paper, forward(truth.presets, inputs, space=paper).angles[0]))
     out: dict[str, Any] = {
         "available": True,

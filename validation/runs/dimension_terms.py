@@ -1,0 +1,149 @@
+"""The nominal-measured corrections followed further into the candidate's dimensions (docs/model.md
+11, session 18): the FEM compliance factors to second order, the chains' shortening correction to
+first order.
+
+``model_correction.compliance_slopes`` makes each chain-compliance factor follow the candidate's
+dimensions linearly, ``f(P) = f(P0) + sum_k g_k r_k`` with r = P / P0 - 1 (docs/model.md 7). At
+the true dimensions (up to +-10 % off nominal) the FEM factors leave that line by up to 0.3 % on
+the bending entries and 2 % on torsion, smoothly and quadratically along the path from nominal
+to the as-built chain (measured, session 18). A nut in its gap amplifies a bending error of a
+driving chain through its load by mu / (1 - mu) (up to 13x): on the designed trajectories (2-2.5
+mm strokes, most postures with a nut in its gap) that was most of the consistent model's form
+error. The curvatures H (n_chains, 5, 5, 8) give the factors' second-order term ``1/2 r^T H r``:
+
+- diagonal: ``(f(+s_k) + f(-s_k) - 2 f0) / s_k^2`` from the slopes' own builds at +-``SLOPE_STEPS``
+  (no new FEM build: their segments are in the cache) and the nominal factors;
+- mixed: ``(f(+s_k, +s_m) + f(-s_k, -s_m) - 2 f0 - s_k^2 H_kk - s_m^2 H_mm) / (2 s_k s_m)``, two
+  builds per pair of dimensions (20 chain builds per chain design, the slopes' ``same_design``
+  and ``unchanged_slices`` reuse as there), accurate to O(s^2) like the slopes.
+
+The shortening correction ``S_measured(P0) - S_elements(P0)`` (``chain_kinematics``, docs/model.md
+10) is 0.3-0.4 % of the driving chains' S_zz off at the true dimensions; with the factors right
+that error is what the walks show (session 18). Its slopes (n_chains, 5, 6, 6) are the central
+difference of the same probe on the slopes' moved chains (their segments cached: no FEM build).
+
+Measured once at the nominal chains, like the factors and slopes; ``model/`` only receives the
+numbers (``ParameterSpace.compliance_curvatures``, ``ParameterSpace.shortening_slopes``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+
+import numpy as np
+
+from flexcal.geometry.params import FlexureChain
+from flexcal.model.chain import chain_compliance_matrix
+from flexcal.model.hinge import ENTRY_INDEX
+from flexcal.model.parameters import DIMENSION_SYMBOLS, ParameterSpace
+
+from ..prototype.segments import StiffnessProvider, chain_slices, prepare_provider
+from .chain_kinematics import chain_shortening
+from .model_correction import (SLOPE_STEPS, compliance_factors, provider_chain_compliance, same_design,
+                               unchanged_slices)
+
+__all__ = ["compliance_curvatures", "shortening_slopes", "curved_space", "moved_chain", "moved_factors"]
+
+_FIELDS = {"w": "width", "a": "fillet", "l": "hinge_length", "t1": "thickness_1", "t2": "thickness_2"}
+
+
+def moved_chain(chain: FlexureChain, relative: dict[str, float]) -> FlexureChain:
+    """``chain`` with each dimension symbol of ``relative`` scaled by (1 + its value)."""
+    return dataclasses.replace(chain, **{_FIELDS[s]: getattr(chain, _FIELDS[s]) * (1.0 + r)
+                                         for s, r in relative.items()})
+
+
+def _shared(nominal: FlexureChain, chain: FlexureChain, provider: StiffnessProvider) -> StiffnessProvider:
+    """``provider`` asking for a slice ``chain`` shares with ``nominal`` as the nominal chain's
+    (``unchanged_slices``: the same segment, built once)."""
+    same = unchanged_slices(nominal, chain)
+
+    def asked(at, x0, x1):
+        return provider(nominal if (x0, x1) in same else at, x0, x1)
+
+    return asked
+
+
+def moved_factors(nominal: FlexureChain, chain: FlexureChain, provider: StiffnessProvider, material) -> np.ndarray:
+    """(8,) provider / closed form of ``chain`` (its shared slices the nominal chain's)."""
+    richer = provider_chain_compliance(chain, _shared(nominal, chain, provider))
+    closed = chain_compliance_matrix(chain, material)
+    return np.array([richer[i, j] / closed[i, j] for i, j in ENTRY_INDEX.values()])
+
+
+def compliance_curvatures(space: ParameterSpace, provider: StiffnessProvider,
+                          steps: dict[str, float] | None = None) -> np.ndarray:
+    """(n_chains, 5, 5, 8): the second derivative of each factor of ``compliance_factors`` per
+    relative change of two chain dimensions (``DIMENSION_SYMBOLS``: w, a, l, t1, t2) at the
+    nominal chains of ``space`` [-] (module docstring), symmetric in the two dimensions."""
+    steps = SLOPE_STEPS if steps is None else steps
+    mech = space.mechanism
+    design = same_design(mech.chains)
+    first = [c for c in range(len(mech.chains)) if design[c] == c]
+    moves = {}
+    for c in first:
+        for k, symbol in enumerate(DIMENSION_SYMBOLS):
+            for sign in (1, -1):
+                moves[c, k, k, sign] = {symbol: sign * steps[symbol]}
+        for k, m in itertools.combinations(range(len(DIMENSION_SYMBOLS)), 2):
+            for sign in (1, -1):
+                moves[c, k, m, sign] = {DIMENSION_SYMBOLS[k]: sign * steps[DIMENSION_SYMBOLS[k]],
+                                        DIMENSION_SYMBOLS[m]: sign * steps[DIMENSION_SYMBOLS[m]]}
+    chains = {key: moved_chain(mech.chains[key[0]].chain, relative) for key, relative in moves.items()}
+    slices = []
+    for (c, *_), chain in chains.items():
+        nominal, same = mech.chains[c].chain, unchanged_slices(mech.chains[c].chain, chain)
+        slices += [(nominal if (x0, x1) in same else chain, x0, x1) for _, x0, x1 in chain_slices([chain])]
+    prepare_provider(provider, list(dict.fromkeys(slices)))  # parallel FEM builds
+    ratio = {key: moved_factors(mech.chains[key[0]].chain, chain, provider, mech.material)
+             for key, chain in chains.items()}
+    nominal = compliance_factors(space, provider)
+    h = np.array([steps[s] for s in DIMENSION_SYMBOLS])
+    out = np.zeros((len(mech.chains), len(DIMENSION_SYMBOLS), len(DIMENSION_SYMBOLS), 8))
+    for c in first:
+        both = {(k, m): ratio[c, k, m, 1] + ratio[c, k, m, -1] - 2.0 * nominal[c] for k, m in
+                itertools.combinations_with_replacement(range(len(DIMENSION_SYMBOLS)), 2)}
+        for k in range(len(DIMENSION_SYMBOLS)):
+            out[c, k, k] = both[k, k] / h[k] ** 2
+        for k, m in itertools.combinations(range(len(DIMENSION_SYMBOLS)), 2):
+            out[c, k, m] = out[c, m, k] = ((both[k, m] - h[k] ** 2 * out[c, k, k] - h[m] ** 2 * out[c, m, m])
+                                           / (2.0 * h[k] * h[m]))
+    return out[design]
+
+
+def shortening_slopes(space: ParameterSpace, provider: StiffnessProvider,
+                      steps: dict[str, float] | None = None) -> np.ndarray:
+    """(n_chains, 5, 6, 6): the change of each chain's shortening correction
+    (``chain_kinematics.shortening_corrections``) per relative change of each dimension at the
+    nominal chains of ``space`` [1/m, 1, m]: central differences at +-``SLOPE_STEPS``."""
+    from flexcal.model.shortening import chain_shortening_form
+
+    steps = SLOPE_STEPS if steps is None else steps
+    mech = space.mechanism
+    design = same_design(mech.chains)
+    out = np.zeros((len(mech.chains), len(DIMENSION_SYMBOLS), 6, 6))
+    for c in (c for c in range(len(mech.chains)) if design[c] == c):
+        nominal = mech.chains[c].chain
+        for k, symbol in enumerate(DIMENSION_SYMBOLS):
+            for sign in (1, -1):
+                chain = moved_chain(nominal, {symbol: sign * steps[symbol]})
+                measured, _ = chain_shortening(chain, _shared(nominal, chain, provider))
+                own = chain_shortening_form(chain.length, chain.hinge_length, chain.width, chain.fillet,
+                                            chain.thickness_1, chain.thickness_2, section=chain.section,
+                                            connector_length=chain.connector_length,
+                                            end_block_length=chain.end_block_length, material=mech.material)
+                out[c, k] += sign * (measured - own) / (2.0 * steps[symbol])
+    return out[design]
+
+
+def curved_space(space: ParameterSpace, provider: StiffnessProvider) -> ParameterSpace:
+    """``space`` (a consistent space with ``compliance_slopes``) whose factors follow the
+    dimensions to second order and whose shortening correction follows them:
+    ``compliance_curvatures`` and ``shortening_slopes`` of ``space`` and ``provider``."""
+    if not (space.compliance_slopes and space.chain_shortening):
+        raise ValueError("curved_space needs a consistent space with compliance slopes "
+                         "(chain_kinematics.consistent_space over corrected_space(..., slopes=True))")
+    return dataclasses.replace(
+        space, compliance_curvatures=tuple(float(v) for v in compliance_curvatures(space, provider).ravel()),
+        shortening_slopes=tuple(float(v) for v in shortening_slopes(space, provider).ravel()))
