@@ -162,3 +162,32 @@ def test_the_curvatures_bound_the_form_error_at_the_workspace_corners_on_the_fem
     # theta_y, the angle the nuts amplify: measured ratio 0.22, so 2/3 fails only if the terms
     # stop doing most of what they do here
     assert rms["curved"][1] <= 2 / 3 * rms["sloped"][1], rms
+
+
+def test_dimension_terms_option_selects_the_curved_space(monkeypatch):
+    """``--dimension-terms quadratic`` (``model_space``'s ``dimension_terms``) puts the consistent
+    space through ``curved_space``; "linear" does not; any other model refuses it (the stubs keep
+    the FEM out: the wiring, not the numbers, is under test)."""
+    import flexcal.validation.prototype.fem_provider as fem_provider_module
+    import flexcal.validation.runs.chain_kinematics as chain_kinematics
+    import flexcal.validation.runs.dimension_terms as dimension_terms
+    import flexcal.validation.runs.model_correction as model_correction
+
+    calls = []
+    monkeypatch.setattr(fem_provider_module, "fem_provider", lambda **kwargs: "provider")
+    monkeypatch.setattr(model_correction, "corrected_space", lambda space, provider, slopes=False: space)
+    monkeypatch.setattr(chain_kinematics, "consistent_space", lambda space, provider: space)
+
+    def curved(space, provider):
+        calls.append(provider)
+        return dataclasses.replace(space, breakaway_force=123.0)
+    monkeypatch.setattr(dimension_terms, "curved_space", curved)
+
+    model_correction.model_space("fem", True, model="consistent", dimension_terms="linear")
+    assert calls == []
+    space = model_correction.model_space("fem", True, model="consistent", dimension_terms="quadratic")
+    assert calls == ["provider"]
+    assert space.breakaway_force == 2.0  # curved_space's output, then the breakaway force set on it
+    for model, stiffness in (("second-order", "fem"), ("paper", "fem"), ("consistent", "closed-form")):
+        with pytest.raises(ValueError, match="dimension-terms quadratic"):
+            model_correction.model_space(stiffness, True, model=model, dimension_terms="quadratic")

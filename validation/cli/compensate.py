@@ -38,7 +38,8 @@ EXAMPLES = (
 # method "paper": the identification measured for docs/compensation.md; "map" (verify's default)
 # is available with --method map (its compensation figures are not yet measured on the FEM run).
 DEFAULT_CONFIG = calibration_defaults("prior_scale", "sobol_n", "particles", "iterations", "polish", "calibration_seed",
-                                      "model", "model_stiffness", "second_order", method="paper", sobol_threshold=0.0,
+                                      "model", "model_stiffness", "second_order",
+                                      "dimension_terms", method="paper", sobol_threshold=0.0,
                                       readings=10, tolerance_urad=1.0, max_rounds=8, gain=1.0)
 
 

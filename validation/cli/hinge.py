@@ -46,8 +46,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--elements-through", type=float,
                         help="quadratic tets through the thinnest section, 1 to 16 (default %(default)s: every "
                              "dominant entry within 0.4 %% of an independent converged reference with the mapped "
-                             "mesh on R 5 mm notches of t 0.5-2.5 mm; 3 gives -0.3 to -2.1 %%; the mapped mesher rounds up to whole "
-                             "cells)")
+                             "mesh on R 5 mm notches of t 0.5-2.5 mm; 3 gives -0.3 to -2.1 %%; the mapped mesher "
+                             "rounds up to whole cells)")
     parser.add_argument("--mesher", choices=("mapped", "tetwild"),
                         help="mapped: a structured mesh mapped onto the hinge's profile, the same mesh and numbers "
                              "on every run; tetwild: fTetWild, a different random mesh per solve (default "

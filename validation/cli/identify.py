@@ -27,7 +27,8 @@ EXAMPLES = (
     "flexcal identify --data curves.csv --sources D1.x0,D1.CL,D1.mu --remove-offset --out runs/d1",
     "flexcal identify --scenario table1 --provider analytic --particles 40 --iterations 20 --out runs/quick",
 )
-DEFAULT_CONFIG = calibration_defaults("model", "model_stiffness", "second_order", "particles", "iterations", "polish",
+DEFAULT_CONFIG = calibration_defaults("model", "model_stiffness", "second_order",
+                                      "dimension_terms", "particles", "iterations", "polish",
                                       "remove_offset", "calibration_seed", "prior_scale", provider="fem",
                                       sources="table1", method="paper")
 

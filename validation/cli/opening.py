@@ -75,8 +75,9 @@ def calibration_model(args: argparse.Namespace, mechanism, *, progress: bool):
     if force is not None and model != "consistent":
         raise ValueError(f"--breakaway-force sets the consistent model's play state; add --model consistent "
                          f"(this run's model is {model})")
+    terms = getattr(args, "dimension_terms", None) or "linear"
     return model_space(args.model_stiffness, args.second_order, progress=progress, mechanism=mechanism,
-                       model=model, breakaway_force=force, **executor_options(args))
+                       model=model, breakaway_force=force, dimension_terms=terms, **executor_options(args))
 
 
 def open_calibration(args: argparse.Namespace, *, progress: bool, data_path=None,

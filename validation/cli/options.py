@@ -173,7 +173,7 @@ def executor_options(args: argparse.Namespace) -> dict[str, Any]:
 
 # --model's default names today's calibration model; the consistent model (issue 24) is selected
 # by name, not by default (docs/cli.md "Which model calibrates")
-MODEL_DEFAULTS = {"model": "second-order", "model_stiffness": "fem", "second_order": True}
+MODEL_DEFAULTS = {"model": "second-order", "model_stiffness": "fem", "second_order": True, "dimension_terms": "linear"}
 
 
 def _calibration_defaults() -> dict[str, Any]:
@@ -224,6 +224,12 @@ def add_model_options(parser: argparse.ArgumentParser) -> None:
                              f"play state, given, not identified; default {DEFAULT_BREAKAWAY_N:g}, the virtual "
                              f"prototype's)")
 
+    parser.add_argument("--dimension-terms", choices=("linear", "quadratic"),
+                        help="--model consistent's FEM factors and chain shortening as functions of the chain "
+                             "dimensions: linear (slopes; default %(default)s) or quadratic (second-order terms and "
+                             "cross terms of the factors, the shortening's slopes: the form error on designed "
+                             "trajectories 0.29-0.44 -> 0.05-0.21 urad theta_y, at ~40 more chain builds on a cold "
+                             "cache; docs/model.md, session 18)")
     add_executor_options(parser, what="the FEM segment builds (cold cache only)")
 
 

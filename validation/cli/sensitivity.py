@@ -20,7 +20,8 @@ EXAMPLES = (
     "flexcal sensitivity --data curves.csv --sobol-n 128 --out runs/sobol-quick",
     "flexcal sensitivity --scenario table1 --provider analytic --sobol-n 64 --json --out runs/s",
 )
-DEFAULT_CONFIG = calibration_defaults("model", "model_stiffness", "second_order", "sobol_n", "sobol_threshold",
+DEFAULT_CONFIG = calibration_defaults("model", "model_stiffness", "second_order",
+                                      "dimension_terms", "sobol_n", "sobol_threshold",
                                       "calibration_seed",
                                       provider="fem")
 
