@@ -17,8 +17,11 @@ postures are avoided; report.md says how many and why (``flexcal.calibration.des
 ``--region box|hull`` draws the candidates in the standard trajectory's input box or the hull of
 its postures, ``--criterion I`` minimizes the mean prediction variance over that box instead of
 maximizing log det M, ``--keep-standard K`` measures the K-point standard trajectory first and
-designs the rest; none of them beat the standard trajectory on table1 seed 1 (FEM prototype,
-docs/calibration.md 10), so the default stays the D-optimal design over the whole workspace.
+designs the rest (report.md says which postures were kept and why); none of them beat the standard
+trajectory on table1 seed 1 (FEM prototype, docs/calibration.md 10), and on `paper` with ``--at``
+stage 1's estimate and ``--model consistent`` ``--keep-standard 41`` beat it on 2 of 3 seeds
+(docs/calibration.md 11, "A 77-point design that keeps the standard sweeps"), so the default
+stays the D-optimal design over the whole workspace.
 """
 
 from __future__ import annotations
