@@ -2,7 +2,7 @@
 
     .venv/bin/python benchmarks/bench_two_stage.py --out runs/two-stage/s1 --seed 1 \
         [--scenario paper] [--model consistent] [--noise-urad 0.5] [--candidates 2000] \
-        [--combined] [--combined-candidates 500] [--redo]
+        [--keep-standard K] [--region workspace|box|hull] [--combined] [--combined-candidates 500] [--redo]
 
 Stages (each one's output folder under --out; a stage whose result is already there is reused
 unless --redo, so a run cut short resumes):
@@ -13,7 +13,10 @@ unless --redo, so a run cut short resumes):
    77 postures, stroke 1.0, seed 28).
 2. ``design``: ``flexcal design --scenario S --at std/report.json --model M --inadequacy none
    --candidates C`` (the D-optimal design at the identified values, where the drives' nuts
-   are in their gaps).
+   are in their gaps). With ``--keep-standard K`` (and/or ``--region R``) the design keeps
+   the K-point standard trajectory first and designs the other 77 - K postures: stage folders
+   ``design-kK[-R]`` / ``designed-kK[-R]`` and OUT/two_stage-kK[-R].json, so variants share one
+   stage 1 (and may run side by side).
 3. ``designed``: stage 1's verify and held-out walk on the designed trajectory (the same seed:
    the same prototype and the same noise stream).
 4. with --combined: ``design-combined`` (``--points 154 --keep-standard 77 --candidates
@@ -119,6 +122,13 @@ def _row(name: str, run: dict) -> str:
             f"(floor {run['heldout_floor_urad']:.3f}) | {run.get('verify_wall_s') or float('nan'):.0f} |")
 
 
+def _variant(args) -> str:
+    """The designed stage's folder suffix: "" for the plain design, "-kK[-region]" otherwise."""
+    if args.keep_standard == 0 and args.region == "workspace":
+        return ""
+    return f"-k{args.keep_standard}" + ("" if args.region == "workspace" else f"-{args.region}")
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", required=True)
@@ -128,6 +138,10 @@ def main(argv=None) -> int:
     parser.add_argument("--noise-urad", type=float, default=0.5)
     parser.add_argument("--walk-seed", type=int, default=28)
     parser.add_argument("--candidates", type=int, default=2000, help="candidates of the designed-alone stage")
+    parser.add_argument("--keep-standard", type=int, default=0, metavar="K",
+                        help="the designed stage keeps the K-point standard trajectory first and designs 77 - K")
+    parser.add_argument("--region", default="workspace", choices=("workspace", "box", "hull"),
+                        help="where the designed stage's candidates are drawn (flexcal design --region)")
     parser.add_argument("--combined", action="store_true",
                         help="also the standard trajectory followed by 77 designed postures (one measurement)")
     parser.add_argument("--combined-candidates", type=int, default=500)
@@ -141,10 +155,14 @@ def main(argv=None) -> int:
     summary = {"scenario": args.scenario, "seed": args.seed, "model": args.model, "noise_urad": args.noise_urad,
                "threads": threads, "paper": PAPER, "runs": {}, "designs": {}}
     summary["runs"]["standard"] = _verify(out / "std", args, None, args.redo)
+    variant = _variant(args)
     if not args.skip_designed:
-        summary["designs"]["designed"] = _design(out / "design", args, out / "std" / "report.json",
-                                                 ["--candidates", str(args.candidates)], args.redo)
-        summary["runs"]["designed"] = _verify(out / "designed", args, out / "design" / "trajectory.csv", args.redo)
+        extra = ["--candidates", str(args.candidates), "--keep-standard", str(args.keep_standard),
+                 "--region", args.region]
+        name = f"designed{variant}"
+        summary["designs"][name] = _design(out / f"design{variant}", args, out / "std" / "report.json", extra,
+                                           args.redo)
+        summary["runs"][name] = _verify(out / name, args, out / f"design{variant}" / "trajectory.csv", args.redo)
     if args.combined:
         summary["designs"]["combined"] = _design(out / "design-combined", args, out / "std" / "report.json",
                                                  ["--points", "154", "--keep-standard", "77", "--candidates",
@@ -154,7 +172,7 @@ def main(argv=None) -> int:
     for name, run in summary["runs"].items():
         if name != "standard":
             summary[f"{name}_vs_standard"] = _beats(run, summary["runs"]["standard"])
-    (out / "two_stage.json").write_text(json.dumps(summary, indent=1))
+    (out / f"two_stage{variant}.json").write_text(json.dumps(summary, indent=1))
 
     print(f"{args.scenario} seed {args.seed}, --model {args.model}, {args.noise_urad} urad; errors x0 um, CL mm, mu % "
           "(relative); *: not identified alone")

@@ -64,3 +64,17 @@ def test_beats_needs_all_three_criteria():
     # worse held-out prediction: loses
     worse_prediction = _run({"D3.x0": 0.0005}, ["D3.x0", "D3.CL"], 0.50)
     assert not bench_two_stage._beats(worse_prediction, standard)["beats"]
+
+
+def test_variants_get_their_own_stages():
+    """--keep-standard / --region name the designed stage's folders and summary, so that variants
+    share one stage 1 and never overwrite each other's results (or the plain design's)."""
+    from types import SimpleNamespace
+
+    def name(keep, region):
+        return bench_two_stage._variant(SimpleNamespace(keep_standard=keep, region=region))
+
+    assert name(0, "workspace") == ""
+    assert name(41, "workspace") == "-k41"
+    assert name(41, "box") == "-k41-box"
+    assert len({name(k, r) for k in (0, 33, 41) for r in ("workspace", "box", "hull")}) == 9

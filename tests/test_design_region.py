@@ -73,7 +73,8 @@ def test_fixed_postures_come_first_and_the_design_adds_the_rest():
 def test_design_cli_keeps_the_standard_postures_and_stays_in_their_hull(tmp_path):
     """flexcal design --keep-standard 13 --region hull --criterion I: the 13-point standard
     trajectory first (its postures and legs), then 28 I-optimal postures inside the hull of the
-    77-point standard trajectory's postures; the options are in report.json."""
+    77-point standard trajectory's postures; the options are in report.json, and report.md says
+    which postures were kept and that none was avoided (--inadequacy none)."""
     import json
 
     from flexcal.model.trajectory import standard_trajectory
@@ -95,3 +96,6 @@ def test_design_cli_keeps_the_standard_postures_and_stays_in_their_hull(tmp_path
     assert np.all(np.sum(np.abs(rows[13:, 2:] * 1e-3) / box, axis=1) <= 1 + 1e-9)
     report = json.loads((out / "report.json").read_text())
     assert (report["region"], report["criterion_name"], report["keep_standard"]) == ("hull", "I", 13)
+    assert (report["kept"]["n_kept"], report["kept"]["n_designed"]) == (13, 28) and report["avoided"] is None
+    text = (out / "report.md").read_text()  # the report says which postures were kept and that none was avoided
+    assert "Postures kept: the first 13 are the 13-point standard trajectory" in text and "No posture avoided" in text

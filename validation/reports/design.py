@@ -27,6 +27,7 @@ def markdown(report: dict) -> str:
              f"| sources with expected std <= 1 % of range | {d['n_sources_below_1pct']} | "
              f"{s['n_sources_below_1pct']} |", "",
              *_avoided_lines(report.get("avoided")),
+             *_kept_lines(report.get("kept")),
              "![expected standard errors](design.png)", "", "## Expected standard error per source [% of range]", "",
              "| source | designed | standard |", "|---|---:|---:|"]
     for name, a, b in zip(report["names"], d["expected_std_of_range"], s["expected_std_of_range"]):
@@ -43,6 +44,15 @@ def _avoided_lines(avoided: dict | None) -> list[str]:
             + ("" if median is None else f" (median {median:.3g} urad, up to "
                f"{avoided['avoided_model_error_urad']['max']:.3g} urad)")
             + f". Why: {avoided['why']}.", ""]
+
+
+def _kept_lines(kept: dict | None) -> list[str]:
+    if not kept:
+        return []
+    mm = lambda values: " / ".join(f"{v:.3g}" for v in values)  # noqa: E731
+    return [f"Postures kept: the first {kept['n_kept']} are the {kept['n_kept']}-point standard trajectory (one actuator "
+            f"at a time, strokes {mm(kept['kept_inputs_mm_max_abs'])} mm), then {kept['n_designed']} designed "
+            f"(strokes up to {mm(kept['designed_inputs_mm_max_abs'])} mm). Why: {kept['why']}.", ""]
 
 
 def plot_design(path, design, names) -> None:
