@@ -217,14 +217,12 @@ def run_diagnosis(measurement: Measurement, *, baseline: Callable[..., BaselineF
 
 
 def _noise_test(problem, left, inputs, direction) -> dict[str, Any]:
-    """``correlated.correlated_noise`` of what is left (n, 3) [rad], the deterministic terms'
-    columns removed; "effect": the library's noise effect among the candidates (None if not)."""
+    """``correlated.correlated_noise`` of what is left (n, 3) [rad] after the baseline and the
+    accepted effects; "effect": the library's noise effect among the candidates (None if not)."""
     from ..effects.chain import NOISE_EFFECTS
 
     noise = [i for i in problem.terms if i in NOISE_EFFECTS]
-    deterministic = [problem.columns[i] for i in problem.terms if i not in NOISE_EFFECTS]
-    regressors = np.concatenate(deterministic, axis=-1) if deterministic else None
-    return {**correlated_noise(left, problem.sigma, inputs, direction, regressors), "effect": noise[0] if noise else None}
+    return {**correlated_noise(left, problem.sigma, inputs, direction), "effect": noise[0] if noise else None}
 
 
 def _report(measurement, fit, residual, floor, unit, folds, ranking, stages, groups, accepted, collinear,
