@@ -109,3 +109,6 @@ def test_the_diagnosis_names_air_turbulence_by_the_noise_test(turbulence, expect
     if expected != "none":
         assert report["confidence"] == "low" and report["top_group"] == ["air_turbulence"]
         assert report["detected_by"] == "correlated noise"  # its cosine term did not predict the held-out legs
+        from flexcal.validation.reports.diagnose import markdown
+
+        assert "no term was significant" in markdown(report)  # report.md says how the answer was found
