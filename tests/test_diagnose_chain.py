@@ -76,7 +76,7 @@ def test_null_raises_a_terms_threshold_by_its_gain_on_none_files():
     assert NullModel().min_gain("x", 1.0) == 1.0
 
 
-@pytest.mark.slow  # 65-110 s each (a diagnosis with the look-alike test)
+@pytest.mark.slow  # 65-142 s each (a diagnosis with the look-alike test; 142 s: air_turbulence at load 10)
 @pytest.mark.parametrize("effect_id", ["sensor_settling", "air_turbulence"])
 def test_each_new_effect_is_found_on_its_own_injection(provider, effect_id):
     """At 10x the noise on the standard trajectory x2, the new effect is the top effect or in
@@ -90,7 +90,7 @@ def test_each_new_effect_is_found_on_its_own_injection(provider, effect_id):
         assert report["detected_by"] == "correlated noise" and report["confidence"] == "low"
 
 
-@pytest.mark.slow  # ~4-6 min: the 77-point design (107 s idle, 4 min at load 10) and a diagnosis (~2 min loaded)
+@pytest.mark.slow  # 396 s at load 10 (2026-11-28): the 77-point design (107 s idle) and a diagnosis
 def test_air_turbulence_10x_on_the_designed_trajectory_is_found(tmp_path, provider):
     """The case the designed small grid missed in session 17 (docs/diagnosis.md: air_turbulence 10x
     on design e8991e922cac40a3 answered `none`, its cosine term closing 0.24 < 0.25): the
