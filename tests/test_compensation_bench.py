@@ -150,3 +150,53 @@ def test_fem_goal_run(tmp_path):
     paper_first = dict(zip(("theta_x", "theta_y", "theta_z"), (65.4, 79.8, 74.8)))
     assert all(report["first_round_mean_reduction_pct"][a] >= paper_first[a] for a in paper_first)
     assert report["goal_met"]
+
+
+def test_compensate_takes_identifys_error_bar_options(tmp_path, monkeypatch, capsys):
+    """compensate's identification gets --error-budget-draws / --no-error-budget / --profile-bars
+    (the option helper identify and verify use) and the --provider the budget is measured on;
+    they reach run_compensation (its budget and VerifySettings.profile) and the report's settings."""
+    import argparse
+
+    from flexcal.validation import cli
+    from flexcal.validation.cli.compensate import error_bar_record
+    from flexcal.validation.runs import compensate as runs_compensate
+
+    assert cli.main(["compensate", "--help"]) == 0
+    text = capsys.readouterr().out
+    assert all(option in text for option in ("--error-budget-draws", "--no-error-budget", "--profile-bars",
+                                             "--provider"))
+    from flexcal.model.forward import ideal_angles
+    from flexcal.model.parameters import parameter_space
+    from flexcal.validation.measurements import Measurement, write_measurement
+
+    scenario = load_scenario("table1")  # its standard trajectory; the small-deflection angles (no sidecar: real data)
+    n = scenario.inputs.shape[0]
+    (tmp_path / "t").mkdir()
+    write_measurement(tmp_path / "t" / "curves.csv", Measurement(
+        point=np.arange(n), time=np.arange(n) * 2.0, leg=scenario.leg, inputs=scenario.inputs,
+        angles=ideal_angles(scenario.inputs, parameter_space())))
+    seen = []
+
+    class Stop(Exception):
+        pass
+
+    def fake_run_compensation(measurement, targets, space, settings, **kwargs):
+        seen.append((settings, kwargs.get("budget")))
+        raise Stop  # the identification itself is identify's, tested there
+
+    monkeypatch.setattr(runs_compensate, "run_compensation", fake_run_compensation)
+    base = ["compensate", "--data", str(tmp_path / "t" / "curves.csv"), "--model-stiffness", "closed-form",
+            "--provider", "analytic", "--out", str(tmp_path / "c"), "--quiet"]
+    for extra, profile, with_budget in ((["--method", "map", "--profile-bars", "--error-budget-draws", "2"], True, True),
+                                        (["--method", "map", "--no-error-budget"], False, False),
+                                        (["--profile-bars"], False, False)):  # --method paper (the default): no bars
+        seen.clear()
+        assert cli.main(base + extra) != 0  # stopped by the fake
+        settings, budget = seen[0]
+        assert settings.verify.profile is profile and (budget is not None) is with_budget
+        args = argparse.Namespace(method=settings.verify.method, provider="analytic",
+                                  error_budget_draws=2 if with_budget else None)
+        record = error_bar_record(args, settings, budget)
+        assert record["profile_bars"] is profile
+        assert record["error_budget"] == ({"provider": "analytic", "draws": 2} if with_budget else None)

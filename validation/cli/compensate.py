@@ -23,7 +23,7 @@ import numpy as np
 
 from .options import add_out, add_seed, calibration_defaults
 
-__all__ = ["configure", "run", "EXAMPLES", "DEFAULT_CONFIG"]
+__all__ = ["configure", "run", "EXAMPLES", "DEFAULT_CONFIG", "error_bar_record"]
 
 EXAMPLES = (
     "flexcal truth --scenario table1 --noise-urad 0.5 --out runs/t1 && "
@@ -39,7 +39,7 @@ EXAMPLES = (
 # is available with --method map (its compensation figures are not yet measured on the FEM run).
 DEFAULT_CONFIG = calibration_defaults("prior_scale", "sobol_n", "particles", "iterations", "polish", "calibration_seed",
                                       "model", "model_stiffness", "second_order",
-                                      "dimension_terms", method="paper", sobol_threshold=0.0,
+                                      "dimension_terms", method="paper", sobol_threshold=0.0, provider="fem",
                                       readings=10, tolerance_urad=1.0, max_rounds=8, gain=1.0)
 
 
@@ -80,6 +80,13 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="least-squares polish of the swarm's best points (default: on)")
     parser.add_argument("--calibration-seed", type=int, default=c["calibration_seed"], metavar="N",
                         help="seed of the Sobol sample and the PSO (default %(default)s)")
+    from .options import add_error_bar_options, add_provider
+
+    # the identification's error bars (--method map/free), as identify's and verify's
+    add_error_bar_options(parser)
+    add_provider(parser, what="of the prototype the model-error budget is measured on (the bench itself is the "
+                              "data sidecar's)")
+    parser.set_defaults(provider=c["provider"])
     add_out(parser, what="report.json, report.md, inputs.csv, targets.csv, fit/first_round/iterated PNGs")
 
 
@@ -96,15 +103,24 @@ def _settings(args):
     check_n_base(args.sobol_n, name="--sobol-n")
     if args.readings < 1:
         raise ValueError(f"--readings={args.readings} must be >= 1")
-    from .options import prior_scale_option
+    from .options import prior_scale_option, profile_option
 
     verify = VerifySettings(sobol_n=args.sobol_n, sobol_threshold=args.sobol_threshold, seed=args.calibration_seed,
                             polish=args.polish, remove_offset=True, method=args.method,
-                            prior_scale=prior_scale_option(args),
+                            prior_scale=prior_scale_option(args), profile=profile_option(args),
                             pso=dataclasses.replace(PSOSettings(), n_particles=args.particles,
                                                     max_iterations=args.iterations))
     loop = LoopSettings(tolerance=args.tolerance_urad * 1e-6, max_rounds=args.max_rounds, gain=args.gain)
     return CompensationSettings(verify=verify, loop=loop)
+
+
+def error_bar_record(args, settings, budget) -> dict:
+    """What the identification's error bars carry, for report.json's settings: the method,
+    the model-error budget ({"provider", "draws"}: None for --method paper or
+    --no-error-budget; draws None: the default) and whether the profile bars were on."""
+    return {"method": args.method,
+            "error_budget": None if budget is None else {"provider": args.provider, "draws": args.error_budget_draws},
+            "profile_bars": settings.verify.profile}
 
 
 def _write_inputs(path, targets: np.ndarray, inputs: np.ndarray, final: np.ndarray | None) -> None:
@@ -125,7 +141,7 @@ def run(args: argparse.Namespace) -> int:
     from ..output import staged_output, write_report
     from .opening import calibration_model, open_data
     from ..runs.targets import default_targets, read_targets, write_targets
-    from .options import executor_options
+    from .options import error_budget_option, executor_options
 
     quiet = getattr(args, "quiet", False)
     settings = _settings(args)
@@ -144,15 +160,17 @@ def run(args: argparse.Namespace) -> int:
                                 progress=not quiet, **executor_options(args))
     from ..runs.form_floor import truth_from_measurement
 
+    budget = error_budget_option(args, space, measurement.inputs, progress=not quiet)
     result = run_compensation(measurement, targets, space, settings, bench=bench,
-                              truth=truth_from_measurement(measurement, space), progress=not quiet)
+                              truth=truth_from_measurement(measurement, space), progress=not quiet, budget=budget)
     report = build_report(result)
     report["settings"] = {"data": str(args.data), "targets": args.targets or "default (flexcal.validation.runs.targets)",
                           "readings": args.readings, "tolerance_urad": args.tolerance_urad,
                           "max_rounds": args.max_rounds, "gain": args.gain, "sobol_n": args.sobol_n,
                           "particles": args.particles, "iterations": args.iterations,
                           "calibration_seed": args.calibration_seed, "model_stiffness": args.model_stiffness,
-                          "second_order": args.second_order, "model": args.model}
+                          "second_order": args.second_order, "model": args.model,
+                          **error_bar_record(args, settings, budget)}
     ideal = ideal_angles(measurement.inputs, space)
     with staged_output(args.out, replace=args.force) as staging:
         write_report(staging, report)

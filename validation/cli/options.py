@@ -278,7 +278,7 @@ def add_calibration_options(parser: argparse.ArgumentParser) -> None:
 
 def add_error_bar_options(parser: argparse.ArgumentParser) -> None:
     """``--error-budget-draws K``, ``--no-error-budget`` and ``--profile-bars`` (``verify``,
-    ``identify``): what the error bars of --method map/free carry besides the noise and the
+    ``identify``, ``compensate``): what the error bars of --method map/free carry besides the noise and the
     residual-fitted discrepancy (validation/runs/error_budget.py, calibration/profile_bars.py)."""
     parser.add_argument("--error-budget-draws", type=int, default=None, metavar="K",
                         help="the error bars of --method map/free carry the model's error measured on the "
@@ -294,6 +294,12 @@ def add_error_bar_options(parser: argparse.ArgumentParser) -> None:
                         help="widen the bars of the base combinations not identified alone by their profile "
                              "likelihood, the other sources re-optimised (calibration/profile_bars.py; for a "
                              "nonlinear model such as --model consistent on noisy data; minutes)")
+
+
+def add_provider(parser: argparse.ArgumentParser, *, what: str) -> None:
+    """``--provider``: the virtual prototype's segment stiffness (``PROVIDERS``); its default
+    comes from the command's DEFAULT_CONFIG. what: what the command builds the prototype for."""
+    parser.add_argument("--provider", choices=PROVIDERS, help=f"prototype segment stiffness {what} (default %(default)s)")
 
 
 def error_budget_option(args: argparse.Namespace, space, inputs, *, progress: bool):
@@ -328,8 +334,7 @@ def add_source_options(parser: argparse.ArgumentParser) -> None:
                                                       "presets, if any, give the error columns")
     add_seed(parser, what="the scenario's drawn errors and noise (default: the scenario's)")
     parser.add_argument("--noise-urad", type=float, default=None, help="sensor noise of the scenario [urad]")
-    parser.add_argument("--provider", choices=PROVIDERS,
-                        help="prototype segment stiffness for --scenario (default %(default)s)")
+    add_provider(parser, what="for --scenario")
     add_trajectory(parser)
     add_mount(parser, what="the scenario's or the data's (sidecar's) mount; with --data the differences are listed")
     add_unit_check_option(parser)

@@ -15,6 +15,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from .baseline import BaselineFit, calibrate_baseline
+from .correlated import correlated_noise
 from .null import NullModel
 from .separation import RUNNER_UP_RATIO, runner_up, separation
 from .where import concentration, noise_floor, strata, structure_tests
@@ -197,14 +198,31 @@ def run_diagnosis(measurement: Measurement, *, baseline: Callable[..., BaselineF
         cv_before = cross_validate(problem, [], folds)
         cv_after = cross_validate(problem, accepted, folds)
         final = fit_terms(problem, accepted)
+        noise_test = _noise_test(problem, residual - final.explained, measurement.inputs, direction)
     report = _report(measurement, fit, residual, floor, unit, folds, first_ranking, stages, groups, accepted,
                      collinear, cv_before, cv_after, final, skipped, settings, k_baseline)
     report["separation"] = separated
     report["null"] = None if null is None else {**null.as_dict(), "min_gain": min_gain}
     if separated is not None and not separated["separated"]:
         report["confidence"] = "low"  # a look-alike outside the library would have been named the same
+    report["correlated_noise"] = noise_test
+    report["detected_by"] = "heldout" if accepted else "none"
+    if not accepted and noise_test["correlated"] and noise_test["effect"] is not None:
+        # noise that is correlated in time and not repeated, which no deterministic term explains: the library's
+        # noise effect, never `high` (any random cause outside the library leaves the same: docs/diagnosis.md)
+        report.update(top_effect=noise_test["effect"], top_group=[noise_test["effect"]], confidence="low",
+                      detected_by="correlated noise")
     return Diagnosis(report=report, residual=residual, heldout_before=cv_before, heldout_after=cv_after,
                      baseline=fit, folds=tuple(folds), stages=tuple(accepted))
+
+
+def _noise_test(problem, left, inputs, direction) -> dict[str, Any]:
+    """``correlated.correlated_noise`` of what is left (n, 3) [rad] after the baseline and the
+    accepted effects; "effect": the library's noise effect among the candidates (None if not)."""
+    from ..effects.chain import NOISE_EFFECTS
+
+    noise = [i for i in problem.terms if i in NOISE_EFFECTS]
+    return {**correlated_noise(left, problem.sigma, inputs, direction), "effect": noise[0] if noise else None}
 
 
 def _report(measurement, fit, residual, floor, unit, folds, ranking, stages, groups, accepted, collinear,

@@ -23,11 +23,15 @@ from .injectors import _Injector
 from .terms import _term
 
 __all__ = ["SensorSettling", "AirTurbulence", "settling_error", "ar1_series", "CHAIN_TERMS",
-           "TERM_SETTLING_TIME", "REFERENCE_DWELL", "TURBULENCE_MODES"]
+           "TERM_SETTLING_TIME", "REFERENCE_DWELL", "TURBULENCE_MODES", "NOISE_EFFECTS"]
 
 TERM_SETTLING_TIME = 0.5  # [s] the settling term's time constant at zero log parameter (free: x exp(l))
 SETTLING_LOG_TAU_LIMIT = 4.0  # [-] |ln(tau / TERM_SETTLING_TIME)| clipped: tau in 0.01..27 s, no overflow
 REFERENCE_DWELL = 2.0  # [s] the scenarios' default dwell: the settling amplitude is the lag left after it
+# effects that are random in time, not functions of the posture or the path: the diagnosis also tests for them
+# with a test of the noise itself (correlated in time, not repeated: diagnosis.correlated), since their held-out
+# term cannot predict a random process over a held-out leg (docs/diagnosis.md, "Correlated noise")
+NOISE_EFFECTS = ("air_turbulence",)
 TURBULENCE_MODES = 8  # cosine modes in time per channel of the turbulence term: periods 2 T / 9 .. T of a run T
 
 

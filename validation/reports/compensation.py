@@ -110,10 +110,12 @@ def build_report(result) -> dict[str, Any]:
     verify = result.verify.report
     report: dict[str, Any] = {
         "n_targets": int(len(result.targets)),
-        "identification": {k: verify[k] for k in ("fit_rms_urad", "fit_max_urad", "fitness_eq13_urad", "selected",
-                                                  "n_evaluations", "offset_removed")},
-        "identified_parameters": [{k: r[k] for k in ("name", "unit", "identified") + (("preset",) if "preset" in r
-                                                                                      else ())}
+        # the estimation's record (--method map/free): the error bars' sources, the model-error budget, the profile bars
+        "identification": {**{k: verify[k] for k in ("fit_rms_urad", "fit_max_urad", "fitness_eq13_urad", "selected",
+                                                     "n_evaluations", "offset_removed")},
+                           "estimation": verify.get("estimation")},
+        "identified_parameters": [{k: r[k] for k in ("name", "unit", "identified", "std_error")
+                                   + (("preset",) if "preset" in r else ())}
                                   for r in verify["parameters"] if r["was_identified"]],
         "return_offsets_urad": [{"leg": leg, **_per_angle(offset * 1e6)} for leg, offset in
                                 result.return_offsets.items()],
@@ -199,6 +201,10 @@ def report_markdown(report: dict[str, Any]) -> str:
              f"{ident['fit_max_urad']:.3g} urad, {len(ident['selected'])} sources identified. Return offsets "
              "removed first (Sec. 4.2, urad): " + ("; ".join(f"leg {o['leg']}: " + ", ".join(_cell(o[a]) for a in ANGLES)
                                                    for o in report["return_offsets_urad"]) or "none"), ""]
+    discrepancy = (ident.get("estimation") or {}).get("discrepancy")
+    if discrepancy:  # --method map/free: what the identified values' standard errors carry
+        lines += [f"Error bars of the identified values (report.json `identified_parameters`, `std_error`): "
+                  f"{discrepancy['error_bars']}.", ""]
     if "goal" in report:
         lines += [f"{report['n_targets']} targets, {report['n_corrections']} corrective round(s), converged to "
                   f"{report['tolerance_urad']:g} urad: {'yes' if report['converged'] else 'NO'}.", "",

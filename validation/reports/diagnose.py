@@ -14,6 +14,19 @@ def fmt3(values) -> str:
     return ", ".join(f"{v:.3g}" for v in values)
 
 
+def _noise_test_lines(report) -> list[str]:
+    """The correlated-noise test (diagnosis.correlated): how the answer was found, its z and p."""
+    test = report.get("correlated_noise")
+    if not test:
+        return []
+    if not test["available"]:
+        return [f"Correlated-noise test: not available ({test['n_pairs']} pairs of repeated readings).", ""]
+    found = " (the answer: no term was significant)" if report.get("detected_by") == "correlated noise" else ""
+    return [f"Correlated-noise test on what is left (repeated readings, {test['n_pairs']} pairs): z {test['z']:.2f}, "
+            f"p {test['p_value']:.2g} against {test['alpha']:g}: "
+            f"{'correlated, not repeated' if test['correlated'] else 'white'}{found}.", ""]
+
+
 def markdown(report) -> str:
     """report.md of a diagnosis report."""
     lines = ["# Sim-to-real gap diagnosis", "",
@@ -21,6 +34,7 @@ def markdown(report) -> str:
              + (f"; indistinguishable group: {', '.join(report['top_group'])}" if len(report["top_group"]) > 1 else "")
              + f"). Effects added in turn: {', '.join(report['accepted_effects']) or 'none'}.", "",
              *_separation_lines(report),
+             *_noise_test_lines(report),
              f"Noise floor {report['noise_floor_urad']:.3g} urad ({fmt3(report['noise_floor_per_angle_urad'])} per "
              f"angle; {report['noise_floor']['method']}).", "",
              f"Baseline: {report['baseline']['description']}; in-sample RMS {fmt3(report['baseline']['in_sample_rms_urad'])}"

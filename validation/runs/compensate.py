@@ -387,15 +387,16 @@ class CompensationResult:
 
 def run_compensation(measurement: Measurement, targets: np.ndarray, space: ParameterSpace,
                      settings: CompensationSettings = CompensationSettings(), *, bench: Bench | None = None,
-                     truth=None, progress: bool = True) -> CompensationResult:
+                     truth=None, progress: bool = True, budget=None) -> CompensationResult:
     """Fig. 9 on ``measurement`` for relative ``targets`` (n, 3) [rad]; without a bench it
     stops after step 3 (the inputs to send). truth: the model-form floor's truth
-    (``runs.form_floor.TruthCurve``; None: "not available" in the report)."""
+    (``runs.form_floor.TruthCurve``; None: "not available" in the report); budget: the
+    identification's model-error budget (``run_verify``'s; --method map/free only)."""
     from flexcal.model.forward import forward
 
     log = print if progress else (lambda *a, **k: None)
     verify_settings = dataclasses.replace(settings.verify, remove_offset=True)
-    result = run_verify(measurement, space, verify_settings, truth=truth, progress=progress)
+    result = run_verify(measurement, space, verify_settings, truth=truth, progress=progress, budget=budget)
     values = identified_values(result, space)
     weak = unidentified_drive_sources(result)
     if weak:
