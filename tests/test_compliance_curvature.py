@@ -165,29 +165,32 @@ def test_the_curvatures_bound_the_form_error_at_the_workspace_corners_on_the_fem
 
 
 def test_dimension_terms_option_selects_the_curved_space(monkeypatch):
-    """``--dimension-terms quadratic`` (``model_space``'s ``dimension_terms``) puts the consistent
-    space through ``curved_space``; "linear" does not; any other model refuses it (the stubs keep
-    the FEM out: the wiring, not the numbers, is under test)."""
+    """``--dimension-terms quadratic`` (``cli.opening.calibration_model``) puts the consistent
+    space through ``curved_space`` with an FEM provider; "linear" does not; any other model or
+    stiffness refuses it before a model is built (the stubs keep the FEM out: the wiring, not the
+    numbers, is under test)."""
+    import argparse
+
     import flexcal.validation.prototype.fem_provider as fem_provider_module
-    import flexcal.validation.runs.chain_kinematics as chain_kinematics
     import flexcal.validation.runs.dimension_terms as dimension_terms
     import flexcal.validation.runs.model_correction as model_correction
+    from flexcal.validation.cli.opening import calibration_model
 
-    calls = []
+    built, curved = [], []
+    monkeypatch.setattr(model_correction, "model_space", lambda *a, **k: built.append(k["model"]) or "space")
     monkeypatch.setattr(fem_provider_module, "fem_provider", lambda **kwargs: "provider")
-    monkeypatch.setattr(model_correction, "corrected_space", lambda space, provider, slopes=False: space)
-    monkeypatch.setattr(chain_kinematics, "consistent_space", lambda space, provider: space)
+    monkeypatch.setattr(dimension_terms, "curved_space", lambda space, provider: curved.append((space, provider))
+                        or "curved")
 
-    def curved(space, provider):
-        calls.append(provider)
-        return dataclasses.replace(space, breakaway_force=123.0)
-    monkeypatch.setattr(dimension_terms, "curved_space", curved)
+    def args(model, stiffness, terms):
+        return argparse.Namespace(model=model, model_stiffness=stiffness, second_order=True, breakaway_force=None,
+                                  dimension_terms=terms, workers=0, scheduler=None)
 
-    model_correction.model_space("fem", True, model="consistent", dimension_terms="linear")
-    assert calls == []
-    space = model_correction.model_space("fem", True, model="consistent", dimension_terms="quadratic")
-    assert calls == ["provider"]
-    assert space.breakaway_force == 2.0  # curved_space's output, then the breakaway force set on it
+    assert calibration_model(args("consistent", "fem", "linear"), None, progress=False) == "space"
+    assert curved == []
+    assert calibration_model(args("consistent", "fem", "quadratic"), None, progress=False) == "curved"
+    assert curved == [("space", "provider")]
     for model, stiffness in (("second-order", "fem"), ("paper", "fem"), ("consistent", "closed-form")):
         with pytest.raises(ValueError, match="dimension-terms quadratic"):
-            model_correction.model_space(stiffness, True, model=model, dimension_terms="quadratic")
+            calibration_model(args(model, stiffness, "quadratic"), None, progress=False)
+    assert built == ["consistent", "consistent"]  # the refused ones built nothing

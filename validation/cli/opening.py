@@ -65,8 +65,9 @@ def open_data(args: argparse.Namespace, *, progress: bool, data_path=None) -> Da
 
 def calibration_model(args: argparse.Namespace, mechanism, *, progress: bool):
     """The calibration model (``ParameterSpace``) of ``mechanism`` with the command's
-    ``--model``, ``--model-stiffness``, ``--second-order``, ``--breakaway-force`` and executor
-    options (``runs.model_correction.model_space``)."""
+    ``--model``, ``--model-stiffness``, ``--second-order``, ``--breakaway-force``,
+    ``--dimension-terms`` and executor options (``runs.model_correction.model_space``, then for
+    ``--dimension-terms quadratic`` ``runs.dimension_terms.curved_space`` on the same FEM cache)."""
     from ..runs.model_correction import model_space
     from .options import executor_options
 
@@ -76,8 +77,17 @@ def calibration_model(args: argparse.Namespace, mechanism, *, progress: bool):
         raise ValueError(f"--breakaway-force sets the consistent model's play state; add --model consistent "
                          f"(this run's model is {model})")
     terms = getattr(args, "dimension_terms", None) or "linear"
-    return model_space(args.model_stiffness, args.second_order, progress=progress, mechanism=mechanism,
-                       model=model, breakaway_force=force, dimension_terms=terms, **executor_options(args))
+    if terms == "quadratic" and (model != "consistent" or args.model_stiffness != "fem"):
+        raise ValueError(f"--dimension-terms quadratic shapes the consistent model's FEM factors: add --model "
+                         f"consistent --model-stiffness fem (this run: {model}, {args.model_stiffness})")
+    space = model_space(args.model_stiffness, args.second_order, progress=progress, mechanism=mechanism,
+                        model=model, breakaway_force=force, **executor_options(args))
+    if terms == "quadratic":
+        from ..prototype.fem_provider import fem_provider
+        from ..runs.dimension_terms import curved_space
+
+        space = curved_space(space, fem_provider(progress=progress, **executor_options(args)))
+    return space
 
 
 def open_calibration(args: argparse.Namespace, *, progress: bool, data_path=None,

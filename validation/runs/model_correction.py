@@ -423,7 +423,7 @@ def corrected_space(space: ParameterSpace, provider: StiffnessProvider, *, slope
 
 def model_space(stiffness: str = "fem", second_order: bool = True, *, progress: bool = False, workers: int | None = 0,
                 scheduler: str | None = None, mechanism=None, breakaway_force: float | None = None,
-                model: str = "second-order", dimension_terms: str = "linear") -> ParameterSpace:
+                model: str = "second-order") -> ParameterSpace:
     """The parameter space of ``mechanism`` (the reference one by default) with the model
     options the calibration commands share.
 
@@ -435,9 +435,9 @@ def model_space(stiffness: str = "fem", second_order: bool = True, *, progress: 
     ``stiffness`` "fem" is ``chain_kinematics.consistent_space`` over FEM factors with their
     slopes, with "closed-form" the same model on Eq. 1's chains with the chains' own
     shortening form (no measured correction); both with the clearance's play state at
-    ``breakaway_force`` (None: ``DEFAULT_BREAKAWAY_N``); ``dimension_terms`` "quadratic" (consistent
-    with "fem" only): the factors to second order in the dimensions and the shortening following
-    them (``dimension_terms.curved_space``), "linear" the slopes alone.
+    ``breakaway_force`` (None: ``DEFAULT_BREAKAWAY_N``). The quadratic dimension terms are added on
+    top by ``dimension_terms.curved_space`` (which reads this module's slopes: the command line
+    composes the two, ``cli.opening.calibration_model``).
     breakaway_force [N] for "second-order": the clearance's play state with that breakaway
     force (None: Eq. 7's memoryless clip; docs/model.md 9). workers / scheduler: where missing
     FEM segments are built (``fem_provider``)."""
@@ -445,11 +445,6 @@ def model_space(stiffness: str = "fem", second_order: bool = True, *, progress: 
 
     if model not in MODELS:
         raise ValueError(f"model {model!r} must be one of {', '.join(MODELS)}")
-    if dimension_terms not in ("linear", "quadratic"):
-        raise ValueError(f"dimension terms {dimension_terms!r} must be 'linear' or 'quadratic'")
-    if dimension_terms == "quadratic" and (model != "consistent" or stiffness != "fem"):
-        raise ValueError(f"quadratic dimension terms (--dimension-terms quadratic) shape the consistent model's FEM "
-                         f"factors: use --model consistent --model-stiffness fem (this run: {model}, {stiffness})")
     if stiffness not in ("fem", "closed-form"):
         raise ValueError(f"model stiffness {stiffness!r} must be 'fem' or 'closed-form'")
     space = parameter_space(mechanism)
@@ -468,10 +463,6 @@ def model_space(stiffness: str = "fem", second_order: bool = True, *, progress: 
 
         provider = fem_provider(progress=progress, workers=workers, scheduler=scheduler)
         space = consistent_space(corrected_space(space, provider, slopes=True), provider)
-        if dimension_terms == "quadratic":
-            from .dimension_terms import curved_space
-
-            space = curved_space(space, provider)
         return dataclasses.replace(space, breakaway_force=force)
     if stiffness == "fem":
         from ..prototype.fem_provider import fem_provider
