@@ -311,12 +311,12 @@ class CrossValidation:
 def choose_prior_scale(residuals_for: Callable[[np.ndarray], Residuals], n_params: int, folds: Sequence[np.ndarray],
                        n_points: int, *, scales: Sequence[float] = PRIOR_SCALES, noise: float | None = None,
                        point_size: int = 3, reference_scale: float = 1.0,
-                       on_fit: Callable[[], None] = lambda: None) -> CrossValidation:
+                       on_fit: Callable[[], None] = lambda: None, x0: np.ndarray | None = None) -> CrossValidation:
     """The prior scale by held-out RMS: the narrowest within one standard error of the lowest.
 
     residuals_for(points (k,) int) -> batched residuals on those points only, (n, k *
     point_size); folds: held-out point sets (``held_out_folds``). For each scale and fold the
-    estimate is fitted on the other points (from the prior mean) and scored on the fold.
+    estimate is fitted on the other points (from the prior mean, or ``x0`` [unit box]) and scored on the fold.
     Without a given noise, one fit on all points at ``reference_scale`` estimates it first and
     the fold fits use that value (one fit each instead of up to ``max_noise_rounds``: the
     noise sets the data's weight against the prior, the quantity the scale trades against,
@@ -327,7 +327,7 @@ def choose_prior_scale(residuals_for: Callable[[np.ndarray], Residuals], n_param
     scales = tuple(sorted(scales))  # narrowest first: the one-standard-error rule prefers it
     if noise is None:
         noise = estimate(residuals_for(all_points), uniform_prior(n_params, reference_scale),
-                         point_size=point_size).noise
+                         point_size=point_size, x0=x0).noise
         on_fit()
     scores, errors = [], []
     for scale in scales:
@@ -335,7 +335,7 @@ def choose_prior_scale(residuals_for: Callable[[np.ndarray], Residuals], n_param
         for fold in folds:
             train = np.setdiff1d(all_points, fold)
             fit = estimate(residuals_for(train), uniform_prior(n_params, scale), noise=noise, point_size=point_size,
-                           max_evaluations=50 * (n_params + 2))
+                           max_evaluations=50 * (n_params + 2), x0=x0)
             on_fit()
             r = np.asarray(residuals_for(fold)(fit.x[None]), float)[0]
             fold_squares.append(float(r @ r))

@@ -52,7 +52,8 @@ class IdentificationSettings:
     max_std [fraction of range]: a base source's data-alone standard deviation limit
     (``base_parameters``); n_folds: held-out blocks when the trajectory has fewer than 3 legs;
     profile: widen the bars of the base combinations not identified alone by their profile
-    likelihood (``calibration.profile_bars``)."""
+    likelihood (``calibration.profile_bars``); start: values (45,) [SI] every fit starts from
+    (cross-validation folds included; None: the prior mean)."""
 
     method: str = "map"
     prior_scale: float | None = None
@@ -61,6 +62,7 @@ class IdentificationSettings:
     max_std: float = 0.01
     n_folds: int = 5
     profile: bool = False
+    start: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         if self.method not in ("map", "free"):
@@ -127,6 +129,11 @@ def identify_all(space: ParameterSpace, inputs: np.ndarray, angles: np.ndarray, 
         return CalibrationProblem(space=space, inputs=inputs[points], angles=angles[points],
                                   directions=directions[points]).residuals
 
+    # where every fit starts: the prior mean, or given values (e.g. an earlier measurement's
+    # estimate: on a designed trajectory's large strokes the prior mean's basin can be a local
+    # minimum, docs/calibration.md 11)
+    x0 = None if settings.start is None else np.clip(
+        space.to_unit(np.asarray(settings.start, float)[space.active_indices]), 0.0, 1.0)
     cv = None
     if settings.method == "free":
         scale = math.inf
@@ -136,7 +143,7 @@ def identify_all(space: ParameterSpace, inputs: np.ndarray, angles: np.ndarray, 
         folds = held_out_folds(leg, settings.n_folds)
         on_plan((settings.noise is None) + len(settings.scales) * len(folds) + 1)
         cv = choose_prior_scale(residuals_for, space.n_params, folds, inputs.shape[0], scales=settings.scales,
-                                noise=settings.noise, on_fit=on_fit)
+                                noise=settings.noise, on_fit=on_fit, x0=x0)
         scale = cv.best
         log(f"prior scale {scale:g} by {cv.n_folds}-fold held-out cross-validation "
             f"(held-out RMS {', '.join(f'{s:g}: {r * 1e6:.3g}' for s, r in zip(cv.scales, cv.held_out_rms))} urad)")
@@ -145,7 +152,7 @@ def identify_all(space: ParameterSpace, inputs: np.ndarray, angles: np.ndarray, 
     prior = uniform_prior(space.n_params, scale)
     # error bars with the model's discrepancy, a process over the postures: the measured angles
     # in workspace half-widths (calibration.discrepancy)
-    fit = estimate(problem.residuals, prior, noise=settings.noise,
+    fit = estimate(problem.residuals, prior, noise=settings.noise, x0=x0,
                    max_evaluations=FREE_MAX_EVALUATIONS if math.isinf(scale) else None,
                    coordinates=angles / WORKSPACE)
     on_fit()

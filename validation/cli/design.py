@@ -136,18 +136,9 @@ def _inadequacy(space, scenario_space, progress: bool):
 
 def design_point(path: str, space) -> np.ndarray:
     """Unit-box values (n_active,) of the sources identified in a report.json."""
-    import json
-    from pathlib import Path
+    from .opening import report_values
 
-    try:
-        rows = json.loads(Path(path).read_text())["parameters"]
-        values = space.build_values({r["name"]: r["identified"] for r in rows}, display_units=True)
-    except FileNotFoundError:
-        raise ValueError(f"--at {path}: no such file") from None
-    except (KeyError, TypeError, json.JSONDecodeError):
-        raise ValueError(f"--at {path}: not a flexcal verify/identify report.json (needs 'parameters' rows with "
-                         f"'name' and 'identified')") from None
-    return space.to_unit(values[space.active_indices])
+    return space.to_unit(report_values(path, space, "--at")[space.active_indices])
 
 
 def run(args: argparse.Namespace) -> int:

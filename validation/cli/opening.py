@@ -99,3 +99,20 @@ def open_calibration(args: argparse.Namespace, *, progress: bool, data_path=None
         check(data.measurement)
     return Opening(measurement=data.measurement, presets=data.presets, truth=data.truth,
                    space=calibration_model(args, data.mechanism, progress=progress))
+
+
+def report_values(path: str, space, option: str) -> np.ndarray:
+    """Values (45,) [SI] of ``space``'s mount with the sources identified in a flexcal verify /
+    identify report.json at ``path`` (the others nominal); ``option`` names the command-line
+    option in the errors (``--at``, ``--start``)."""
+    import json
+    from pathlib import Path
+
+    try:
+        rows = json.loads(Path(path).read_text())["parameters"]
+        return space.build_values({r["name"]: r["identified"] for r in rows}, display_units=True)
+    except FileNotFoundError:
+        raise ValueError(f"{option} {path}: no such file") from None
+    except (KeyError, TypeError, json.JSONDecodeError):
+        raise ValueError(f"{option} {path}: not a flexcal verify/identify report.json (needs 'parameters' rows with "
+                         f"'name' and 'identified')") from None

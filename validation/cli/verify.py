@@ -28,7 +28,7 @@ EXAMPLES = (
     "flexcal verify --print-config > verify.toml; flexcal verify --config verify.toml --scenario table1 --out runs/t1",
     "flexcal report runs/table1                                   # -> runs/table1/report.html",
 )
-DEFAULT_CONFIG = {"provider": "fem", **CALIBRATION_DEFAULTS}
+DEFAULT_CONFIG = {"provider": "fem", "start": "", **CALIBRATION_DEFAULTS}
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -37,6 +37,11 @@ def configure(parser: argparse.ArgumentParser) -> None:
     add_source_options(parser)
     add_calibration_options(parser)
     add_error_bar_options(parser)
+    parser.add_argument("--start", metavar="REPORT",
+                        help="--method map/free: start every fit at the values identified in this report.json "
+                             "(flexcal verify / identify; e.g. the standard trajectory's run before a designed one, "
+                             "whose large strokes can trap a fit from the prior mean: docs/calibration.md 11) "
+                             "instead of the prior mean")
     add_out(parser, what="report.json, report.md, fit/convergence/residuals/sensitivity PNGs, curves.csv")
 
 
@@ -53,6 +58,8 @@ def run(args: argparse.Namespace) -> int:
     if args.particles < 2 or args.iterations < 1:
         raise ValueError(f"--particles={args.particles} must be >= 2 and --iterations={args.iterations} >= 1")
     check_sobol_options(args)
+    if args.start and args.method == "paper":
+        raise ValueError("--start sets where the map/free fits start; --method paper's swarm has no start point")
     settings = VerifySettings(sobol_n=args.sobol_n, sobol_threshold=args.sobol_threshold, seed=args.calibration_seed,
                               polish=args.polish, remove_offset=args.remove_offset, method=args.method,
                               prior_scale=prior_scale_option(args), profile=profile_option(args),
@@ -61,6 +68,10 @@ def run(args: argparse.Namespace) -> int:
                                                       max_iterations=args.iterations))
     opening = open_calibration(args, progress=not args.quiet)
     measurement, space = opening.measurement, opening.space
+    if args.start:
+        from .opening import report_values
+
+        settings = dataclasses.replace(settings, start=tuple(report_values(args.start, space, "--start").tolist()))
     budget = error_budget_option(args, space, measurement.inputs, progress=not args.quiet)
     result = run_verify(measurement, space, settings, presets=opening.presets, truth=opening.truth,
                         progress=not args.quiet, budget=budget)

@@ -23,7 +23,8 @@ class VerifySettings:
     prior_scale: the MAP prior scale (None: cross-validated); sources: identify only these
     (the others at nominal; with "paper" instead of the Sobol selection; ``flexcal identify``);
     profile: widen the map/free bars of the base combinations not identified alone by their
-    profile likelihood (``calibration.profile_bars``)."""
+    profile likelihood (``calibration.profile_bars``); start: values (45,) [SI] every map/free fit
+    starts from (None: the prior mean)."""
 
     sobol_n: int = 512
     sobol_threshold: float = 0.01
@@ -36,6 +37,7 @@ class VerifySettings:
     prior_scale: float | None = None
     sources: tuple[str, ...] | None = None
     profile: bool = False
+    start: tuple[float, ...] | None = None
 
     def __post_init__(self) -> None:
         if self.method not in ("map", "free", "paper"):

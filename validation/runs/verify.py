@@ -235,7 +235,8 @@ def _estimated_identification(measurement: Measurement, angles: np.ndarray, spac
             bar.total = total
         result = identify_all(space, measurement.inputs, angles, measurement.leg,
                               IdentificationSettings(method=settings.method, prior_scale=settings.prior_scale,
-                                                     profile=settings.profile),
+                                                     profile=settings.profile,
+                                                     start=None if settings.start is None else np.array(settings.start)),
                               log=log, on_fit=lambda: bar.update(1), on_plan=plan,
                               model_error=model_error)
     fit = result.estimate
