@@ -46,3 +46,11 @@ def test_verify_refuses_start_with_the_paper_method(tmp_path):
 
     assert cli.main(["verify", "--scenario", "table1", "--provider", "analytic", "--method", "paper",
                      "--start", str(tmp_path / "report.json"), "--out", str(tmp_path / "run"), "-q"]) == 2
+
+
+def test_verify_refuses_a_missing_start_report_before_building_the_model(tmp_path):
+    from flexcal.validation import cli
+
+    assert cli.main(["verify", "--scenario", "table1", "--provider", "analytic", "--start", str(tmp_path / "no.json"),
+                     "--out", str(tmp_path / "run"), "-q"]) == 2
+    assert not (tmp_path / "run").exists()

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+from pathlib import Path
 
 from .options import CALIBRATION_DEFAULTS, add_calibration_options, add_error_bar_options, add_out
 from .options import prior_scale_option
@@ -60,6 +61,8 @@ def run(args: argparse.Namespace) -> int:
     check_sobol_options(args)
     if args.start and args.method == "paper":
         raise ValueError("--start sets where the map/free fits start; --method paper's swarm has no start point")
+    if args.start and not Path(args.start).is_file():  # before the model's (possibly cold FEM) build
+        raise ValueError(f"--start {args.start}: no such file (a flexcal verify/identify report.json)")
     settings = VerifySettings(sobol_n=args.sobol_n, sobol_threshold=args.sobol_threshold, seed=args.calibration_seed,
                               polish=args.polish, remove_offset=args.remove_offset, method=args.method,
                               prior_scale=prior_scale_option(args), profile=profile_option(args),
