@@ -194,3 +194,18 @@ def test_dimension_terms_option_selects_the_curved_space(monkeypatch):
         with pytest.raises(ValueError, match="dimension-terms quadratic"):
             calibration_model(args(model, stiffness, "quadratic"), None, progress=False)
     assert built == ["consistent", "consistent"]  # the refused ones built nothing
+
+
+def test_verify_refuses_quadratic_terms_for_another_model_before_the_truth(tmp_path, monkeypatch):
+    """The option check runs before the prototype's truth is made (on a cold FEM prototype that
+    is ~15 s): the truth's maker is stubbed to fail loudly, so reaching it fails the test."""
+    from flexcal.validation import cli
+    from flexcal.validation.cli import options
+
+    def no_truth(*args, **kwargs):
+        raise AssertionError("the truth was made before the model options were checked")
+
+    monkeypatch.setattr(options, "load_source_with_truth", no_truth)
+    assert cli.main(["verify", "--scenario", "table1", "--provider", "analytic", "--model", "second-order",
+                     "--dimension-terms", "quadratic", "--out", str(tmp_path / "run"), "-q"]) == 2
+    assert not (tmp_path / "run").exists()

@@ -63,6 +63,19 @@ def open_data(args: argparse.Namespace, *, progress: bool, data_path=None) -> Da
                        mechanism=data_mechanism(measurement.metadata, args))
 
 
+def check_model_options(args: argparse.Namespace) -> None:
+    """Refuse a combination of model options ``calibration_model`` cannot build (ValueError),
+    before any truth or FEM model is made for it."""
+    model = getattr(args, "model", "second-order")
+    if getattr(args, "breakaway_force", None) is not None and model != "consistent":
+        raise ValueError(f"--breakaway-force sets the consistent model's play state; add --model consistent "
+                         f"(this run's model is {model})")
+    terms = getattr(args, "dimension_terms", None) or "linear"
+    if terms == "quadratic" and (model != "consistent" or args.model_stiffness != "fem"):
+        raise ValueError(f"--dimension-terms quadratic shapes the consistent model's FEM factors: add --model "
+                         f"consistent --model-stiffness fem (this run: {model}, {args.model_stiffness})")
+
+
 def calibration_model(args: argparse.Namespace, mechanism, *, progress: bool):
     """The calibration model (``ParameterSpace``) of ``mechanism`` with the command's
     ``--model``, ``--model-stiffness``, ``--second-order``, ``--breakaway-force``,
@@ -71,15 +84,10 @@ def calibration_model(args: argparse.Namespace, mechanism, *, progress: bool):
     from ..runs.model_correction import model_space
     from .options import executor_options
 
+    check_model_options(args)
     model = getattr(args, "model", "second-order")
     force = getattr(args, "breakaway_force", None)
-    if force is not None and model != "consistent":
-        raise ValueError(f"--breakaway-force sets the consistent model's play state; add --model consistent "
-                         f"(this run's model is {model})")
     terms = getattr(args, "dimension_terms", None) or "linear"
-    if terms == "quadratic" and (model != "consistent" or args.model_stiffness != "fem"):
-        raise ValueError(f"--dimension-terms quadratic shapes the consistent model's FEM factors: add --model "
-                         f"consistent --model-stiffness fem (this run: {model}, {args.model_stiffness})")
     space = model_space(args.model_stiffness, args.second_order, progress=progress, mechanism=mechanism,
                         model=model, breakaway_force=force, **executor_options(args))
     if terms == "quadratic":
@@ -94,6 +102,7 @@ def open_calibration(args: argparse.Namespace, *, progress: bool, data_path=None
                      check: Callable[[Any], None] | None = None) -> Opening:
     """``open_data`` then ``calibration_model``; check(measurement) runs between them and
     raises to stop before the model is built (a cold FEM-corrected model takes ~30 s)."""
+    check_model_options(args)
     data = open_data(args, progress=progress, data_path=data_path)
     if check is not None:
         check(data.measurement)
