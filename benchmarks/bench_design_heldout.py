@@ -2,10 +2,11 @@
 
     .venv/bin/python benchmarks/bench_design_heldout.py --out runs/heldout/std-s1 --seed 1 \
         [--trajectory runs/design/trajectory.csv] [--scenario table1] [--model second-order|consistent] \
-        [--noise-urad 0.5] [--walk-seed 28] [--walk-points 77]
+        [--noise-urad 0.5] [--walk-seed 28] [--walk-points 77] [--dimension-terms quadratic] [--start REPORT]
 
 Runs what ``flexcal verify --scenario S --seed N --noise-urad 0.5 [--trajectory T] [--model M]``
-runs (the same parser and defaults, FEM prototype; report.json written to --out), then the
+runs (the same parser and defaults, FEM prototype; report.json written to --out; with
+--dimension-terms and --start as verify's), then the
 held-out test: the calibration model at the identified values against the noise-free prototype
 of the same seed along a random multi-actuator walk (``bench_form_error.random_walk``:
 --walk-points postures inside the standard trajectory's strokes, seed --walk-seed), never
@@ -71,6 +72,9 @@ def main(argv=None) -> int:
     parser.add_argument("--walk-seed", type=int, default=28)
     parser.add_argument("--walk-points", type=int, default=77)
     parser.add_argument("--provider", default="fem", help="the prototype's segment stiffness (fem, analytic)")
+    parser.add_argument("--dimension-terms", default="linear", choices=("linear", "quadratic"),
+                        help="flexcal verify --dimension-terms (--model consistent)")
+    parser.add_argument("--start", default=None, metavar="REPORT", help="flexcal verify --start REPORT")
     args = parser.parse_args(argv)
 
     from flexcal.calibration.problem import CalibrationProblem
@@ -84,6 +88,10 @@ def main(argv=None) -> int:
                    str(args.noise_urad), "--model", args.model, "--provider", args.provider, "--out", args.out, "--quiet", "--force"]
     if args.trajectory:
         verify_argv += ["--trajectory", args.trajectory]
+    if args.dimension_terms != "linear":
+        verify_argv += ["--dimension-terms", args.dimension_terms]
+    if args.start:
+        verify_argv += ["--start", args.start]
     captured = {}
 
     # flexcal verify's own run, with its space and values kept for the held-out walk
@@ -122,7 +130,8 @@ def main(argv=None) -> int:
     rows = {r["name"]: r for r in report["parameters"]}
     alone = [n for n in DRIVES if n in pure]
     out = {"scenario": args.scenario, "provider": args.provider, "seed": args.seed, "trajectory": args.trajectory or "standard",
-           "model": args.model, "n_points": int(measurement.n_points), "fit_rms_urad": report["fit_rms_urad"],
+           "model": args.model, "dimension_terms": args.dimension_terms, "start": args.start,
+           "verify_argv": verify_argv, "n_points": int(measurement.n_points), "fit_rms_urad": report["fit_rms_urad"],
            "fit_over_noise": report.get("fit_rms_over_noise_floor"),
            "alone": alone, "pure": sorted(pure),
            "abs_error": {n: rows[n]["abs_error"] for n in alone},  # display units (x0 mm, CL mm, mu -)

@@ -2,7 +2,8 @@
 
     .venv/bin/python benchmarks/bench_two_stage.py --out runs/two-stage/s1 --seed 1 \
         [--scenario paper] [--model consistent] [--noise-urad 0.5] [--candidates 2000] \
-        [--keep-standard K] [--region workspace|box|hull] [--combined] [--combined-candidates 500] [--redo]
+        [--keep-standard K] [--region workspace|box|hull] [--combined] [--combined-candidates 500] \
+        [--dimension-terms linear|quadratic] [--no-start] [--redo]
 
 Stages (each one's output folder under --out; a stage whose result is already there is reused
 unless --redo, so a run cut short resumes):
@@ -23,7 +24,17 @@ unless --redo, so a run cut short resumes):
    C2``: the standard trajectory followed by 77 designed postures, one measurement) and
    ``combined`` (its verify and held-out walk).
 
-Writes OUT/two_stage.json (every stage's Table 1 drive rows, sources alone, z, fit/noise, the
+The designed verifies (3, 4) start every fit at stage 1's estimate (``flexcal verify --start
+std/report.json``: from the prior mean a fit on a designed trajectory's large strokes can end in
+a local minimum, docs/calibration.md 11); ``--no-start`` starts them at the prior mean, as
+before the option existed. Their folders end in ``-start`` when started (``designed-k41-start``),
+so a run of either kind never reuses the other's. ``--dimension-terms quadratic`` goes to every
+verify and design (``--model consistent``, FEM chains: the default ``--model-stiffness fem``);
+every stage's folder then ends in ``-quadratic`` (``std-quadratic``, ``design-k41-quadratic``,
+``designed-k41-quadratic-start``; summary ``two_stage-k41-quadratic-start.json``).
+
+Writes OUT/two_stage[...].json (every stage's Table 1 drive rows, sources alone, z, z RMS of the
+drive sources alone, of every source alone and of every base parameter, fit/noise, the
 model-form floor, held-out RMS, wall times) and prints a Markdown table of it. Not a test (a
 consistent verify on the FEM prototype takes minutes); the figures go into
 docs/calibration.md ("The `paper` Table 1 by a two-stage measurement").
@@ -44,13 +55,38 @@ import bench_design_heldout  # noqa: E402
 PAPER = {"x0": 2.7, "CL": 0.02, "mu": 1.3}  # Table 1 of the paper: um, mm, % (relative)
 
 
-def _verify(out: Path, args, trajectory: Path | None, redo: bool) -> dict:
+def model_options(args) -> list[str]:
+    """The calibration model's options, the same for every verify and design of a run."""
+    return ["--model", args.model, "--dimension-terms", args.dimension_terms]
+
+
+def verify_argv(out: Path, args, trajectory: Path | None = None, start: Path | None = None) -> list[str]:
+    """bench_design_heldout's argv for one verify stage: the standard trajectory (trajectory None)
+    or a designed one, its fits started at ``start`` (a report.json; None: the prior mean)."""
+    argv = ["--out", str(out), "--seed", str(args.seed), "--scenario", args.scenario, *model_options(args),
+            "--noise-urad", str(args.noise_urad), "--walk-seed", str(args.walk_seed)]
+    if trajectory is not None:
+        argv += ["--trajectory", str(trajectory)]
+    if start is not None:
+        argv += ["--start", str(start)]
+    return argv
+
+
+def design_argv(out: Path, args, report: Path, extra: list[str]) -> list[str]:
+    """flexcal design's argv: the design at ``report``'s identified values."""
+    return ["design", "--scenario", args.scenario, "--at", str(report), *model_options(args),
+            "--inadequacy", "none", "--noise-urad", str(args.noise_urad), "--out", str(out), "--force", *extra]
+
+
+def _z_rms(values) -> float | None:
+    values = [v for v in values if v is not None]
+    return (sum(v * v for v in values) / len(values)) ** 0.5 if values else None
+
+
+def _verify(out: Path, args, trajectory: Path | None, redo: bool, start: Path | None = None) -> dict:
     done = out / "heldout.json"
     if not done.exists() or redo:
-        argv = ["--out", str(out), "--seed", str(args.seed), "--scenario", args.scenario, "--model", args.model,
-                "--noise-urad", str(args.noise_urad), "--walk-seed", str(args.walk_seed)]
-        if trajectory is not None:
-            argv += ["--trajectory", str(trajectory)]
+        argv = verify_argv(out, args, trajectory, start)
         started = time.perf_counter()
         bench_design_heldout.main(argv)
         heldout = json.loads(done.read_text())
@@ -62,8 +98,16 @@ def _verify(out: Path, args, trajectory: Path | None, redo: bool) -> dict:
     heldout["drives"] = bench_design_heldout.drive_rows(report)
     heldout["form_floor"] = bench_design_heldout.form_floor(report)
     heldout["fit_over_noise"] = report.get("fit_rms_over_noise_floor")
-    z_alone = [d["z"] for d in heldout["drives"].values() if d["alone"] and d["z"] is not None]
-    heldout["z_rms_drives_alone"] = (sum(z * z for z in z_alone) / len(z_alone)) ** 0.5 if z_alone else None
+    heldout["z_rms_drives_alone"] = _z_rms(d["z"] for d in heldout["drives"].values() if d["alone"])
+    # every source identified alone (a pure base parameter, drive or not) and every base parameter
+    rows = {r["name"]: r for r in report["parameters"]}
+    base = report.get("base_parameters", {})
+    pure = base.get("pure", [])
+    heldout["z_rms_pure"] = _z_rms(rows[n].get("z_score") for n in pure)
+    heldout["n_pure"] = len(pure)
+    heldout["z_rms_base"] = base.get("z_rms")
+    heldout["n_base"] = len(base.get("rows", []))
+    heldout["start"] = str(start) if start is not None else None
     return heldout
 
 
@@ -72,8 +116,7 @@ def _design(out: Path, args, report: Path, extra: list[str], redo: bool) -> dict
     if not done.exists() or redo:
         from flexcal.validation.cli import main as main_cli
 
-        argv = ["design", "--scenario", args.scenario, "--at", str(report), "--model", args.model,
-                "--inadequacy", "none", "--noise-urad", str(args.noise_urad), "--out", str(out), "--force", *extra]
+        argv = design_argv(out, args, report, extra)
         started = time.perf_counter()
         status = main_cli(argv)
         if status != 0:
@@ -117,8 +160,13 @@ def _row(name: str, run: dict) -> str:
     rms = floor.get("rms_urad") or {}
     floor_text = "/".join(f"{v:.2g}" for v in rms.values()) + f" (max {floor.get('max_urad', float('nan')):.2g})" if rms else "-"
     z = ", ".join(f"{n} {d['z']:.2f}" for n, d in run["drives"].items() if d["alone"] and d["z"] is not None)
+
+    def rms(key, n):
+        return "-" if run.get(key) is None else f"{run[key]:.2f} ({run.get(n)})"
+
     return (f"| {name} | {run['n_points']} | {len(run['alone'])}: {', '.join(run['alone'])} | {cell('x0')} | {cell('CL')} "
-            f"| {cell('mu')} | {z} | {run['fit_over_noise']:.2f} | {floor_text} | {run['heldout_rms_urad']:.3f} "
+            f"| {cell('mu')} | {z} | {rms('z_rms_pure', 'n_pure')} | {rms('z_rms_base', 'n_base')} "
+            f"| {run['fit_over_noise']:.2f} | {floor_text} | {run['heldout_rms_urad']:.3f} "
             f"(floor {run['heldout_floor_urad']:.3f}) | {run.get('verify_wall_s') or float('nan'):.0f} |")
 
 
@@ -127,6 +175,47 @@ def _variant(args) -> str:
     if args.keep_standard == 0 and args.region == "workspace":
         return ""
     return f"-k{args.keep_standard}" + ("" if args.region == "workspace" else f"-{args.region}")
+
+
+def _terms(args) -> str:
+    """Every stage's folder suffix for the model's dimension terms: "" for linear (the folders of
+    the runs made before the option existed), "-quadratic" otherwise."""
+    return "" if args.dimension_terms == "linear" else f"-{args.dimension_terms}"
+
+
+def _started(args) -> str:
+    """A designed verify's folder suffix: "-start" when its fits start at stage 1's estimate
+    (the folders of the runs made before --start existed started at the prior mean)."""
+    return "-start" if args.start else ""
+
+
+def stage_plan(out: Path, args) -> dict:
+    """The stages a run makes, in order: name -> folder, and for a verify its trajectory and
+    start (stage 1's report.json with --start, else None), for a design its argv's extra options.
+    Each variant (K, region, dimension terms, start) has its own folders, so variants share
+    nothing they would overwrite; the designed verifies share the design of their variant."""
+    terms, started = _terms(args), _started(args)
+    std = out / f"std{terms}"
+    start = std / "report.json" if args.start else None
+    plan = {"standard": {"folder": std, "trajectory": None, "start": None}}
+    designs = []
+    if not args.skip_designed:
+        variant = _variant(args)
+        designs.append((f"designed{variant}", out / f"design{variant}{terms}",
+                        ["--candidates", str(args.candidates), "--keep-standard", str(args.keep_standard),
+                         "--region", args.region], out / f"designed{variant}{terms}{started}"))
+    if args.combined:
+        designs.append(("combined", out / f"design-combined{terms}",
+                        ["--points", "154", "--keep-standard", "77", "--candidates", str(args.combined_candidates)],
+                        out / f"combined{terms}{started}"))
+    for name, design, extra, folder in designs:
+        plan[f"design:{name}"] = {"folder": design, "at": std / "report.json", "extra": extra}
+        plan[name] = {"folder": folder, "trajectory": design / "trajectory.csv", "start": start}
+    return plan
+
+
+def summary_path(out: Path, args) -> Path:
+    return out / f"two_stage{_variant(args)}{_terms(args)}{_started(args)}.json"
 
 
 def main(argv=None) -> int:
@@ -146,6 +235,12 @@ def main(argv=None) -> int:
                         help="also the standard trajectory followed by 77 designed postures (one measurement)")
     parser.add_argument("--combined-candidates", type=int, default=500)
     parser.add_argument("--skip-designed", action="store_true", help="only the standard and the combined stages")
+    parser.add_argument("--dimension-terms", default="linear", choices=("linear", "quadratic"),
+                        help="the consistent model's dimension terms (flexcal verify/design --dimension-terms), "
+                             "for every verify and design of the run")
+    parser.add_argument("--start", action=argparse.BooleanOptionalAction, default=True,
+                        help="the designed verifies start every fit at stage 1's estimate (flexcal verify --start "
+                             "std/report.json; default on; --no-start: at the prior mean)")
     parser.add_argument("--redo", action="store_true", help="rerun stages whose results are already in --out")
     args = parser.parse_args(argv)
     out = Path(args.out)
@@ -153,32 +248,24 @@ def main(argv=None) -> int:
     threads = {k: os.environ.get(k) for k in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS")}
 
     summary = {"scenario": args.scenario, "seed": args.seed, "model": args.model, "noise_urad": args.noise_urad,
-               "threads": threads, "paper": PAPER, "runs": {}, "designs": {}}
-    summary["runs"]["standard"] = _verify(out / "std", args, None, args.redo)
-    variant = _variant(args)
-    if not args.skip_designed:
-        extra = ["--candidates", str(args.candidates), "--keep-standard", str(args.keep_standard),
-                 "--region", args.region]
-        name = f"designed{variant}"
-        summary["designs"][name] = _design(out / f"design{variant}", args, out / "std" / "report.json", extra,
-                                           args.redo)
-        summary["runs"][name] = _verify(out / name, args, out / f"design{variant}" / "trajectory.csv", args.redo)
-    if args.combined:
-        summary["designs"]["combined"] = _design(out / "design-combined", args, out / "std" / "report.json",
-                                                 ["--points", "154", "--keep-standard", "77", "--candidates",
-                                                  str(args.combined_candidates)], args.redo)
-        summary["runs"]["combined"] = _verify(out / "combined", args, out / "design-combined" / "trajectory.csv",
-                                              args.redo)
+               "dimension_terms": args.dimension_terms, "start": args.start, "threads": threads, "paper": PAPER,
+               "runs": {}, "designs": {}}
+    for name, stage in stage_plan(out, args).items():
+        if name.startswith("design:"):
+            summary["designs"][name.split(":", 1)[1]] = _design(stage["folder"], args, stage["at"], stage["extra"],
+                                                               args.redo)
+        else:
+            summary["runs"][name] = _verify(stage["folder"], args, stage["trajectory"], args.redo, stage["start"])
     for name, run in summary["runs"].items():
         if name != "standard":
             summary[f"{name}_vs_standard"] = _beats(run, summary["runs"]["standard"])
-    (out / f"two_stage{variant}.json").write_text(json.dumps(summary, indent=1))
+    summary_path(out, args).write_text(json.dumps(summary, indent=1))
 
     print(f"{args.scenario} seed {args.seed}, --model {args.model}, {args.noise_urad} urad; errors x0 um, CL mm, mu % "
           "(relative); *: not identified alone")
-    print("| trajectory | points | alone | x0 D1/D2/D3 | CL D1/D2/D3 | mu D1/D2/D3 | z (alone) | fit/noise "
-          "| floor RMS x/y/z urad | held-out RMS urad | verify wall s |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|")
+    print("| trajectory | points | alone | x0 D1/D2/D3 | CL D1/D2/D3 | mu D1/D2/D3 | z (alone) | z RMS alone (n) "
+          "| z RMS base (n) | fit/noise | floor RMS x/y/z urad | held-out RMS urad | verify wall s |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for name, run in summary["runs"].items():
         print(_row(name, run))
     for key in summary:

@@ -78,3 +78,89 @@ def test_variants_get_their_own_stages():
     assert name(41, "workspace") == "-k41"
     assert name(41, "box") == "-k41-box"
     assert len({name(k, r) for k in (0, 33, 41) for r in ("workspace", "box", "hull")}) == 9
+
+
+def _args(**changes):
+    """bench_two_stage's parsed options (its own parser), with ``changes`` on the command line."""
+    argv = ["--out", "unused", "--seed", "3", "--scenario", "table1", "--keep-standard", "41"]
+    for key, value in changes.items():
+        argv += [f"--{key}"] if value is True else [f"--{key}", str(value)]
+    captured = {}
+
+    def stop(args):  # the parsed options, then out before any stage runs
+        captured["args"] = args
+        raise _Parsed
+
+    from unittest import mock
+
+    with mock.patch.object(bench_two_stage, "stage_plan", lambda out, args: stop(args)), pytest.raises(_Parsed):
+        bench_two_stage.main(argv)
+    return captured["args"]
+
+
+class _Parsed(Exception):
+    pass
+
+
+def _heldout_verify_argv(argv: list[str]) -> list[str]:
+    """The flexcal verify argv that bench_design_heldout.main builds from ``argv`` (flexcal's
+    main replaced by one that records it and fails, so nothing runs)."""
+    from unittest import mock
+
+    seen = []
+    with mock.patch("flexcal.validation.cli.main", lambda a: seen.append(a) or 1), pytest.raises(SystemExit):
+        bench_design_heldout.main(argv)
+    return seen[0]
+
+
+def test_designed_verify_starts_at_stage_one_and_every_stage_gets_the_dimension_terms(tmp_path):
+    """Issue #28 (session 19): the designed verify starts its fits at stage 1's report.json
+    (flexcal verify --start), by default; --dimension-terms reaches every verify and design, and
+    the argv each stage builds is one flexcal's own parsers accept with those values."""
+    from flexcal.validation.cli import build_parser
+
+    args = _args(**{"dimension-terms": "quadratic"})
+    assert args.start and args.dimension_terms == "quadratic"
+    plan = bench_two_stage.stage_plan(tmp_path, args)
+    assert list(plan) == ["standard", "design:designed-k41", "designed-k41"]
+    stage1_report = tmp_path / "std-quadratic" / "report.json"
+    assert plan["standard"]["start"] is None  # stage 1 starts at the prior mean: there is nothing before it
+    assert plan["designed-k41"]["start"] == stage1_report
+    assert plan["designed-k41"]["trajectory"] == tmp_path / "design-k41-quadratic" / "trajectory.csv"
+    assert plan["design:designed-k41"]["at"] == stage1_report
+
+    verify_parser = build_parser("verify")
+    for name in ("standard", "designed-k41"):
+        stage = plan[name]
+        bench = bench_two_stage.verify_argv(stage["folder"], args, stage["trajectory"], stage["start"])
+        verify = verify_parser.parse_args(_heldout_verify_argv(bench))
+        assert verify.dimension_terms == "quadratic" and verify.model == "consistent"
+        assert verify.model_stiffness == "fem"  # what --dimension-terms quadratic needs (opening.calibration_model)
+        assert (verify.start or None) == (None if stage["start"] is None else str(stage1_report))  # default ""
+        assert verify.trajectory == (None if stage["trajectory"] is None else str(stage["trajectory"]))
+        assert verify.seed == 3 and verify.scenario == "table1"
+    design_stage = plan["design:designed-k41"]
+    design = build_parser("design").parse_args(
+        bench_two_stage.design_argv(design_stage["folder"], args, design_stage["at"], design_stage["extra"]))
+    assert design.dimension_terms == "quadratic" and design.model == "consistent"
+    assert design.at == str(stage1_report) and design.keep_standard == 41
+
+
+def test_start_and_terms_name_their_own_folders(tmp_path):
+    """--no-start and the linear terms keep the folder names of the runs made before these
+    options (stage 1 "std", "designed-k41" started at the prior mean); a started or quadratic run
+    never reuses them, and --no-start passes no --start."""
+    old = bench_two_stage.stage_plan(tmp_path, _args(**{"no-start": True}))
+    assert old["standard"]["folder"] == tmp_path / "std"
+    assert old["designed-k41"]["folder"] == tmp_path / "designed-k41"
+    assert old["designed-k41"]["start"] is None
+    assert "--start" not in bench_two_stage.verify_argv(tmp_path, _args(**{"no-start": True}),
+                                                        old["designed-k41"]["trajectory"], None)
+    started = bench_two_stage.stage_plan(tmp_path, _args())
+    assert started["standard"]["folder"] == tmp_path / "std"  # stage 1 is shared: it has no start
+    assert started["designed-k41"]["folder"] == tmp_path / "designed-k41-start"
+    quadratic = bench_two_stage.stage_plan(tmp_path, _args(**{"dimension-terms": "quadratic", "no-start": True}))
+    folders = [plan[name]["folder"] for plan in (old, started, quadratic) for name in plan]
+    assert len(set(folders)) == len(folders) - 2  # only the linear runs' stage 1 and design are shared
+    assert bench_two_stage.summary_path(tmp_path, _args(**{"dimension-terms": "quadratic"})).name == \
+        "two_stage-k41-quadratic-start.json"
