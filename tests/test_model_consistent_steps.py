@@ -18,18 +18,26 @@ from flexcal.model.trajectory import standard_trajectory
 pytestmark = pytest.mark.skipif(not kernel.available(), reason="the consistent model runs in the compiled engine")
 
 
+def _forty_candidates():
+    """The matrices of 40 uniform random candidates (seed 0) of the consistent space with the play state."""
+    space = dataclasses.replace(parameter_space(), second_order=True, chain_shortening=tuple(np.zeros(216)),
+                                breakaway_force=2.0)
+    return mechanism_matrices(space.from_unit(np.random.default_rng(0).random((40, 45))), space)
+
+
+def _solve(matrices, inputs, tol=CONSISTENT_TOL, **options):
+    """``solve_points_consistent`` with the forward model's settings and the clearance on."""
+    return solve_points_consistent(matrices, inputs, clearance=True, tol=tol, max_iter=CONSISTENT_MAX_ITER,
+                                   divergence=DIVERGENCE_LIMIT, state_tolerance=STATE_TOLERANCE, **options)
+
+
 def test_the_fixed_point_needs_few_evaluations_per_posture():
     """40 uniform random candidates (those of the convergence test) on the standard trajectory,
     with the play state: Broyden steps from a start moved by the linear response, the previous
     points' drift and the measured dX/dC take 13.4 evaluations per posture on average (5.1 where
     every nut sits on its flank, 22.3 where one is off it: the probes); the plain fixed point
     from the previous pose took 25.9 (10.3 / 42.6)."""
-    space = dataclasses.replace(parameter_space(), second_order=True, chain_shortening=tuple(np.zeros(216)),
-                                breakaway_force=2.0)
-    values = space.from_unit(np.random.default_rng(0).random((40, 45)))
-    out = solve_points_consistent(mechanism_matrices(values, space), standard_trajectory().inputs, clearance=True,
-                                  tol=CONSISTENT_TOL, max_iter=CONSISTENT_MAX_ITER, divergence=DIVERGENCE_LIMIT,
-                                  state_tolerance=STATE_TOLERANCE)
+    out = _solve(_forty_candidates(), standard_trajectory().inputs)
     assert np.all(out["codes"] == 0)
     engaged = out["point_class"] == 1
     assert 0.2 < np.mean(engaged) < 0.8  # both kinds of posture are visited
@@ -45,13 +53,8 @@ def test_the_default_tolerances_agree_with_tighter_ones():
     3.5e-14 m (session 15, both before and after the kernel stopped re-evaluating the map after a
     converged equilibrium where no probe follows). Without the re-evaluation before the probes
     too, the rates' error moved the poses by 1.3e-12 rad here (2.7e-12 on 300 candidates)."""
-    space = dataclasses.replace(parameter_space(), second_order=True, chain_shortening=tuple(np.zeros(216)),
-                                breakaway_force=2.0)
-    values = space.from_unit(np.random.default_rng(0).random((40, 45)))
-    matrices = mechanism_matrices(values, space)
-    runs = [solve_points_consistent(matrices, standard_trajectory().inputs, clearance=True, tol=tol,
-                                    max_iter=CONSISTENT_MAX_ITER, divergence=DIVERGENCE_LIMIT,
-                                    state_tolerance=STATE_TOLERANCE) for tol in (CONSISTENT_TOL, CONSISTENT_TOL / 30)]
+    matrices = _forty_candidates()
+    runs = [_solve(matrices, standard_trajectory().inputs, tol) for tol in (CONSISTENT_TOL, CONSISTENT_TOL / 30)]
     assert all(np.all(run["codes"] == 0) for run in runs)
     # 5e-13 rad / 2e-13 m: ~4x the measured 1.1e-13 / 3.5e-14 (rounding of the probes' rates),
     # below the 1.3e-12 rad an under-resolved rate gives (checked: that variant fails here)
@@ -68,14 +71,8 @@ def test_a_revisited_command_starts_from_its_earlier_equilibrium():
     results are those of the solve without it, to the iteration's own tolerance."""
     assert consistent.revisits(np.array([[0.0, 0, 0], [1, 0, 0], [0, 0, 0], [1, 0, 0], [0, 0, 1]])).tolist() == [
         -1, -1, 0, 1, -1]
-    space = dataclasses.replace(parameter_space(), second_order=True, chain_shortening=tuple(np.zeros(216)),
-                                breakaway_force=2.0)
-    values = space.from_unit(np.random.default_rng(0).random((40, 45)))
-    matrices = mechanism_matrices(values, space)
-    inputs = standard_trajectory().inputs
-    runs = [solve_points_consistent(matrices, inputs, clearance=True, tol=CONSISTENT_TOL, max_iter=CONSISTENT_MAX_ITER,
-                                    divergence=DIVERGENCE_LIMIT, state_tolerance=STATE_TOLERANCE, revisit=revisit)
-            for revisit in (True, False)]
+    matrices, inputs = _forty_candidates(), standard_trajectory().inputs
+    runs = [_solve(matrices, inputs, revisit=revisit) for revisit in (True, False)]
     assert all(np.all(run["codes"] == 0) for run in runs)
     # 5e-13 rad, the bound of test_the_default_tolerances_agree_with_tighter_ones: another start
     # ends the iteration elsewhere inside its tolerance (measured 8.7e-14 rad here)
@@ -98,13 +95,8 @@ def test_reusing_the_previous_points_rates_at_a_loose_step_keeps_the_results():
     random candidates with the play state: the same poses and offsets as probing every step (the
     code before), and as a 30x tighter solve, to the iteration's own tolerance, with fewer
     evaluations of the map (measured 11.6 -> 10.8 per posture here, 12.2 -> 11.3 on 300)."""
-    space = dataclasses.replace(parameter_space(), second_order=True, chain_shortening=tuple(np.zeros(216)),
-                                breakaway_force=2.0)
-    values = space.from_unit(np.random.default_rng(0).random((40, 45)))
-    matrices = mechanism_matrices(values, space)
-    inputs = standard_trajectory().inputs
-    runs = [solve_points_consistent(matrices, inputs, clearance=True, tol=tol, max_iter=CONSISTENT_MAX_ITER,
-                                    divergence=DIVERGENCE_LIMIT, state_tolerance=STATE_TOLERANCE, reuse_rates=reuse)
+    matrices, inputs = _forty_candidates(), standard_trajectory().inputs
+    runs = [_solve(matrices, inputs, tol, reuse_rates=reuse)
             for tol, reuse in ((CONSISTENT_TOL, True), (CONSISTENT_TOL, False), (CONSISTENT_TOL / 30, False))]
     assert all(np.all(run["codes"] == 0) for run in runs)
     for other in runs[1:]:
