@@ -15,7 +15,8 @@ plain fixed point of before) the iteration locked into 2-cycles on random candid
 a nut is off its flank, the first Newton step of a point runs its equilibrium and probes to
 ``LOOSE_TOL`` only and never ends the point: it moves C most of the way, the tight steps after
 it (whose rates give the release) end it, so the results are those of tight steps throughout to
-the iteration's own tolerance (session 16).
+the iteration's own tolerance (session 16); that loose step takes the previous point's last tight
+rates of a nut that was off its flank there too instead of probing it (session 19).
 """
 
 import numpy as np
