@@ -137,8 +137,9 @@ def solve_points_consistent(matrices, inputs: np.ndarray, *, clearance: bool, to
     """Run the compiled consistent kernel; same outputs as ``kernel.solve_points_compiled``
     (force_only clearance; ``tol`` [m, rad] on the pose update per point). ``revisit=False``
     starts no point from an earlier one with the same command (``revisits``; for the tests);
-    ``reuse_rates=False`` probes every nut off its flank at every Newton step on the offsets
-    (``_numba_consistent.RATE_REUSE``; the code before session 19, for the tests)."""
+    ``reuse_rates=False`` probes every nut off its flank at every Newton step on the offsets, a
+    point's loose first one too, instead of taking the previous point's tight rates there (the
+    code before session 19; for the tests)."""
     import numba
 
     from . import _numba_consistent
