@@ -15,7 +15,8 @@ plain fixed point of before) the iteration locked into 2-cycles on random candid
 a nut is off its flank, the first Newton step of a point runs its equilibrium and probes to
 ``LOOSE_TOL`` only and never ends the point: it moves C most of the way, the tight steps after
 it (whose rates give the release) end it, so the results are those of tight steps throughout to
-the iteration's own tolerance (session 16).
+the iteration's own tolerance (session 16); that loose step takes the previous point's last tight
+rates of a nut that was off its flank there too instead of probing it (session 19).
 """
 
 import numpy as np
@@ -76,7 +77,9 @@ def _dot6(p, row, col, a0, a1, a2, a3, a4, a5):
             + a4 * p[row + 4, col] + a5 * p[row + 5, col])
 
 
-@njit(cache=True, nogil=True, fastmath=_FAST)
+# inlined into ``_equilibrium`` (session 19): as a call, its 18 array arguments were passed and
+# reference-counted at every evaluation, ~1/3 of the kernel's time on the random candidates
+@njit(cache=True, nogil=True, fastmath=_FAST, inline="always")
 def _terms(cand, x, c, command, x0, axial, pack, point_b, defect_index, defect, weight, r, u, n, force, d, ml, grad):
     """At pose x (6,) and offsets c (3,): shortening r, axial inputs u, loads n (6,) and the
     second-order wrench ``force`` (P-delta 2 N J^T S D, the lateral defect's forces, the rigid
@@ -284,7 +287,7 @@ def _equilibrium(cand, x, c, command, compliance, wrench, x0, gain, axial, pack,
 @njit(cache=True, nogil=True, parallel=True, fastmath=_FAST)
 def solve(compliance, wrench, gain, axial, pack, point_b, defect_index, defect, weight, coupling, mu, limit, x0, nut,
           band, play, inputs, revisit, clearance, tol, max_iter, divergence,
-          faces, state_tol, input_gain,
+          faces, state_tol, input_gain, reuse_rates,
           pose_out, load_out, c_out, release_out, r_out, state_out, class_out, code_out, iter_out):
     """All candidates (in parallel) at all points (in order). Each fixed point starts from the
     previous solution moved by the response to what changed: the linear model's ``input_gain``
@@ -327,6 +330,8 @@ def solve(compliance, wrench, gain, axial, pack, point_b, defect_index, defect, 
         c_probe = np.zeros(3)
         c_prev = np.zeros(3)
         rate = np.zeros((3, 3))
+        rate_point = np.full(3, -1, dtype=np.int64)  # the point where column k of rate was last measured tight
+        reuse = np.zeros(3, dtype=np.bool_)
         stiff = np.zeros(3)
         b = np.zeros((3, 3))
         a = np.zeros(3)
@@ -409,10 +414,18 @@ def solve(compliance, wrench, gain, axial, pack, point_b, defect_index, defect, 
                         if mu[cand, k] > 0 and c[k] > state_tol:
                             probed = True
                 loose = probed and step == 0
+                # a loose first step reuses the previous point's last tight rates of a nut that was
+                # off its flank there too instead of probing it (session 19): that step only moves C
+                # towards the solution, the tight steps after it measure their own. (Reusing a tight
+                # step's rates at the next tight step of a point when C moved by <= 1e-12 m since
+                # moved the poses by 5.6e-13 rad against a 30x tighter solve: not kept.)
+                for k in range(3):
+                    reuse[k] = (reuse_rates and loose and p > 0 and rate_point[k] == p - 1
+                                and mu[cand, k] > 0 and c[k] > state_tol)
                 code, its = _equilibrium(cand, x, c, command, compliance, wrench, x0, gain, axial, pack, point_b,
                                          defect_index, defect, weight, LOOSE_TOL if loose else inner_tol, max_iter,
-                                         divergence, probed and not loose, r, u,
-                                         n, force, d, ml, grad, work, secant)
+                                         divergence, probed and not loose, r, u, n, force, d, ml, grad, work,
+                                         secant)
                 iterations += its
                 if code != OK or not use_clearance:
                     break
@@ -421,6 +434,8 @@ def solve(compliance, wrench, gain, axial, pack, point_b, defect_index, defect, 
                 # diagonal) for the others (an engaged nut needs only the sign of its load; one
                 # that leaves its flank is measured at the next step)
                 for k in range(3):
+                    if reuse[k]:
+                        continue
                     if mu[cand, k] > 0 and c[k] > state_tol:
                         for m in range(6):
                             x_probe[m] = x[m] + response[k, m] * TANGENT_STEP
@@ -439,9 +454,11 @@ def solve(compliance, wrench, gain, axial, pack, point_b, defect_index, defect, 
                             rate[i, k] = (n_probe[3 + i] - n[3 + i]) / TANGENT_STEP
                         for m in range(6):
                             response[k, m] = (x_probe[m] - x[m]) / TANGENT_STEP
+                        rate_point[k] = -1 if loose else p
                     else:
                         for i in range(3):
                             rate[i, k] = coupling[cand, i, k] - (axial[cand, 3 + i] if i == k else 0.0)
+                        rate_point[k] = -1
                 if code != OK:
                     break
                 # Eq. 6-7 with the nut's own stiffness k_i = -dN_i/dC_i at this equilibrium:

@@ -133,10 +133,13 @@ def revisits(inputs: np.ndarray) -> np.ndarray:
 
 def solve_points_consistent(matrices, inputs: np.ndarray, *, clearance: bool, tol: float, max_iter: int,
                             divergence: float, state_tolerance: float, n_threads: int = 1,
-                            revisit: bool = True) -> dict[str, np.ndarray]:
+                            revisit: bool = True, reuse_rates: bool = True) -> dict[str, np.ndarray]:
     """Run the compiled consistent kernel; same outputs as ``kernel.solve_points_compiled``
     (force_only clearance; ``tol`` [m, rad] on the pose update per point). ``revisit=False``
-    starts no point from an earlier one with the same command (``revisits``; for the tests)."""
+    starts no point from an earlier one with the same command (``revisits``; for the tests);
+    ``reuse_rates=False`` probes every nut off its flank at every Newton step on the offsets, a
+    point's loose first one too, instead of taking the previous point's tight rates there (the
+    code before session 19; for the tests)."""
     import numba
 
     from . import _numba_consistent
@@ -159,7 +162,8 @@ def solve_points_consistent(matrices, inputs: np.ndarray, *, clearance: bool, to
         c(m.coupling[:, DRIVING][:, :, DRIVING]), c(m.mu), c(m.clearance),
         c(m.initial_position), c(m.nut_stiffness), c(np.maximum(m.breakaway_band, 0.0)),
         bool(clearance and np.all(m.breakaway_band >= 0)), c(inputs, dtype=float), seen, bool(clearance), float(tol),
-        int(max_iter), float(divergence), _FACES, float(state_tolerance), c(m.input_gain), out["pose"], out["loads"], out["clearance"],
+        int(max_iter), float(divergence), _FACES, float(state_tolerance), c(m.input_gain), bool(reuse_rates),
+        out["pose"], out["loads"], out["clearance"],
         out["release"], out["parasitic"], out["states"], out["point_class"], out["codes"], out["iterations"])
     previous = numba.get_num_threads()
     numba.set_num_threads(max(1, min(int(n_threads), numba.config.NUMBA_NUM_THREADS)))
