@@ -195,7 +195,7 @@ def _whiten(z: np.ndarray, G: np.ndarray, distance: np.ndarray, noise: float, am
     major), projected by keep if given. Without keep Sigma is block diagonal by angle (the
     angles' processes and the noise are independent): the rows a::3 hold s_a^2 M + sigma^2 I,
     so three n x n Cholesky factors and triangular solves replace one 3n x 3n factor and two
-    general solves (a fit ~4x faster, docs/testing.md). The rows of w and V come out angle
+    general solves (a fit 4-8x faster, docs/testing.md). The rows of w and V come out angle
     major; |w - V a|^2 and the QR of [V; I] do not depend on the order of the rows."""
     from scipy.linalg import solve_triangular
 

@@ -143,9 +143,9 @@ def _three_runs_on_fresh_caches(tmp_path, arguments):
 HINGE_DEFAULT_OPTIONS = ["hinge", "--type", "circular", "--radius-mm", "5", "--thickness-mm", "1", "--width-mm", "10"]
 
 
-# slow: the default 7 cells through (207 k DOF) take ~100 s a run at load 5 (2026-11-28; 30 s at 4
-# through); the default run checks the same processes and files at 4 through:
-# test_three_coarser_hinge_runs_on_fresh_caches_write_the_same_bytes
+# slow: the default 7 cells through (207 k DOF) take ~100 s a run at load 5 (2026-11-28, docs/testing.md:
+# 299 s for the three, 52 s at 4 through); the default run checks the same processes and files at 4
+# through: test_three_coarser_hinge_runs_on_fresh_caches_write_the_same_bytes
 @pytest.mark.slow
 def test_three_hinge_runs_on_fresh_caches_write_the_same_bytes(tmp_path):
     """Issue 14's goal, as a user runs it: three ``flexcal hinge`` processes with the default
