@@ -170,24 +170,48 @@ def _negative_log_likelihood(theta: np.ndarray, z: np.ndarray, G: np.ndarray, di
     (the bars 18x too narrow, base z RMS 5.1); with the QR the steps change it smoothly
     (1.5e-6 per 1e-8). Sigma is well conditioned (sigma^2 on its diagonal), so a sensitive
     source does not break its Cholesky factor."""
+    from scipy.linalg import solve_triangular
+
     sigma, amplitude, length, tau = _unpack(theta, noise, features is not None)
-    S = _matern_noise_covariance(distance, sigma, amplitude, length)
     if tau is not None:
         F = _polynomial_factor(features, tau)
         G = np.concatenate([G, F if keep is None else keep.T @ F], axis=1)
-    if keep is not None:
-        S = keep.T @ S @ keep
     try:
-        L = np.linalg.cholesky(S)
+        w, V, log_det_L = _whiten(z, G, distance, sigma, amplitude, length, keep)
     except np.linalg.LinAlgError:
         return 1e300
-    w, V = np.linalg.solve(L, z), np.linalg.solve(L, G)
     k = V.shape[1]
     Q, R = np.linalg.qr(np.vstack([V, np.eye(k)]))
-    a = np.linalg.solve(R, Q[:len(w)].T @ w)  # the minimizer of |w - V a|^2 + |a|^2
+    a = solve_triangular(R, Q[:len(w)].T @ w)  # the minimizer of |w - V a|^2 + |a|^2
     misfit = w - V @ a
     quadratic = misfit @ misfit + a @ a
-    return float(0.5 * quadratic + np.sum(np.log(np.diag(L))) + np.sum(np.log(np.abs(np.diag(R)))))
+    return float(0.5 * quadratic + log_det_L + np.sum(np.log(np.abs(np.diag(R)))))
+
+
+def _whiten(z: np.ndarray, G: np.ndarray, distance: np.ndarray, noise: float, amplitude: np.ndarray,
+            length: float, keep: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, float]:
+    """w = L^-1 z, V = L^-1 G and log det L, for L L^T = Sigma = sigma^2 I + the Matern part
+    over postures at ``distance`` (n, n) (amplitude (3,) [rad], length [workspace units], points
+    major), projected by keep if given. Without keep Sigma is block diagonal by angle (the
+    angles' processes and the noise are independent): the rows a::3 hold s_a^2 M + sigma^2 I,
+    so three n x n Cholesky factors and triangular solves replace one 3n x 3n factor and two
+    general solves (a fit 4-8x faster, docs/testing.md). The rows of w and V come out angle
+    major; |w - V a|^2 and the QR of [V; I] do not depend on the order of the rows."""
+    from scipy.linalg import solve_triangular
+
+    if keep is not None:
+        L = np.linalg.cholesky(keep.T @ _matern_noise_covariance(distance, noise, amplitude, length) @ keep)
+        wV = solve_triangular(L, np.column_stack([z, G]), lower=True)
+        return wV[:, 0], wV[:, 1:], float(np.sum(np.log(np.diag(L))))
+    correlation = matern52(distance, length)
+    blocks, log_det_L = [], 0.0
+    noise_diagonal = noise ** 2 * np.eye(correlation.shape[0])
+    for angle in range(3):
+        L = np.linalg.cholesky(amplitude[angle] ** 2 * correlation + noise_diagonal)
+        blocks.append(solve_triangular(L, np.column_stack([z[angle::3], G[angle::3]]), lower=True))
+        log_det_L += float(np.sum(np.log(np.diag(L))))
+    wV = np.concatenate(blocks)
+    return wV[:, 0], wV[:, 1:], log_det_L
 
 
 def model_error_factor(samples: np.ndarray) -> np.ndarray:

@@ -155,6 +155,19 @@ def test_step_loss_term_is_a_whole_step_at_a_move_and_slides_between_moves():
     np.testing.assert_allclose(half[m + 1:], expected[m + 1:], rtol=1e-12, atol=1e-18)  # as above
 
 
+def test_path_fraction_is_computed_once_per_data_and_cannot_be_changed():
+    """TermData.inputs_path_fraction is path_fraction(inputs), the same arrays on every read
+    (step_loss reads it on each evaluation), and read-only so no caller changes the cached copy."""
+    data = standard_setting().data
+    fraction, move = data.inputs_path_fraction
+    expected_fraction, expected_move = path_fraction(data.inputs)
+    np.testing.assert_array_equal(fraction, expected_fraction)  # the same function on the same inputs: exact
+    np.testing.assert_array_equal(move, expected_move)  # exact, as above
+    assert data.inputs_path_fraction[0] is fraction
+    with pytest.raises(ValueError, match="read-only"):
+        fraction[0, 0] = 1.0
+
+
 def test_creep_term_has_a_free_time_constant():
     data = standard_setting().data
     term = model_term("creep")
