@@ -3,7 +3,7 @@
     .venv/bin/python benchmarks/bench_two_stage.py --out runs/two-stage/s1 --seed 1 \
         [--scenario paper] [--model consistent] [--noise-urad 0.5] [--candidates 2000] \
         [--keep-standard K] [--region workspace|box|hull] [--combined] [--combined-candidates 500] \
-        [--dimension-terms linear|quadratic] [--no-start] [--redo]
+        [--dimension-terms linear|quadratic] [--criterion D|I|drives] [--no-start] [--redo]
 
 Stages (each one's output folder under --out; a stage whose result is already there is reused
 unless --redo, so a run cut short resumes):
@@ -17,7 +17,9 @@ unless --redo, so a run cut short resumes):
    are in their gaps). With ``--keep-standard K`` (and/or ``--region R``) the design keeps
    the K-point standard trajectory first and designs the other 77 - K postures: stage folders
    ``design-kK[-R]`` / ``designed-kK[-R]`` and OUT/two_stage-kK[-R].json, so variants share one
-   stage 1 (and may run side by side).
+   stage 1 (and may run side by side). ``--criterion C`` goes to the design (``flexcal design
+   --criterion``; "drives": A-optimal on the drive sources' bars over their paper figures); when
+   not D it names the designed stages too (``design-k41-drives``, ``designed-k41-drives``).
 3. ``designed``: stage 1's verify and held-out walk on the designed trajectory (the same seed:
    the same prototype and the same noise stream).
 4. with --combined: ``design-combined`` (``--points 154 --keep-standard 77 --candidates
@@ -51,8 +53,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).parent))
 import bench_design_heldout  # noqa: E402
-
-PAPER = {"x0": 2.7, "CL": 0.02, "mu": 1.3}  # Table 1 of the paper: um, mm, % (relative)
+from flexcal.validation.runs.verify import PAPER_DRIVE_FIGURES as PAPER  # noqa: E402  Table 1: um, mm, % (relative)
 
 
 def model_options(args) -> list[str]:
@@ -171,10 +172,13 @@ def _row(name: str, run: dict) -> str:
 
 
 def _variant(args) -> str:
-    """The designed stage's folder suffix: "" for the plain design, "-kK[-region]" otherwise."""
-    if args.keep_standard == 0 and args.region == "workspace":
+    """The designed stage's folder suffix: "" for the plain D-optimal design, "-kK[-region][-criterion]"
+    otherwise (the criterion only when not D, so the D runs keep their folders)."""
+    criterion = getattr(args, "criterion", "D")
+    if args.keep_standard == 0 and args.region == "workspace" and criterion == "D":
         return ""
-    return f"-k{args.keep_standard}" + ("" if args.region == "workspace" else f"-{args.region}")
+    return (f"-k{args.keep_standard}" + ("" if args.region == "workspace" else f"-{args.region}")
+            + ("" if criterion == "D" else f"-{criterion}"))
 
 
 def _terms(args) -> str:
@@ -203,7 +207,8 @@ def stage_plan(out: Path, args) -> dict:
         variant = _variant(args)
         designs.append((f"designed{variant}", out / f"design{variant}{terms}",
                         ["--candidates", str(args.candidates), "--keep-standard", str(args.keep_standard),
-                         "--region", args.region], out / f"designed{variant}{terms}{started}"))
+                         "--region", args.region, "--criterion", args.criterion],
+                        out / f"designed{variant}{terms}{started}"))
     if args.combined:
         designs.append(("combined", out / f"design-combined{terms}",
                         ["--points", "154", "--keep-standard", "77", "--candidates", str(args.combined_candidates)],
@@ -231,6 +236,8 @@ def main(argv=None) -> int:
                         help="the designed stage keeps the K-point standard trajectory first and designs 77 - K")
     parser.add_argument("--region", default="workspace", choices=("workspace", "box", "hull"),
                         help="where the designed stage's candidates are drawn (flexcal design --region)")
+    parser.add_argument("--criterion", default="D", choices=("D", "I", "drives"),
+                        help="the designed stage's criterion (flexcal design --criterion; default D)")
     parser.add_argument("--combined", action="store_true",
                         help="also the standard trajectory followed by 77 designed postures (one measurement)")
     parser.add_argument("--combined-candidates", type=int, default=500)
@@ -248,7 +255,8 @@ def main(argv=None) -> int:
     threads = {k: os.environ.get(k) for k in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS")}
 
     summary = {"scenario": args.scenario, "seed": args.seed, "model": args.model, "noise_urad": args.noise_urad,
-               "dimension_terms": args.dimension_terms, "start": args.start, "threads": threads, "paper": PAPER,
+               "dimension_terms": args.dimension_terms, "criterion": args.criterion, "start": args.start,
+               "threads": threads, "paper": PAPER,
                "runs": {}, "designs": {}}
     for name, stage in stage_plan(out, args).items():
         if name.startswith("design:"):

@@ -29,6 +29,10 @@ identifiable, before anything is measured:
   there is not noise that averages out: the fit absorbs it into the sources (a bias the
   information matrix does not see), so the D-criterion alone seeks exactly those postures
   (largest signatures at the workspace corners, where the model is worst);
+- other criteria, by the same greedy + exchange: "I" (trace M^-1 A, A the mean information of
+  postures to be predicted) and "drives" (A diagonal: (range / figure)^2 on chosen sources, e.g.
+  the drive sources and their paper Table 1 figures: ``figure_weights``; the sum of their expected
+  variances in units of their figures, A-optimality);
 
 The design is local (at one parameter point) like any nonlinear D-optimal design; the
 report gives the criterion, sigma_min, the condition number and the expected standard
@@ -42,10 +46,12 @@ from typing import Callable
 
 import numpy as np
 
-__all__ = ["candidate_postures", "candidate_inputs", "REGIONS", "d_criterion", "i_criterion", "greedy_d_optimal",
-           "greedy_i_optimal", "order_postures", "DesignQuality", "design_quality", "Design", "design_trajectory"]
+__all__ = ["candidate_postures", "candidate_inputs", "REGIONS", "CRITERIA", "d_criterion", "i_criterion",
+           "greedy_d_optimal", "greedy_i_optimal", "figure_weights", "order_postures", "DesignQuality",
+           "design_quality", "Design", "design_trajectory"]
 
 REGIONS = ("workspace", "box", "hull")  # where candidates are drawn (candidate_inputs)
+CRITERIA = ("D", "I", "drives")  # design_trajectory's criteria
 
 
 def candidate_postures(angle_gain: np.ndarray, workspace: np.ndarray, n_candidates: int,
@@ -90,6 +96,29 @@ def i_criterion(J: np.ndarray, prior_precision: np.ndarray, A: np.ndarray) -> fl
     over the postures whose mean information is A (d, d) (I-optimality; lower is better)."""
     M = J.T @ J + np.diag(prior_precision)
     return float(np.trace(np.linalg.solve(M, A)))
+
+
+def figure_weights(names, spans: np.ndarray, figures: dict[str, float]) -> np.ndarray:
+    """A (d, d) for ``i_criterion`` / ``greedy_i_optimal`` that makes trace(M^-1 A) the sum, over the
+    sources named in ``figures``, of (expected standard error / that source's figure)^2 (A-optimality
+    on those sources, each in units of its own figure): diagonal, (span / figure)^2 at each named
+    source's place in ``names`` (d,), zero elsewhere. spans (d,) [SI] the sources' ranges (upper -
+    lower: M is in unit-box coordinates, so a unit-box variance is multiplied by span^2); figures
+    {name: figure [SI] > 0}, every name among ``names``."""
+    names = list(names)
+    spans = np.asarray(spans, float)
+    if spans.shape != (len(names),):
+        raise ValueError(f"spans {spans.shape} must be ({len(names)},), one per name")
+    missing = [n for n in figures if n not in names]
+    if missing:
+        raise ValueError(f"sources {missing} of the figures are not among the design's sources")
+    weights = np.zeros(len(names))
+    for name, figure in figures.items():
+        if not figure > 0:
+            raise ValueError(f"the figure of {name} must be > 0, got {figure!r}")
+        i = names.index(name)
+        weights[i] = (spans[i] / figure) ** 2
+    return np.diag(weights)
 
 
 def _i_gains(J_candidates: np.ndarray, M_inverse: np.ndarray, A: np.ndarray) -> np.ndarray:
@@ -256,7 +285,7 @@ def design_trajectory(jacobian: Callable[[np.ndarray], np.ndarray], angle_gain: 
                       max_inadequacy: float | None = None, rng: np.random.Generator | int | None = 0,
                       progress: Callable[[str], None] | None = None, region: str = "workspace",
                       box: np.ndarray | None = None, criterion: str = "D",
-                      prediction_inputs: np.ndarray | None = None,
+                      prediction_inputs: np.ndarray | None = None, variance_weights: np.ndarray | None = None,
                       fixed_inputs: np.ndarray | None = None, fixed_leg: np.ndarray | None = None) -> Design:
     """D-optimal trajectory of ``n_points`` postures (the zero posture first, then n - 1 chosen).
 
@@ -271,7 +300,9 @@ def design_trajectory(jacobian: Callable[[np.ndarray], np.ndarray], angle_gain: 
     region: "workspace" (candidates uniform in the angular workspace) or "box" / "hull" (in the
     actuator-input box +-box (3,) [m] or its octahedron: ``candidate_inputs``); criterion "D"
     (log det M) or "I" (trace M^-1 A, A the mean information of ``prediction_inputs`` (k, 3)
-    [m], the postures to be predicted); fixed_inputs (k, 3) [m]: postures always measured, first
+    [m], the postures to be predicted) or "drives" (trace M^-1 A with A = ``variance_weights`` (d, d),
+    e.g. ``figure_weights`` of the drive sources and their paper figures: A-optimal on their error
+    bars, the same exchange as "I"); fixed_inputs (k, 3) [m]: postures always measured, first
     and in their order (they replace the zero posture, so they should start with it), the design
     choosing n_points - k more; fixed_leg (k,) their legs (default all one leg).
     """
@@ -288,10 +319,12 @@ def design_trajectory(jacobian: Callable[[np.ndarray], np.ndarray], angle_gain: 
         if box is None:
             raise ValueError(f"region={region!r} needs the input box (3,) [m]")
         candidates = candidate_inputs(box, n_candidates, region, rng)
-    if criterion not in ("D", "I"):
-        raise ValueError(f"criterion={criterion!r} must be 'D' or 'I'")
+    if criterion not in CRITERIA:
+        raise ValueError(f"criterion={criterion!r} must be one of {CRITERIA}")
     if criterion == "I" and prediction_inputs is None:
         raise ValueError("criterion 'I' needs prediction_inputs (the postures to be predicted)")
+    if criterion == "drives" and variance_weights is None:
+        raise ValueError("criterion 'drives' needs variance_weights (d, d): the A of trace(M^-1 A)")
     start_inputs = np.zeros((1, 3)) if fixed_inputs is None else np.asarray(fixed_inputs, float).reshape(-1, 3)
     n_choose = n_points - start_inputs.shape[0]
     if n_choose < 1:
@@ -317,10 +350,17 @@ def design_trajectory(jacobian: Callable[[np.ndarray], np.ndarray], angle_gain: 
         picked, _ = greedy_d_optimal(J[offered] / sigma[offered, :, None], prior_precision, n_choose, fixed=start,
                                      progress=say)
     else:
-        P = np.asarray(jacobian(np.asarray(prediction_inputs, float)), float) / noise
-        say(f"greedy I-optimal selection of {n_choose} of {offered.size} postures ({len(prediction_inputs)} to predict)")
-        picked, _ = greedy_i_optimal(J[offered] / sigma[offered, :, None], prior_precision, n_choose,
-                                     P.T @ P / len(prediction_inputs), fixed=start, progress=say)
+        if criterion == "I":
+            P = np.asarray(jacobian(np.asarray(prediction_inputs, float)), float) / noise
+            A = P.T @ P / len(prediction_inputs)
+            say(f"greedy I-optimal selection of {n_choose} of {offered.size} postures ({len(prediction_inputs)} to "
+                "predict)")
+        else:
+            A = np.asarray(variance_weights, float)
+            say(f"greedy A-optimal selection of {n_choose} of {offered.size} postures ({np.count_nonzero(np.diag(A))} "
+                "sources weighed)")
+        picked, _ = greedy_i_optimal(J[offered] / sigma[offered, :, None], prior_precision, n_choose, A, fixed=start,
+                                     progress=say)
     chosen = offered[picked]
     scale = np.abs(np.linalg.solve(angle_gain, workspace)) if box is None else np.asarray(box, float)
     order = order_postures(candidates[chosen], scale, start=start_inputs[-1])

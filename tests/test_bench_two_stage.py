@@ -164,3 +164,26 @@ def test_start_and_terms_name_their_own_folders(tmp_path):
     assert len(set(folders)) == len(folders) - 2  # only the linear runs' stage 1 and design are shared
     assert bench_two_stage.summary_path(tmp_path, _args(**{"dimension-terms": "quadratic"})).name == \
         "two_stage-k41-quadratic-start.json"
+
+
+def test_criterion_reaches_the_design_and_names_its_stages(tmp_path):
+    """--criterion drives goes to flexcal design (its parser accepts it) and names the designed
+    stages, so a drives run never reuses a D run's design; D (the default) keeps the old folders."""
+    from flexcal.validation.cli import build_parser
+
+    args = _args(criterion="drives", **{"dimension-terms": "quadratic"})
+    plan = bench_two_stage.stage_plan(tmp_path, args)
+    assert list(plan) == ["standard", "design:designed-k41-drives", "designed-k41-drives"]
+    assert plan["design:designed-k41-drives"]["folder"] == tmp_path / "design-k41-drives-quadratic"
+    assert plan["designed-k41-drives"]["folder"] == tmp_path / "designed-k41-drives-quadratic-start"
+    assert plan["designed-k41-drives"]["trajectory"] == tmp_path / "design-k41-drives-quadratic" / "trajectory.csv"
+    stage = plan["design:designed-k41-drives"]
+    design = build_parser("design").parse_args(bench_two_stage.design_argv(stage["folder"], args, stage["at"],
+                                                                           stage["extra"]))
+    assert design.criterion == "drives" and design.keep_standard == 41
+    assert bench_two_stage.summary_path(tmp_path, args).name == "two_stage-k41-drives-quadratic-start.json"
+    default = bench_two_stage.stage_plan(tmp_path, _args(**{"dimension-terms": "quadratic"}))
+    assert default["design:designed-k41"]["folder"] == tmp_path / "design-k41-quadratic"
+    stage = default["design:designed-k41"]
+    assert build_parser("design").parse_args(bench_two_stage.design_argv(stage["folder"], args, stage["at"],
+                                                                         stage["extra"])).criterion == "D"

@@ -1,13 +1,17 @@
 """Designs for where the mount is used (issue #28 item 2): candidates in the standard trajectory's
-input box or the hull of its postures, the I-criterion (prediction variance), fixed postures."""
+input box or the hull of its postures, the I-criterion (prediction variance), fixed postures, and
+the "drives" criterion (A-optimal on the drive sources' expected variances, each over its paper
+Table 1 figure squared: trace(M^-1 A), A diagonal on the drive sources, greedy_i_optimal's exchange)."""
 
 from __future__ import annotations
+
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
-from flexcal.calibration.design import (candidate_inputs, d_criterion, design_trajectory, greedy_d_optimal,
-                                        greedy_i_optimal, i_criterion)
+from flexcal.calibration.design import (candidate_inputs, d_criterion, design_trajectory, figure_weights,
+                                        greedy_d_optimal, greedy_i_optimal, i_criterion)
 
 BOX = np.array([1.0e-3, 1.0e-3, 0.65e-3])  # [m] strokes like table1's standard trajectory
 WORKSPACE = np.array([1e-3, 5e-3, 3e-3])  # [rad]
@@ -99,3 +103,74 @@ def test_design_cli_keeps_the_standard_postures_and_stays_in_their_hull(tmp_path
     assert (report["kept"]["n_kept"], report["kept"]["n_designed"]) == (13, 28) and report["avoided"] is None
     text = (out / "report.md").read_text()  # the report says which postures were kept and that none was avoided
     assert "Postures kept: the first 13 are the 13-point standard trajectory" in text and "No posture avoided" in text
+
+
+def test_figure_weights_weigh_only_the_named_sources_by_range_over_figure_squared():
+    names = ("L1.w", "D1.x0", "D1.CL", "D1.mu", "H1.k")
+    spans = np.array([1e-4, 1e-3, 4e-4, 0.2, 5.0])
+    A = figure_weights(names, spans, {"D1.x0": 2.7e-6, "D1.CL": 2e-5, "D1.mu": 0.013})
+    assert np.count_nonzero(A - np.diag(np.diag(A))) == 0  # diagonal
+    # (range / figure)^2; default rel 1e-6: float rounding only
+    assert np.diag(A) == pytest.approx([0.0, (1e-3 / 2.7e-6) ** 2, (4e-4 / 2e-5) ** 2, (0.2 / 0.013) ** 2, 0.0])
+    # so trace(M^-1 A) is the sum of (standard error [SI] / figure)^2 for unit-box variances M^-1
+    variances = np.array([1.0, 1e-4, 4e-4, 1e-2, 1.0])
+    expected = sum((np.sqrt(v) * s / f) ** 2 for v, s, f in zip(variances[1:4], spans[1:4], (2.7e-6, 2e-5, 0.013)))
+    assert np.trace(np.diag(variances) @ A) == pytest.approx(expected)  # default rel 1e-6: rounding only
+    with pytest.raises(ValueError, match="not among"):
+        figure_weights(names, spans, {"D2.x0": 2.7e-6})
+    with pytest.raises(ValueError, match="> 0"):
+        figure_weights(names, spans, {"D1.x0": 0.0})
+
+
+def test_drive_figures_are_the_paper_table1_figures_in_si():
+    """x0 2.7 um, CL 0.02 mm, mu 1.3 % of its value at the design point (validation.runs.verify.PAPER_TABLE1)."""
+    from flexcal.model.parameters import DRIVE_SOURCE_NAMES
+    from flexcal.validation.cli.design import drive_figures
+
+    names = ("L1.w",) + DRIVE_SOURCE_NAMES
+    lower, span = np.zeros(len(names)), np.full(len(names), 2.0)
+    space = SimpleNamespace(names=names, from_unit=lambda eta: lower + span * eta)
+    eta = np.full(len(names), 0.25)  # every value 0.5 [SI]
+    figures = drive_figures(space, eta)
+    assert set(figures) == set(DRIVE_SOURCE_NAMES)
+    for name, figure in figures.items():  # default rel 1e-6: unit conversion only
+        assert figure == pytest.approx({"x0": 2.7e-6, "CL": 2e-5, "mu": 0.013 * 0.5}[name.split(".")[1]])
+
+
+def test_drives_design_narrows_the_drive_bars_more_than_the_d_design():
+    """On the same candidates, the "drives" design has a lower trace(M^-1 A) over the weighed
+    sources than the D-optimal one (fails if the criterion is ignored: the same design), and the
+    D design the larger log det (each wins its own criterion)."""
+    names = ("a", "b", "c", "d", "e", "f")
+    A = figure_weights(names, np.ones(6), {"b": 0.5, "e": 0.1})
+    precision = np.full(6, 12.0)
+    common = dict(n_points=15, n_candidates=300, prior_precision=precision, rng=4, region="box", box=BOX)
+    d_design = design_trajectory(_jacobian, np.eye(3), WORKSPACE, np.zeros((1, 3)), criterion="D", **common)
+    a_design = design_trajectory(_jacobian, np.eye(3), WORKSPACE, np.zeros((1, 3)), criterion="drives",
+                                 variance_weights=A, **common)
+    W_d, W_a = _jacobian(d_design.inputs) / 0.5e-6, _jacobian(a_design.inputs) / 0.5e-6
+    trace_d, trace_a = i_criterion(W_d, precision, A), i_criterion(W_a, precision, A)
+    # 10 %: clear of a tie (the criterion ignored gives the D design, ratio 1); measured 0.83 (0.190 / 0.228)
+    assert trace_a < 0.9 * trace_d, (trace_a, trace_d)
+    assert d_criterion(W_d, precision) >= d_criterion(W_a, precision)
+    with pytest.raises(ValueError, match="variance_weights"):
+        design_trajectory(_jacobian, np.eye(3), WORKSPACE, np.zeros((1, 3)), criterion="drives", **common)
+
+
+def test_design_cli_criterion_drives_writes_its_criterion(tmp_path):
+    """flexcal design --criterion drives: report.json names it and gives the drive sources' trace for
+    the design and the standard trajectory; report.md's criterion line and figure rows say it."""
+    import json
+
+    from flexcal.validation import cli
+
+    out = tmp_path / "design"
+    assert cli.main(["design", "--points", "41", "--candidates", "200", "--model-stiffness", "closed-form",
+                     "--inadequacy", "none", "--criterion", "drives", "--keep-standard", "13",
+                     "--out", str(out), "-q"]) == 0
+    report = json.loads((out / "report.json").read_text())
+    assert report["criterion_name"] == "drives" and report["criterion"].startswith("A-optimal on the drive sources")
+    drives = report["drives_criterion"]
+    assert drives["designed"]["trace"] > 0 and drives["standard_trajectory"]["trace"] > 0
+    text = (out / "report.md").read_text()
+    assert "Criterion: A-optimal on the drive sources" in text and "(drives criterion)" in text

@@ -18,7 +18,9 @@ def markdown(report: dict) -> str:
              f"{report['n_points']} postures chosen from {report['n_candidates']} candidates, noise "
              f"{report['noise_urad']:g} urad, prior scale {report['prior_scale']:g}, model inadequacy: "
              f"{report['inadequacy']} (wall-clock time: timings.json).", "",
+             f"Criterion: {report['criterion']}.", "",
              "| figure | designed | standard trajectory (77) |", "|---|---:|---:|",
+             *_drives_lines(report.get("drives_criterion")),
              f"| log det M (D-criterion) | {d['log_det_information']:.2f} | {s['log_det_information']:.2f} |",
              f"| det(M)^(1/45) | {d['d_efficiency']:.4g} | {s['d_efficiency']:.4g} |",
              f"| rank of W | {d['rank']} | {s['rank']} |",
@@ -33,6 +35,15 @@ def markdown(report: dict) -> str:
     for name, a, b in zip(report["names"], d["expected_std_of_range"], s["expected_std_of_range"]):
         lines.append(f"| `{name}` | {100 * a:.3g} | {100 * b:.3g} |")
     return "\n".join(lines) + "\n"
+
+
+def _drives_lines(drives: dict | None) -> list[str]:
+    """The drive sources' A-criterion rows of the figure table (none without --criterion drives)."""
+    if not drives:
+        return []
+    d, s = drives["designed"], drives["standard_trajectory"]
+    return [f"| sum of (drive std / paper figure)^2 (drives criterion) | {d['trace']:.4g} | {s['trace']:.4g} |",
+            f"| largest drive std / paper figure | {d['max_std_over_figure']:.3g} | {s['max_std_over_figure']:.3g} |"]
 
 
 def _avoided_lines(avoided: dict | None) -> list[str]:

@@ -48,7 +48,7 @@ from ..measurements import Measurement
 from .form_floor import TruthCurve, model_form_floor, not_available
 from .settings import VerifySettings
 
-__all__ = ["VerifySettings", "VerifyResult", "run_verify", "PAPER_TABLE1"]
+__all__ = ["VerifySettings", "VerifyResult", "run_verify", "PAPER_TABLE1", "PAPER_DRIVE_FIGURES"]
 
 # Paper Table 1 / Sec. 3.3 figures: maximum identification errors and the orientation fit
 PAPER_TABLE1 = {
@@ -58,6 +58,10 @@ PAPER_TABLE1 = {
     "other_max_rel_error_pct": 10.0,
     "orientation_fit_max_urad": 0.015,
 }
+# each drive symbol's Table 1 figure in Table 1's unit: x0 um, CL mm, mu % relative to its value
+PAPER_DRIVE_FIGURES = {symbol: PAPER_TABLE1[key] for symbol, key in (
+    ("x0", "initial_position_max_abs_error_um"), ("CL", "clearance_max_abs_error_mm"),
+    ("mu", "hysteresis_max_rel_error_pct"))}
 OUTPUTS = ("overall", "theta_x", "theta_y", "theta_z")
 
 
