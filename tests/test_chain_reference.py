@@ -139,3 +139,40 @@ def test_prototype_segment_mesh_within_half_a_percent_of_the_hex27_reference(cha
     # the issue's goal for the default mesh: 0.5 % of the converged value, here the reference's limit
     name, *_, prototype, _ = _leaf_segment_rows(chain)[entry]
     assert abs(prototype) <= PROTOTYPE_GOAL, f"{chain} {name}: the prototype's mesh is {100 * prototype:+.3f} % off"
+
+
+@functools.cache
+def _l1_second_segment_rows() -> dict:
+    # L1 [m1, s0] (leaf 2 thin along z, the reference turned): mapped nested at 2 through on
+    # the mirror quarters, r = 4, 5, 6 (137k / 259k / 438k DOF); Q2 hexes r = 3..6 (78k..603k DOF).
+    # At session 18's levels (mapped r = 2, 3, 4) K[rzA,rzB] missed by +0.124 %: its mapped
+    # levels are not asymptotic there. Measured (2026-11-28, session 19, load 2-6): every entry
+    # within 0.1 % (K[rzA,rzB] +0.097 % at the finest level, which stands in for its limit);
+    # the test run 7 min 41 s wall idle, 9.0 GB peak (docs/meshing.md, "Session 19")
+    rows = compare("L1", None, (4, 5, 6), (3, 4, 5, 6), prototype=True, mirrored=True, index=1)
+    return {row[0]: row for row in rows}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("entry", ENTRIES)
+def test_second_leaf_segment_of_l1_mapped_within_a_tenth_of_a_percent_of_the_hex27_reference(entry):
+    rows = _l1_second_segment_rows()
+    assert sorted(rows) == sorted(ENTRIES)  # the same 26 dominant entries as on [0, m1]
+    name, _, mapped, _, reference, uncertainty, diff, *_ = rows[entry]
+    assert abs(diff) <= AGREEMENT, (f"L1 [m1, s0] {name}: mapped limit {mapped:.6e} is {100 * diff:+.3f} % from the "
+                                    f"Q2-hex reference {reference:.6e} (+- {100 * uncertainty / abs(reference):.3f} %)")
+
+
+# Measured (2026-11-28, session 19): the prototype's torsion on L1 [m1, s0] is +0.506 % from the
+# refined reference limit, 0.006 % over the goal: an open miss, kept visible (strict: once the
+# prototype's grid meets it this fails and docs/meshing.md must be updated)
+TORSION = {"K[rxA,rxA]", "K[rxA,rxB]", "K[rxB,rxB]"}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("entry", [pytest.param(e, marks=pytest.mark.xfail(strict=True, reason="+0.506 %, "
+                                                                          "docs/meshing.md session 19"))
+                                   if e in TORSION else e for e in ENTRIES])
+def test_prototype_second_leaf_segment_of_l1_within_half_a_percent_of_the_hex27_reference(entry):
+    name, *_, prototype, _ = _l1_second_segment_rows()[entry]
+    assert abs(prototype) <= PROTOTYPE_GOAL, f"L1 [m1, s0] {name}: the prototype's mesh is {100 * prototype:+.3f} % off"
