@@ -58,10 +58,10 @@ PAPER_TABLE1 = {
     "other_max_rel_error_pct": 10.0,
     "orientation_fit_max_urad": 0.015,
 }
-# each drive symbol's Table 1 figure in Table 1's unit: x0 um, CL mm, mu % relative to its value
-PAPER_DRIVE_FIGURES = {symbol: PAPER_TABLE1[key] for symbol, key in (
-    ("x0", "initial_position_max_abs_error_um"), ("CL", "clearance_max_abs_error_mm"),
-    ("mu", "hysteresis_max_rel_error_pct"))}
+# each drive symbol's Table 1 row, and its figure in Table 1's unit: x0 um, CL mm, mu % relative to its value
+DRIVE_ROWS = {"x0": "initial_position_max_abs_error_um", "CL": "clearance_max_abs_error_mm",
+              "mu": "hysteresis_max_rel_error_pct"}
+PAPER_DRIVE_FIGURES = {symbol: PAPER_TABLE1[key] for symbol, key in DRIVE_ROWS.items()}
 OUTPUTS = ("overall", "theta_x", "theta_y", "theta_z")
 
 
@@ -134,8 +134,7 @@ def _paper_comparison(rows: list[dict[str, Any]], fit_max_urad: float,
     shown = [r for r in rows if r["name"] not in unobservable]
     every = _figures(shown, lambda r: True) | {"orientation_fit_max_urad": fit_max_urad}
     meaningful = _figures(shown, lambda r: r["identifiable"]) | {"orientation_fit_max_urad": fit_max_urad}
-    groups = {"initial_position_max_abs_error_um": "x0", "clearance_max_abs_error_mm": "CL",
-              "hysteresis_max_rel_error_pct": "mu"}
+    groups = {key: symbol for symbol, key in DRIVE_ROWS.items()}
     out = []
     for key, paper in PAPER_TABLE1.items():
         symbol = groups.get(key)
