@@ -89,14 +89,48 @@ def test_a_curved_valley_widens_the_pinned_looking_combination():
     assert np.linalg.eigvalsh(added).min() > -1e-12 * np.abs(added).max()  # PSD up to round-off
 
 
-def test_profile_bars_are_opt_in():
-    """--profile-bars: off unless asked (its cost on noise-free data, docs/calibration.md 6),
-    and off for --method paper whatever is asked."""
+def test_profile_bars_follow_the_declared_sensor_noise_unless_given():
+    """--profile-bars / --no-profile-bars as given; by default on exactly when the run declares
+    sensor noise (--noise-urad > 0, else the sidecar's sensors.noise_urad), off for a noise-free
+    or undeclared measurement (its cost and too-wide bars there, docs/calibration.md 6); off for
+    --method paper whatever is asked."""
     from flexcal.validation.cli.options import profile_option
 
     def args(**kw):
-        return argparse.Namespace(**{"profile_bars": False, "method": "map", "model": "consistent", **kw})
-    assert profile_option(args()) is False
-    assert profile_option(args(profile_bars=True)) is True
-    assert profile_option(args(profile_bars=True, method="free")) is True
-    assert profile_option(args(profile_bars=True, method="paper")) is False
+        return argparse.Namespace(**{"profile_bars": None, "method": "map", "noise_urad": None, **kw})
+    noisy, quiet = {"sensors": {"noise_urad": [0.0, 0.5, 0.0]}}, {"sensors": {"noise_urad": [0.0, 0.0, 0.0]}}
+    assert profile_option(args(), {}) is False  # nothing declared (a real file without a sidecar)
+    assert profile_option(args(), quiet) is False
+    assert profile_option(args(), noisy) is True  # one channel's noise is enough
+    assert profile_option(args(noise_urad=0.5), quiet) is True  # the option overrides the sidecar
+    assert profile_option(args(noise_urad=0.0), noisy) is False
+    assert profile_option(args(profile_bars=False), noisy) is False
+    assert profile_option(args(profile_bars=True), {}) is True
+    assert profile_option(args(profile_bars=True, method="free"), {}) is True
+    assert profile_option(args(profile_bars=True, method="paper"), noisy) is False
+    assert profile_option(args(method="paper"), noisy) is False
+
+
+def test_verify_profiles_a_noisy_scenario_by_default(tmp_path, monkeypatch):
+    """The command line reaches run_verify with the profile on for a scenario with --noise-urad,
+    off without it, and off with --no-profile-bars (the settings seen by a stub run_verify)."""
+    from flexcal.validation import cli
+    from flexcal.validation.runs import verify as runs_verify
+
+    seen = []
+
+    class Stop(Exception):
+        pass
+
+    def fake_run_verify(measurement, space, settings, **kwargs):
+        seen.append(settings.profile)
+        raise Stop  # the fit itself is tested elsewhere
+
+    monkeypatch.setattr(runs_verify, "run_verify", fake_run_verify)
+    base = ["verify", "--scenario", "table1", "--provider", "analytic", "--model", "paper", "--method", "map",
+            "--out", str(tmp_path / "v"), "--quiet"]
+    for extra, expected in ((["--noise-urad", "0.5"], True), ([], False),
+                            (["--noise-urad", "0.5", "--no-profile-bars"], False)):
+        seen.clear()
+        assert cli.main(base + extra) != 0  # stopped by the stub
+        assert seen == [expected]

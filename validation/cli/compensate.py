@@ -103,11 +103,11 @@ def _settings(args):
     check_n_base(args.sobol_n, name="--sobol-n")
     if args.readings < 1:
         raise ValueError(f"--readings={args.readings} must be >= 1")
-    from .options import prior_scale_option, profile_option
+    from .options import prior_scale_option
 
     verify = VerifySettings(sobol_n=args.sobol_n, sobol_threshold=args.sobol_threshold, seed=args.calibration_seed,
                             polish=args.polish, remove_offset=True, method=args.method,
-                            prior_scale=prior_scale_option(args), profile=profile_option(args),
+                            prior_scale=prior_scale_option(args),
                             pso=dataclasses.replace(PSOSettings(), n_particles=args.particles,
                                                     max_iterations=args.iterations))
     loop = LoopSettings(tolerance=args.tolerance_urad * 1e-6, max_rounds=args.max_rounds, gain=args.gain)
@@ -141,7 +141,7 @@ def run(args: argparse.Namespace) -> int:
     from ..output import staged_output, write_report
     from .opening import calibration_model, open_data
     from ..runs.targets import default_targets, read_targets, write_targets
-    from .options import error_budget_option, executor_options
+    from .options import error_budget_option, executor_options, profile_option
 
     quiet = getattr(args, "quiet", False)
     settings = _settings(args)
@@ -149,6 +149,8 @@ def run(args: argparse.Namespace) -> int:
     workspace = data.mechanism.workspace  # the targets lie in the data's mount's workspace
     targets = read_targets(args.targets, workspace=workspace) if args.targets else default_targets(workspace=workspace)
     measurement, space = data.measurement, calibration_model(args, data.mechanism, progress=not quiet)
+    settings = dataclasses.replace(settings, verify=dataclasses.replace(
+        settings.verify, profile=profile_option(args, measurement.metadata)))
     dwell = float(np.median(np.diff(measurement.time))) if measurement.n_points > 1 else 2.0
     from flexcal.model.parameters import parameter_space
 

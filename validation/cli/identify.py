@@ -80,7 +80,6 @@ def run(args: argparse.Namespace) -> int:
     selected = parse_sources(args.sources, parameter_space().names)
     progress = show_progress(args)
     settings = VerifySettings(method=args.method, prior_scale=prior_scale_option(args), sources=selected,
-                              profile=profile_option(args),
                               polish=args.polish, seed=args.calibration_seed, remove_offset=args.remove_offset,
                               noise_urad=args.noise_urad if args.noise_urad else None,
                               pso=dataclasses.replace(PSOSettings(), n_particles=args.particles,
@@ -90,6 +89,7 @@ def run(args: argparse.Namespace) -> int:
     opening = open_calibration(args, progress=progress,
                                check=lambda measurement: check_determined(measurement.n_points, len(selected)))
     measurement, presets, truth, space = opening.measurement, opening.presets, opening.truth, opening.space
+    settings = dataclasses.replace(settings, profile=profile_option(args, measurement.metadata))
     start = time.perf_counter()
     # bars on stderr for the long loops (PSO iterations, least-squares fits); identify prints its own summary
     budget = error_budget_option(args, space, measurement.inputs, progress=progress)

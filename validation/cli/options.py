@@ -287,13 +287,16 @@ def add_error_bar_options(parser: argparse.ArgumentParser) -> None:
                              "sources (default 0)")
     parser.add_argument("--no-error-budget", action="store_true",
                         help="error bars from the residual-fitted discrepancy alone (no prototype runs)")
-    # opt-in: measured on the consistent model it brings the base bars into the z-score band with
-    # 0.5 urad noise (9-28 constrained fits), but on the noise-free table1 scenario it ran 99
-    # constrained fits (~450 of a 530 s idle verify) and made the bars ~6x too wide (docs/calibration.md 6, session 17)
-    parser.add_argument("--profile-bars", action="store_true",
+    # default: on when the measurement declares sensor noise (``profile_option``). Measured on the
+    # consistent model, with 0.5 urad noise it brings the base bars into the z-score band (9-28
+    # constrained fits), but on the noise-free table1 scenario it ran 99 constrained fits (~450 of a
+    # 530 s idle verify) and made the bars ~6x too wide (docs/calibration.md 6, session 17)
+    parser.add_argument("--profile-bars", action=argparse.BooleanOptionalAction, default=None,
                         help="widen the bars of the base combinations not identified alone by their profile "
-                             "likelihood, the other sources re-optimised (calibration/profile_bars.py; for a "
-                             "nonlinear model such as --model consistent on noisy data; minutes)")
+                             "likelihood, the other sources re-optimised (calibration/profile_bars.py; minutes). "
+                             "Default: on when the measurement declares its sensor noise (--noise-urad > 0 or the "
+                             "sidecar's sensors.noise_urad), off for a noise-free or undeclared one, where the fit's "
+                             "noise is the model's own misfit and the profile makes the bars too wide")
 
 
 def add_provider(parser: argparse.ArgumentParser, *, what: str) -> None:
@@ -321,9 +324,29 @@ def error_budget_option(args: argparse.Namespace, space, inputs, *, progress: bo
     return budget
 
 
-def profile_option(args: argparse.Namespace) -> bool:
-    """``--profile-bars`` as VerifySettings takes it; off for --method paper (no error bars)."""
-    return bool(args.profile_bars) and args.method != "paper"
+def declared_noise_urad(args: argparse.Namespace, metadata: dict) -> float:
+    """The largest sensor noise [urad] the run declares: ``--noise-urad`` if given, else the
+    measurement sidecar's ``sensors.noise_urad`` (0 when neither states one)."""
+    if getattr(args, "noise_urad", None) is not None:
+        return float(args.noise_urad)
+    stated = (metadata.get("sensors") or {}).get("noise_urad") or [0.0]
+    return max(float(value) for value in stated)
+
+
+def profile_option(args: argparse.Namespace, metadata: dict) -> bool:
+    """``--profile-bars`` as VerifySettings takes it: off for --method paper (no error bars);
+    given on or off, as given; by default on exactly when the run declares sensor noise
+    (``declared_noise_urad`` > 0). Why by that: the profile likelihood measures how far the
+    objective's valley lets a base combination move within one unit of the fit's noise; with
+    sensor noise that unit is the sensor's and the widened bars were measured honest (z RMS
+    3.40 -> 0.93 on table1, 3.19 -> 1.29 on `paper`, consistent model, seeds 1-3), without it
+    the unit is the model's own misfit (0.004 urad) and the bars came out ~6x too wide at ~4x the
+    time (docs/calibration.md 6, session 17)."""
+    if args.method == "paper":
+        return False
+    if args.profile_bars is not None:
+        return bool(args.profile_bars)
+    return declared_noise_urad(args, metadata) > 0.0
 
 
 def add_source_options(parser: argparse.ArgumentParser) -> None:

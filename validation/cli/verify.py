@@ -65,12 +65,13 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError(f"--start {args.start}: no such file (a flexcal verify/identify report.json)")
     settings = VerifySettings(sobol_n=args.sobol_n, sobol_threshold=args.sobol_threshold, seed=args.calibration_seed,
                               polish=args.polish, remove_offset=args.remove_offset, method=args.method,
-                              prior_scale=prior_scale_option(args), profile=profile_option(args),
+                              prior_scale=prior_scale_option(args),
                               noise_urad=args.noise_urad if args.noise_urad else None,
                               pso=dataclasses.replace(PSOSettings(), n_particles=args.particles,
                                                       max_iterations=args.iterations))
     opening = open_calibration(args, progress=not args.quiet)
     measurement, space = opening.measurement, opening.space
+    settings = dataclasses.replace(settings, profile=profile_option(args, measurement.metadata))
     if args.start:
         from .opening import report_values
 
