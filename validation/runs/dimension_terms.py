@@ -14,8 +14,12 @@ error. The curvatures H (n_chains, 5, 5, 8) give the factors' second-order term 
 - diagonal: ``(f(+s_k) + f(-s_k) - 2 f0) / s_k^2`` from the slopes' own builds at +-``SLOPE_STEPS``
   (no new FEM build: their segments are in the cache) and the nominal factors;
 - mixed: ``(f(+s_k, +s_m) + f(-s_k, -s_m) - 2 f0 - s_k^2 H_kk - s_m^2 H_mm) / (2 s_k s_m)``, two
-  builds per pair of dimensions (20 chain builds per chain design, the slopes' ``same_design``
-  and ``unchanged_slices`` reuse as there), accurate to O(s^2) like the slopes.
+  moved chains per pair of dimensions (20 per chain design, ``same_design`` as the slopes),
+  accurate to O(s^2) like the slopes. Only the slices both dimensions of the pair reach are
+  built (``slice_owners``): t1 reaches leaf 1's slice only, t2 leaf 2's, w and a both leaves', l
+  all three (it moves the section nodes), and a slice one of them leaves as it was is the other
+  one's single-move segment (or the nominal one), the same solid and so the same numbers: 48
+  segment builds for the reference mount where 96 were (session 20, docs/model.md 11).
 
 The shortening correction ``S_measured(P0) - S_elements(P0)`` (``chain_kinematics``, docs/model.md
 10) is 0.3-0.4 % of the driving chains' S_zz off at the true dimensions; with the factors right
