@@ -26,6 +26,74 @@ def test_the_analytic_provider_gives_zero_curvatures():
     np.testing.assert_allclose(curvatures, 0.0, rtol=0, atol=2e-4)
 
 
+def _recorded(provider):
+    """``provider`` that notes each canonical segment it is asked for (what an FEM provider builds)."""
+    from flexcal.validation.prototype.fem_provider import canonical_segment
+
+    asked = set()
+
+    def recorded(chain, x0, x1):
+        asked.add(canonical_segment(chain, x0, x1)[0])
+        return provider(chain, x0, x1)
+
+    recorded.asked = asked
+    return recorded
+
+
+def _nominal_shares_only(monkeypatch):
+    """The curvatures' sharing as it was before session 20: a pair's slice is shared with the
+    nominal chain only, never with the single moves'."""
+    from flexcal.validation.runs import dimension_terms
+    from flexcal.validation.runs.model_correction import unchanged_slices
+
+    monkeypatch.setattr(dimension_terms, "slice_owners",
+                        lambda chain, alike: dict.fromkeys(unchanged_slices(alike[0], chain), alike[0]))
+
+
+def test_a_pairs_slice_is_built_only_where_both_its_dimensions_reach_it(monkeypatch):
+    """The mixed curvatures ask for 48 segments beyond the factors' and slopes' (2 chain designs x
+    12 leaf slices x 2 signs), not 96: a slice of a pair's chain that one of its two dimensions
+    leaves as it was is the other one's single-move segment (t1 reaches leaf 1's slice only, t2
+    leaf 2's, w and a both leaves, l all three). Same curvatures as asking each pair's chain for
+    its own slices (the analytic segments: a function of the slice's solid)."""
+    from flexcal.validation.runs.dimension_terms import compliance_curvatures
+    from flexcal.validation.runs.model_correction import compliance_factors, compliance_slopes
+
+    space = parameter_space()
+    counts, curvatures = {}, {}
+    for label in ("shared", "nominal only"):
+        if label == "nominal only":
+            _nominal_shares_only(monkeypatch)
+        provider = _recorded(analytic_provider())
+        compliance_factors(space, provider)
+        compliance_slopes(space, provider, method="builds")
+        before = set(provider.asked)
+        curvatures[label] = compliance_curvatures(space, provider)
+        counts[label] = len(provider.asked - before)
+    assert counts == {"shared": 48, "nominal only": 96}, counts
+    # the same slices' numbers in the same order: equal to the last bit
+    np.testing.assert_array_equal(curvatures["shared"], curvatures["nominal only"])
+
+
+@pytest.mark.slow
+def test_the_shared_curvatures_are_the_unshared_ones_on_the_fem(monkeypatch, tmp_path):
+    """On the FEM (the mapped grid at 2 through, its own cache, to be quick: the sharing is the
+    same on any grid) the curvatures with a pair's slices taken from the single moves are those
+    with every pair's chain built for itself, to the last bit: the same solid meshes and solves
+    to the same numbers (``unchanged_slices``). Slow: ~140 segment builds at 2 through."""
+    from flexcal.validation.prototype.fem_provider import fem_provider
+    from flexcal.validation.runs.dimension_terms import compliance_curvatures
+
+    space = parameter_space()
+    shared = compliance_curvatures(space, fem_provider(elements_through_thickness=2, cache_directory=tmp_path,
+                                                       progress=False))
+    _nominal_shares_only(monkeypatch)
+    unshared = compliance_curvatures(space, fem_provider(elements_through_thickness=2, cache_directory=tmp_path,
+                                                         progress=False))
+    assert np.abs(shared).max() > 1e-3  # the FEM's curvatures are not the analytic zeros (session 18: up to ~1)
+    np.testing.assert_array_equal(shared, unshared)  # the same segments' numbers: equal to the last bit
+
+
 def test_the_analytic_provider_gives_near_zero_shortening_slopes():
     """On the analytic segments the prototype's chain is the model's own elements, whose
     shortening form the element form gives to ~4 digits at any dimensions (docs/model.md 10): the

@@ -14,8 +14,12 @@ error. The curvatures H (n_chains, 5, 5, 8) give the factors' second-order term 
 - diagonal: ``(f(+s_k) + f(-s_k) - 2 f0) / s_k^2`` from the slopes' own builds at +-``SLOPE_STEPS``
   (no new FEM build: their segments are in the cache) and the nominal factors;
 - mixed: ``(f(+s_k, +s_m) + f(-s_k, -s_m) - 2 f0 - s_k^2 H_kk - s_m^2 H_mm) / (2 s_k s_m)``, two
-  builds per pair of dimensions (20 chain builds per chain design, the slopes' ``same_design``
-  and ``unchanged_slices`` reuse as there), accurate to O(s^2) like the slopes.
+  moved chains per pair of dimensions (20 per chain design, ``same_design`` as the slopes),
+  accurate to O(s^2) like the slopes. Only the slices both dimensions of the pair reach are
+  built (``slice_owners``): t1 reaches leaf 1's slice only, t2 leaf 2's, w and a both leaves', l
+  all three (it moves the section nodes), and a slice one of them leaves as it was is the other
+  one's single-move segment (or the nominal one), the same solid and so the same numbers: 48
+  segment builds for the reference mount where 96 were (session 20, docs/model.md 11).
 
 The shortening correction ``S_measured(P0) - S_elements(P0)`` (``chain_kinematics``, docs/model.md
 10) is 0.3-0.4 % of the driving chains' S_zz off at the true dimensions; with the factors right
@@ -43,7 +47,7 @@ from .chain_kinematics import chain_shortening
 from .model_correction import (SLOPE_STEPS, compliance_factors, provider_chain_compliance, same_design,
                                unchanged_slices)
 
-__all__ = ["compliance_curvatures", "shortening_slopes", "curved_space", "moved_chain", "moved_factors"]
+__all__ = ["compliance_curvatures", "shortening_slopes", "curved_space", "moved_chain", "moved_factors", "slice_owners"]
 
 _FIELDS = {"w": "width", "a": "fillet", "l": "hinge_length", "t1": "thickness_1", "t2": "thickness_2"}
 
@@ -54,20 +58,33 @@ def moved_chain(chain: FlexureChain, relative: dict[str, float]) -> FlexureChain
                                          for s, r in relative.items()})
 
 
-def _shared(nominal: FlexureChain, chain: FlexureChain, provider: StiffnessProvider) -> StiffnessProvider:
-    """``provider`` asking for a slice ``chain`` shares with ``nominal`` as the nominal chain's
-    (``unchanged_slices``: the same segment, built once)."""
-    same = unchanged_slices(nominal, chain)
+def slice_owners(chain: FlexureChain, alike) -> dict[tuple[float, float], FlexureChain]:
+    """{slice (x_start, x_end) [m]: the first chain of ``alike`` whose same slice is the same solid}
+    for the slices of ``chain`` one of them shares (``unchanged_slices``: same section nodes, same
+    pieces), so a provider asked for it as that chain's builds it once, with the same numbers."""
+    owners: dict[tuple[float, float], FlexureChain] = {}
+    for other in alike:
+        for piece in unchanged_slices(other, chain):
+            owners.setdefault(piece, other)
+    return owners
+
+
+def _shared(alike, chain: FlexureChain, provider: StiffnessProvider) -> StiffnessProvider:
+    """``provider`` asking for a slice ``chain`` shares with a chain of ``alike`` (a sequence of
+    chains; ``slice_owners``) as that chain's (the same segment, built once)."""
+    owners = slice_owners(chain, alike)
 
     def asked(at, x0, x1):
-        return provider(nominal if (x0, x1) in same else at, x0, x1)
+        return provider(owners.get((x0, x1), at), x0, x1)
 
     return asked
 
 
-def moved_factors(nominal: FlexureChain, chain: FlexureChain, provider: StiffnessProvider, material) -> np.ndarray:
-    """(8,) provider / closed form of ``chain`` (its shared slices the nominal chain's)."""
-    richer = provider_chain_compliance(chain, _shared(nominal, chain, provider))
+def moved_factors(nominal: FlexureChain, chain: FlexureChain, provider: StiffnessProvider, material,
+                  alike=()) -> np.ndarray:
+    """(8,) provider / closed form of ``chain`` (a slice it shares with ``nominal`` or a chain of
+    ``alike`` that chain's: ``slice_owners``)."""
+    richer = provider_chain_compliance(chain, _shared([nominal, *alike], chain, provider))
     closed = chain_compliance_matrix(chain, material)
     return np.array([richer[i, j] / closed[i, j] for i, j in ENTRY_INDEX.values()])
 
@@ -91,12 +108,18 @@ def compliance_curvatures(space: ParameterSpace, provider: StiffnessProvider,
                 moves[c, k, m, sign] = {DIMENSION_SYMBOLS[k]: sign * steps[DIMENSION_SYMBOLS[k]],
                                         DIMENSION_SYMBOLS[m]: sign * steps[DIMENSION_SYMBOLS[m]]}
     chains = {key: moved_chain(mech.chains[key[0]].chain, relative) for key, relative in moves.items()}
+    # a slice of a pair's chain that only one of its two dimensions (or neither) reaches is that
+    # single move's (or the nominal chain's) segment: t1 reaches leaf 1's slice only, t2 leaf 2's,
+    # w and a both leaves', l all three (it moves the nodes); 48 segment builds where 96 were
+    alike = {key: [mech.chains[key[0]].chain] + ([chains[key[0], key[1], key[1], key[3]],
+                                                 chains[key[0], key[2], key[2], key[3]]] if key[1] != key[2] else [])
+             for key in chains}
     slices = []
-    for (c, *_), chain in chains.items():
-        nominal, same = mech.chains[c].chain, unchanged_slices(mech.chains[c].chain, chain)
-        slices += [(nominal if (x0, x1) in same else chain, x0, x1) for _, x0, x1 in chain_slices([chain])]
+    for key, chain in chains.items():
+        owners = slice_owners(chain, alike[key])
+        slices += [(owners.get((x0, x1), chain), x0, x1) for _, x0, x1 in chain_slices([chain])]
     prepare_provider(provider, list(dict.fromkeys(slices)))  # parallel FEM builds
-    ratio = {key: moved_factors(mech.chains[key[0]].chain, chain, provider, mech.material)
+    ratio = {key: moved_factors(alike[key][0], chain, provider, mech.material, alike[key][1:])
              for key, chain in chains.items()}
     nominal = compliance_factors(space, provider)
     h = np.array([steps[s] for s in DIMENSION_SYMBOLS])
@@ -128,7 +151,7 @@ def shortening_slopes(space: ParameterSpace, provider: StiffnessProvider,
         for k, symbol in enumerate(DIMENSION_SYMBOLS):
             for sign in (1, -1):
                 chain = moved_chain(nominal, {symbol: sign * steps[symbol]})
-                measured, _ = chain_shortening(chain, _shared(nominal, chain, provider))
+                measured, _ = chain_shortening(chain, _shared([nominal], chain, provider))
                 own = chain_shortening_form(chain.length, chain.hinge_length, chain.width, chain.fillet,
                                             chain.thickness_1, chain.thickness_2, section=chain.section,
                                             connector_length=chain.connector_length,
