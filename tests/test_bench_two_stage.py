@@ -187,3 +187,35 @@ def test_criterion_reaches_the_design_and_names_its_stages(tmp_path):
     stage = default["design:designed-k41"]
     assert build_parser("design").parse_args(bench_two_stage.design_argv(stage["folder"], args, stage["at"],
                                                                          stage["extra"])).criterion == "D"
+
+
+def test_pooling_per_mount_over_the_seeds():
+    """benchmarks/pool_two_stage.py: per mount, the largest error and the held-out RMS as RMS over
+    the seeds, the sources alone summed, z pooled n-weighted; "beats" needs all three criteria
+    per mount, so a design that wins two seeds narrowly and loses one badly does not beat."""
+    import math
+
+    import pool_two_stage
+
+    def summary(seed, worst, held, alone, z_base=(1.0, 1.0)):
+        stage = {"z_rms_pure": 1.0, "n_pure": 4, "z_rms_base": z_base[0], "n_base": 6}
+        return {"scenario": "table1", "seed": seed,
+                "runs": {"standard": dict(stage), "designed-x": {**stage, "z_rms_base": z_base[1]}},
+                "designed-x_vs_standard": {"worst_over_paper": list(worst), "heldout_rms_urad": list(held),
+                                           "n_alone": list(alone)}}
+    # (designed, standard) per seed, as bench_two_stage._beats writes them
+    wins = [summary(1, (0.1, 0.5), (0.1, 0.2), (4, 4), z_base=(1.0, 3.0)), summary(2, (0.3, 0.1), (0.2, 0.2), (4, 4)),
+            summary(3, (0.1, 0.2), (0.1, 0.3), (5, 4))]
+    entry = pool_two_stage.pool(wins, "designed-x")["table1"]
+    assert entry["seeds"] == [1, 2, 3] and entry["beats"]
+    # sqrt((0.1^2 + 0.3^2 + 0.1^2) / 3) against sqrt((0.5^2 + 0.1^2 + 0.2^2) / 3): exact arithmetic
+    assert math.isclose(entry["designed-x"]["worst_rms"], math.sqrt(0.11 / 3), rel_tol=1e-12)
+    assert math.isclose(entry["standard"]["worst_rms"], math.sqrt(0.30 / 3), rel_tol=1e-12)
+    assert entry["designed-x"]["alone"] == 13 and entry["standard"]["alone"] == 12
+    # base z: designed 3.0 on seed 1's 6 values, 1.0 on the other 12: sqrt((6*9 + 12) / 18)
+    assert math.isclose(entry["designed-x"]["z_base"][0], math.sqrt(66 / 18), rel_tol=1e-12)
+    assert entry["designed-x"]["z_base"][1] == 18
+    loses = wins[:2] + [summary(3, (0.9, 0.2), (0.1, 0.3), (5, 4))]  # one bad seed outweighs two good ones
+    assert not pool_two_stage.pool(loses, "designed-x")["table1"]["beats"]
+    fewer = wins[:2] + [summary(3, (0.1, 0.2), (0.1, 0.3), (2, 4))]  # fewer sources alone in all
+    assert not pool_two_stage.pool(fewer, "designed-x")["table1"]["beats"]
