@@ -28,9 +28,9 @@ from pathlib import Path
 import numpy as np
 
 from flexcal.fem.mesh_mapped_chain import PROTOTYPE_CHAIN_OPTIONS
-from flexcal.geometry.params import reference_mechanism
 from flexcal.validation.reports.chain_cuts import (composed_stiffness, cut_rows, entry_index, one_piece_stiffness,
                                                      stretch)
+from flexcal.validation.reports.chain_reference import reference_chain
 
 
 def cut_tag(name: str, n_segments: int, through: float, change: dict) -> str:
@@ -53,9 +53,8 @@ def main() -> None:
     folder.mkdir(parents=True, exist_ok=True)
     change = json.loads(args.options)
     options = {**PROTOTYPE_CHAIN_OPTIONS, **change}
-    chains = {c.name: c.chain for c in reference_mechanism().chains}
     for name in args.chain:
-        chain = chains[name]
+        chain = reference_chain(name)
         part, cuts = stretch(chain, args.segments)
         tag = cut_tag(name, args.segments, args.through, change)
         subsets = [tuple(int(i) for i in text.split(",")) for text in (args.tie or [])]

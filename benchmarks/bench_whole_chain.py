@@ -28,10 +28,9 @@ import numpy as np
 from bench_chain_cuts import cut_tag
 from flexcal.fem.convergence import richardson
 from flexcal.fem.mesh_mapped_chain import PROTOTYPE_CHAIN_OPTIONS
-from flexcal.geometry.params import reference_mechanism
 from flexcal.validation.reports.chain_cuts import (chain_segments, converged_chain_estimate, cut_rows, entry_index,
                                                    one_piece_stiffness, segment_stiffness, series_stiffness, stretch)
-from flexcal.validation.reports.chain_reference import reference_stiffness, segment
+from flexcal.validation.reports.chain_reference import reference_chain, reference_stiffness, segment
 from flexcal.validation.reports.hinge_reference import _cached, reference_limit
 
 
@@ -47,13 +46,11 @@ def main() -> None:
     parser.add_argument("--cuts-dir", default="bench_chain_cuts")
     args = parser.parse_args()
     ref_dir, cuts_dir = Path(args.ref_dir).resolve(), Path(args.cuts_dir).resolve()
-    for folder in (ref_dir, cuts_dir):
-        folder.mkdir(parents=True, exist_ok=True)
+    ref_dir.mkdir(parents=True, exist_ok=True)
+    cuts_dir.mkdir(parents=True, exist_ok=True)
     change = json.loads(args.options)
-    options = {**PROTOTYPE_CHAIN_OPTIONS, **change}
-    chains = {c.name: c.chain for c in reference_mechanism().chains}
     for name in args.chain:
-        chain = chains[name]
+        chain = reference_chain(name)
         limits, uncertainty = {}, {}
         for index, levels in ((0, args.ref_levels), (1, args.ref_levels_2)):
             part = segment(name, index)
@@ -74,7 +71,7 @@ def main() -> None:
         paths = {kind: cuts_dir / f"{kind}_{tag}.npy" for kind in ("untied", "tied")}
         if not all(p.exists() for p in paths.values()):
             whole, cuts = stretch(chain, 5)
-            untied, (tied,), _ = one_piece_stiffness(whole, cuts, args.through, options)
+            untied, (tied,), _ = one_piece_stiffness(whole, cuts, args.through, {**PROTOTYPE_CHAIN_OPTIONS, **change})
             np.save(paths["untied"], untied)
             np.save(paths["tied"], tied)
         untied, tied = np.load(paths["untied"]), np.load(paths["tied"])

@@ -7,18 +7,18 @@ import numpy as np
 import pytest
 
 from flexcal.fem.mesh_mapped_chain import PROTOTYPE_CHAIN_OPTIONS
-from flexcal.geometry.params import ChainSegment, reference_mechanism
+from flexcal.geometry.params import ChainSegment
 from flexcal.validation.prototype.segments import analytic_provider, section_nodes
 from flexcal.validation.reports.chain_cuts import (composed_stiffness, cut_rows, entry_index, one_piece_stiffness,
                                                    segment_stiffness, series_stiffness, stretch)
+from flexcal.validation.reports.chain_reference import reference_chain
 
-CHAINS = {c.name: c.chain for c in reference_mechanism().chains}
 
 
 def test_segments_joined_in_series_are_the_whole_chain_of_beam_theory():
     # beam theory composes exactly (Eq. 1): the five slices' 12 x 12 joined at the section
     # nodes are the 12 x 12 of the whole chain [0, L] the same provider gives in one slice
-    chain = CHAINS["L1"]
+    chain = reference_chain("L1")
     provider = analytic_provider()
     nodes = section_nodes(chain)
     joined = series_stiffness([provider(chain, float(a), float(b)) for a, b in zip(nodes[:-1], nodes[1:])])
@@ -32,7 +32,7 @@ def test_a_tied_cut_in_the_one_piece_mesh_is_the_two_segments_meshed_alone():
     # in a stretch of strut the two segments' grids, meshed alone, are the one-piece grid cut
     # at its cut line (the same lines along x, the same section lines: no leaf): tying the
     # cut section and joining is the same condensation, so the same 12 x 12 to round-off
-    chain = CHAINS["D1"]
+    chain = reference_chain("D1")
     nodes = section_nodes(chain)
     start, end = float(nodes[2]), float(nodes[3])  # [s0, s1], strut only
     middle = 0.5 * (start + end)
@@ -50,7 +50,7 @@ def test_tying_a_section_only_stiffens():
     # a tie is a constraint: tied - untied is positive semi-definite (a coarse L1 [0, s0],
     # 2 through, both mirror planes, 8k DOF), and stiffer on every diagonal entry (measured
     # +1.5 to +3.0 %, K[ux,ux] +21.5 %: already at 2 through what the prototype's grid shows)
-    part, cuts = stretch(CHAINS["L1"], 2)
+    part, cuts = stretch(reference_chain("L1"), 2)
     untied, (tied,), _ = one_piece_stiffness(part, cuts, 2, {**PROTOTYPE_CHAIN_OPTIONS, "slenderness": None})
     scale = np.concatenate([np.ones(3), np.full(3, 0.05)] * 2)  # rotations times the 50 mm section [m]
     difference = (tied - untied) / scale[:, None] / scale[None, :]
@@ -66,7 +66,7 @@ def _leaf_pair(chain_name: str):
     # prototype's way), and in one piece, tied at m1 and not. L1: 79k DOF per class, D1 259k
     # DOF (no mirror plane: 7 through both leaves); measured 2026-11-28, load ~10: 58 s CPU,
     # 3 min 45 s wall together, 2.2 GB peak
-    chain = CHAINS[chain_name]
+    chain = reference_chain(chain_name)
     part, cuts = stretch(chain, 2)
     untied, (tied,), _ = one_piece_stiffness(part, cuts, 7, PROTOTYPE_CHAIN_OPTIONS)
     composed = composed_stiffness(chain, 2, 7, PROTOTYPE_CHAIN_OPTIONS)

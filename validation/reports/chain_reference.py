@@ -24,7 +24,7 @@ import numpy as np
 
 from .hinge_reference import AGREEMENT, _cached, reference_limit
 
-__all__ = ["AGREEMENT", "MAPPED_NESTED", "segment", "mapped_stiffness", "reference_stiffness",
+__all__ = ["AGREEMENT", "MAPPED_NESTED", "reference_chain", "segment", "mapped_stiffness", "reference_stiffness",
            "prototype_stiffness", "compare"]
 
 NAMES = ("ux", "uy", "uz", "rx", "ry", "rz")
@@ -32,12 +32,19 @@ MAPPED_NESTED = {"n_base": 2, "options": {"side_aspect": 3.0, "slenderness": Non
 """The nested mapped sequence of docs/meshing.md ("Convergence"): 2 through, session 13's grid."""
 
 
+def reference_chain(chain_name: str):
+    """The ``FlexureChain`` named ``chain_name`` ("L1", "D1", ...) of the reference mount."""
+    from flexcal.geometry.params import reference_mechanism
+
+    return {c.name: c.chain for c in reference_mechanism().chains}[chain_name]
+
+
 def segment(chain_name: str, index: int = 0):
     """The prototype's ``index``-th slice of chain ``chain_name`` (``section_nodes``)."""
-    from flexcal.geometry.params import ChainSegment, reference_mechanism
+    from flexcal.geometry.params import ChainSegment
     from flexcal.validation.prototype.segments import section_nodes
 
-    chain = {c.name: c.chain for c in reference_mechanism().chains}[chain_name]
+    chain = reference_chain(chain_name)
     nodes = section_nodes(chain)
     return ChainSegment(chain=chain, x_start=float(nodes[index]), x_end=float(nodes[index + 1]))
 
