@@ -81,9 +81,13 @@ FAST_CHAIN_OPTIONS = {**DEFAULT_CHAIN_OPTIONS, "side_aspect": 3.0, "slenderness"
 # moved to where they buy accuracy (docs/meshing.md, "The prototype's grid"): side cells of
 # 1 neck cell graded fast (2 per unit distance) into the width, blocks graded twice as fast
 # (block_grading 1), no refinement at the part's end faces and section rims (rim_aspect
-# 24 = max_aspect), 6 cells per fillet arc, flat-part cells 2 neck cells long. Every dominant
-# entry of the L1 and D1 leaf segments within 0.48 % of the nested limit at 75k-86k DOF.
-PROTOTYPE_CHAIN_OPTIONS = {**DEFAULT_CHAIN_OPTIONS, "aspect": 2.0, "n_arc": 6, "side_aspect": 1.0, "grading": 2.0,
+# 24 = max_aspect), flat-part cells 2 neck cells long. Every dominant entry of the L1 and D1
+# leaf segments within 0.48 % of the nested limit at 75k-86k DOF. Since session 20, 8 cells per
+# fillet arc (the default's; session 16 took 6): against the Q2-hex reference limit the
+# torsion K[rx,rx] of L1 [m1, s0] went from +0.506 % to +0.476 %, every dominant entry of the
+# four leaf segments within 0.488 % (was 0.506 %), for +16 % of the table1 segments' CPU
+# (+5 % of a cold truth's, load ~15); docs/meshing.md, "Session 20: whole chains".
+PROTOTYPE_CHAIN_OPTIONS = {**DEFAULT_CHAIN_OPTIONS, "aspect": 2.0, "side_aspect": 1.0, "grading": 2.0,
                            "rim_aspect": 24.0, "block_grading": 1.0}
 # Options of ``chain_grid`` that the defaults leave out (None there: as the defaults'
 # edge_aspect and grading), so the default grid and its cache keys stay as they were.
