@@ -28,6 +28,7 @@ import numpy as np
 from bench_chain_cuts import cut_tag
 from flexcal.fem.convergence import richardson
 from flexcal.fem.mesh_mapped_chain import PROTOTYPE_CHAIN_OPTIONS
+from flexcal.validation.prototype.segments import end_stiffness, expand_end_stiffness, section_nodes
 from flexcal.validation.reports.chain_cuts import (chain_segments, converged_chain_estimate, cut_rows, entry_index,
                                                    one_piece_stiffness, segment_stiffness, series_stiffness, stretch)
 from flexcal.validation.reports.chain_reference import reference_chain, reference_stiffness, segment
@@ -62,9 +63,12 @@ def main() -> None:
                          lambda r=r: (segment_stiffness(segment(name, 2), 7.0, PROTOTYPE_CHAIN_OPTIONS, r), -1))
                  for r in strut_levels]
         strut_fit = richardson(1.0 / np.asarray(strut_levels, float), np.array(strut))
-        by_start = {0: limits[0], 1: limits[1], 2: strut_fit.limit}
-        from flexcal.validation.prototype.segments import section_nodes
-
+        # an entrywise limit need not keep the six rigid motions in the null space, and a short
+        # stiff segment (D1's 15 mm strut) joined in series turns that defect into large errors:
+        # each limit is rebuilt from its end block K_BB (A clamped), which defines it
+        lengths = np.diff(section_nodes(chain))
+        by_start = {i: expand_end_stiffness(end_stiffness(k), float(lengths[i]))
+                    for i, k in enumerate((limits[0], limits[1], strut_fit.limit))}
         starts = {round(float(x), 12): i for i, x in enumerate(section_nodes(chain)[:3])}
         converged_segments = chain_segments(chain, 5, lambda seg: by_start[starts[round(seg.x_start, 12)]])
         tag = cut_tag(name, 5, args.through, change)
@@ -78,7 +82,7 @@ def main() -> None:
         prototype_segments = chain_segments(chain, 5, lambda seg: segment_stiffness(seg, 7.0, PROTOTYPE_CHAIN_OPTIONS))
         prototype = series_stiffness(prototype_segments)
         strut_converged = prototype_segments.copy()
-        strut_converged[2] = strut_fit.limit
+        strut_converged[2] = by_start[2]
         strut_part = prototype - series_stiffness(strut_converged)
         converged = converged_chain_estimate(converged_segments, tied, untied)
         joined = series_stiffness(converged_segments)
