@@ -13,10 +13,14 @@ reference limit.
         --ref-levels 2 3 4 5 6 --prototype --dir /tmp/chain_ref
     python benchmarks/bench_chain_reference.py --chain L1 D1 --segment 1 --mirrored \\
         --mapped-levels 2 3 4 --ref-levels 2 3 4 5 --prototype --dir /tmp/chain_ref
+    python benchmarks/bench_chain_reference.py --chain L1 --segment 1 --mirrored \
+        --mapped-levels 4 5 6 --ref-levels 3 4 5 6 --prototype --prototype-options '{"n_arc": 7}' --dir /tmp/chain_ref
 
 --mirrored: the mapped levels condensed on their quarter (``mapped_stiffness``; D1's whole
 level r = 4, 727k DOF, needs more than 8 GB). The finest reference level, r = 6, is 474k DOF
-and 6.4 GB.
+and 6.4 GB. Every matrix is read from DIR/<tag>.npy when it is there (a reference level computed
+once serves every later run: copy the hex27_*.npy of an earlier run into DIR); --prototype-options
+compares a candidate grid for the prototype (PROTOTYPE_CHAIN_OPTIONS updated by the JSON given).
 
 The reference's limit is that of its finest three levels; its uncertainty the difference
 from the limit of the three levels before them (with four or more levels), else half the
@@ -30,6 +34,7 @@ test (tests/test_chain_reference.py is).
 from __future__ import annotations
 
 import argparse
+import json
 from pathlib import Path
 
 from flexcal.validation.reports.chain_reference import AGREEMENT, compare
@@ -44,13 +49,20 @@ def main() -> None:
     parser.add_argument("--prototype", action="store_true", help="also the prototype's segment mesh")
     parser.add_argument("--mirrored", action="store_true",
                         help="mapped levels condensed on their quarter (D1's r = 4 whole needs > 8 GB)")
+    parser.add_argument("--prototype-options", default=None,
+                        help="JSON: the prototype's mesh on PROTOTYPE_CHAIN_OPTIONS updated by these (a candidate grid)")
     parser.add_argument("--dir", default="bench_chain_reference")
     args = parser.parse_args()
     folder = Path(args.dir).resolve()
     folder.mkdir(parents=True, exist_ok=True)
+    candidate = None
+    if args.prototype_options is not None:
+        from flexcal.fem.mesh_mapped_chain import PROTOTYPE_CHAIN_OPTIONS
+
+        candidate = {**PROTOTYPE_CHAIN_OPTIONS, **json.loads(args.prototype_options)}
     for chain in args.chain:
         rows = compare(chain, folder, args.mapped_levels, args.ref_levels, args.prototype, args.mirrored,
-                       args.segment)
+                       args.segment, candidate)
         name = ("[0, m1]", "[m1, s0]")[args.segment]
         print(f"\n{chain} {name}: mapped nested at 2 through{', mirrored' if args.mirrored else ''}, "
               f"r = {args.mapped_levels}; "

@@ -48,6 +48,7 @@ __all__ = [
     "MorphedChain",
     "chain_stiffness_derivative",
     "mirrored_chain_stiffness",
+    "mirrored_sections_stiffness",
     "MIRROR_PARITY",
 ]
 
@@ -361,12 +362,26 @@ def mirrored_chain_stiffness(mesh, material: Material, plane_a: Plane, point_a: 
     stiffness. Measured on the prototype's leaf segments: the same 12 x 12 to ~1e-12 as
     ``solve_chain`` on the mirrored whole mesh, at a quarter (two planes) or half (one) of
     the factorisation's CPU time (docs/meshing.md, session 17)."""
+    return mirrored_sections_stiffness(mesh, material, [(plane_a, point_a), (plane_b, point_b)], axes,
+                                       relative_tolerance=relative_tolerance)
+
+
+def mirrored_sections_stiffness(mesh, material: Material, sections: list[tuple[Plane, np.ndarray]],
+                                axes: tuple[int, ...], *,
+                                relative_tolerance: float = DEFAULT_PLANE_TOLERANCE) -> np.ndarray:
+    """Stiffness (6 N, 6 N) [SI] of the whole part (``mesh`` and its mirror images, as
+    ``mirrored_chain_stiffness``) condensed onto the N reference points of ``sections``
+    [(plane, point)], the part's nodes on each plane rigidly tied to its point (DOFs ux..rz
+    of each point in turn). With the two end faces it is ``mirrored_chain_stiffness``; with
+    cross-sections inside the part too, it is the part cut there into rigidly tied segments
+    and joined again (docs/meshing.md, "Session 20: whole chains")."""
     import itertools
 
     axes = tuple(int(a) for a in axes)
     if any(a not in MIRROR_PARITY for a in axes) or len(set(axes)) != len(axes):
         raise ValueError(f"axes={axes!r}: mirror axes are 1 (y) and / or 2 (z), each once")
-    couplings = _end_couplings(mesh, plane_a, point_a, plane_b, point_b, relative_tolerance)
+    couplings = [RigidCoupling(nodes=select_plane_nodes(mesh, plane, relative_tolerance=relative_tolerance),
+                               reference_point=np.asarray(point, float).reshape(3)) for plane, point in sections]
     if any(c.reference_point[a] != 0.0 for c in couplings for a in axes):
         raise ValueError("the reference points must lie on the mirror planes")
     nodes, cmap, upper_ii, K_im, K_mm = _coupled_blocks(mesh, material, couplings)
@@ -375,9 +390,11 @@ def mirrored_chain_stiffness(mesh, material: Material, plane_a: Plane, point_a: 
             raise ValueError(f"the mesh must lie on the non-negative side of its mirror plane (axis {a}) and touch it")
     free = cmap.free_node_dofs
     node, component = free // 3, free % 3
-    stiffness = np.zeros((12, 12))
+    n_master = 6 * len(couplings)
+    stiffness = np.zeros((n_master, n_master))
     for signs in itertools.product((1, -1), repeat=len(axes)):
-        masters = np.flatnonzero(np.all([np.tile(MIRROR_PARITY[a], 2) == s for a, s in zip(axes, signs)], axis=0))
+        same = [np.tile(MIRROR_PARITY[a], len(couplings)) == s for a, s in zip(axes, signs)]
+        masters = np.flatnonzero(np.all(same, axis=0)) if same else np.arange(n_master)  # no planes: one class
         keep = np.ones(free.size, bool)
         for a, s in zip(axes, signs):
             on_plane = nodes[node, a] == 0.0

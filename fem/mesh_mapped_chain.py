@@ -81,13 +81,17 @@ FAST_CHAIN_OPTIONS = {**DEFAULT_CHAIN_OPTIONS, "side_aspect": 3.0, "slenderness"
 # moved to where they buy accuracy (docs/meshing.md, "The prototype's grid"): side cells of
 # 1 neck cell graded fast (2 per unit distance) into the width, blocks graded twice as fast
 # (block_grading 1), no refinement at the part's end faces and section rims (rim_aspect
-# 24 = max_aspect), 6 cells per fillet arc, flat-part cells 2 neck cells long. Every dominant
-# entry of the L1 and D1 leaf segments within 0.48 % of the nested limit at 75k-86k DOF.
-PROTOTYPE_CHAIN_OPTIONS = {**DEFAULT_CHAIN_OPTIONS, "aspect": 2.0, "n_arc": 6, "side_aspect": 1.0, "grading": 2.0,
+# 24 = max_aspect), flat-part cells 2 neck cells long. Every dominant entry of the L1 and D1
+# leaf segments within 0.48 % of the nested limit at 75k-86k DOF. Since session 20, 8 cells per
+# fillet arc (the default's; session 16 took 6): against the Q2-hex reference limit the
+# torsion K[rx,rx] of L1 [m1, s0] went from +0.506 % to +0.476 %, every dominant entry of the
+# four leaf segments within 0.488 % (was 0.506 %), for +16 % of the table1 segments' CPU
+# (+5 % of a cold truth's, load ~15); docs/meshing.md, "Session 20: whole chains".
+PROTOTYPE_CHAIN_OPTIONS = {**DEFAULT_CHAIN_OPTIONS, "aspect": 2.0, "side_aspect": 1.0, "grading": 2.0,
                            "rim_aspect": 24.0, "block_grading": 1.0}
 # Options of ``chain_grid`` that the defaults leave out (None there: as the defaults'
 # edge_aspect and grading), so the default grid and its cache keys stay as they were.
-EXTRA_CHAIN_OPTIONS = ("rim_aspect", "block_grading", "section_grading")
+EXTRA_CHAIN_OPTIONS = ("rim_aspect", "block_grading", "section_grading", "cuts")
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -233,7 +237,8 @@ def cells_through(params, n_thickness: int, slenderness: float | None) -> int:
 def chain_grid(params, n_thickness: int, *, aspect: float = 3.0, n_arc: int = 8, width_aspect: float = 12.0,
                side_aspect: float = 1.5, edge_aspect: float = 3.0, grading: float = 0.5, max_aspect: float = 24.0,
                slenderness: float | None = 5.5, refinement: int = 1, rim_aspect: float | None = None,
-               block_grading: float | None = None, section_grading: float | None = None) -> ChainGrid:
+               block_grading: float | None = None, section_grading: float | None = None,
+               cuts: tuple[float, ...] | None = None) -> ChainGrid:
     """The parent grid of a chain or segment (module docstring).
 
     n_thickness: cells across every leaf's core (so across t at its neck), raised by
@@ -251,6 +256,10 @@ def chain_grid(params, n_thickness: int, *, aspect: float = 3.0, n_arc: int = 8,
     refinement there); block_grading: the grading along x in the blocks (None: grading);
     section_grading: the grading of the section lines outside the leaves' footprint (None:
     block_grading). The last three are the prototype's (``PROTOTYPE_CHAIN_OPTIONS``).
+    cuts: x [m] of cross-sections inside blocks that get a grid line each, graded as the
+    part's end faces (``rim_aspect``): the part cut there into the segments the prototype
+    condenses has, along x, exactly those segments' lines (docs/meshing.md, "Session 20:
+    whole chains"; None: no cuts).
     """
     if not chain_mapped_supported(params):
         raise ValueError(f"the chain mapper takes a FlexureChain or ChainSegment of leaves, got {type(params).__name__}")
@@ -284,7 +293,11 @@ def chain_grid(params, n_thickness: int, *, aspect: float = 3.0, n_arc: int = 8,
                     return rim_cell
                 return edge_cell if isinstance(ps[j], LeafPiece) else None
 
-            lines = _graded(piece.x0, piece.x1, face_cell(i - 1), face_cell(i + 1), block_grading, h_max)
+            inside = [c for c in (cuts or ()) if piece.x0 + 1e-9 < c < piece.x1 - 1e-9]
+            ends = [piece.x0, *sorted(inside), piece.x1]
+            bounds = [face_cell(i - 1), *[rim_cell] * (2 * len(inside)), face_cell(i + 1)]
+            lines = np.concatenate([_graded(a, b, bounds[2 * k], bounds[2 * k + 1], block_grading, h_max)[k > 0:]
+                                    for k, (a, b) in enumerate(zip(ends[:-1], ends[1:]))])
         x_parts.append(lines if not x_parts else lines[1:])
     x = np.concatenate(x_parts)
     r = int(refinement)

@@ -43,7 +43,9 @@ __all__ = ["fem_provider", "segment_stiffness_fem", "mirror_segment_stiffness", 
 # D ones; MIRRORED below): L1 0.446 % / 0.448 %, D1 unchanged, 0.46x main's cold-truth CPU
 # (docs/meshing.md, "The prototype's grid, mirrored"; docs/scale.md, session 17). The calibration
 # model's FEM factors come from this same provider (validation/runs/model_correction.py),
-# so they moved with it. fTetWild keeps its own default (TETWILD_ELEMENTS_THROUGH).
+# so they moved with it. Since session 20 with 8 cells per fillet arc (was 6): every dominant
+# entry of the four leaf segments within 0.488 % of the Q2-hex reference limit (L1 [m1, s0]'s
+# torsion was 0.506 %). fTetWild keeps its own default (TETWILD_ELEMENTS_THROUGH).
 DEFAULT_ELEMENTS_THROUGH = 7
 # 3 quadratic tets through the thinnest leaf section of a fTetWild mesh: within ~0.3 % of the
 # converged bending compliance on the reference notch hinge after snapping (docs/meshing.md),

@@ -16,13 +16,15 @@ hinges' (``hinge_reference.reference_limit``). The prototype's mesh: the segment
 
 from __future__ import annotations
 
+import json
+import zlib
 from pathlib import Path
 
 import numpy as np
 
 from .hinge_reference import AGREEMENT, _cached, reference_limit
 
-__all__ = ["AGREEMENT", "MAPPED_NESTED", "segment", "mapped_stiffness", "reference_stiffness",
+__all__ = ["AGREEMENT", "MAPPED_NESTED", "reference_chain", "segment", "mapped_stiffness", "reference_stiffness",
            "prototype_stiffness", "compare"]
 
 NAMES = ("ux", "uy", "uz", "rx", "ry", "rz")
@@ -30,12 +32,19 @@ MAPPED_NESTED = {"n_base": 2, "options": {"side_aspect": 3.0, "slenderness": Non
 """The nested mapped sequence of docs/meshing.md ("Convergence"): 2 through, session 13's grid."""
 
 
+def reference_chain(chain_name: str):
+    """The ``FlexureChain`` named ``chain_name`` ("L1", "D1", ...) of the reference mount."""
+    from flexcal.geometry.params import reference_mechanism
+
+    return {c.name: c.chain for c in reference_mechanism().chains}[chain_name]
+
+
 def segment(chain_name: str, index: int = 0):
     """The prototype's ``index``-th slice of chain ``chain_name`` (``section_nodes``)."""
-    from flexcal.geometry.params import ChainSegment, reference_mechanism
+    from flexcal.geometry.params import ChainSegment
     from flexcal.validation.prototype.segments import section_nodes
 
-    chain = {c.name: c.chain for c in reference_mechanism().chains}[chain_name]
+    chain = reference_chain(chain_name)
     nodes = section_nodes(chain)
     return ChainSegment(chain=chain, x_start=float(nodes[index]), x_end=float(nodes[index + 1]))
 
@@ -78,22 +87,29 @@ def reference_stiffness(part, refinement: int) -> tuple[np.ndarray, int]:
     return hex27_segment_stiffness(part, refinement=refinement)
 
 
-def prototype_stiffness(part) -> tuple[np.ndarray, int]:
-    """(12 x 12 [SI], -1) the virtual prototype's segment provider computes (its cache: FLEXCAL_CACHE_DIR)."""
+def prototype_stiffness(part, options: dict | None = None) -> tuple[np.ndarray, int]:
+    """(12 x 12 [SI], -1) the virtual prototype's segment provider computes (its cache: FLEXCAL_CACHE_DIR);
+    with ``options``, the same mirrored condensation on that grid instead of ``PROTOTYPE_CHAIN_OPTIONS``
+    (a candidate grid for the prototype; 7 asked for), not cached."""
+    if options is not None:
+        from .chain_cuts import segment_stiffness
+
+        return segment_stiffness(part, 7.0, options), -1
     from flexcal.validation.prototype.fem_provider import segment_stiffness_fem
 
     return segment_stiffness_fem(part), -1
 
 
 def compare(chain_name: str, folder: Path | None, mapped_levels, ref_levels, prototype: bool = False,
-            mirrored: bool = False, index: int = 0):
+            mirrored: bool = False, index: int = 0, prototype_options: dict | None = None):
     """Rows (entry, mapped rate, mapped limit, reference rate, reference limit, its
     uncertainty, (mapped limit - reference limit) / |reference limit|, (finest mapped -
     reference limit) / |reference limit|, (prototype's mesh - reference limit) / |reference
     limit| (NaN without ``prototype``), the reference's rate spread) for every dominant entry
     (``DOMINANT_FRACTION`` on the finest reference) of the upper triangle of the 12 x 12
     stiffness [SI] of chain ``chain_name``'s leaf segment ``index`` (0: [0, m1], 1: [m1, s0]).
-    ``mirrored``: the mapped levels condensed on their mirror part (``mapped_stiffness``)."""
+    ``mirrored``: the mapped levels condensed on their mirror part (``mapped_stiffness``);
+    ``prototype_options``: the prototype's mesh on that grid (``prototype_stiffness``)."""
     from flexcal.fem.convergence import dominant_entries, richardson
     from flexcal.validation.reports.fem import DOMINANT_FRACTION
 
@@ -105,7 +121,9 @@ def compare(chain_name: str, folder: Path | None, mapped_levels, ref_levels, pro
                        for r in mapped_levels])
     reference = np.array([_cached(folder, f"hex27_{stem}_r{r}", lambda r=r: reference_stiffness(part, r))
                           for r in ref_levels])
-    proto = None if not prototype else _cached(folder, f"prototype_{stem}", lambda: prototype_stiffness(part))
+    proto_tag = f"prototype_{stem}" if prototype_options is None else \
+        f"prototype_{stem}_{zlib.crc32(json.dumps(prototype_options, sort_keys=True).encode()):08x}"
+    proto = None if not prototype else _cached(folder, proto_tag, lambda: prototype_stiffness(part, prototype_options))
     fit = richardson(1.0 / np.asarray(mapped_levels[-3:], float), mapped[-3:])
     ref_rate, ref_lim, ref_unc, ref_spread = reference_limit(ref_levels, reference)
     mask = np.triu(dominant_entries(reference[-1], DOMINANT_FRACTION))

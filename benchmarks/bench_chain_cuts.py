@@ -1,0 +1,88 @@
+"""What cutting the prototype's chains into rigidly tied segments does (issue 26, whole
+chains): every dominant entry of the 12 x 12 of the first k segments of L1 or D1
+(``--segments 2``: [0, s0], the two leaf segments; 5: the whole chain) composed from the
+segments meshed alone (the prototype's way), against the same stretch meshed in one piece
+(grid lines at the cuts), with the cut sections rigidly tied (tied) and without (untied):
+``flexcal.validation.reports.chain_cuts``.
+
+    python benchmarks/bench_chain_cuts.py --chain L1 D1 --segments 2 --dir /tmp/cuts
+    python benchmarks/bench_chain_cuts.py --chain L1 --segments 5 --tie 0,3 1,2 --dir /tmp/cuts
+    python benchmarks/bench_chain_cuts.py --chain L1 --segments 2 --through 10 \\
+        --options '{"slenderness": null}' --dir /tmp/cuts
+
+Options: ``PROTOTYPE_CHAIN_OPTIONS`` updated by --options (JSON); --through: cells asked for
+(7, the prototype's). Each matrix is stored as DIR/<tag>.npy and reused. One OMP/MKL
+thread; docs/meshing.md ("Session 20: whole chains") gives the runs. Not a test
+(tests/test_chain_cuts.py is).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import time
+import zlib
+from pathlib import Path
+
+import numpy as np
+
+from flexcal.fem.mesh_mapped_chain import PROTOTYPE_CHAIN_OPTIONS
+from flexcal.validation.reports.chain_cuts import (composed_stiffness, cut_rows, entry_index, one_piece_stiffness,
+                                                     stretch)
+from flexcal.validation.reports.chain_reference import reference_chain
+
+
+def cut_tag(name: str, n_segments: int, through: float, change: dict) -> str:
+    """The stored matrices' name: chain, segments, cells asked for, a checksum of the options' change."""
+    return f"{name}_{n_segments}_n{through:g}_{zlib.crc32(json.dumps(change, sort_keys=True).encode()):08x}"
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--chain", nargs="+", default=["L1", "D1"])
+    parser.add_argument("--segments", type=int, default=2, help="2: [0, s0]; 5: the whole chain")
+    parser.add_argument("--through", type=float, default=7.0)
+    parser.add_argument("--options", default="{}", help="JSON, updates PROTOTYPE_CHAIN_OPTIONS")
+    parser.add_argument("--tie", nargs="*", default=None,
+                        help="also the stretch with only these cuts tied (indices into the cuts, comma separated "
+                             "per set, e.g. 0,3 1,2 for the whole chain: m1 and m2 alone, s0 and s1 alone)")
+    parser.add_argument("--dir", default="bench_chain_cuts")
+    args = parser.parse_args()
+    folder = Path(args.dir).resolve()
+    folder.mkdir(parents=True, exist_ok=True)
+    change = json.loads(args.options)
+    options = {**PROTOTYPE_CHAIN_OPTIONS, **change}
+    for name in args.chain:
+        chain = reference_chain(name)
+        part, cuts = stretch(chain, args.segments)
+        tag = cut_tag(name, args.segments, args.through, change)
+        subsets = [tuple(int(i) for i in text.split(",")) for text in (args.tie or [])]
+        tie_sets = [cuts] + [tuple(cuts[i] for i in subset) for subset in subsets]
+        kinds = ["composed", "untied", "tied"] + [f"tied{''.join(map(str, subset))}" for subset in subsets]
+        paths = {kind: folder / f"{kind}_{tag}.npy" for kind in kinds}
+        if not all(p.exists() for p in paths.values()):
+            cpu, wall = time.process_time(), time.perf_counter()
+            untied, tied, dof = one_piece_stiffness(part, cuts, args.through, options, tie_sets)
+            print(f"{name} one piece: {dof} DOF (mirror part), {len(tie_sets) + 1} condensations, "
+                  f"{time.process_time() - cpu:.1f} s CPU, {time.perf_counter() - wall:.1f} s wall "
+                  f"(load {os.getloadavg()[0]:.1f})", flush=True)
+            cpu = time.process_time()
+            composed = composed_stiffness(chain, args.segments, args.through, options)
+            print(f"{name} composed: {time.process_time() - cpu:.1f} s CPU", flush=True)
+            for kind, value in zip(kinds, [composed, untied, *tied]):
+                np.save(paths[kind], value)
+        composed, untied, *tied = (np.load(paths[k]) for k in kinds)
+        print(f"\n{name} [0, {1e3 * part.x_end:.1f} mm], cuts at {[round(1e3 * c, 1) for c in cuts]} mm, "
+              f"{args.through:g} asked for, options {change or 'PROTOTYPE_CHAIN_OPTIONS'}")
+        only = "".join(f" only {[round(1e3 * c, 1) for c in ties]} tied - untied [%] |" for ties in tie_sets[1:])
+        print(f"| entry | one piece, untied | composed - untied [%] | tied - untied [%] | composed - tied [%] |{only}")
+        print("|---|---:|---:|---:|---:|" + "---:|" * len(subsets))
+        for entry, value, composed_diff, tied_diff, grid_diff in cut_rows(composed, tied[0], untied):
+            i, j = entry_index(entry)
+            extra = "".join(f" {100 * (t[i, j] - untied[i, j]) / abs(untied[i, j]):+.3f} |" for t in tied[1:])
+            print(f"| {entry} | {value:.6e} | {100 * composed_diff:+.3f} | {100 * tied_diff:+.3f} | "
+                  f"{100 * grid_diff:+.3f} |{extra}")
+
+if __name__ == "__main__":
+    main()

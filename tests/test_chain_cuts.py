@@ -1,0 +1,103 @@
+"""What cutting a chain into rigidly tied segments does (flexcal.validation.reports.chain_cuts;
+issue 26, whole chains; docs/meshing.md, "Session 20: whole chains")."""
+
+import functools
+
+import numpy as np
+import pytest
+
+from flexcal.fem.mesh_mapped_chain import PROTOTYPE_CHAIN_OPTIONS
+from flexcal.geometry.params import ChainSegment
+from flexcal.validation.prototype.segments import analytic_provider, section_nodes
+from flexcal.validation.reports.chain_cuts import (composed_stiffness, cut_rows, entry_index, one_piece_stiffness,
+                                                   segment_stiffness, series_stiffness, stretch)
+from flexcal.validation.reports.chain_reference import reference_chain
+
+
+
+def test_segments_joined_in_series_are_the_whole_chain_of_beam_theory():
+    # beam theory composes exactly (Eq. 1): the five slices' 12 x 12 joined at the section
+    # nodes are the 12 x 12 of the whole chain [0, L] the same provider gives in one slice
+    chain = reference_chain("L1")
+    provider = analytic_provider()
+    nodes = section_nodes(chain)
+    joined = series_stiffness([provider(chain, float(a), float(b)) for a, b in zip(nodes[:-1], nodes[1:])])
+    whole = provider(chain, 0.0, chain.length)
+    size = np.sqrt(np.outer(np.diag(whole), np.diag(whole)))
+    # round-off of a 36 x 36 Schur complement of matrices spanning 1e4..1e9 [SI]: measured 3e-12; 1e-9
+    assert np.all(np.abs(joined - whole) <= 1e-9 * size), np.max(np.abs(joined - whole) / size)
+
+
+def test_a_tied_cut_in_the_one_piece_mesh_is_the_two_segments_meshed_alone():
+    # in a stretch of strut the two segments' grids, meshed alone, are the one-piece grid cut
+    # at its cut line (the same lines along x, the same section lines: no leaf): tying the
+    # cut section and joining is the same condensation, so the same 12 x 12 to round-off
+    chain = reference_chain("D1")
+    nodes = section_nodes(chain)
+    start, end = float(nodes[2]), float(nodes[3])  # [s0, s1], strut only
+    middle = 0.5 * (start + end)
+    options = {**PROTOTYPE_CHAIN_OPTIONS, "rim_aspect": 3.0}  # fine cells at the cut and the end faces
+    _, (tied,), _ = one_piece_stiffness(ChainSegment(chain=chain, x_start=start, x_end=end), (middle,), 3, options)
+    halves = [segment_stiffness(ChainSegment(chain=chain, x_start=a, x_end=b), 3, options)
+              for a, b in ((start, middle), (middle, end))]
+    joined = series_stiffness(halves)
+    size = np.sqrt(np.outer(np.diag(tied), np.diag(tied)))
+    # round-off of PARDISO condensations and a Schur complement (measured 2e-15 at 2 through): 1e-9
+    assert np.all(np.abs(joined - tied) <= 1e-9 * size), np.max(np.abs(joined - tied) / size)
+
+
+def test_tying_a_section_only_stiffens():
+    # a tie is a constraint: tied - untied is positive semi-definite (a coarse L1 [0, s0],
+    # 2 through, both mirror planes, 8k DOF), and stiffer on every diagonal entry (measured
+    # +1.5 to +3.0 %, K[ux,ux] +21.5 %: already at 2 through what the prototype's grid shows)
+    part, cuts = stretch(reference_chain("L1"), 2)
+    untied, (tied,), _ = one_piece_stiffness(part, cuts, 2, {**PROTOTYPE_CHAIN_OPTIONS, "slenderness": None})
+    scale = np.concatenate([np.ones(3), np.full(3, 0.05)] * 2)  # rotations times the 50 mm section [m]
+    difference = (tied - untied) / scale[:, None] / scale[None, :]
+    # round-off against the largest entry: measured -1.0e-12 of it; 1e-9 leaves 1000x
+    assert np.linalg.eigvalsh(difference).min() >= -1e-9 * np.abs(difference).max()
+    assert np.all(np.diag(tied) > np.diag(untied))
+
+
+@functools.cache
+def _leaf_pair(chain_name: str):
+    # [0, s0] of the chain (leaf 1, connector, leaf 2, half a section of strut) on the
+    # prototype's grid (7 asked for): its two segments meshed alone and joined (the
+    # prototype's way), and in one piece, tied at m1 and not. L1: 79k DOF per class, D1 259k
+    # DOF (no mirror plane: 7 through both leaves); measured 2026-11-28, load ~10: 58 s CPU,
+    # 3 min 45 s wall together, 2.2 GB peak
+    chain = reference_chain(chain_name)
+    part, cuts = stretch(chain, 2)
+    untied, (tied,), _ = one_piece_stiffness(part, cuts, 7, PROTOTYPE_CHAIN_OPTIONS)
+    composed = composed_stiffness(chain, 2, 7, PROTOTYPE_CHAIN_OPTIONS)
+    return {row[0]: row for row in cut_rows(composed, tied, untied)}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("chain", ["L1", "D1"])
+def test_the_prototypes_leaf_pair_is_its_one_piece_mesh_tied_at_the_mid_connector(chain):
+    # the one-piece grid carries both leaves' section lines through every block, so it is finer
+    # than each segment's own; tied at m1 it still gives the prototype's joined segments
+    # within 0.1 % on every dominant entry (measured <= 0.065 % L1, <= 0.059 % D1: the grid's
+    # part is small, so what tied - untied shows is the tie)
+    rows = _leaf_pair(chain)
+    for entry, _, _, _, grid in rows.values():
+        # 0.1 %: the issue's agreement tolerance; measured <= 0.065 %
+        assert abs(grid) <= 1e-3, f"{chain} {entry}: joined segments {100 * grid:+.3f} % from the tied one piece"
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("chain", ["L1", "D1"])
+def test_the_rigid_tie_at_the_mid_connector_stiffens_the_leaf_pair_by_more_than_a_percent(chain):
+    # the prototype's modelling error, not a discretisation error: the connector is 10 mm long
+    # between two leaves turned 90 degrees against each other, so the mid-connector section m1
+    # (5 mm from either leaf root) is far from plane; tying it rigidly removes the connector's
+    # own compliance. Measured (docs/meshing.md, session 20) on every dominant diagonal entry
+    # +1.4 to +3.0 % (K[ux,ux] +20.7 to +21.6 %), the same at 2-3 through and at 7; once the
+    # prototype stops cutting at m1 (or ties it otherwise) this fails and the docs must be updated
+    rows = _leaf_pair(chain)
+    for entry, _, _, tie, _ in rows.values():
+        i, j = entry_index(entry)
+        if i == j:
+            # 1 %: twice the issue's 0.5 % goal; the smallest measured is +1.38 % (D1 K[ryB,ryB])
+            assert tie >= 1e-2, f"{chain} {entry}: the tie at m1 adds only {100 * tie:+.3f} %"

@@ -1,0 +1,163 @@
+"""What cutting a chain into rigidly tied segments does to its stiffness (issue 26, whole
+chains; docs/meshing.md, "Session 20: whole chains").
+
+The virtual prototype builds a chain from segments (``validation/prototype/segments.py``:
+[0, m1], [m1, s0], [s0, s1], [s1, m2], [m2, L]), each meshed alone and condensed onto the
+centres of its two end sections with those sections rigidly tied, then joined at the
+shared centres (``series_stiffness``). Three 12 x 12 of one part (a stretch of the chain,
+``stretch``) between its end centres, on the mapped grid of one set of options:
+
+- ``composed``: the part's segments each meshed and condensed alone (the prototype's way;
+  at ``PROTOTYPE_CHAIN_OPTIONS`` and 7 asked for, the provider's own matrices), joined;
+- ``tied``: the part meshed in one piece with grid lines at the cuts (``chain_grid``'s
+  ``cuts``: along x the segments' own lines), its nodes on each cut section rigidly tied to
+  the section's centre, those centres condensed out: the same mesh as ``untied`` with the
+  ties, so tied - untied is what the ties do, nothing else;
+- ``untied``: that one-piece mesh condensed onto its end centres only (no cut).
+
+composed - tied is the grid's part: the one-piece grid carries every leaf's section lines
+through all of its blocks, so it is finer than each segment's own.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["stretch", "series_stiffness", "segment_stiffness", "one_piece_stiffness", "chain_segments",
+           "composed_stiffness", "converged_chain_estimate", "cut_rows", "entry_index"]
+
+
+def stretch(chain, n_segments: int):
+    """(``ChainSegment`` [0, x_k] of ``chain`` made of its first ``n_segments`` prototype
+    segments (1..5, ``section_nodes``), the x [m] of the cuts inside it)."""
+    from flexcal.geometry.params import ChainSegment
+    from flexcal.validation.prototype.segments import section_nodes
+
+    nodes = section_nodes(chain)
+    if not 1 <= n_segments <= len(nodes) - 1:
+        raise ValueError(f"n_segments={n_segments} must be 1..{len(nodes) - 1}")
+    return (ChainSegment(chain=chain, x_start=0.0, x_end=float(nodes[n_segments])),
+            tuple(float(x) for x in nodes[1:n_segments]))
+
+
+def series_stiffness(segments: np.ndarray) -> np.ndarray:
+    """(12, 12) [SI] between the first segment's start node and the last one's end node of
+    consecutive segments (n, 12, 12) (each segment's end node the next one's start node,
+    DOFs ux..rz at start then end, one frame): assembled on the n + 1 nodes, the inner
+    nodes condensed out (Schur complement)."""
+    segments = np.asarray(segments, float)
+    n = len(segments)
+    K = np.zeros((6 * (n + 1), 6 * (n + 1)))
+    for k, segment in enumerate(segments):
+        K[6 * k:6 * k + 12, 6 * k:6 * k + 12] += segment
+    return _condensed_onto_ends(K)
+
+
+def _condensed_onto_ends(K: np.ndarray) -> np.ndarray:
+    ends = np.r_[0:6, K.shape[0] - 6:K.shape[0]]
+    inner = np.arange(6, K.shape[0] - 6)
+    K_ei = K[np.ix_(ends, inner)]
+    out = K[np.ix_(ends, ends)] - K_ei @ np.linalg.solve(K[np.ix_(inner, inner)], K_ei.T)
+    return 0.5 * (out + out.T)
+
+
+def _mirror_part(part, elements_through: float, options: dict, refinement: int = 1):
+    from flexcal.fem.mesh_mapped_chain import mapped_mesh_chain_mirror_part
+
+    return mapped_mesh_chain_mirror_part(part, elements_through_thickness=elements_through, refinement=refinement,
+                                         **options)
+
+
+def segment_stiffness(segment, elements_through: float, options: dict, refinement: int = 1) -> np.ndarray:
+    """(12, 12) [SI] of one segment meshed alone on ``options`` (every cell split into
+    ``refinement``^3), condensed on its mirror part: the prototype's provider's matrix at
+    ``PROTOTYPE_CHAIN_OPTIONS``, 7 asked for and refinement 1."""
+    from flexcal.fem.condense import mirrored_chain_stiffness
+    from flexcal.geometry.exact import end_planes
+    from flexcal.geometry.params import STEEL
+
+    mesh, axes = _mirror_part(segment, elements_through, options, refinement)
+    planes = end_planes(segment)
+    k = mirrored_chain_stiffness(mesh, STEEL, planes["A"], planes["A"][0], planes["B"], planes["B"][0], axes)
+    return 0.5 * (k + k.T)
+
+
+def one_piece_stiffness(part, cuts, elements_through: float, options: dict,
+                        tie_sets=None) -> tuple[np.ndarray, list[np.ndarray], int]:
+    """(untied (12, 12), [tied (12, 12) per tie set] [SI], DOF of the meshed mirror part) of
+    ``part`` meshed in one piece with grid lines at ``cuts`` [m] (module docstring),
+    condensed on the mirror part (``mirrored_sections_stiffness``). tie_sets: the cuts tied
+    in each tied matrix (None: one set, every cut), each a subset of ``cuts``."""
+    from flexcal.fem.condense import mirrored_sections_stiffness
+    from flexcal.geometry.exact import end_planes
+    from flexcal.geometry.params import STEEL
+
+    cuts = tuple(float(x) for x in cuts)
+    tie_sets = [cuts] if tie_sets is None else [tuple(float(x) for x in ties) for ties in tie_sets]
+    if any(x not in cuts for ties in tie_sets for x in ties):
+        raise ValueError(f"tie_sets={tie_sets!r} must be subsets of cuts={cuts!r}")
+    mesh, axes = _mirror_part(part, elements_through, {**options, "cuts": cuts})
+    planes = end_planes(part)
+    ends = [(planes["A"], planes["A"][0]), (planes["B"], planes["B"][0])]
+    untied = mirrored_sections_stiffness(mesh, STEEL, ends, axes)
+    tied = []
+    for ties in tie_sets:
+        inner = [((np.array([x, 0.0, 0.0]), np.array([1.0, 0.0, 0.0])), np.array([x, 0.0, 0.0]))
+                 for x in sorted(ties)]
+        tied.append(_condensed_onto_ends(mirrored_sections_stiffness(mesh, STEEL, [ends[0], *inner, ends[1]], axes)))
+    return 0.5 * (untied + untied.T), tied, mesh.n_dof
+
+
+def chain_segments(chain, n_segments: int, first_half) -> np.ndarray:
+    """(n_segments, 12, 12) [SI] of the first ``n_segments`` prototype segments of ``chain``
+    in order, ``first_half(segment)`` giving the matrix of a first-half segment and a
+    second-half one taken as the mirror image of its first-half twin (``canonical_segment``)."""
+    from flexcal.validation.prototype.fem_provider import canonical_segment, mirror_segment_stiffness
+    from flexcal.validation.prototype.segments import section_nodes
+
+    nodes = section_nodes(chain)
+    out = []
+    for a, b in zip(nodes[:n_segments], nodes[1:n_segments + 1]):
+        segment, mirrored = canonical_segment(chain, float(a), float(b))
+        k = first_half(segment)
+        out.append(mirror_segment_stiffness(k) if mirrored else k)
+    return np.array(out)
+
+
+def composed_stiffness(chain, n_segments: int, elements_through: float, options: dict) -> np.ndarray:
+    """(12, 12) [SI] of the first ``n_segments`` prototype segments of ``chain``, each meshed
+    alone on ``options`` (``segment_stiffness``), joined (``series_stiffness``)."""
+    return series_stiffness(chain_segments(chain, n_segments,
+                                           lambda segment: segment_stiffness(segment, elements_through, options)))
+
+
+def converged_chain_estimate(segment_limits: np.ndarray, tied: np.ndarray, untied: np.ndarray) -> np.ndarray:
+    """(12, 12) [SI]: the converged stiffness of a stretch of chain in one piece, estimated
+    from the converged stiffness of its rigidly tied segments (n, 12, 12), joined, less what
+    the ties add (tied - untied of one one-piece mesh, ``one_piece_stiffness``)."""
+    return series_stiffness(segment_limits) - (np.asarray(tied) - np.asarray(untied))
+
+
+NAMES = [f"{s}{node}" for node in "AB" for s in ("ux", "uy", "uz", "rx", "ry", "rz")]
+
+
+def entry_index(entry: str) -> tuple[int, int]:
+    """(i, j) of an entry's name ``"K[uxA,rzB]"`` in the 12 x 12."""
+    first, second = entry[2:-1].split(",")
+    return NAMES.index(first), NAMES.index(second)
+
+
+def cut_rows(composed: np.ndarray, tied: np.ndarray, untied: np.ndarray):
+    """Rows (entry, untied value [SI], (composed - untied), (tied - untied), (composed - tied),
+    each / |untied|) for the dominant entries (``DOMINANT_FRACTION`` on ``untied``) of the
+    upper triangle of three 12 x 12 of one part."""
+    from flexcal.fem.convergence import dominant_entries
+    from flexcal.validation.reports.fem import DOMINANT_FRACTION
+
+    mask = np.triu(dominant_entries(untied, DOMINANT_FRACTION))
+    rows = []
+    for i, j in zip(*np.nonzero(mask)):
+        scale = abs(untied[i, j])
+        rows.append((f"K[{NAMES[i]},{NAMES[j]}]", untied[i, j], (composed[i, j] - untied[i, j]) / scale,
+                     (tied[i, j] - untied[i, j]) / scale, (composed[i, j] - tied[i, j]) / scale))
+    return rows
