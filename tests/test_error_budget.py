@@ -75,7 +75,8 @@ def test_identify_carries_the_budget_and_no_bar_narrows(tmp_path):
     for name, extra in (("with", []), ("without", ["--no-error-budget"])):
         out = tmp_path / name
         assert cli.main(["identify", "--scenario", "table1", "--provider", "analytic", "--method", "map",
-                         "--sources", "table1", "--noise-urad", "0.5", "--model-stiffness", "closed-form",
+                         "--sources", "table1", "--noise-urad", "0.5", "--model", "second-order",
+                             "--model-stiffness", "closed-form",
                          "--out", str(out), "-q", *extra]) == 0
         reports[name] = json.loads((out / "report.json").read_text())
     budget = reports["with"]["estimation"]["discrepancy"]["model_error_budget_samples"]
