@@ -29,4 +29,20 @@ command -v "$PYTHON" >/dev/null 2>&1 || PYTHON=python3
 [ -x .venv/bin/python ] || "$PYTHON" -m venv .venv
 .venv/bin/python -m pip install -q --upgrade pip >/dev/null
 .venv/bin/python -m pip install -q -e '.[test]'
+
+# numba compiles the model's kernels on their first call and caches them in model/__pycache__:
+# the consistent model's (the calibration default, docs/model.md "Session 20") take ~2-2.5 min
+# of CPU, the second-order model's ~0.5 min. Compile them here, on one small batch of each model
+# (64 candidates: the batched kernels' size too), so that the first flexcal run does not pay it.
+echo "setup: compiling the model's kernels (numba; a few minutes, once)"
+.venv/bin/python -c '
+import numpy as np
+from flexcal.model.forward import forward
+from flexcal.model.trajectory import standard_trajectory
+from flexcal.validation.runs.model_correction import model_space
+for model in ("consistent", "second-order"):
+    space = model_space("closed-form", model=model)
+    forward(np.repeat(space.nominal_full[None], 64, axis=0), standard_trajectory(space.mechanism, n_points=13).inputs,
+            space=space, engine="numba")
+'
 echo "setup: ready (.venv/bin/flexcal)"

@@ -78,7 +78,8 @@ def test_config_file_sets_option_defaults(tmp_path, small_csv, capsys):
     config = tmp_path / "s.toml"
     config.write_text("sobol_n = 8\ncalibration_seed = 5\n")
     out = tmp_path / "out"
-    assert cli.main(["sensitivity", "--data", str(small_csv), "--config", str(config), "--out", str(out), "-q"]) == 0
+    assert cli.main(["sensitivity", "--data", str(small_csv), "--model", "second-order",
+                     "--config", str(config), "--out", str(out), "-q"]) == 0
     report = json.loads((out / "report.json").read_text())
     assert report["summary"]["n_base"] == 8 and report["summary"]["seed"] == 5
     assert report["config"]["sobol_n"] == 8 and report["config"]["provider"] == "fem"
@@ -86,7 +87,8 @@ def test_config_file_sets_option_defaults(tmp_path, small_csv, capsys):
 
 def test_json_prints_only_the_summary(tmp_path, small_csv, capsys):
     out = tmp_path / "out"
-    assert cli.main(["sensitivity", "--data", str(small_csv), "--sobol-n", "4", "--out", str(out), "--json"]) == 0
+    assert cli.main(["sensitivity", "--data", str(small_csv), "--model", "second-order",
+                     "--sobol-n", "4", "--out", str(out), "--json"]) == 0
     lines = capsys.readouterr().out.strip().splitlines()
     assert len(lines) == 1
     summary = json.loads(lines[0])
@@ -141,7 +143,8 @@ def run_twice(tmp_path, argv, names):
 
 
 def test_same_seed_same_report_identify(tmp_path, small_csv):
-    first, second = run_twice(tmp_path, ["identify", "--data", str(small_csv), "--sources", "D1.x0,D1.CL,D1.mu",
+    first, second = run_twice(tmp_path, ["identify", "--data", str(small_csv), "--model", "second-order",
+                                         "--sources", "D1.x0,D1.CL,D1.mu",
                                          "--particles", "40", "--iterations", "5", "--calibration-seed", "3"],
                               ["report.json", "report.md", "timings.json"])
     # the wall-clock times are in timings.json only: report.json and report.md repeat to the byte
@@ -151,7 +154,8 @@ def test_same_seed_same_report_identify(tmp_path, small_csv):
 
 
 def test_same_seed_same_report_sensitivity_and_forward(tmp_path, small_csv):
-    first, second = run_twice(tmp_path, ["sensitivity", "--data", str(small_csv), "--sobol-n", "8"],
+    first, second = run_twice(tmp_path, ["sensitivity", "--data", str(small_csv), "--model", "second-order",
+                                         "--sobol-n", "8"],
                               ["report.json", "report.md"])
     assert first == second  # no timings in this report: byte-identical as a whole
     first, second = run_twice(tmp_path / "fw", ["forward", "--inputs-mm", "0.3,0.1,0"], ["report.json", "report.md"])

@@ -86,7 +86,8 @@ def test_design_cli_keeps_the_standard_postures_and_stays_in_their_hull(tmp_path
     from flexcal.validation.prototype.scenario import load_scenario
 
     out = tmp_path / "design"
-    assert cli.main(["design", "--points", "41", "--candidates", "200", "--model-stiffness", "closed-form",
+    assert cli.main(["design", "--model", "second-order",
+                     "--points", "41", "--candidates", "200", "--model-stiffness", "closed-form",
                      "--inadequacy", "none", "--region", "hull", "--criterion", "I", "--keep-standard", "13",
                      "--out", str(out), "-q"]) == 0
     rows = np.loadtxt(out / "trajectory.csv", delimiter=",", skiprows=1)
@@ -165,7 +166,8 @@ def test_design_cli_criterion_drives_writes_its_criterion(tmp_path):
     from flexcal.validation import cli
 
     out = tmp_path / "design"
-    assert cli.main(["design", "--points", "41", "--candidates", "200", "--model-stiffness", "closed-form",
+    assert cli.main(["design", "--model", "second-order",
+                     "--points", "41", "--candidates", "200", "--model-stiffness", "closed-form",
                      "--inadequacy", "none", "--criterion", "drives", "--keep-standard", "13",
                      "--out", str(out), "-q"]) == 0
     report = json.loads((out / "report.json").read_text())

@@ -162,7 +162,8 @@ def test_benchmark_command_tiny_grid_survives_a_failed_case_and_resumes(tmp_path
 def _designed_trajectory(folder):
     """A small ``flexcal design`` trajectory (41 postures from 300 candidates: 4 legs of up to
     11 after the zero posture; the model without its inadequacy weight, seconds)."""
-    assert cli.main(["design", "--points", "41", "--candidates", "300", "--model-stiffness", "closed-form",
+    assert cli.main(["design", "--model", "second-order",
+                     "--points", "41", "--candidates", "300", "--model-stiffness", "closed-form",
                      "--inadequacy", "none", "--out", str(folder), "-q"]) == 0
     return folder / "trajectory.csv"
 

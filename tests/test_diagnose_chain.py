@@ -99,7 +99,7 @@ def test_air_turbulence_10x_on_the_designed_trajectory_is_found(tmp_path, provid
     from flexcal.validation.diagnosis.benchmark import trajectory_digest
     from flexcal.validation.prototype.scenario import read_trajectory
 
-    assert cli.main(["design", "--points", "77", "--model-stiffness", "closed-form", "--out",
+    assert cli.main(["design", "--model", "second-order", "--points", "77", "--model-stiffness", "closed-form", "--out",
                      str(tmp_path / "design"), "-q"]) == 0
     trajectory = read_trajectory(tmp_path / "design" / "trajectory.csv")
     assert trajectory_digest(*trajectory) == "e8991e922cac40a3"  # the grid's design: the same case
@@ -118,7 +118,8 @@ def _small_design(folder):
     from flexcal.validation import cli
     from flexcal.validation.prototype.scenario import read_trajectory
 
-    assert cli.main(["design", "--points", "41", "--candidates", "300", "--model-stiffness", "closed-form",
+    assert cli.main(["design", "--model", "second-order",
+                     "--points", "41", "--candidates", "300", "--model-stiffness", "closed-form",
                      "--inadequacy", "none", "--out", str(folder), "-q"]) == 0
     return read_trajectory(folder / "trajectory.csv")
 

@@ -76,7 +76,8 @@ def test_identify_carries_the_budget_and_no_bar_narrows(tmp_path):
         out = tmp_path / name
         # the profile off: this test is about the budget's term (the profile has its own, test_profile_bars.py)
         assert cli.main(["identify", "--scenario", "table1", "--provider", "analytic", "--method", "map",
-                         "--sources", "table1", "--noise-urad", "0.5", "--model-stiffness", "closed-form", "--no-profile-bars",
+                         "--sources", "table1", "--noise-urad", "0.5", "--model", "second-order",
+                         "--model-stiffness", "closed-form", "--no-profile-bars",
                          "--out", str(out), "-q", *extra]) == 0
         reports[name] = json.loads((out / "report.json").read_text())
     budget = reports["with"]["estimation"]["discrepancy"]["model_error_budget_samples"]

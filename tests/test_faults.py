@@ -33,7 +33,8 @@ from flexcal.validation.out_lock import lock_paths, read_holder
 FLEXCAL = [sys.executable, "-c", "import sys; from flexcal.validation.cli import main; sys.exit(main())"]
 TRUTH = ["truth", "--scenario", "table1", "--provider", "analytic", "--seed", "3"]
 # the paper's method: its Sobol and PSO stages are the named points to interrupt at
-VERIFY = ["verify", "--scenario", "table1", "--provider", "analytic", "--model-stiffness", "closed-form",
+VERIFY = ["verify", "--scenario", "table1", "--provider", "analytic", "--model", "second-order",
+          "--model-stiffness", "closed-form",
           "--method", "paper", "--sobol-n", "8", "--particles", "40", "--iterations", "3"]
 # fTetWild (not the default mapped mesher): its meshing stage is the one to interrupt
 HINGE = ["hinge", "--type", "circular", "--radius-mm", "5", "--thickness-mm", "1", "--width-mm", "10",

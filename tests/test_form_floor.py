@@ -104,7 +104,8 @@ def test_verify_and_identify_reports_carry_the_floor_or_say_not_available(tmp_pa
     from flexcal.validation.measurements import read_measurement, write_measurement
 
     out = tmp_path / "verify"
-    assert cli.main(["verify", "--scenario", "table1", "--provider", "analytic", "--model-stiffness", "closed-form",
+    assert cli.main(["verify", "--scenario", "table1", "--provider", "analytic", "--model", "second-order",
+                     "--model-stiffness", "closed-form",
                      "--method", "paper", "--sobol-n", "16", "--particles", "40", "--iterations", "6", "--out",
                      str(out), "-q"]) == 0
     floor = json.loads((out / "report.json").read_text())["model_form_floor"]
@@ -125,7 +126,8 @@ def test_verify_and_identify_reports_carry_the_floor_or_say_not_available(tmp_pa
                                                         inputs=curve.inputs, angles=curve.angles))
     for data, available in ((tmp_path / "t" / "curves.csv", True), (real / "curves.csv", False)):
         ident = tmp_path / f"identify-{available}"
-        assert cli.main(["identify", "--data", str(data), "--model-stiffness", "closed-form", "--particles", "40",
+        assert cli.main(["identify", "--data", str(data), "--model", "second-order",
+                         "--model-stiffness", "closed-form", "--particles", "40",
                          "--iterations", "4", "--out", str(ident), "-q"]) == 0
         floor = json.loads((ident / "report.json").read_text())["model_form_floor"]
         text = (ident / "report.md").read_text()

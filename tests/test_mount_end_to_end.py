@@ -25,7 +25,8 @@ def test_second_mount_end_to_end(tmp_path):
     sidecar = json.loads((truth / "curves.json").read_text())
     assert mount_from_table(sidecar["mount"], source="sidecar") == read_mount(MIRROR)
     data = str(truth / "curves.csv")
-    assert cli.main(["verify", "--data", data, "--noise-urad", "0.5", "--model-stiffness", "closed-form",
+    assert cli.main(["verify", "--data", data, "--noise-urad", "0.5", "--model", "second-order",
+                     "--model-stiffness", "closed-form",
                      "--out", str(verify), "-q"]) == 0
     report = json.loads((verify / "report.json").read_text())
     floor = report["model_form_floor"]["models"][0]["all"]["rms_urad"]  # the model at the true values

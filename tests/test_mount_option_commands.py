@@ -22,7 +22,7 @@ from flexcal.geometry.mount import mount_from_table, read_mount
 from flexcal.validation import cli
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
-CHEAP = ["--provider", "analytic", "--model-stiffness", "closed-form", "-q"]
+CHEAP = ["--provider", "analytic", "--model", "second-order", "--model-stiffness", "closed-form", "-q"]
 L1_WIDTH_MM = 31.7  # the reference mount's leaves are 40 mm wide
 WORKSPACE_MRAD = [0.2, 1.0, 0.6]  # the reference's +-1/+-5/+-3 mrad divided by 5
 
@@ -76,7 +76,8 @@ def test_design_draws_its_postures_in_the_mount_files_workspace(small_mount, tmp
     from flexcal.model.parameters import parameter_space
 
     out = tmp_path / "d"
-    assert cli.main(["design", "--scenario", "nominal", "--mount", str(small_mount), "--model-stiffness", "closed-form",
+    assert cli.main(["design", "--scenario", "nominal", "--mount", str(small_mount), "--model", "second-order",
+                     "--model-stiffness", "closed-form",
                      "--points", "20", "--candidates", "100", "--inadequacy", "none", "-q", "--out", str(out)]) == 0
     inputs = np.loadtxt(out / "trajectory.csv", delimiter=",", skiprows=1, usecols=(2, 3, 4)) * 1e-3  # [m]
     space = parameter_space(read_mount(small_mount))

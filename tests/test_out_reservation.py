@@ -25,7 +25,8 @@ from flexcal.validation.run_folder import MARKER_NAME, inputs_inside
 FLEXCAL = [sys.executable, "-c", "import sys; from flexcal.validation.cli import main; sys.exit(main())"]
 TRUTH = ["truth", "--scenario", "table1", "--provider", "analytic", "--seed", "3"]
 # identify and verify at their smallest: the paper's method, a short Sobol and PSO, the closed-form model
-FAST_CALIBRATION = {"identify": ["--model-stiffness", "closed-form", "--method", "paper", "--particles", "40",
+FAST_CALIBRATION = {"identify": ["--model", "second-order",
+                                 "--model-stiffness", "closed-form", "--method", "paper", "--particles", "40",
                                   "--iterations", "3"]}
 FAST_CALIBRATION["verify"] = [*FAST_CALIBRATION["identify"], "--sobol-n", "8"]
 TRUTH_FILES = [MARKER_NAME, "curves.csv", "curves.json", "curves.png", "report.json", "report.md", "timings.json"]
@@ -117,7 +118,8 @@ def test_inputs_are_found_in_any_option_and_in_the_toml_files_they_name(tmp_path
 
 def test_design_force_replaces_its_earlier_run(tmp_path, capsys):
     # before: design --force computed everything, then refused the folder (staged_output without replace)
-    fast = ["design", "--model-stiffness", "closed-form", "--inadequacy", "none", "--points", "13",
+    fast = ["design", "--model", "second-order",
+            "--model-stiffness", "closed-form", "--inadequacy", "none", "--points", "13",
             "--candidates", "40", "-q"]
     out = tmp_path / "d"
     assert cli.main([*fast, "--out", str(out)]) == 0

@@ -55,7 +55,7 @@ def test_unit_mistakes_are_refused_in_one_line(tmp_path, capsys, table1, command
     write_measurement(path, _scaled(table1, **change))
     cheap = {"verify": ["--method", "map", "--prior-scale", "1"], "identify": ["--method", "free", "--sources", "D3.x0"]}
     status, err = _cli(capsys, [command, "--data", str(path), "--out", str(tmp_path / "run"), "-q", *cheap[command],
-                                "--model-stiffness", "closed-form", "--no-second-order"])
+                                "--model", "second-order", "--model-stiffness", "closed-form", "--no-second-order"])
     assert status == 2
     assert len(err) == 1 and err[0].startswith(f"flexcal {command}: error: {path}: ")
     for word in words:
@@ -67,8 +67,8 @@ def test_the_flag_reads_the_file_anyway(tmp_path, capsys, table1):
     """--skip-unit-check: identify runs on the m-for-mm file (the fit is the user's business)."""
     path = tmp_path / "curves.csv"
     write_measurement(path, _scaled(table1, inputs=1e-3))
-    argv = ["identify", "--data", str(path), "--sources", "D3.x0", "--method", "free", "--model-stiffness",
-            "closed-form", "--no-second-order", "--out", str(tmp_path / "run"), "-q"]
+    argv = ["identify", "--data", str(path), "--sources", "D3.x0", "--method", "free", "--model", "second-order",
+            "--model-stiffness", "closed-form", "--no-second-order", "--out", str(tmp_path / "run"), "-q"]
     assert cli.main(argv) == 2  # refused without the flag
     capsys.readouterr()
     assert cli.main(argv + ["--skip-unit-check"]) == 0
@@ -170,7 +170,8 @@ def test_identify_shows_progress_on_its_long_loop(tmp_path, capsys, table1):
     (one line per stage off a terminal: validation/progress.py)."""
     path = tmp_path / "curves.csv"
     write_measurement(path, table1)
-    assert cli.main(["identify", "--data", str(path), "--sources", "D3.x0", "--method", "free", "--model-stiffness",
-                     "closed-form", "--no-second-order", "--out", str(tmp_path / "run")]) == 0
+    assert cli.main(["identify", "--data", str(path), "--sources", "D3.x0", "--method", "free",
+                     "--model", "second-order", "--model-stiffness", "closed-form", "--no-second-order",
+                     "--out", str(tmp_path / "run")]) == 0
     err = capsys.readouterr().err
     assert "free estimate: started" in err and "free estimate: done, 1/1 fit" in err

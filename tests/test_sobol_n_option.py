@@ -9,7 +9,8 @@ import pytest
 from flexcal.validation import cli
 
 REFUSAL = "must be a power of two (e.g. 512): the Sobol sequence loses its balance otherwise"
-SCENARIO = ["--scenario", "table1", "--provider", "analytic", "--model-stiffness", "closed-form"]
+SCENARIO = ["--scenario", "table1", "--provider", "analytic", "--model", "second-order",
+            "--model-stiffness", "closed-form"]
 
 
 @pytest.mark.parametrize("command, args", [

@@ -21,7 +21,8 @@ from typing import Any, Callable
 
 import numpy as np
 
-__all__ = ["DataOpening", "Opening", "open_data", "calibration_model", "open_calibration"]
+__all__ = ["DataOpening", "Opening", "open_data", "model_option", "dimension_terms", "check_model_options",
+           "calibration_model", "open_calibration"]
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -63,17 +64,42 @@ def open_data(args: argparse.Namespace, *, progress: bool, data_path=None) -> Da
                        mechanism=data_mechanism(measurement.metadata, args))
 
 
+def model_option(args: argparse.Namespace) -> str:
+    """The ``--model`` name of a parsed command line (``options.DEFAULT_MODEL`` without one)."""
+    from .options import DEFAULT_MODEL
+
+    return getattr(args, "model", None) or DEFAULT_MODEL
+
+
+def dimension_terms(args: argparse.Namespace) -> str:
+    """The dimension terms the run's model takes: ``--dimension-terms`` for ``--model consistent``
+    with FEM chains; for any other model "linear" (it has no FEM factors that follow the
+    dimensions) if the value is the default (``options.DEFAULT_DIMENSION_TERMS``, so that making
+    "quadratic" the default leaves ``--model second-order`` runnable), else a ValueError: an
+    explicit "quadratic" the model cannot take is refused."""
+    from .options import DEFAULT_DIMENSION_TERMS
+
+    terms = getattr(args, "dimension_terms", None) or DEFAULT_DIMENSION_TERMS
+    model, stiffness = model_option(args), getattr(args, "model_stiffness", "fem")
+    if terms == "linear" or (model == "consistent" and stiffness == "fem"):
+        return terms
+    if terms == DEFAULT_DIMENSION_TERMS:
+        return "linear"
+    raise ValueError(f"--dimension-terms quadratic shapes the consistent model's FEM factors: add --model "
+                     f"consistent --model-stiffness fem (this run: {model}, {stiffness})")
+
+
 def check_model_options(args: argparse.Namespace) -> None:
     """Refuse a combination of model options ``calibration_model`` cannot build (ValueError),
     before any truth or FEM model is made for it."""
-    model = getattr(args, "model", "second-order")
+    model = model_option(args)
     if getattr(args, "breakaway_force", None) is not None and model != "consistent":
         raise ValueError(f"--breakaway-force sets the consistent model's play state; add --model consistent "
                          f"(this run's model is {model})")
-    terms = getattr(args, "dimension_terms", None) or "linear"
-    if terms == "quadratic" and (model != "consistent" or args.model_stiffness != "fem"):
-        raise ValueError(f"--dimension-terms quadratic shapes the consistent model's FEM factors: add --model "
-                         f"consistent --model-stiffness fem (this run: {model}, {args.model_stiffness})")
+    if model == "consistent" and getattr(args, "second_order", True) is False:
+        raise ValueError("the consistent model (the calibration default since session 20) is second-order by "
+                         "construction: drop --no-second-order, or use --model second-order --no-second-order")
+    dimension_terms(args)
 
 
 def calibration_model(args: argparse.Namespace, mechanism, *, progress: bool):
@@ -85,9 +111,9 @@ def calibration_model(args: argparse.Namespace, mechanism, *, progress: bool):
     from .options import executor_options
 
     check_model_options(args)
-    model = getattr(args, "model", "second-order")
+    model = model_option(args)
     force = getattr(args, "breakaway_force", None)
-    terms = getattr(args, "dimension_terms", None) or "linear"
+    terms = dimension_terms(args)
     space = model_space(args.model_stiffness, args.second_order, progress=progress, mechanism=mechanism,
                         model=model, breakaway_force=force, **executor_options(args))
     if terms == "quadratic":

@@ -2,11 +2,13 @@
 from ``model_correction`` so that the command line reads them without importing the model.
 
 - "paper": Eq. 1-8 as written (closed-form chains, no second-order terms);
-- "second-order": today's default, FEM-informed chains with the second-order terms added to
-  the pose (docs/model.md 7-8);
+- "second-order": FEM-informed chains with the second-order terms added to the pose
+  (docs/model.md 7-8; the default of ``diagnose`` and ``compensate``, and of every calibration
+  command before session 20);
 - "consistent": compliance factors following the dimensions, the chains' measured shortening
   solved inside the fixed point with the clearance, the clearance's play state
-  (docs/model.md 9-10).
+  (docs/model.md 9-10; the default of ``verify``, ``identify``, ``sensitivity`` and ``design``
+  since session 20, ``cli.options.DEFAULT_MODEL``).
 """
 
 __all__ = ["MODELS", "DEFAULT_BREAKAWAY_N"]
