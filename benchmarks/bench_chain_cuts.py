@@ -8,6 +8,7 @@ segments meshed alone (the prototype's way), against the same stretch meshed in 
     python benchmarks/bench_chain_cuts.py --chain L1 D1 --segments 2 --dir /tmp/cuts
     python benchmarks/bench_chain_cuts.py --chain L1 --segments 5 --tie 0,3 1,2 --dir /tmp/cuts
     python benchmarks/bench_chain_cuts.py --chain L1 --middle --dir /tmp/cuts   # one cut, at L/2
+    python benchmarks/bench_chain_cuts.py --chain L1 --strut-depth 50 --dir /tmp/cuts   # 50 mm into the strut
     python benchmarks/bench_chain_cuts.py --chain L1 --segments 2 --through 10 \\
         --options '{"slenderness": null}' --dir /tmp/cuts
 
@@ -30,7 +31,7 @@ import numpy as np
 
 from flexcal.fem.mesh_mapped_chain import PROTOTYPE_CHAIN_OPTIONS
 from flexcal.validation.reports.chain_cuts import (composed_stiffness, cut_rows, entry_index, middle_cut,
-                                                     one_piece_stiffness, stretch)
+                                                     one_piece_stiffness, stretch, strut_cuts)
 from flexcal.validation.reports.chain_reference import reference_chain
 
 
@@ -51,6 +52,9 @@ def main() -> None:
     parser.add_argument("--middle", action="store_true",
                         help="the whole chain cut once, at its middle (two mirror-image halves), instead of the "
                              "prototype's section nodes; --segments is ignored")
+    parser.add_argument("--strut-depth", type=float, default=None,
+                        help="[mm] the whole chain cut only in its strut, this far from either end of it "
+                             "(three segments); --segments is ignored")
     parser.add_argument("--dir", default="bench_chain_cuts")
     args = parser.parse_args()
     folder = Path(args.dir).resolve()
@@ -59,9 +63,13 @@ def main() -> None:
     options = {**PROTOTYPE_CHAIN_OPTIONS, **change}
     for name in args.chain:
         chain = reference_chain(name)
-        part, cuts = middle_cut(chain) if args.middle else stretch(chain, args.segments)
-        n_segments, nodes = (2, (0.0, *cuts, part.x_end)) if args.middle else (args.segments, None)
-        tag = cut_tag(name, "mid" if args.middle else args.segments, args.through, change)
+        if args.middle or args.strut_depth is not None:
+            part, cuts = middle_cut(chain) if args.middle else strut_cuts(chain, 1e-3 * args.strut_depth)
+            n_segments, nodes = len(cuts) + 1, (0.0, *cuts, part.x_end)
+            label = "mid" if args.middle else f"strut{args.strut_depth:g}"
+        else:
+            (part, cuts), n_segments, nodes, label = stretch(chain, args.segments), args.segments, None, args.segments
+        tag = cut_tag(name, label, args.through, change)
         subsets = [tuple(int(i) for i in text.split(",")) for text in (args.tie or [])]
         tie_sets = [cuts] + [tuple(cuts[i] for i in subset) for subset in subsets]
         kinds = ["composed", "untied", "tied"] + [f"tied{''.join(map(str, subset))}" for subset in subsets]

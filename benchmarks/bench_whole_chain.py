@@ -48,6 +48,9 @@ def main() -> None:
                         help="also the chain cut once, at its middle: its halves at this many cells asked for "
                              "joined (P'), the tie at L/2 (T' - U'), and the chain in one piece (U'), from "
                              "bench_chain_cuts.py --middle's matrices in --cuts-dir")
+    parser.add_argument("--strut-depth", type=float, default=None,
+                        help="[mm] with --middle-through: the chain cut in its strut this far from either end "
+                             "instead of at L/2 (bench_chain_cuts.py --strut-depth)")
     parser.add_argument("--ref-dir", default="bench_chain_reference")
     parser.add_argument("--cuts-dir", default="bench_chain_cuts")
     args = parser.parse_args()
@@ -98,9 +101,11 @@ def main() -> None:
               f"{100 * max(np.max(np.diag(uncertainty[i]) / np.abs(np.diag(limits[i]))) for i in (0, 1)):.3f} %")
         middle = None
         if args.middle_through is not None:
-            mid_tag = cut_tag(name, "mid", args.middle_through, change)
+            label = "mid" if args.strut_depth is None else f"strut{args.strut_depth:g}"
+            mid_tag = cut_tag(name, label, args.middle_through, change)
             middle = {kind: np.load(cuts_dir / f"{kind}_{mid_tag}.npy") for kind in ("composed", "tied", "untied")}
-        extra = ((" cut at L/2: P' - C [%] | tie at L/2: T' - U' [%] | no cut: U' - C [%] |", "---:|---:|---:|")
+        where = "L/2" if args.strut_depth is None else f"{args.strut_depth:g} mm into the strut"
+        extra = ((f" cut at {where}: P' - C [%] | its ties: T' - U' [%] | no cut: U' - C [%] |", "---:|---:|---:|")
                  if middle else ("", ""))
         print("| entry | prototype P | estimate C | P - C [%] | segments P - S [%] | of which strut [%] | "
               f"ties T - U [%] |{extra[0]}")

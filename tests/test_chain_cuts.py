@@ -12,7 +12,7 @@ from flexcal.validation.prototype.segments import analytic_provider, section_nod
 from flexcal.validation.prototype.fem_provider import canonical_segment, mirror_segment_stiffness
 from flexcal.validation.reports.chain_cuts import (chain_segments, composed_stiffness, cut_rows, entry_index,
                                                    middle_cut, one_piece_stiffness, segment_stiffness,
-                                                   series_stiffness, stretch)
+                                                   series_stiffness, stretch, strut_cuts)
 from flexcal.validation.reports.chain_reference import reference_chain
 
 
@@ -48,6 +48,25 @@ def test_the_second_half_of_a_chain_cut_at_its_middle_is_the_first_half_mirrored
     size = np.sqrt(np.outer(np.diag(whole), np.diag(whole)))
     # round-off of a 18 x 18 Schur complement, as in the five-segment test above: 1e-9
     assert np.all(np.abs(series_stiffness(halves) - whole) <= 1e-9 * size)
+
+
+def test_cuts_in_the_strut_lie_in_the_strut_and_compose_to_the_whole_chain():
+    # strut_cuts: 50 mm from either end of L1's 327 mm strut; beam theory's three segments
+    # (the third the first's mirror image) joined are the whole chain; a depth beyond half
+    # the strut is refused
+    chain = reference_chain("L1")
+    part, cuts = strut_cuts(chain, 0.05)
+    strut_start = chain.end_block_length + 2 * chain.hinge_length + chain.connector_length
+    # sums of a few lengths of ~0.1 m: round-off ~1e-17 m; 1e-15 m
+    assert cuts == pytest.approx((strut_start + 0.05, chain.length - strut_start - 0.05), abs=1e-15)
+    provider = analytic_provider()
+    pieces = chain_segments(chain, 3, lambda seg: provider(chain, seg.x_start, seg.x_end), (0.0, *cuts, part.x_end))
+    whole = provider(chain, 0.0, chain.length)
+    size = np.sqrt(np.outer(np.diag(whole), np.diag(whole)))
+    # round-off of a 24 x 24 Schur complement, as in the five-segment test above: 1e-9
+    assert np.all(np.abs(series_stiffness(pieces) - whole) <= 1e-9 * size)
+    with pytest.raises(ValueError, match="half the strut"):
+        strut_cuts(chain, 0.5 * chain.strut_length)
 
 
 def test_a_tied_cut_in_the_one_piece_mesh_is_the_two_segments_meshed_alone():

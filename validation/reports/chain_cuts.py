@@ -24,7 +24,7 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = ["stretch", "series_stiffness", "segment_stiffness", "one_piece_stiffness", "chain_segments",
-           "composed_stiffness", "middle_cut", "converged_chain_estimate", "cut_rows", "entry_index"]
+           "composed_stiffness", "middle_cut", "strut_cuts", "converged_chain_estimate", "cut_rows", "entry_index"]
 
 
 def stretch(chain, n_segments: int):
@@ -115,6 +115,19 @@ def middle_cut(chain):
     from flexcal.geometry.params import ChainSegment
 
     return ChainSegment(chain=chain, x_start=0.0, x_end=float(chain.length)), (0.5 * float(chain.length),)
+
+
+def strut_cuts(chain, depth: float):
+    """(the whole ``chain`` as a ``ChainSegment``, (s, L - s)): the chain cut only in its strut,
+    ``depth`` [m] from either end of it (s = e + 2l + c + depth), into the leaf pair with the
+    strut's first piece, the rest of the strut, and the mirror image of the first."""
+    from flexcal.geometry.params import ChainSegment
+
+    start = chain.end_block_length + 2.0 * chain.hinge_length + chain.connector_length + depth
+    if not 0.0 < depth < 0.5 * chain.strut_length:
+        raise ValueError(f"depth={depth} m must lie in (0, {0.5 * chain.strut_length}) m, half the strut")
+    return (ChainSegment(chain=chain, x_start=0.0, x_end=float(chain.length)),
+            (float(start), float(chain.length - start)))
 
 
 def chain_segments(chain, n_segments: int, first_half, nodes=None) -> np.ndarray:
