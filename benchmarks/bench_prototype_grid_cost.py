@@ -69,7 +69,8 @@ def main() -> None:
         segment, _ = canonical_segment(chain, 0.0, (0.5 if cut else 1.0) * chain.length)
         halves[(segment.chain, segment.x_start, segment.x_end)] = segment
     candidates = halves if args.middle else segments
-    throughs = {key: quarter_through(segment, args.through, candidate) for key, segment in candidates.items()}
+    throughs = {key: quarter_through(segment, args.through, candidate) if args.middle else args.through
+                for key, segment in candidates.items()}
     print("candidate cells asked for:", sorted(set(throughs.values())))
     print(f"{len(segments)} segments; candidate {args.change}, {len(candidates)} segments at {args.through:g} through"
           f"{' (halves [0, L/2] of long-strut chains, whole chains else)' if args.middle else ''}")
