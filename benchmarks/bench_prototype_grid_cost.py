@@ -7,15 +7,15 @@ see the same load. The segments are ~90 % of a cold table1 truth's CPU (docs/mes
 "Session 20: whole chains").
 
     python benchmarks/bench_prototype_grid_cost.py --change '{"n_arc": 8}' --rounds 2
-    python benchmarks/bench_prototype_grid_cost.py --middle --through 8 --rounds 2
+    python benchmarks/bench_prototype_grid_cost.py --middle --rounds 2
 
 --middle: the candidate is the prototype's grid (--change still applies) on the halves
 [0, L/2] of the as-built chains whose strut is at least ``LONG_STRUT`` section widths long
 (the chain cut once, at its middle), and on the whole of the others (not cut: the cut at
-the middle of D1's 30 mm strut adds 0.48 % in torsion; docs/meshing.md, "Session 20: cutting
-where the ties do not matter"), at --through cells asked for, against today's segments at 7. A half is meshed at the first of --through and --through + 1 whose
-grid has both mirror planes (a quarter condensed 4 times, as today's leaf segments: at 7 the
-D halves would be meshed whole, 281k DOF).
+the middle of D1's 30 mm strut adds 0.48 % in torsion; docs/meshing.md, "Session 20:
+cutting where the ties do not matter"), against today's segments at 7. Each candidate is
+meshed at the first of --through and --through + 1 cells asked for whose grid has both
+mirror planes (a quarter, condensed 4 times; at 7 a D chain has none: 281k DOF for its half).
 """
 
 from __future__ import annotations
