@@ -7,6 +7,8 @@ segments meshed alone (the prototype's way), against the same stretch meshed in 
 
     python benchmarks/bench_chain_cuts.py --chain L1 D1 --segments 2 --dir /tmp/cuts
     python benchmarks/bench_chain_cuts.py --chain L1 --segments 5 --tie 0,3 1,2 --dir /tmp/cuts
+    python benchmarks/bench_chain_cuts.py --chain L1 --middle --dir /tmp/cuts   # one cut, at L/2
+    python benchmarks/bench_chain_cuts.py --chain L1 --strut-depth 50 --dir /tmp/cuts   # 50 mm into the strut
     python benchmarks/bench_chain_cuts.py --chain L1 --segments 2 --through 10 \\
         --options '{"slenderness": null}' --dir /tmp/cuts
 
@@ -28,12 +30,12 @@ from pathlib import Path
 import numpy as np
 
 from flexcal.fem.mesh_mapped_chain import PROTOTYPE_CHAIN_OPTIONS
-from flexcal.validation.reports.chain_cuts import (composed_stiffness, cut_rows, entry_index, one_piece_stiffness,
-                                                     stretch)
+from flexcal.validation.reports.chain_cuts import (composed_stiffness, cut_rows, entry_index, middle_cut,
+                                                     one_piece_stiffness, stretch, strut_cuts)
 from flexcal.validation.reports.chain_reference import reference_chain
 
 
-def cut_tag(name: str, n_segments: int, through: float, change: dict) -> str:
+def cut_tag(name: str, n_segments, through: float, change: dict) -> str:
     """The stored matrices' name: chain, segments, cells asked for, a checksum of the options' change."""
     return f"{name}_{n_segments}_n{through:g}_{zlib.crc32(json.dumps(change, sort_keys=True).encode()):08x}"
 
@@ -47,6 +49,12 @@ def main() -> None:
     parser.add_argument("--tie", nargs="*", default=None,
                         help="also the stretch with only these cuts tied (indices into the cuts, comma separated "
                              "per set, e.g. 0,3 1,2 for the whole chain: m1 and m2 alone, s0 and s1 alone)")
+    parser.add_argument("--middle", action="store_true",
+                        help="the whole chain cut once, at its middle (two mirror-image halves), instead of the "
+                             "prototype's section nodes; --segments is ignored")
+    parser.add_argument("--strut-depth", type=float, default=None,
+                        help="[mm] the whole chain cut only in its strut, this far from either end of it "
+                             "(three segments); --segments is ignored")
     parser.add_argument("--dir", default="bench_chain_cuts")
     args = parser.parse_args()
     folder = Path(args.dir).resolve()
@@ -55,8 +63,13 @@ def main() -> None:
     options = {**PROTOTYPE_CHAIN_OPTIONS, **change}
     for name in args.chain:
         chain = reference_chain(name)
-        part, cuts = stretch(chain, args.segments)
-        tag = cut_tag(name, args.segments, args.through, change)
+        if args.middle or args.strut_depth is not None:
+            part, cuts = middle_cut(chain) if args.middle else strut_cuts(chain, 1e-3 * args.strut_depth)
+            n_segments, nodes = len(cuts) + 1, (0.0, *cuts, part.x_end)
+            label = "mid" if args.middle else f"strut{args.strut_depth:g}"
+        else:
+            (part, cuts), n_segments, nodes, label = stretch(chain, args.segments), args.segments, None, args.segments
+        tag = cut_tag(name, label, args.through, change)
         subsets = [tuple(int(i) for i in text.split(",")) for text in (args.tie or [])]
         tie_sets = [cuts] + [tuple(cuts[i] for i in subset) for subset in subsets]
         kinds = ["composed", "untied", "tied"] + [f"tied{''.join(map(str, subset))}" for subset in subsets]
@@ -68,7 +81,7 @@ def main() -> None:
                   f"{time.process_time() - cpu:.1f} s CPU, {time.perf_counter() - wall:.1f} s wall "
                   f"(load {os.getloadavg()[0]:.1f})", flush=True)
             cpu = time.process_time()
-            composed = composed_stiffness(chain, args.segments, args.through, options)
+            composed = composed_stiffness(chain, n_segments, args.through, options, nodes)
             print(f"{name} composed: {time.process_time() - cpu:.1f} s CPU", flush=True)
             for kind, value in zip(kinds, [composed, untied, *tied]):
                 np.save(paths[kind], value)

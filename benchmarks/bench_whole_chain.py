@@ -9,6 +9,7 @@ the four cuts add (tied - untied of the one-piece chain mesh, ``bench_chain_cuts
         --ref-levels 2 3 4 5 6 --ref-levels-2 3 4 5 6
     python benchmarks/bench_whole_chain.py --chain D1 --through 8 --ref-dir D --cuts-dir C \\
         --ref-levels 2 3 4 5 6 --ref-levels-2 2 3 4 5
+    python benchmarks/bench_whole_chain.py --chain D1 --through 8 --middle-through 8 ...  # + the cut at L/2
 
 The reference levels are read from D/hex27_<chain>_<0|1>_r<r>.npy (computed and stored if
 missing: r = 6 is ~9 GB); the one-piece matrices from C (bench_chain_cuts.py's, computed if
@@ -43,6 +44,13 @@ def main() -> None:
     parser.add_argument("--ref-levels", type=int, nargs="+", default=[2, 3, 4, 5, 6], help="[0, m1]")
     parser.add_argument("--ref-levels-2", type=int, nargs="+", default=[3, 4, 5, 6], help="[m1, s0]")
     parser.add_argument("--strut-levels", type=int, nargs=3, default=[4, 5, 6])
+    parser.add_argument("--middle-through", type=float, default=None,
+                        help="also the chain cut once, at its middle: its halves at this many cells asked for "
+                             "joined (P'), the tie at L/2 (T' - U'), and the chain in one piece (U'), from "
+                             "bench_chain_cuts.py --middle's matrices in --cuts-dir")
+    parser.add_argument("--strut-depth", type=float, default=None,
+                        help="[mm] with --middle-through: the chain cut in its strut this far from either end "
+                             "instead of at L/2 (bench_chain_cuts.py --strut-depth)")
     parser.add_argument("--ref-dir", default="bench_chain_reference")
     parser.add_argument("--cuts-dir", default="bench_chain_cuts")
     args = parser.parse_args()
@@ -91,16 +99,28 @@ def main() -> None:
         print(f"strut segment rates {np.nanmin(np.diag(strut_fit.rate)):.2f}-{np.nanmax(np.diag(strut_fit.rate)):.2f}; "
               "reference uncertainty of the diagonal <= "
               f"{100 * max(np.max(np.diag(uncertainty[i]) / np.abs(np.diag(limits[i]))) for i in (0, 1)):.3f} %")
+        middle = None
+        if args.middle_through is not None:
+            label = "mid" if args.strut_depth is None else f"strut{args.strut_depth:g}"
+            mid_tag = cut_tag(name, label, args.middle_through, change)
+            middle = {kind: np.load(cuts_dir / f"{kind}_{mid_tag}.npy") for kind in ("composed", "tied", "untied")}
+        where = "L/2" if args.strut_depth is None else f"{args.strut_depth:g} mm into the strut"
+        extra = ((f" cut at {where}: P' - C [%] | its ties: T' - U' [%] | no cut: U' - C [%] |", "---:|---:|---:|")
+                 if middle else ("", ""))
         print("| entry | prototype P | estimate C | P - C [%] | segments P - S [%] | of which strut [%] | "
-              "ties T - U [%] |")
-        print("|---|---:|---:|---:|---:|---:|---:|")
+              f"ties T - U [%] |{extra[0]}")
+        print(f"|---|---:|---:|---:|---:|---:|---:|{extra[1]}")
         for entry, *_ in cut_rows(prototype, tied, untied):
             i, j = entry_index(entry)
             scale = abs(converged[i, j])
+            tail = (f" {100 * (middle['composed'][i, j] - converged[i, j]) / scale:+.3f} | "
+                    f"{100 * (middle['tied'][i, j] - middle['untied'][i, j]) / abs(middle['untied'][i, j]):+.3f} | "
+                    f"{100 * (middle['untied'][i, j] - converged[i, j]) / scale:+.3f} |"
+                    if middle else "")
             print(f"| {entry} | {prototype[i, j]:.6e} | {converged[i, j]:.6e} | "
                   f"{100 * (prototype[i, j] - converged[i, j]) / scale:+.3f} | "
                   f"{100 * (prototype[i, j] - joined[i, j]) / scale:+.3f} | {100 * strut_part[i, j] / scale:+.3f} | "
-                  f"{100 * (tied[i, j] - untied[i, j]) / scale:+.3f} |")
+                  f"{100 * (tied[i, j] - untied[i, j]) / scale:+.3f} |{tail}")
 
 if __name__ == "__main__":
     main()

@@ -9,8 +9,10 @@ import pytest
 from flexcal.fem.mesh_mapped_chain import PROTOTYPE_CHAIN_OPTIONS
 from flexcal.geometry.params import ChainSegment
 from flexcal.validation.prototype.segments import analytic_provider, section_nodes
-from flexcal.validation.reports.chain_cuts import (composed_stiffness, cut_rows, entry_index, one_piece_stiffness,
-                                                   segment_stiffness, series_stiffness, stretch)
+from flexcal.validation.prototype.fem_provider import canonical_segment, mirror_segment_stiffness
+from flexcal.validation.reports.chain_cuts import (chain_segments, composed_stiffness, cut_rows, entry_index,
+                                                   middle_cut, one_piece_stiffness, segment_stiffness,
+                                                   series_stiffness, stretch, strut_cuts)
 from flexcal.validation.reports.chain_reference import reference_chain
 
 
@@ -26,6 +28,45 @@ def test_segments_joined_in_series_are_the_whole_chain_of_beam_theory():
     size = np.sqrt(np.outer(np.diag(whole), np.diag(whole)))
     # round-off of a 36 x 36 Schur complement of matrices spanning 1e4..1e9 [SI]: measured 3e-12; 1e-9
     assert np.all(np.abs(joined - whole) <= 1e-9 * size), np.max(np.abs(joined - whole) / size)
+
+
+def test_the_second_half_of_a_chain_cut_at_its_middle_is_the_first_half_mirrored():
+    # the cut at L/2 (middle_cut): [L/2, L] is meshed as [0, L/2] turned by pi about z
+    # (canonical_segment; before session 20 a slice starting exactly at L/2 was meshed again),
+    # and with beam theory the two mirrored halves joined are the whole chain
+    chain = reference_chain("D1")
+    part, cuts = middle_cut(chain)
+    assert cuts == (0.5 * chain.length,) and part.x_end == chain.length
+    segment, mirrored = canonical_segment(chain, 0.5 * chain.length, chain.length)
+    assert mirrored and (segment.x_start, segment.x_end) == (0.0, round(0.5 * chain.length, 12))
+    assert not canonical_segment(chain, 0.0, 0.5 * chain.length)[1]
+    provider = analytic_provider()
+    halves = chain_segments(chain, 2, lambda seg: provider(chain, seg.x_start, seg.x_end),
+                            (0.0, *cuts, chain.length))
+    np.testing.assert_array_equal(halves[1], mirror_segment_stiffness(halves[0]))
+    whole = provider(chain, 0.0, chain.length)
+    size = np.sqrt(np.outer(np.diag(whole), np.diag(whole)))
+    # round-off of a 18 x 18 Schur complement, as in the five-segment test above: 1e-9
+    assert np.all(np.abs(series_stiffness(halves) - whole) <= 1e-9 * size)
+
+
+def test_cuts_in_the_strut_lie_in_the_strut_and_compose_to_the_whole_chain():
+    # strut_cuts: 50 mm from either end of L1's 327 mm strut; beam theory's three segments
+    # (the third the first's mirror image) joined are the whole chain; a depth beyond half
+    # the strut is refused
+    chain = reference_chain("L1")
+    part, cuts = strut_cuts(chain, 0.05)
+    strut_start = chain.end_block_length + 2 * chain.hinge_length + chain.connector_length
+    # sums of a few lengths of ~0.1 m: round-off ~1e-17 m; 1e-15 m
+    assert cuts == pytest.approx((strut_start + 0.05, chain.length - strut_start - 0.05), abs=1e-15)
+    provider = analytic_provider()
+    pieces = chain_segments(chain, 3, lambda seg: provider(chain, seg.x_start, seg.x_end), (0.0, *cuts, part.x_end))
+    whole = provider(chain, 0.0, chain.length)
+    size = np.sqrt(np.outer(np.diag(whole), np.diag(whole)))
+    # round-off of a 24 x 24 Schur complement, as in the five-segment test above: 1e-9
+    assert np.all(np.abs(series_stiffness(pieces) - whole) <= 1e-9 * size)
+    with pytest.raises(ValueError, match="half the strut"):
+        strut_cuts(chain, 0.5 * chain.strut_length)
 
 
 def test_a_tied_cut_in_the_one_piece_mesh_is_the_two_segments_meshed_alone():

@@ -92,7 +92,8 @@ def canonical_segment(chain: FlexureChain, x_start: float, x_end: float) -> tupl
     """(segment that is meshed, mirrored?) for the slice [x_start, x_end] [m] of ``chain``:
     a slice in the second half is the mirror image of one in the first (module docstring)."""
     length = chain.length
-    mirrored = x_start > 0.5 * length + 1e-12 and x_end > 0.5 * length
+    # a slice starting at the middle (the cut at L/2) is the mirror image of the first half
+    mirrored = x_start > 0.5 * length - 1e-12 and x_end > 0.5 * length + 1e-12
     a, b = (length - x_end, length - x_start) if mirrored else (x_start, x_end)
     # cut positions to 1 pm: L - (L - x) must find the same cache entry as x
     return ChainSegment(chain=chain, x_start=round(max(a, 0.0), 12), x_end=round(min(b, length), 12)), mirrored

@@ -24,7 +24,7 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = ["stretch", "series_stiffness", "segment_stiffness", "one_piece_stiffness", "chain_segments",
-           "composed_stiffness", "converged_chain_estimate", "cut_rows", "entry_index"]
+           "composed_stiffness", "middle_cut", "strut_cuts", "converged_chain_estimate", "cut_rows", "entry_index"]
 
 
 def stretch(chain, n_segments: int):
@@ -108,14 +108,37 @@ def one_piece_stiffness(part, cuts, elements_through: float, options: dict,
     return 0.5 * (untied + untied.T), tied, mesh.n_dof
 
 
-def chain_segments(chain, n_segments: int, first_half) -> np.ndarray:
+def middle_cut(chain):
+    """(the whole ``chain`` as a ``ChainSegment``, (L/2,)): the chain cut once, at its middle
+    (the middle of its strut), into two mirror-image halves: the cut the ties matter least at
+    (docs/meshing.md, "Session 20: cutting where the ties do not matter")."""
+    from flexcal.geometry.params import ChainSegment
+
+    return ChainSegment(chain=chain, x_start=0.0, x_end=float(chain.length)), (0.5 * float(chain.length),)
+
+
+def strut_cuts(chain, depth: float):
+    """(the whole ``chain`` as a ``ChainSegment``, (s, L - s)): the chain cut only in its strut,
+    ``depth`` [m] from either end of it (s = e + 2l + c + depth), into the leaf pair with the
+    strut's first piece, the rest of the strut, and the mirror image of the first."""
+    from flexcal.geometry.params import ChainSegment
+
+    start = chain.end_block_length + 2.0 * chain.hinge_length + chain.connector_length + depth
+    if not 0.0 < depth < 0.5 * chain.strut_length:
+        raise ValueError(f"depth={depth} m must lie in (0, {0.5 * chain.strut_length}) m, half the strut")
+    return (ChainSegment(chain=chain, x_start=0.0, x_end=float(chain.length)),
+            (float(start), float(chain.length - start)))
+
+
+def chain_segments(chain, n_segments: int, first_half, nodes=None) -> np.ndarray:
     """(n_segments, 12, 12) [SI] of the first ``n_segments`` prototype segments of ``chain``
     in order, ``first_half(segment)`` giving the matrix of a first-half segment and a
-    second-half one taken as the mirror image of its first-half twin (``canonical_segment``)."""
+    second-half one taken as the mirror image of its first-half twin (``canonical_segment``).
+    nodes: the section nodes [m] (None: the prototype's, ``section_nodes``)."""
     from flexcal.validation.prototype.fem_provider import canonical_segment, mirror_segment_stiffness
     from flexcal.validation.prototype.segments import section_nodes
 
-    nodes = section_nodes(chain)
+    nodes = section_nodes(chain) if nodes is None else np.asarray(nodes, float)
     out = []
     for a, b in zip(nodes[:n_segments], nodes[1:n_segments + 1]):
         segment, mirrored = canonical_segment(chain, float(a), float(b))
@@ -124,11 +147,13 @@ def chain_segments(chain, n_segments: int, first_half) -> np.ndarray:
     return np.array(out)
 
 
-def composed_stiffness(chain, n_segments: int, elements_through: float, options: dict) -> np.ndarray:
-    """(12, 12) [SI] of the first ``n_segments`` prototype segments of ``chain``, each meshed
-    alone on ``options`` (``segment_stiffness``), joined (``series_stiffness``)."""
+def composed_stiffness(chain, n_segments: int, elements_through: float, options: dict, nodes=None) -> np.ndarray:
+    """(12, 12) [SI] of the first ``n_segments`` prototype segments of ``chain`` (between
+    ``nodes``, None: ``section_nodes``), each meshed alone on ``options``
+    (``segment_stiffness``), joined (``series_stiffness``)."""
     return series_stiffness(chain_segments(chain, n_segments,
-                                           lambda segment: segment_stiffness(segment, elements_through, options)))
+                                           lambda segment: segment_stiffness(segment, elements_through, options),
+                                           nodes))
 
 
 def converged_chain_estimate(segment_limits: np.ndarray, tied: np.ndarray, untied: np.ndarray) -> np.ndarray:
