@@ -172,12 +172,14 @@ def executor_options(args: argparse.Namespace) -> dict[str, Any]:
     return {"workers": getattr(args, "workers", 0), "scheduler": getattr(args, "scheduler", None)}
 
 
-# The calibration model of verify, identify, sensitivity and design (docs/cli.md "Which model
-# calibrates"): the consistent model since session 20 (issue 24). On the README's main job its
-# form floor at the true values is 0.03 / 0.06 / 0.01 urad against the second-order model's 0.52 /
-# 1.85 / 0.40, its noise-free fit 0.0042 against 0.286 urad RMS (docs/model.md, "Session 20").
-# diagnose and compensate keep "second-order" (their figures were measured with it: their modules).
-DEFAULT_MODEL = "consistent"
+# The calibration model of every calibration command (docs/cli.md "Which model calibrates"):
+# "second-order". Session 20 made it "consistent" (issue 24) and took that back at its end,
+# measured: on the merged FEM truth (8 cells per fillet arc) the README's noise-free main job
+# with the consistent model, fitted from the prior mean, ended in a worse minimum (fit 0.0064
+# urad RMS, D3.x0 2.33 um off, base z RMS 72.9 with one combination at -300), while the same fit
+# started at the second-order estimate reached 0.0016 urad, x0 <= 0.63 um, z 7.2 (docs/model.md
+# "Session 20"). The default waits for a start that finds that minimum by itself.
+DEFAULT_MODEL = "second-order"
 # --model consistent's FEM factors as functions of the chain dimensions: "linear" (the slopes) or
 # "quadratic" (docs/model.md, "Session 18"); flipping it is this one line. The default applies
 # where it can (consistent with FEM chains); elsewhere the run's model has no such terms
