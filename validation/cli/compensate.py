@@ -13,8 +13,8 @@ theta_x_urad, theta_y_urad, theta_z_urad relative to the zero posture,
 Writes DIR/report.json, report.md, inputs.csv (targets and inputs), targets.csv,
 fit.png (Fig. 12), and with a prototype first_round.png (Fig. 14), iterated.png (Fig. 15).
 
-The model is ``--model second-order`` by default, not the consistent model of ``verify``: Tables
-2-3 were measured with it (``COMPENSATION_MODEL``).
+The model is ``--model second-order`` by default (``COMPENSATION_MODEL``, pinned whatever the
+calibration default becomes): Tables 2-3 were measured with it.
 """
 
 from __future__ import annotations
