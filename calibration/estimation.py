@@ -136,18 +136,28 @@ class Estimate:
 
 def posterior(J: np.ndarray, noise: float, prior: Prior) -> tuple[np.ndarray, float, np.ndarray]:
     """(Sigma (d, d) [unit box^2], p_eff, std (d,) [unit box]) of the linearized MAP, from one
-    eigendecomposition of the information matrix. J (m, d) the data Jacobian [residual units
-    per unit box], noise sigma [residual units]. Sigma = (J^T J/sigma^2 + diag(prior
-    precision))^+, a pseudo-inverse: finite, and right for every combination the data or the
-    prior see (a base parameter's variance is c^T Sigma c); std = sqrt(diag Sigma), inf for a
-    source that takes part in a direction neither the data nor a prior sees (free least squares
-    on a rank-deficient problem); p_eff = trace(J Sigma J^T)/sigma^2."""
+    thin SVD of the whitened Jacobian stacked on the prior's square-root precision. J (m, d) the
+    data Jacobian [residual units per unit box], noise sigma [residual units]. Sigma =
+    (J^T J/sigma^2 + diag(prior precision))^+, a pseudo-inverse: finite, and right for every
+    combination the data or the prior see (a base parameter's variance is c^T Sigma c); std =
+    sqrt(diag Sigma), inf for a source that takes part in a direction neither the data nor a
+    prior sees (free least squares on a rank-deficient problem); p_eff = trace(J Sigma
+    J^T)/sigma^2.
+
+    The SVD of the stacked matrix, not an eigendecomposition of the normal equations: the
+    latter resolves an eigenvalue only to ~1e-16 of the largest, and a noise-free fit (its
+    noise the model's, 0.003 urad on the consistent model's main job) puts the data's
+    eigenvalues ~1e13 above the prior's, so a floor there declared prior-held directions
+    unseen and their sources' bars infinite (session 21, docs/calibration.md 8)."""
     W = J / noise
-    eigenvalues, vectors = np.linalg.eigh(W.T @ W + np.diag(prior.precision))
-    floor = max(eigenvalues.max(initial=0.0), 1e-300) * 1e-12  # below this a direction is numerically unseen
-    seen = eigenvalues > floor
-    sigma = (vectors[:, seen] / eigenvalues[seen]) @ vectors[:, seen].T
-    p_eff = float(np.sum(np.sum((W @ vectors[:, seen]) ** 2, axis=0) / eigenvalues[seen]))
+    stacked = np.vstack([W, np.diag(np.sqrt(prior.precision))])
+    _, singular, vt = np.linalg.svd(stacked, full_matrices=False)
+    vectors = vt.T
+    # below this a direction is numerically unseen: the SVD's round-off is ~1e-16 of the largest
+    floor = max(singular.max(initial=0.0), 1e-300) * 1e-12
+    seen = singular > floor
+    sigma = (vectors[:, seen] / singular[seen] ** 2) @ vectors[:, seen].T
+    p_eff = float(np.sum(np.sum((W @ vectors[:, seen]) ** 2, axis=0) / singular[seen] ** 2))
     unbounded = np.any(vectors[:, ~seen] ** 2 > 1e-12, axis=1)
     std = np.where(unbounded, np.inf, np.sqrt(np.maximum(np.diag(sigma), 0.0)))
     return sigma, p_eff, std

@@ -17,6 +17,7 @@ reports' business.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from typing import Callable
@@ -33,6 +34,7 @@ from flexcal.calibration.problem import CalibrationProblem
 from flexcal.calibration.profile_bars import with_profile_bars
 from flexcal.calibration.pso import identify
 from flexcal.calibration.pso_settings import PSOResult, PSOSettings
+from flexcal.calibration.staged_start import is_consistent, second_order_form
 from flexcal.model.parameters import ParameterSpace
 from flexcal.model.trajectory import WORKSPACE, travel_directions
 
@@ -53,7 +55,8 @@ class IdentificationSettings:
     (``base_parameters``); n_folds: held-out blocks when the trajectory has fewer than 3 legs;
     profile: widen the bars of the base combinations not identified alone by their profile
     likelihood (``calibration.profile_bars``); start: values (45,) [SI] every fit starts from
-    (cross-validation folds included; None: the prior mean)."""
+    (cross-validation folds included; None: the prior mean, or for a consistent space with
+    ``staged`` the second-order model's estimate on the same data, ``calibration.staged_start``)."""
 
     method: str = "map"
     prior_scale: float | None = None
@@ -63,6 +66,7 @@ class IdentificationSettings:
     n_folds: int = 5
     profile: bool = False
     start: np.ndarray | None = None
+    staged: bool = True
 
     def __post_init__(self) -> None:
         if self.method not in ("map", "free"):
@@ -132,8 +136,15 @@ def identify_all(space: ParameterSpace, inputs: np.ndarray, angles: np.ndarray, 
     # where every fit starts: the prior mean, or given values (e.g. an earlier measurement's
     # estimate: on a designed trajectory's large strokes the prior mean's basin can be a local
     # minimum, docs/calibration.md 11)
-    x0 = None if settings.start is None else np.clip(
-        space.to_unit(np.asarray(settings.start, float)[space.active_indices]), 0.0, 1.0)
+    start = settings.start
+    if start is None and settings.staged and is_consistent(space):
+        # a consistent model's basin is found from the second-order model's estimate
+        # (calibration.staged_start)
+        first = identify_all(second_order_form(space), inputs, angles, leg,
+                             dataclasses.replace(settings, profile=False, staged=False))
+        start = first.values
+        log(f"start: the second-order model's estimate (fit {first.estimate.rms * 1e6:.3g} urad RMS)")
+    x0 = None if start is None else np.clip(space.to_unit(np.asarray(start, float)[space.active_indices]), 0.0, 1.0)
     cv = None
     if settings.method == "free":
         scale = math.inf
