@@ -111,6 +111,18 @@ def test_profile_bars_follow_the_declared_sensor_noise_unless_given():
     assert profile_option(args(method="paper"), noisy) is False
 
 
+def test_the_sidecars_stated_noise_is_read_in_one_place():
+    """``sidecar.stated_sensor_noise_urad``: the per-channel noise a sidecar states, None when it
+    states none (the profile bars' default, the compensation bench and the form floor each say
+    what that means)."""
+    from flexcal.validation.sidecar import stated_sensor_noise_urad
+
+    for metadata in ({}, {"sensors": None}, {"sensors": {}}, {"sensors": {"offset_urad": [1.0, 0.0, 0.0]}}):
+        assert stated_sensor_noise_urad(metadata) is None
+    stated = stated_sensor_noise_urad({"sensors": {"noise_urad": [0.0, 0.5, 0.25]}})
+    assert stated.tolist() == [0.0, 0.5, 0.25]
+
+
 def test_verify_profiles_a_noisy_scenario_by_default(tmp_path, monkeypatch):
     """The command line reaches run_verify with the profile on for a scenario with --noise-urad,
     off without it, and off with --no-profile-bars (the settings seen by a stub run_verify)."""

@@ -20,11 +20,12 @@ from pathlib import Path
 from typing import Annotated, Any
 
 import msgspec
+import numpy as np
 
 from flexcal.geometry.mount import MountFile
 from flexcal.geometry.schema import FINITE, load_json
 
-__all__ = ["Sidecar", "MechanismOverrides", "PresetError", "read_sidecar"]
+__all__ = ["Sidecar", "MechanismOverrides", "PresetError", "read_sidecar", "stated_sensor_noise_urad"]
 
 _STRICT = {"frozen": True, "forbid_unknown_fields": True, "kw_only": True}
 # Within +-2 m of O_C: the metre-scale mount's frame (paper: a 1400 mm grating); a centre of
@@ -104,3 +105,13 @@ def read_sidecar(path: str | os.PathLike, *, n_rows: int | None = None) -> dict[
                          f"{path.with_suffix('.csv').name} has {n_rows} data rows; the sidecar belongs to another "
                          f"measurement (fix or remove it)")
     return raw
+
+
+def stated_sensor_noise_urad(metadata: dict[str, Any]) -> np.ndarray | None:
+    """(3,) the sensor noise [urad] per channel a measurement's sidecar states
+    (``sensors.noise_urad``, as ``read_sidecar`` decoded it), or None when it states none (no
+    sidecar, no ``sensors`` entry or no noise in it). Each reader says what "none" means for
+    it: a bench that simulates the sensors adds no noise, the model-form floor calls the
+    noise unknown, the profile bars' default is off (``cli.options.declared_noise_urad``)."""
+    stated = (metadata.get("sensors") or {}).get("noise_urad")
+    return None if stated is None else np.asarray(stated, dtype=float)

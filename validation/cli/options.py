@@ -342,8 +342,10 @@ def declared_noise_urad(args: argparse.Namespace, metadata: dict) -> float:
     measurement sidecar's ``sensors.noise_urad`` (0 when neither states one)."""
     if getattr(args, "noise_urad", None) is not None:
         return float(args.noise_urad)
-    stated = (metadata.get("sensors") or {}).get("noise_urad") or [0.0]
-    return max(float(value) for value in stated)
+    from ..sidecar import stated_sensor_noise_urad
+
+    stated = stated_sensor_noise_urad(metadata)
+    return 0.0 if stated is None else float(stated.max())
 
 
 def profile_option(args: argparse.Namespace, metadata: dict) -> bool:

@@ -32,6 +32,7 @@ from flexcal.calibration.compensation import LoopResult, LoopSettings, iterate
 from flexcal.model.parameters import ParameterSpace
 
 from ..measurements import Measurement
+from ..sidecar import stated_sensor_noise_urad
 from .verify import VerifyResult, VerifySettings, run_verify
 
 __all__ = ["Bench", "DriveRecord", "CompensationSettings", "CompensationResult", "approach_sequence",
@@ -163,15 +164,17 @@ def bench_from_metadata(metadata: dict, space: ParameterSpace, *, n_readings: in
                                 _provider_from_description(str(metadata["provider"]), progress, workers, scheduler),
                                 mount_offsets=offsets)
     sensors = metadata.get("sensors", {})
+    stated = stated_sensor_noise_urad(metadata)
+    noise_urad = np.zeros(3) if stated is None else stated  # no noise stated: the bench adds none
     entries = list(metadata.get("effects", []))
     return Bench(prototype=prototype, effects=bench_effects(entries),
-                 noise=np.asarray(sensors.get("noise_urad", [0.0] * 3), dtype=float) * 1e-6,
+                 noise=noise_urad * 1e-6,
                  offset=np.asarray(sensors.get("offset_urad", [0.0] * 3), dtype=float) * 1e-6,
                  dwell=dwell, n_readings=n_readings, seed=int(metadata.get("seed", 0) if seed is None else seed),
                  start_time=end_time + dwell,
                  description={"scenario": metadata.get("scenario"), "seed": metadata.get("seed"),
                               "provider": metadata["provider"], "effects": entries,
-                              "noise_urad_per_sample": (np.asarray(sensors.get("noise_urad", [0.0] * 3))).tolist(),
+                              "noise_urad_per_sample": noise_urad.tolist(),
                               "n_readings": n_readings, "dwell_s": dwell})
 
 

@@ -40,6 +40,7 @@ import numpy as np
 from flexcal.model.parameters import ParameterSpace
 
 from ..measurements import Measurement
+from ..sidecar import stated_sensor_noise_urad
 
 __all__ = ["TruthCurve", "truth_from_run", "truth_from_measurement", "paper_model_space", "model_name",
            "model_description",
@@ -84,7 +85,8 @@ def truth_from_measurement(measurement: Measurement, space: ParameterSpace) -> T
     values = space.build_values({e["name"]: e["value"] for e in presets}, display_units=True)
     sensors = measurement.metadata.get("sensors") or {}
     offset = np.asarray(sensors.get("offset_urad", [0.0] * 3), dtype=float) * 1e-6
-    noise = np.asarray(sensors.get("noise_urad", [np.nan] * 3), dtype=float)
+    stated = stated_sensor_noise_urad(measurement.metadata)
+    noise = np.full(3, np.nan) if stated is None else stated
     if np.all(noise == 0.0):
         what = "noise-free (the sidecar states sensor noise 0)"
     elif np.all(np.isfinite(noise)):
