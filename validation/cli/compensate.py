@@ -40,7 +40,7 @@ EXAMPLES = (
 # 9 Table 1 sources that the 0.01 screening keeps (verify's default), at ~10x the identification time.
 # method "paper": the identification measured for docs/compensation.md; "map" (verify's default)
 # is available with --method map (its compensation figures are not yet measured on the FEM run).
-# model "second-order" whatever the calibration default (cli.options.DEFAULT_MODEL) becomes: Tables
+# model "second-order", not the calibration default (the consistent model since session 20): Tables
 # 2-3 of docs/compensation.md were measured with it; the consistent model's compensation is
 # measured on the analytic prototype only (tests/test_compensate_consistent.py, slow), and this
 # identification (Sobol over all 45 sources, then the PSO) costs ~5-10x per model evaluation with it

@@ -14,8 +14,9 @@ postures are measured in no other leg (one pass of a designed trajectory), the h
 scores extrapolate the baseline: the command warns and the report says how many
 (``heldout.share_not_repeated``); measure the trajectory twice (docs/diagnosis.md).
 
-The baseline model is ``--model second-order`` by default (``DIAGNOSIS_MODEL``): the diagnosis's
-benchmark figures and nulls were measured with that baseline.
+The baseline model is ``--model second-order`` by default, not the consistent model the other
+calibration commands default to: the diagnosis's benchmark figures and nulls were measured with
+that baseline (``DIAGNOSIS_MODEL``).
 """
 
 from __future__ import annotations
@@ -30,8 +31,8 @@ from .options import MODEL_DEFAULTS
 __all__ = ["configure", "run", "EXAMPLES", "DEFAULT_CONFIG"]
 
 _BASELINE = BaselineSettings()
-# The baseline calibration stays on --model second-order whatever the calibration commands'
-# default (cli.options.DEFAULT_MODEL) becomes: every figure of docs/diagnosis.md (detection rates,
+# The baseline calibration stays on --model second-order, not the calibration commands' default
+# (the consistent model since session 20): every figure of docs/diagnosis.md (detection rates,
 # false alarms, the trajectories' nulls) was measured with that baseline, diagnose-benchmark builds
 # it (cli.diagnose_benchmark), and a --null JSON holds the gains of that baseline's terms. Another
 # baseline would need those measured again; --model consistent selects it

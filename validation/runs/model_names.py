@@ -7,8 +7,8 @@ from ``model_correction`` so that the command line reads them without importing 
   command before session 20);
 - "consistent": compliance factors following the dimensions, the chains' measured shortening
   solved inside the fixed point with the clearance, the clearance's play state
-  (docs/model.md 9-10; selected by name: ``cli.options.DEFAULT_MODEL`` is second-order, docs/model.md
-  "Session 20").
+  (docs/model.md 9-10; the default of ``verify``, ``identify``, ``sensitivity`` and ``design``
+  since session 20, ``cli.options.DEFAULT_MODEL``).
 """
 
 __all__ = ["MODELS", "DEFAULT_BREAKAWAY_N"]
