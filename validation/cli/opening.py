@@ -97,7 +97,7 @@ def check_model_options(args: argparse.Namespace) -> None:
         raise ValueError(f"--breakaway-force sets the consistent model's play state; add --model consistent "
                          f"(this run's model is {model})")
     if model == "consistent" and getattr(args, "second_order", True) is False:
-        raise ValueError("the consistent model (the calibration default since session 20) is second-order by "
+        raise ValueError("the consistent model (the calibration default) is second-order by "
                          "construction: drop --no-second-order, or use --model second-order --no-second-order")
     dimension_terms(args)
 
