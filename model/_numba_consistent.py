@@ -180,35 +180,35 @@ def _terms(cand, x, c, command, x0, axial, pack, point_b, defect_index, defect, 
         n[j] = tension
         # the chain's energy gradient beyond the linear part and the P-delta 2 N S D: K m +
         # sum_c (K e)_c dm_c/dD, e = D - u e_x + m the chain end's strain (model/consistent.py)
-        g0 = k0 + load * (q * p[K_ROW0, 0])
-        g1 = k1 + load * (q * p[K_ROW0, 1] + load * tq1)
-        g2 = k2 + load * (q * p[K_ROW0, 2] + load * tq2)
-        g3 = k3 + load * (q * p[K_ROW0, 3] + load * tq3)
-        g4 = k4 + load * (q * p[K_ROW0, 4] + load * tq4)
-        g5 = k5 + load * (q * p[K_ROW0, 5] + load * tq5)
+        gr0 = k0 + load * (q * p[K_ROW0, 0])
+        gr1 = k1 + load * (q * p[K_ROW0, 1] + load * tq1)
+        gr2 = k2 + load * (q * p[K_ROW0, 2] + load * tq2)
+        gr3 = k3 + load * (q * p[K_ROW0, 3] + load * tq3)
+        gr4 = k4 + load * (q * p[K_ROW0, 4] + load * tq4)
+        gr5 = k5 + load * (q * p[K_ROW0, 5] + load * tq5)
         if symmetric:  # sum_c f_c dm_c/dD: each term q d_a d_b gives f_c q d_b to a and f_c q d_a to b
-            g1 += f2 * q2 * d3 + f3 * q4 * d2 + f3 * q5 * d4 + f4 * q8 * d3
-            g2 += f1 * q0 * d3 + f3 * q4 * d1 + f3 * q6 * d5 + f5 * q10 * d3
-            g3 += (f1 * q0 * d2 + f1 * q1 * d4 + f2 * q2 * d1 + f2 * q3 * d5 + f4 * q8 * d1 + f4 * q9 * d5
-                   + f5 * q10 * d2 + f5 * q11 * d4)
-            g4 += f1 * q1 * d3 + f3 * q5 * d1 + f3 * q7 * d5 + f5 * q11 * d3
-            g5 += f2 * q3 * d3 + f3 * q6 * d2 + f3 * q7 * d4 + f4 * q9 * d3
+            gr1 += f2 * q2 * d3 + f3 * q4 * d2 + f3 * q5 * d4 + f4 * q8 * d3
+            gr2 += f1 * q0 * d3 + f3 * q4 * d1 + f3 * q6 * d5 + f5 * q10 * d3
+            gr3 += (f1 * q0 * d2 + f1 * q1 * d4 + f2 * q2 * d1 + f2 * q3 * d5 + f4 * q8 * d1 + f4 * q9 * d5
+                    + f5 * q10 * d2 + f5 * q11 * d4)
+            gr4 += f1 * q1 * d3 + f3 * q5 * d1 + f3 * q7 * d5 + f5 * q11 * d3
+            gr5 += f2 * q3 * d3 + f3 * q6 * d2 + f3 * q7 * d4 + f4 * q9 * d3
         else:
-            grad[0], grad[1], grad[2], grad[3], grad[4], grad[5] = g0, g1, g2, g3, g4, g5
+            grad[0], grad[1], grad[2], grad[3], grad[4], grad[5] = gr0, gr1, gr2, gr3, gr4, gr5
             ml[1], ml[2], ml[3], ml[4], ml[5] = f1, f2, f3, f4, f5
             for t in range(defect_index.shape[0]):
                 ia, ib = defect_index[t, 1], defect_index[t, 2]
                 w = ml[defect_index[t, 0]] * defect[cand, j, t]
                 grad[ia] += w * d[ib]
                 grad[ib] += w * d[ia]
-            g0, g1, g2, g3, g4, g5 = grad[0], grad[1], grad[2], grad[3], grad[4], grad[5]
+            gr0, gr1, gr2, gr3, gr4, gr5 = grad[0], grad[1], grad[2], grad[3], grad[4], grad[5]
         two_t = 2.0 * tension
-        v0 = two_t * s0 + g0
-        v1 = two_t * s1 + g1
-        v2 = two_t * s2 + g2
-        v3 = two_t * s3 + g3
-        v4 = two_t * s4 + g4
-        v5 = two_t * s5 + g5
+        v0 = two_t * s0 + gr0
+        v1 = two_t * s1 + gr1
+        v2 = two_t * s2 + gr2
+        v3 = two_t * s3 + gr3
+        v4 = two_t * s4 + gr4
+        v5 = two_t * s5 + gr5
         force[0] += _dot6(p, J_ROW, 0, v0, v1, v2, v3, v4, v5) + _dot3(p, W_COL, 0, e0, e1, e2)
         force[1] += _dot6(p, J_ROW, 1, v0, v1, v2, v3, v4, v5) + _dot3(p, W_COL, 1, e0, e1, e2)
         force[2] += _dot6(p, J_ROW, 2, v0, v1, v2, v3, v4, v5) + _dot3(p, W_COL, 2, e0, e1, e2)
