@@ -37,6 +37,13 @@ PROBE_TOL = 1e-14  # [m, rad] a probe's pose: its rate error ~ 1e-12 / TANGENT_S
 # ones, at the tight tolerances, end it (session 16: 16.8 -> 15.0 evaluations per posture)
 LOOSE_TOL = 1e-9
 MIN_STIFFNESS = 0.2  # a measured nut stiffness below this share of the linear one is not trusted (linear used)
+# the lateral defect's terms (c, a, b) of chains symmetric about their axis (``consistent.defect_terms``
+# lays their coefficients out in this order when a call's chains have no others): the torsion's
+# couplings and (dy, ry), (dz, rz), (ry, rz) in the torsion's own defect; (3, 1, 2) is a rounding-level
+# entry (<= 4e-13). ``_terms`` writes them out as products of locals (session 21): the general loop
+# over an index, kept for other chains, was ~1/4 of the kernel's time
+SYMMETRIC_DEFECT = np.array([[1, 2, 3], [1, 3, 4], [2, 1, 3], [2, 3, 5], [3, 1, 2], [3, 1, 4], [3, 2, 5], [3, 4, 5],
+                             [4, 1, 3], [4, 3, 5], [5, 2, 3], [5, 3, 4]], dtype=np.int64)
 
 
 # pack rows (``consistent.pack_chains``): per candidate and chain one (N_PACK, WIDTH) block of
@@ -80,11 +87,13 @@ def _dot6(p, row, col, a0, a1, a2, a3, a4, a5):
 # inlined into ``_equilibrium`` (session 19): as a call, its 18 array arguments were passed and
 # reference-counted at every evaluation, ~1/3 of the kernel's time on the random candidates
 @njit(cache=True, nogil=True, fastmath=_FAST, inline="always")
-def _terms(cand, x, c, command, x0, axial, pack, point_b, defect_index, defect, weight, r, u, n, force, d, ml, grad):
+def _terms(cand, x, c, command, x0, axial, pack, point_b, defect_index, defect, symmetric, weight, r, u, n, force, d,
+           ml, grad):
     """At pose x (6,) and offsets c (3,): shortening r, axial inputs u, loads n (6,) and the
     second-order wrench ``force`` (P-delta 2 N J^T S D, the lateral defect's forces, the rigid
     term and the turning lever arms of the chain forces), all in place; force and the scratch
-    vectors d, ml, grad are (WIDTH,) (entries 6, 7 unused)."""
+    vectors d, ml, grad are (WIDTH,) (entries 6, 7 unused). ``symmetric``: the defect's terms are
+    ``SYMMETRIC_DEFECT``'s, written out (otherwise the loop over ``defect_index``; the same sums)."""
     t0, t1, t2 = x[3], x[4], x[5]
     xs0, xs1, xs2, xs3, xs4, xs5 = x[0], x[1], x[2], x[3], x[4], x[5]
     tt = t0 * t0 + t1 * t1 + t2 * t2
@@ -128,11 +137,21 @@ def _terms(cand, x, c, command, x0, axial, pack, point_b, defect_index, defect, 
         u_j = r[j] + ((command[j - 3] + x0[cand, j - 3] + c[j - 3]) if j >= 3 else 0.0)
         u[j] = u_j
         # the lateral compatibility defect m_c = sum_t q_t d_a d_b (c = y..rz) and K m
-        d[0], d[1], d[2], d[3], d[4], d[5] = d0, d1, d2, d3, d4, d5
-        ml[0], ml[1], ml[2], ml[3], ml[4], ml[5] = 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
-        for t in range(defect_index.shape[0]):
-            ml[defect_index[t, 0]] += defect[cand, j, t] * d[defect_index[t, 1]] * d[defect_index[t, 2]]
-        m1, m2, m3, m4, m5 = ml[1], ml[2], ml[3], ml[4], ml[5]
+        if symmetric:  # SYMMETRIC_DEFECT's terms in its order, q0..q11
+            q0, q1, q2, q3 = defect[cand, j, 0], defect[cand, j, 1], defect[cand, j, 2], defect[cand, j, 3]
+            q4, q5, q6, q7 = defect[cand, j, 4], defect[cand, j, 5], defect[cand, j, 6], defect[cand, j, 7]
+            q8, q9, q10, q11 = defect[cand, j, 8], defect[cand, j, 9], defect[cand, j, 10], defect[cand, j, 11]
+            m1 = q0 * d2 * d3 + q1 * d3 * d4
+            m2 = q2 * d1 * d3 + q3 * d3 * d5
+            m3 = q4 * d1 * d2 + q5 * d1 * d4 + q6 * d2 * d5 + q7 * d4 * d5
+            m4 = q8 * d1 * d3 + q9 * d3 * d5
+            m5 = q10 * d2 * d3 + q11 * d3 * d4
+        else:
+            d[0], d[1], d[2], d[3], d[4], d[5] = d0, d1, d2, d3, d4, d5
+            ml[0], ml[1], ml[2], ml[3], ml[4], ml[5] = 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+            for t in range(defect_index.shape[0]):
+                ml[defect_index[t, 0]] += defect[cand, j, t] * d[defect_index[t, 1]] * d[defect_index[t, 2]]
+            m1, m2, m3, m4, m5 = ml[1], ml[2], ml[3], ml[4], ml[5]
         # K m, and the lateral chain force (K e)_c = K m - K[:, 0] u + K D (c = y..rz)
         k0 = _dot5(p, K_COL + 1, 0, m1, m2, m3, m4, m5)
         k1 = _dot5(p, K_COL + 1, 1, m1, m2, m3, m4, m5)
@@ -161,25 +180,35 @@ def _terms(cand, x, c, command, x0, axial, pack, point_b, defect_index, defect, 
         n[j] = tension
         # the chain's energy gradient beyond the linear part and the P-delta 2 N S D: K m +
         # sum_c (K e)_c dm_c/dD, e = D - u e_x + m the chain end's strain (model/consistent.py)
-        grad[0] = k0 + load * (q * p[K_ROW0, 0])
-        grad[1] = k1 + load * (q * p[K_ROW0, 1] + load * tq1)
-        grad[2] = k2 + load * (q * p[K_ROW0, 2] + load * tq2)
-        grad[3] = k3 + load * (q * p[K_ROW0, 3] + load * tq3)
-        grad[4] = k4 + load * (q * p[K_ROW0, 4] + load * tq4)
-        grad[5] = k5 + load * (q * p[K_ROW0, 5] + load * tq5)
-        ml[1], ml[2], ml[3], ml[4], ml[5] = f1, f2, f3, f4, f5
-        for t in range(defect_index.shape[0]):
-            ia, ib = defect_index[t, 1], defect_index[t, 2]
-            w = ml[defect_index[t, 0]] * defect[cand, j, t]
-            grad[ia] += w * d[ib]
-            grad[ib] += w * d[ia]
+        gr0 = k0 + load * (q * p[K_ROW0, 0])
+        gr1 = k1 + load * (q * p[K_ROW0, 1] + load * tq1)
+        gr2 = k2 + load * (q * p[K_ROW0, 2] + load * tq2)
+        gr3 = k3 + load * (q * p[K_ROW0, 3] + load * tq3)
+        gr4 = k4 + load * (q * p[K_ROW0, 4] + load * tq4)
+        gr5 = k5 + load * (q * p[K_ROW0, 5] + load * tq5)
+        if symmetric:  # sum_c f_c dm_c/dD: each term q d_a d_b gives f_c q d_b to a and f_c q d_a to b
+            gr1 += f2 * q2 * d3 + f3 * q4 * d2 + f3 * q5 * d4 + f4 * q8 * d3
+            gr2 += f1 * q0 * d3 + f3 * q4 * d1 + f3 * q6 * d5 + f5 * q10 * d3
+            gr3 += (f1 * q0 * d2 + f1 * q1 * d4 + f2 * q2 * d1 + f2 * q3 * d5 + f4 * q8 * d1 + f4 * q9 * d5
+                    + f5 * q10 * d2 + f5 * q11 * d4)
+            gr4 += f1 * q1 * d3 + f3 * q5 * d1 + f3 * q7 * d5 + f5 * q11 * d3
+            gr5 += f2 * q3 * d3 + f3 * q6 * d2 + f3 * q7 * d4 + f4 * q9 * d3
+        else:
+            grad[0], grad[1], grad[2], grad[3], grad[4], grad[5] = gr0, gr1, gr2, gr3, gr4, gr5
+            ml[1], ml[2], ml[3], ml[4], ml[5] = f1, f2, f3, f4, f5
+            for t in range(defect_index.shape[0]):
+                ia, ib = defect_index[t, 1], defect_index[t, 2]
+                w = ml[defect_index[t, 0]] * defect[cand, j, t]
+                grad[ia] += w * d[ib]
+                grad[ib] += w * d[ia]
+            gr0, gr1, gr2, gr3, gr4, gr5 = grad[0], grad[1], grad[2], grad[3], grad[4], grad[5]
         two_t = 2.0 * tension
-        v0 = two_t * s0 + grad[0]
-        v1 = two_t * s1 + grad[1]
-        v2 = two_t * s2 + grad[2]
-        v3 = two_t * s3 + grad[3]
-        v4 = two_t * s4 + grad[4]
-        v5 = two_t * s5 + grad[5]
+        v0 = two_t * s0 + gr0
+        v1 = two_t * s1 + gr1
+        v2 = two_t * s2 + gr2
+        v3 = two_t * s3 + gr3
+        v4 = two_t * s4 + gr4
+        v5 = two_t * s5 + gr5
         force[0] += _dot6(p, J_ROW, 0, v0, v1, v2, v3, v4, v5) + _dot3(p, W_COL, 0, e0, e1, e2)
         force[1] += _dot6(p, J_ROW, 1, v0, v1, v2, v3, v4, v5) + _dot3(p, W_COL, 1, e0, e1, e2)
         force[2] += _dot6(p, J_ROW, 2, v0, v1, v2, v3, v4, v5) + _dot3(p, W_COL, 2, e0, e1, e2)
@@ -188,8 +217,6 @@ def _terms(cand, x, c, command, x0, axial, pack, point_b, defect_index, defect, 
         force[5] += _dot6(p, J_ROW, 5, v0, v1, v2, v3, v4, v5) + _dot3(p, W_COL, 5, e0, e1, e2)
         # the chain force F (tension n_j along the axis, lateral K e) works through the second-order
         # displacement of B: d ext / d theta^T F = 1/2 (p (theta.F) + (theta.p) F - 2 theta (p.F))
-        f1 = ml[1]
-        f2 = ml[2]
         g0 = p[R_ROW, 0] * tension + p[R_ROW, 1] * f1 + p[R_ROW, 2] * f2
         g1 = p[R_ROW + 1, 0] * tension + p[R_ROW + 1, 1] * f1 + p[R_ROW + 1, 2] * f2
         g2 = p[R_ROW + 2, 0] * tension + p[R_ROW + 2, 1] * f1 + p[R_ROW + 2, 2] * f2
@@ -201,8 +228,8 @@ def _terms(cand, x, c, command, x0, axial, pack, point_b, defect_index, defect, 
 
 
 @njit(cache=True, nogil=True, fastmath=_FAST)
-def _equilibrium(cand, x, c, command, compliance, wrench, x0, gain, axial, pack, point_b, defect_index, defect, weight,
-                 tol, max_iter, divergence, settle, r, u, n, force, d, ml, grad, work, secant):
+def _equilibrium(cand, x, c, command, compliance, wrench, x0, gain, axial, pack, point_b, defect_index, defect,
+                 symmetric, weight, tol, max_iter, divergence, settle, r, u, n, force, d, ml, grad, work, secant):
     """Solve the pose x in place to ``tol`` at fixed offsets c: the fixed point ``x = Phi(x)``
     (module docstring), converged when ``|Phi(x) - x| <= tol``; x is then the last point evaluated
     (within ``tol / (1 - rho)`` of the fixed point, rho <= 0.1 the map's contraction) and r, u, n,
@@ -218,7 +245,8 @@ def _equilibrium(cand, x, c, command, compliance, wrench, x0, gain, axial, pack,
     x_new, f_prev, s_prev, b_y, s_b, rhs = work[0], work[1], work[2], work[3], work[4], work[5]
     previous = np.inf
     for it in range(max_iter):
-        _terms(cand, x, c, command, x0, axial, pack, point_b, defect_index, defect, weight, r, u, n, force, d, ml, grad)
+        _terms(cand, x, c, command, x0, axial, pack, point_b, defect_index, defect, symmetric, weight, r, u, n, force,
+               d, ml, grad)
         for m in range(6):  # F_C + sum_j g_j u_j - f2(x)
             acc = wrench[cand, m] - force[m]
             for j in range(6):
@@ -242,8 +270,8 @@ def _equilibrium(cand, x, c, command, compliance, wrench, x0, gain, axial, pack,
             if settle:  # x moved to Phi(x), ~rho tol from the fixed point, and its terms
                 for k in range(6):
                     x[k] = x_new[k]
-                _terms(cand, x, c, command, x0, axial, pack, point_b, defect_index, defect, weight, r, u, n, force,
-                       d, ml, grad)
+                _terms(cand, x, c, command, x0, axial, pack, point_b, defect_index, defect, symmetric, weight, r, u, n,
+                       force, d, ml, grad)
             return OK, it + 1
         # residual f = Phi(x) - x, kept in x_new
         for k in range(6):
@@ -285,8 +313,8 @@ def _equilibrium(cand, x, c, command, compliance, wrench, x0, gain, axial, pack,
 
 
 @njit(cache=True, nogil=True, parallel=True, fastmath=_FAST)
-def solve(compliance, wrench, gain, axial, pack, point_b, defect_index, defect, weight, coupling, mu, limit, x0, nut,
-          band, play, inputs, revisit, clearance, tol, max_iter, divergence,
+def solve(compliance, wrench, gain, axial, pack, point_b, defect_index, defect, symmetric, weight, coupling, mu, limit,
+          x0, nut, band, play, inputs, revisit, clearance, tol, max_iter, divergence,
           faces, state_tol, input_gain, reuse_rates,
           pose_out, load_out, c_out, release_out, r_out, state_out, class_out, code_out, iter_out):
     """All candidates (in parallel) at all points (in order). Each fixed point starts from the
@@ -423,8 +451,8 @@ def solve(compliance, wrench, gain, axial, pack, point_b, defect_index, defect, 
                     reuse[k] = (reuse_rates and loose and p > 0 and rate_point[k] == p - 1
                                 and mu[cand, k] > 0 and c[k] > state_tol)
                 code, its = _equilibrium(cand, x, c, command, compliance, wrench, x0, gain, axial, pack, point_b,
-                                         defect_index, defect, weight, LOOSE_TOL if loose else inner_tol, max_iter,
-                                         divergence, probed and not loose, r, u, n, force, d, ml, grad, work,
+                                         defect_index, defect, symmetric, weight, LOOSE_TOL if loose else inner_tol,
+                                         max_iter, divergence, probed and not loose, r, u, n, force, d, ml, grad, work,
                                          secant)
                 iterations += its
                 if code != OK or not use_clearance:
@@ -443,7 +471,7 @@ def solve(compliance, wrench, gain, axial, pack, point_b, defect_index, defect, 
                             c_probe[i] = c[i]
                         c_probe[k] += TANGENT_STEP
                         code, its = _equilibrium(cand, x_probe, c_probe, command, compliance, wrench, x0, gain,
-                                                 axial, pack, point_b, defect_index, defect, weight,
+                                                 axial, pack, point_b, defect_index, defect, symmetric, weight,
                                                  LOOSE_TOL if loose else PROBE_TOL,
                                                  max_iter, divergence, not loose, r, u, n_probe, force, d, ml,
                                                  grad, work, secant)
@@ -500,8 +528,8 @@ def solve(compliance, wrench, gain, axial, pack, point_b, defect_index, defect, 
                     break
                 if change <= tol:  # the offsets moved by <= tol: one more equilibrium settles the pose
                     code, its = _equilibrium(cand, x, c, command, compliance, wrench, x0, gain, axial, pack,
-                                             point_b, defect_index, defect, weight, inner_tol, max_iter, divergence,
-                                             False, r, u, n, force, d, ml, grad, work, secant)
+                                             point_b, defect_index, defect, symmetric, weight, inner_tol, max_iter,
+                                             divergence, False, r, u, n, force, d, ml, grad, work, secant)
                     iterations += its
                     break
                 code = NOT_CONVERGED

@@ -18,7 +18,7 @@ energy is ``U_j = 1/2 e_j^T K_j e_j + 1/2 N_j^2 D_j^T T_j D_j`` in the end strai
 
 with F_j = R_j (tension, (K_j e_j)_y, (K_j e_j)_z) the chain force and W the weight at r_cg. L_j
 (5 x 6 x 6, ``shortening.chain_second_order_forms``) is the lateral part of the chain's BCH
-defect (the torsion's couplings with the swing; 13 non-zero entries, passed to the kernel as
+defect (the torsion's couplings with the swing; 12 non-zero entries, passed to the kernel as
 sparse terms, ``defect_terms``); T_j (6 x 6) the chain's load form (its elements' P-delta
 under the axial load; ``shortening._load_form``). Both come from the candidate's own
 elements; neither has a measured correction.
@@ -78,13 +78,22 @@ def defect_terms(lateral: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The lateral defect forms L (n_c, 6, 5, 6, 6) as the kernel's sparse terms: index
     (n_t, 3) int64 rows (c, a, b), a <= b, c in 1..5 the defect's component, and coefficients
     (n_c, 6, n_t) q with ``m_c = sum q d_a d_b`` (off-diagonal pairs folded: q = 2 L[a, b]).
-    The terms are the union of the non-zero entries over all candidates and chains (13 of
-    the 105 for chains symmetric about their axis: the torsion's couplings, and (dy, ry),
-    (dz, rz), (ry, rz) in the torsion's own defect)."""
+    The terms are the union of the non-zero entries over all candidates and chains (12 of
+    the 105 for chains symmetric about their axis, one of them rounding-level: the torsion's
+    couplings, and (dy, ry), (dz, rz), (ry, rz) in the torsion's own defect); where that union
+    lies inside ``_numba_consistent.SYMMETRIC_DEFECT`` the index is that one, in its order (a
+    term no chain has gets zero coefficients), which the kernel writes out term by term."""
+    from ._numba_consistent import SYMMETRIC_DEFECT
+
     lateral = np.asarray(lateral, dtype=float)
     upper = np.triu(np.ones((6, 6), dtype=bool))
     used = np.any(lateral != 0.0, axis=(0, 1)) & upper  # (5, 6, 6)
-    c, a, b = np.nonzero(used)
+    symmetric = np.zeros_like(used)
+    symmetric[SYMMETRIC_DEFECT[:, 0] - 1, SYMMETRIC_DEFECT[:, 1], SYMMETRIC_DEFECT[:, 2]] = True
+    if not np.any(used & ~symmetric):
+        c, a, b = SYMMETRIC_DEFECT[:, 0] - 1, SYMMETRIC_DEFECT[:, 1], SYMMETRIC_DEFECT[:, 2]
+    else:
+        c, a, b = np.nonzero(used)
     index = np.stack([c + 1, a, b], axis=1).astype(np.int64)
     coefficients = lateral[:, :, c, a, b] * np.where(a == b, 1.0, 2.0)
     return index, np.ascontiguousarray(coefficients)
@@ -133,13 +142,16 @@ def revisits(inputs: np.ndarray) -> np.ndarray:
 
 def solve_points_consistent(matrices, inputs: np.ndarray, *, clearance: bool, tol: float, max_iter: int,
                             divergence: float, state_tolerance: float, n_threads: int = 1,
-                            revisit: bool = True, reuse_rates: bool = True) -> dict[str, np.ndarray]:
+                            revisit: bool = True, reuse_rates: bool = True,
+                            written_out: bool = True) -> dict[str, np.ndarray]:
     """Run the compiled consistent kernel; same outputs as ``kernel.solve_points_compiled``
     (force_only clearance; ``tol`` [m, rad] on the pose update per point). ``revisit=False``
     starts no point from an earlier one with the same command (``revisits``; for the tests);
     ``reuse_rates=False`` probes every nut off its flank at every Newton step on the offsets, a
     point's loose first one too, instead of taking the previous point's tight rates there (the
-    code before session 19; for the tests)."""
+    code before session 19; for the tests). ``written_out=False`` sums the lateral defect's terms
+    in the loop over their index even where they are ``SYMMETRIC_DEFECT``'s (the code before
+    session 21; for the tests)."""
     import numba
 
     from . import _numba_consistent
@@ -156,9 +168,11 @@ def solve_points_consistent(matrices, inputs: np.ndarray, *, clearance: bool, to
     compliance = np.linalg.inv(m.frame_stiffness)
     wrench = np.einsum("cab,cb->ca", m.frame_stiffness, m.gravity_pose)
     seen = revisits(inputs) if revisit else np.full(inputs.shape[0], -1, dtype=np.int64)
+    defect_index, defect = defect_terms(m.lateral_defect)
+    symmetric = written_out and np.array_equal(defect_index, _numba_consistent.SYMMETRIC_DEFECT)
     arguments = (
         c(compliance), c(wrench), c(m.axial_gain), c(m.axial_stiffness), pack_chains(m), c(m.point_b),
-        *defect_terms(m.lateral_defect), c(m.payload),
+        defect_index, defect, bool(symmetric), c(m.payload),
         c(m.coupling[:, DRIVING][:, :, DRIVING]), c(m.mu), c(m.clearance),
         c(m.initial_position), c(m.nut_stiffness), c(np.maximum(m.breakaway_band, 0.0)),
         bool(clearance and np.all(m.breakaway_band >= 0)), c(inputs, dtype=float), seen, bool(clearance), float(tol),
