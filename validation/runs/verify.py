@@ -43,6 +43,7 @@ from flexcal.calibration.problem import CalibrationProblem
 from flexcal.calibration.sensitivity import select_parameters, sobol_indices
 from flexcal.model.parameters import DRIVE_SOURCE_NAMES, ParameterSpace
 
+from ..blas_threads import single_blas_thread
 from ..progress import progress_bar, with_progress
 from ..measurements import Measurement
 from .form_floor import TruthCurve, model_form_floor, not_available
@@ -233,7 +234,11 @@ def _estimated_identification(measurement: Measurement, angles: np.ndarray, spac
         def model_error(values: np.ndarray) -> np.ndarray:
             made.append(budget(values))
             return made[-1].samples
-    with progress_bar(None, f"{settings.method} estimate", enabled=progress, unit="fit") as bar:
+    # the fits' dense algebra (46-column Jacobians, 231 x 231 discrepancy kernels) on one BLAS
+    # thread: on 2 cores the threaded BLAS made the README's warm main job 44 s against 30 s
+    # (session 21, docs/scale.md); the identified values the same to the bit, the bars to 1e-8
+    with single_blas_thread(), progress_bar(None, f"{settings.method} estimate", enabled=progress,
+                                            unit="fit") as bar:
         def plan(total: int) -> None:
             bar.total = total
         result = identify_all(space, measurement.inputs, angles, measurement.leg,
