@@ -29,6 +29,7 @@ from typing import Any, Callable
 import numpy as np
 
 from flexcal.calibration.compensation import LoopResult, LoopSettings, iterate
+from flexcal.calibration.staged_start import is_consistent
 from flexcal.model.parameters import ParameterSpace
 
 from ..measurements import Measurement
@@ -217,7 +218,7 @@ def drives_in_order(space: ParameterSpace) -> bool:
     (``breakaway_force``: each nut's offset is carried from posture to posture, so a target's
     angles depend on the postures driven before it) or the consistent model (its compiled solve
     has no closed-form input Jacobian, ``model.inverse.forward_jacobian``)."""
-    return space.breakaway_force is not None or bool(space.chain_shortening)
+    return space.breakaway_force is not None or is_consistent(space)
 
 
 # The input step of the ordered model's Jacobian by central differences [m]: ~1e-4 of the

@@ -37,6 +37,7 @@ from typing import Any
 
 import numpy as np
 
+from flexcal.calibration.staged_start import is_consistent
 from flexcal.model.parameters import ParameterSpace
 
 from ..measurements import Measurement
@@ -111,9 +112,9 @@ def model_name(space: ParameterSpace) -> str:
     measured shortening set) or "second-order" (anything else ``--model second-order`` builds,
     its ``--model-stiffness`` and ``--second-order`` variants included)."""
     if (not space.compliance_factors and not space.second_order and space.breakaway_force is None
-            and not space.chain_shortening):
+            and not is_consistent(space)):
         return "paper"
-    return "consistent" if space.chain_shortening else "second-order"
+    return "consistent" if is_consistent(space) else "second-order"
 
 
 def model_description(space: ParameterSpace) -> str:
