@@ -135,6 +135,8 @@ def run_case(case: BenchmarkCase, diagnose: Callable[[Measurement], Any]) -> dic
            "achieved_magnitude_noise": case.answer.get("achieved_magnitude_noise"),
            "predicted": report["top_effect"], "group": group, "confidence": report["confidence"],
            "noise_floor_urad": report["noise_floor_urad"], "closure": report["how_far"]["closure"]}
+    noise = report.get("correlated_noise") or {}
+    row["detected_by"], row["noise_z"] = report.get("detected_by"), noise.get("z")
     separation = report.get("separation") or {}
     row["separation"] = {k: separation.get(k) for k in ("separated", "closest", "closure_on_closest", "runner_up")}
     row["top3"] = [{k: r[k] for k in ("effect", "closure", "gain_noise_variances", "delta_bic", "significant")}

@@ -198,7 +198,7 @@ def run_diagnosis(measurement: Measurement, *, baseline: Callable[..., BaselineF
         cv_before = cross_validate(problem, [], folds)
         cv_after = cross_validate(problem, accepted, folds)
         final = fit_terms(problem, accepted)
-        noise_test = _noise_test(problem, residual - final.explained, measurement.inputs, direction)
+        noise_test = _noise_test(problem, residual - final.explained, measurement.inputs, direction, measurement.time)
     report = _report(measurement, fit, residual, floor, unit, folds, first_ranking, stages, groups, accepted,
                      collinear, cv_before, cv_after, final, skipped, settings, k_baseline)
     report["separation"] = separated
@@ -207,22 +207,33 @@ def run_diagnosis(measurement: Measurement, *, baseline: Callable[..., BaselineF
         report["confidence"] = "low"  # a look-alike outside the library would have been named the same
     report["correlated_noise"] = noise_test
     report["detected_by"] = "heldout" if accepted else "none"
-    if not accepted and noise_test["correlated"] and noise_test["effect"] is not None:
-        # noise that is correlated in time and not repeated, which no deterministic term explains: the library's
-        # noise effect, never `high` (any random cause outside the library leaves the same: docs/diagnosis.md)
-        report.update(top_effect=noise_test["effect"], top_group=[noise_test["effect"]], confidence="low",
-                      detected_by="correlated noise")
+    if noise_test["correlated"] and noise_test["effect"] is not None:
+        report.update(_noise_answer(noise_test["effect"], report["top_group"] if accepted else []))
     return Diagnosis(report=report, residual=residual, heldout_before=cv_before, heldout_after=cv_after,
                      baseline=fit, folds=tuple(folds), stages=tuple(accepted))
 
 
-def _noise_test(problem, left, inputs, direction) -> dict[str, Any]:
+def _noise_answer(noise_effect: str, group: list[str]) -> dict[str, Any]:
+    """The answer when what is left after the accepted effects is still correlated in time and
+    not repeated (``correlated.correlated_noise``): the library's noise effect, never `high`
+    (any random cause outside the library leaves the same: docs/diagnosis.md). With no
+    accepted effect (empty ``group``) it is the answer; with one, the noise joins the winner's
+    group: the slow part of a correlated noise is what a term smooth in time (drift, a step)
+    takes on held-out legs, so the data cannot tell whether the winner is there as well."""
+    if not group:
+        return {"top_effect": noise_effect, "top_group": [noise_effect], "confidence": "low",
+                "detected_by": "correlated noise"}
+    return {"top_group": list(dict.fromkeys([*group, noise_effect])), "confidence": "low",
+            "detected_by": "heldout and correlated noise"}
+
+
+def _noise_test(problem, left, inputs, direction, time) -> dict[str, Any]:
     """``correlated.correlated_noise`` of what is left (n, 3) [rad] after the baseline and the
-    accepted effects; "effect": the library's noise effect among the candidates (None if not)."""
+    accepted effects, time (n,) [s]; "effect": the library's noise effect among the candidates (None if not)."""
     from ..effects.chain import NOISE_EFFECTS
 
     noise = [i for i in problem.terms if i in NOISE_EFFECTS]
-    return {**correlated_noise(left, problem.sigma, inputs, direction), "effect": noise[0] if noise else None}
+    return {**correlated_noise(left, problem.sigma, inputs, direction, time), "effect": noise[0] if noise else None}
 
 
 def _report(measurement, fit, residual, floor, unit, folds, ranking, stages, groups, accepted, collinear,

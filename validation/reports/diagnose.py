@@ -21,7 +21,9 @@ def _noise_test_lines(report) -> list[str]:
         return []
     if not test["available"]:
         return [f"Correlated-noise test: not available ({test['n_pairs']} pairs of repeated readings).", ""]
-    found = " (the answer: no term was significant)" if report.get("detected_by") == "correlated noise" else ""
+    found = {"correlated noise": " (the answer: no term was significant)",
+             "heldout and correlated noise": " after the accepted effects (the noise joins the winner's group: a term smooth "
+                                             "in time takes the slow part of a correlated noise)"}.get(report.get("detected_by"), "")
     return [f"Correlated-noise test on what is left (repeated readings, {test['n_pairs']} pairs): z {test['z']:.2f}, "
             f"p {test['p_value']:.2g} against {test['alpha']:g}: "
             f"{'correlated, not repeated' if test['correlated'] else 'white'}{found}.", ""]
