@@ -57,8 +57,8 @@ def test_an_ar1_that_does_not_repeat_is_found_and_a_repeating_signal_is_not():
 
 def test_a_deterministic_change_that_does_not_repeat_is_flagged_too():
     """The test cannot tell a random process from a slow deterministic change between the cycles
-    (a temperature-like swing): both are correlated and not repeated. Hence the diagnosis asks it
-    only when no term is significant, and answers `low` (docs/diagnosis.md)."""
+    (a temperature-like swing): both are correlated and not repeated. Hence the diagnosis answers
+    `low` whenever it speaks (docs/diagnosis.md)."""
     inputs, direction, time = _two_cycles()
     noise = np.random.default_rng(3).normal(size=(154, 3)) * SIGMA
     swing = np.sin(2 * np.pi * time / 250.0)[:, None] * np.array([2.0, 1.0, 1.5]) * SIGMA

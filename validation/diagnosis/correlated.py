@@ -31,8 +31,9 @@ not earned its parameters, and the smooth ones take up the slow part of an AR(1)
 air_turbulence 3x, standard trajectory x2: z 5.17 on the residual, 1.55 with every
 deterministic term's columns removed, 2.94 with thermal's alone). So the test cannot tell a
 random process from a deterministic change that does not repeat and that no term took (a
-lost step below its term's significance): the diagnosis names the noise effect only when no
-term is significant, and never with `high` confidence.
+lost step below its term's significance): the diagnosis names the noise effect when no term
+is significant, adds it to the winner's group when what an accepted term leaves is still
+correlated (session 22), and never with `high` confidence.
 """
 
 from __future__ import annotations
