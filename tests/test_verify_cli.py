@@ -62,6 +62,12 @@ def test_full_table1_run_on_the_fem_prototype(tmp_path):
     rows = {r["name"]: r for r in report["parameters"]}
     assert rows["D3.CL"]["abs_error"] < 0.004  # [mm]
     assert report["fit_rms_urad"] < 6.0  # the closed-form model left 5.1 urad (session 1)
+    # issue 24's time goal is a warm figure; the first run may have built FEM segments (the
+    # prototype's, and the estimate's geometry for the model-error budget: session 21 saw that
+    # fail the bound once), so the same job again times a warm cache
+    assert cli.main(["verify", "--scenario", "table1", "--out", str(out), "-q", "--force"]) == 0
+    again = json.loads((out / "report.json").read_text())
+    assert again["fit_rms_urad"] == report["fit_rms_urad"]  # the same job: seeded, single-threaded estimate
     wall_s = json.loads((out / "timings.json").read_text())["wall_s"]
     assert wall_s < 120  # goal 60 s warm on an idle machine; 2x for a loaded CI runner
 
