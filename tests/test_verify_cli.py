@@ -92,7 +92,8 @@ def test_map_recovers_the_drive_sources_with_honest_error_bars(tmp_path):
     assert report["method"] == "map"
     rows = {r["name"]: r for r in report["parameters"]}
     assert all(r["std_error"] is not None and r["std_error"] > 0 for r in rows.values())
-    assert all(r["z_score"] is not None for r in rows.values())
+    # every source has a z-score but an offset direction the data do not determine (its bar is "open")
+    assert all(r["z_score"] is not None for r in rows.values() if "undetermined" not in r)
     assert {"D1.x0", "D2.x0", "D3.x0"} <= set(report["identifiable"])
     assert max(rows[f"D{i}.x0"]["abs_error"] for i in (1, 2, 3)) * 1e3 < 2.7  # [um], paper Table 1
     # the honesty band (docstring; measured 1.10-1.32)
@@ -186,7 +187,7 @@ def test_error_bars_stay_honest_with_a_deliberately_imperfect_model(tmp_path):
     for seed in ("1", "2"):
         report, _ = _analytic_verify(tmp_path / seed, "--scenario", "table1", "--seed", seed, "--no-second-order")
         z += [r["z_score"] for r in report["parameters"] if r["identifiable"]]
-        z_base += [r["z_score"] for r in report["base_parameters"]["rows"]]
+        z_base += [r["z_score"] for r in report["base_parameters"]["rows"] if r["z_score"] is not None]
         rows = {r["name"]: r for r in report["parameters"]}
         table = {r["label"]: r for r in report["base_parameters"]["rows"]}
         for name in report["base_parameters"]["pure"]:  # same error and truth: same z only with the same bar

@@ -8,6 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from .form_floor import form_floor_line, form_floor_markdown
+from .safe_markdown import md_text
 
 __all__ = ["verify_markdown", "identification_lines", "write_verify_figures", "plot_calibration", "verify_lines"]
 
@@ -107,10 +108,15 @@ def identification_lines(report) -> list[str]:
     lines += ["| base parameter | estimate | std error | " + ("true | z |" if with_truth else ""),
               "|---|---:|---:|" + ("---:|---:|" if with_truth else "")]
     for r in table.get("rows", []):
-        lines.append(f"| {r['label']} | {r['estimate_unit']:.4g} | {r['std_unit']:.3g} | "
-                     + (f"{r['true_unit']:.4g} | {r['z_score']:.2f} |" if with_truth else ""))
-    if with_truth:
-        lines += ["", f"RMS of the base parameters' z-scores: {table['z_rms']:.3g}."]
+        std = "open*" if "undetermined" in r else f"{r['std_unit']:.3g}"
+        z = "—" if r.get("z_score") is None else f"{r['z_score']:.2f}"
+        lines.append(f"| {r['label']} | {r['estimate_unit']:.4g} | {std} | "
+                     + (f"{r['true_unit']:.4g} | {z} |" if with_truth else ""))
+    for name, why in table.get("undetermined_directions", {}).items():
+        lines += ["", f"\\* `{name}`: {md_text(why)}; a combination led by it has no meaningful bar."]
+    if with_truth and table.get("z_rms") is not None:
+        lines += ["", f"RMS of the base parameters' z-scores: {table['z_rms']:.3g} "
+                      f"(over {table.get('n_z_scores', len(table['rows']))})."]
     lines += ["", "Sources identified alone (their own values are meaningful): "
               + (", ".join(table.get("pure", [])) or "none"), ""]
     return lines
@@ -159,7 +165,7 @@ def verify_markdown(report) -> str:
         if has_preset:
             cells.append(f"{r['preset']:.5g}")
         cells.append(f"{r['identified']:.5g}")
-        cells.append("—" if r.get("std_error") is None else f"{r['std_error']:.3g}")
+        cells.append("—" if r.get("std_error") is None else ("open*" if "undetermined" in r else f"{r['std_error']:.3g}"))
         if has_preset:
             rel = "—" if r["rel_error"] is None else f"{100 * r['rel_error']:.2f} %"
             z = "—" if r.get("z_score") is None else f"{r['z_score']:.2f}"
@@ -167,6 +173,7 @@ def verify_markdown(report) -> str:
         cells += ["yes" if r["was_identified"] else "no (screened out, nominal)",
                   "yes" if r["identifiable"] else "no"]
         lines.append("| " + " | ".join(cells) + " |")
+    lines += [f"\n\\* `{r['name']}`: {md_text(r['undetermined'])}." for r in report["parameters"] if "undetermined" in r]
     return "\n".join(lines) + "\n"
 
 
@@ -179,8 +186,11 @@ def verify_lines(report, out) -> list[str]:
         lines.append(f"  z-scores of the {report['n_z_scores']} identifiable sources: RMS {report['z_rms_identifiable']:.3g}")
     z_base = report.get("base_parameters", {}).get("z_rms")
     if z_base is not None and np.isfinite(z_base):
-        lines.append(f"  z-scores of the {len(report['base_parameters']['rows'])} base parameters: RMS "
-                     f"{report['base_parameters']['z_rms']:.3g}")
+        table = report["base_parameters"]
+        left_out = len(table["rows"]) - table.get("n_z_scores", len(table["rows"]))
+        lines.append(f"  z-scores of the {table.get('n_z_scores', len(table['rows']))} base parameters: RMS "
+                     f"{table['z_rms']:.3g}" + (f" ({left_out} led by an undetermined offset direction left out)"
+                                                 if left_out else ""))
     for row in report.get("paper_comparison", []):
         if not row.get("shown", True):
             lines.append(f"  {row['figure']}: paper {row['paper']:g}, not observable on this mount")

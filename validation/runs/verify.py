@@ -86,7 +86,13 @@ def _parameter_rows(space: ParameterSpace, identified: np.ndarray, presets: np.n
                     selected: tuple[str, ...], meaningful: set[str], *, std: np.ndarray | None = None,
                     unobservable: dict[str, str] | None = None) -> list[dict[str, Any]]:
     """One row per source, display units: identified value, standard error (None where the
-    source was not identified), and with presets the errors and the z-score (error / std)."""
+    source was not identified), and with presets the errors and the z-score (error / std; none
+    for an offset direction the data do not determine: ``undetermined`` says why)."""
+    from flexcal.calibration.offset_directions import undetermined_directions
+
+    names = [p.name for p in space.parameters]
+    undetermined = {} if std is None else {n: why for n, why in undetermined_directions(names, identified, std).items()
+                                           if n in selected}
     rows = []
     for i, (p, value) in enumerate(zip(space.parameters, identified)):
         s = p.display_scale
@@ -101,7 +107,9 @@ def _parameter_rows(space: ParameterSpace, identified: np.ndarray, presets: np.n
             row["abs_error"] = abs(value - preset) * s
             row["rel_error"] = abs(value - preset) / abs(preset) if preset != 0 else None
             row["error_of_range"] = abs(value - preset) / (p.upper - p.lower)
-            row["z_score"] = (value - preset) / se if se else None
+            row["z_score"] = (value - preset) / se if se and p.name not in undetermined else None
+        if p.name in undetermined:
+            row["undetermined"] = undetermined[p.name]
         rows.append(row)
     return rows
 
@@ -296,22 +304,38 @@ def _observability(release: np.ndarray) -> dict[str, str]:
 def _base_table(identification, space: ParameterSpace, presets: np.ndarray | None) -> dict[str, Any]:
     """Each base parameter beta = C x [unit box]: estimate, standard error sqrt(C Sigma C^T) (the
     covariance of the sources' table: a source identified alone is its own row, with its own
-    error bar) and, with presets, the true beta and its z-score; ``z_rms`` over all of them."""
+    error bar) and, with presets, the true beta and its z-score; ``z_rms`` over all of them but
+    the combinations led by an undetermined offset direction (``undetermined_directions``: their
+    linear bar does not hold; each such row says why and has no z-score)."""
     base = identification.base
     C = base.reported_combinations(space.names)
     estimate = C @ identification.x_unit
     std = np.sqrt(np.einsum("kd,de,ke->k", C, identification.estimate.covariance, C))
+    undetermined = _undetermined(identification, space)
     rows = [{"label": label, "estimate_unit": float(b), "std_unit": float(s)}
             for label, b, s in zip(base.labels, estimate, std)]
+    for row, lead in zip(rows, base.base):
+        if lead in undetermined:
+            row["undetermined"] = undetermined[lead]
     out: dict[str, Any] = {"rows": rows, "units": "fractions of the sources' ranges (unit box, Eq. 9)",
-                           "pure": list(base.pure())}
+                           "pure": list(base.pure()), "undetermined_directions": undetermined}
     if presets is not None:
         truth = C @ space.to_unit(presets[space.active_indices])
         z = (estimate - truth) / std
         for row, t, zk in zip(rows, truth, z):
-            row["true_unit"], row["z_score"] = float(t), float(zk)
-        out["z_rms"] = float(np.sqrt(np.mean(z ** 2))) if z.size else None
+            row["true_unit"], row["z_score"] = float(t), (None if "undetermined" in row else float(zk))
+        judged = np.array([r["z_score"] for r in rows if r["z_score"] is not None])
+        out["z_rms"] = float(np.sqrt(np.mean(judged ** 2))) if judged.size else None
+        out["n_z_scores"] = int(judged.size)
     return out
+
+
+def _undetermined(identification, space: ParameterSpace) -> dict[str, str]:
+    """``calibration.offset_directions.undetermined_directions`` of an identification (values and
+    standard errors (45,) [SI])."""
+    from flexcal.calibration.offset_directions import undetermined_directions
+
+    return undetermined_directions([p.name for p in space.parameters], identification.values, identification.std)
 
 
 def run_verify(measurement: Measurement, space: ParameterSpace, settings: VerifySettings = VerifySettings(), *,
