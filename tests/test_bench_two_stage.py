@@ -219,3 +219,22 @@ def test_pooling_per_mount_over_the_seeds():
     assert not pool_two_stage.pool(loses, "designed-x")["table1"]["beats"]
     fewer = wins[:2] + [summary(3, (0.1, 0.2), (0.1, 0.3), (2, 4))]  # fewer sources alone in all
     assert not pool_two_stage.pool(fewer, "designed-x")["table1"]["beats"]
+
+
+@pytest.mark.slow
+def test_the_designed_measurement_beats_the_standard_one_on_the_paper_mount(tmp_path):
+    """Issue #28's "design >= standard": the README's two-stage path (standard trajectory, then
+    `flexcal design --criterion drives --keep-standard 41 --dimension-terms quadratic` at its
+    estimate, then the designed verify started there), FEM prototype, `paper` seed 1, 0.5 urad.
+    The designed stage must win on all three criteria of ``_beats``: a lower largest drive error
+    (over the paper's figure) among the drives both identify alone, at least as many sources
+    alone, and a lower RMS predicting a held-out random walk (seed 28). Measured 2026-11-28
+    (session 21, docs/calibration.md "Session 21"): 0.149 vs 0.310, 9 vs 7, 0.151 vs 0.424 urad;
+    ~4 min warm (the FEM prototype's cache), more cold."""
+    import json
+
+    assert bench_two_stage.main(["--out", str(tmp_path), "--seed", "1", "--scenario", "paper", "--keep-standard", "41",
+                                 "--criterion", "drives", "--dimension-terms", "quadratic"]) == 0
+    summary = json.loads(next(tmp_path.glob("two_stage*.json")).read_text())
+    verdict = next(v for k, v in summary.items() if k.endswith("_vs_standard"))
+    assert verdict["beats"], verdict
