@@ -27,7 +27,7 @@ def test_the_base_table_leaves_a_combination_led_by_an_undetermined_direction_ou
     offset 0.5 +- 0.4 mm: undetermined) and D1.x0 alone. The first row says why and has no z-score;
     z_rms is the second row's alone."""
     from flexcal.calibration.base_parameters import base_parameters
-    from flexcal.validation.runs.verify import _base_table
+    from flexcal.validation.runs.verify import _base_table, _undetermined
 
     names = ("L1.d", "L1.phi", "D1.x0")
     W = np.array([[0.0, 100.0, 0.0], [0.0, 0.0, 100.0], [0.0, 0.0, 0.0]])  # L1.d unseen: regrouped
@@ -38,7 +38,8 @@ def test_the_base_table_leaves_a_combination_led_by_an_undetermined_direction_ou
     identification = SimpleNamespace(base=base, x_unit=np.array([0.25, 0.7, 0.5]),
                                      estimate=SimpleNamespace(covariance=np.diag([0.04, 1e-4, 1e-4])),
                                      values=np.array([0.5e-3, 4.4, 0.2e-3]), std=np.array([0.4e-3, 0.06, 1e-6]))
-    table = _base_table(identification, space, presets=np.array([0.25, 0.3, 0.51]))
+    undetermined = _undetermined(space, identification.values, identification.std, selected=names)
+    table = _base_table(identification, space, np.array([0.25, 0.3, 0.51]), undetermined)
     first, second = table["rows"]
     assert "undetermined" in first and first["z_score"] is None and "L1.d = 0.5 +- 0.4 mm" in first["undetermined"]
     assert second["z_score"] == (0.5 - 0.51) / 0.01  # (estimate - truth) / sqrt(1e-4)

@@ -112,8 +112,10 @@ def identification_lines(report) -> list[str]:
         z = "—" if r.get("z_score") is None else f"{r['z_score']:.2f}"
         lines.append(f"| {r['label']} | {r['estimate_unit']:.4g} | {std} | "
                      + (f"{r['true_unit']:.4g} | {z} |" if with_truth else ""))
-    for name, why in table.get("undetermined_directions", {}).items():
-        lines += ["", f"\\* `{name}`: {md_text(why)}; a combination led by it has no meaningful bar."]
+    for r in table.get("rows", []):
+        if "undetermined" in r:
+            lines += ["", f"\\* `{r['label'].split()[0]}`: {md_text(r['undetermined'])}; the combination it leads has "
+                          f"no meaningful bar."]
     if with_truth and table.get("z_rms") is not None:
         lines += ["", f"RMS of the base parameters' z-scores: {table['z_rms']:.3g} "
                       f"(over {table.get('n_z_scores', len(table['rows']))})."]

@@ -84,15 +84,13 @@ class VerifyResult:
 
 def _parameter_rows(space: ParameterSpace, identified: np.ndarray, presets: np.ndarray | None,
                     selected: tuple[str, ...], meaningful: set[str], *, std: np.ndarray | None = None,
-                    unobservable: dict[str, str] | None = None) -> list[dict[str, Any]]:
+                    unobservable: dict[str, str] | None = None,
+                    undetermined: dict[str, str] | None = None) -> list[dict[str, Any]]:
     """One row per source, display units: identified value, standard error (None where the
     source was not identified), and with presets the errors and the z-score (error / std; none
-    for an offset direction the data do not determine: ``undetermined`` says why)."""
-    from flexcal.calibration.offset_directions import undetermined_directions
-
-    names = [p.name for p in space.parameters]
-    undetermined = {} if std is None else {n: why for n, why in undetermined_directions(names, identified, std).items()
-                                           if n in selected}
+    for an offset direction the data do not determine, ``_undetermined``: the row's
+    ``undetermined`` says why)."""
+    undetermined = undetermined or {}
     rows = []
     for i, (p, value) in enumerate(zip(space.parameters, identified)):
         s = p.display_scale
@@ -301,17 +299,17 @@ def _observability(release: np.ndarray) -> dict[str, str]:
     return why
 
 
-def _base_table(identification, space: ParameterSpace, presets: np.ndarray | None) -> dict[str, Any]:
+def _base_table(identification, space: ParameterSpace, presets: np.ndarray | None,
+                undetermined: dict[str, str]) -> dict[str, Any]:
     """Each base parameter beta = C x [unit box]: estimate, standard error sqrt(C Sigma C^T) (the
     covariance of the sources' table: a source identified alone is its own row, with its own
     error bar) and, with presets, the true beta and its z-score; ``z_rms`` over all of them but
-    the combinations led by an undetermined offset direction (``undetermined_directions``: their
-    linear bar does not hold; each such row says why and has no z-score)."""
+    the combinations led by an undetermined offset direction (``undetermined``, ``_undetermined``:
+    their linear bar does not hold; each such row says why and has no z-score)."""
     base = identification.base
     C = base.reported_combinations(space.names)
     estimate = C @ identification.x_unit
     std = np.sqrt(np.einsum("kd,de,ke->k", C, identification.estimate.covariance, C))
-    undetermined = _undetermined(identification, space)
     rows = [{"label": label, "estimate_unit": float(b), "std_unit": float(s)}
             for label, b, s in zip(base.labels, estimate, std)]
     for row, lead in zip(rows, base.base):
@@ -330,12 +328,16 @@ def _base_table(identification, space: ParameterSpace, presets: np.ndarray | Non
     return out
 
 
-def _undetermined(identification, space: ParameterSpace) -> dict[str, str]:
-    """``calibration.offset_directions.undetermined_directions`` of an identification (values and
-    standard errors (45,) [SI])."""
+def _undetermined(space: ParameterSpace, values: np.ndarray, std: np.ndarray | None,
+                  selected: tuple[str, ...]) -> dict[str, str]:
+    """{"X.phi": why} of ``calibration.offset_directions.undetermined_directions`` over the
+    identified sources (values, std (45,) [SI]; {} without error bars)."""
     from flexcal.calibration.offset_directions import undetermined_directions
 
-    return undetermined_directions([p.name for p in space.parameters], identification.values, identification.std)
+    if std is None:
+        return {}
+    found = undetermined_directions([p.name for p in space.parameters], values, std)
+    return {name: why for name, why in found.items() if name in selected}
 
 
 def run_verify(measurement: Measurement, space: ParameterSpace, settings: VerifySettings = VerifySettings(), *,
@@ -365,8 +367,9 @@ def run_verify(measurement: Measurement, space: ParameterSpace, settings: Verify
     model = forward(values, measurement.inputs, space=space)
     classes = tuple(CLASS_NAMES[int(c)] for c in model.point_class[0])
     unobservable = _observability(model.release[0])
+    undetermined = _undetermined(space, values, core["std"], core["selected"])
     rows = _parameter_rows(space, values, presets, core["selected"], core["identifiable"], std=core["std"],
-                           unobservable=unobservable)
+                           unobservable=unobservable, undetermined=undetermined)
     per_point = np.linalg.norm(residual, axis=1)
     noise_floor = settings.noise_urad * 1e-6 if settings.noise_urad else None
     report: dict[str, Any] = {
@@ -412,7 +415,7 @@ def run_verify(measurement: Measurement, space: ParameterSpace, settings: Verify
                                      "meaningful": list(base.base)}
     if core.get("identification") is not None:
         identified = core["identification"]
-        report["base_parameters"] = _base_table(identified, identified.problem.space, presets)
+        report["base_parameters"] = _base_table(identified, identified.problem.space, presets, undetermined)
     if presets is not None:
         z = [r["z_score"] for r in rows if r["identifiable"] and r.get("z_score") is not None]
         report["z_rms_identifiable"] = float(np.sqrt(np.mean(np.square(z)))) if z else None
