@@ -29,6 +29,7 @@ from flexcal.calibration.estimation import (PRIOR_SCALES, CrossValidation, Estim
                                             with_model_error,
                                             held_out_folds, uniform_prior)
 from flexcal.calibration.identifiability import IdentifiabilityReport, identifiability
+from flexcal.calibration.offset_chart import OffsetChart, offset_chart
 from flexcal.calibration.polish import PolishResult, norm_sum_polish, polish_candidates
 from flexcal.calibration.problem import CalibrationProblem
 from flexcal.calibration.profile_bars import with_profile_bars
@@ -80,15 +81,19 @@ class IdentificationSettings:
 @dataclass(frozen=True, kw_only=True, eq=False)
 class Identification:
     """values (45,) [SI] identified; std (45,) [SI] standard errors (inf: not seen by the data
-    and no prior); x_unit (45,) on the unit box; estimate: the ``Estimate``; base: the
-    ``BaseParameters`` of the data Jacobian at the solution; cross_validation (or None when
-    the scale was given); prior_scale used; problem: the ``CalibrationProblem`` over all
-    points; fitted_angles (n, 3) [rad]; method."""
+    and no prior); x_unit (active,) on the space's unit box; chart: the coordinates the
+    estimator worked in (``calibration.offset_chart``: the mount offsets in Cartesian
+    components); estimate: the ``Estimate`` in them (its x, covariance, Jacobian); base: the
+    ``BaseParameters`` of the data Jacobian at the solution, over the chart's names;
+    cross_validation (or None when the scale was given); prior_scale used; problem: the
+    ``CalibrationProblem`` over all points (on the space's unit box); fitted_angles (n, 3)
+    [rad]; method."""
 
     method: str
     values: np.ndarray
     std: np.ndarray
     x_unit: np.ndarray
+    chart: OffsetChart
     estimate: Estimate
     base: BaseParameters
     cross_validation: CrossValidation | None
@@ -99,8 +104,10 @@ class Identification:
     @property
     def identifiable(self) -> tuple[str, ...]:
         """The sources the data identify alone (``BaseParameters.pure``): the ones whose own
-        values mean something, what the reports call identifiable."""
-        return self.base.pure()
+        values mean something, what the reports call identifiable (a mount offset's Cartesian
+        component identified alone is a base parameter, not a source)."""
+        names = set(self.problem.space.names)
+        return tuple(n for n in self.base.pure() if n in names)
 
 
 def check_determined(n_points: int, n_unknowns: int, what: str = "sources") -> None:
@@ -129,9 +136,17 @@ def identify_all(space: ParameterSpace, inputs: np.ndarray, angles: np.ndarray, 
     directions = travel_directions(inputs)
     problem = CalibrationProblem(space=space, inputs=inputs, angles=angles, directions=directions)
 
+    # every fit runs in the chart's coordinates: the mount offsets in Cartesian components
+    # (calibration.offset_chart: polar ones have a singular origin, a cut circle and a minimum
+    # per direction where an offset is poorly determined)
+    chart = offset_chart(space.names)
+
+    def in_chart(residuals):
+        return lambda Y: residuals(chart.to_space(Y))
+
     def residuals_for(points: np.ndarray):
-        return CalibrationProblem(space=space, inputs=inputs[points], angles=angles[points],
-                                  directions=directions[points]).residuals
+        return in_chart(CalibrationProblem(space=space, inputs=inputs[points], angles=angles[points],
+                                           directions=directions[points]).residuals)
 
     # where every fit starts: the prior mean, or given values (e.g. an earlier measurement's
     # estimate: on a designed trajectory's large strokes the prior mean's basin can be a local
@@ -144,7 +159,8 @@ def identify_all(space: ParameterSpace, inputs: np.ndarray, angles: np.ndarray, 
                              dataclasses.replace(settings, profile=False, staged=False))
         start = first.values
         log(f"start: the second-order model's estimate (fit {first.estimate.rms * 1e6:.3g} urad RMS)")
-    x0 = None if start is None else np.clip(space.to_unit(np.asarray(start, float)[space.active_indices]), 0.0, 1.0)
+    x0 = None if start is None else np.clip(
+        chart.from_space(np.clip(space.to_unit(np.asarray(start, float)[space.active_indices]), 0.0, 1.0)), 0.0, 1.0)
     cv = None
     if settings.method == "free":
         scale = math.inf
@@ -163,30 +179,34 @@ def identify_all(space: ParameterSpace, inputs: np.ndarray, angles: np.ndarray, 
     prior = uniform_prior(space.n_params, scale)
     # error bars with the model's discrepancy, a process over the postures: the measured angles
     # in workspace half-widths (calibration.discrepancy)
-    fit = estimate(problem.residuals, prior, noise=settings.noise, x0=x0,
+    fit = estimate(in_chart(problem.residuals), prior, noise=settings.noise, x0=x0,
                    max_evaluations=FREE_MAX_EVALUATIONS if math.isinf(scale) else None,
                    coordinates=angles / WORKSPACE)
     on_fit()
+    x_unit = chart.to_space(fit.x)
+    values = space.full_values(space.from_unit(x_unit))
     if model_error is not None:
-        samples = model_error(space.full_values(space.from_unit(fit.x))) if callable(model_error) else model_error
+        samples = model_error(values) if callable(model_error) else model_error
         samples = np.asarray(samples, float)
         fit = with_model_error(fit, angles / WORKSPACE, samples.reshape(len(samples), -1))
-    base = base_parameters(fit.jacobian / fit.noise, space.names, max_std=settings.max_std)
+    base = base_parameters(fit.jacobian / fit.noise, chart.names, max_std=settings.max_std)
     if settings.profile:
-        names = list(space.names)
         alone = set(base.pure())
-        rows = [row for name, row in zip(base.base, base.reported_combinations(names)) if name not in alone]
+        rows = [row for name, row in zip(base.base, base.reported_combinations(chart.names)) if name not in alone]
         if rows:
-            fit = with_profile_bars(fit, problem.residuals, np.array(rows))
+            fit = with_profile_bars(fit, in_chart(problem.residuals), np.array(rows))
             log(f"profile likelihood of {len(rows)} base combinations: {fit.profile_bars.n_fits} constrained fits, "
                 f"bars widened x{', '.join(f'{w:.3g}' for w in fit.profile_bars.widening)}")
     ranges = space.upper - space.lower
-    values = space.full_values(space.from_unit(fit.x))
+    # the sources' bars from the chart's covariance, to first order (an offset's direction at
+    # zero offset: infinite); a coordinate the data and prior leave open stays infinite
+    unit_std = np.sqrt(np.abs(np.diag(chart.covariance_to_space(fit.x, fit.covariance))))
+    unit_std = np.where(np.isfinite(unit_std) & np.isfinite(fit.std), unit_std, np.inf)
     std = np.zeros(len(space.parameters))
-    std[space.active_indices] = fit.std * ranges
-    fitted = problem.model_angles(fit.x[None])[0][0]
-    return Identification(method=settings.method, values=values, std=std, x_unit=fit.x, estimate=fit, base=base,
-                          cross_validation=cv, prior_scale=scale, problem=problem, fitted_angles=fitted)
+    std[space.active_indices] = unit_std * ranges
+    fitted = problem.model_angles(x_unit[None])[0][0]
+    return Identification(method=settings.method, values=values, std=std, x_unit=x_unit, chart=chart, estimate=fit,
+                          base=base, cross_validation=cv, prior_scale=scale, problem=problem, fitted_angles=fitted)
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)

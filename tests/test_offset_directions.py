@@ -1,5 +1,6 @@
 """Mount offsets whose direction the data do not determine (calibration/offset_directions.py):
-the rule, and the verify report's base table leaving their combinations out of the z-scores."""
+the rule on the sources' table, and the verify report's base table in the estimator's Cartesian
+chart (calibration/offset_chart.py), where no combination holds a direction."""
 
 from types import SimpleNamespace
 
@@ -22,26 +23,31 @@ def test_a_direction_is_undetermined_when_its_offset_is_within_two_standard_erro
     assert undetermined_directions(["X.d", "X.phi"], np.array([0.999e-3, 0.0]), np.array([0.5e-3, 0.1]))
 
 
-def test_the_base_table_leaves_a_combination_led_by_an_undetermined_direction_out_of_the_z_scores():
-    """Three sources on the unit box; the base combinations are L1.phi (led by the direction of an
-    offset 0.5 +- 0.4 mm: undetermined) and D1.x0 alone. The first row says why and has no z-score;
-    z_rms is the second row's alone."""
+def test_the_base_table_is_in_the_estimators_chart_with_the_truth_mapped_alike():
+    """Three sources, L1.d, L1.phi, D1.x0; the estimator works in (L1.dy, L1.dz, D1.x0)
+    (calibration.offset_chart). The base table's rows are combinations of those, estimate and
+    bar from the estimate's chart coordinates and covariance, the true value the presets mapped
+    by the same chart: no row is left without a z-score, whatever the offset's size."""
     from flexcal.calibration.base_parameters import base_parameters
-    from flexcal.validation.runs.verify import _base_table, _undetermined
+    from flexcal.calibration.offset_chart import offset_chart
+    from flexcal.validation.runs.verify import _base_table
 
     names = ("L1.d", "L1.phi", "D1.x0")
-    W = np.array([[0.0, 100.0, 0.0], [0.0, 0.0, 100.0], [0.0, 0.0, 0.0]])  # L1.d unseen: regrouped
-    base = base_parameters(W, names)
-    assert base.base == ("L1.phi", "D1.x0")
-    space = SimpleNamespace(names=names, parameters=[SimpleNamespace(name=n) for n in names],
-                            active_indices=np.arange(3), to_unit=lambda v: np.asarray(v, float))
-    identification = SimpleNamespace(base=base, x_unit=np.array([0.25, 0.7, 0.5]),
-                                     estimate=SimpleNamespace(covariance=np.diag([0.04, 1e-4, 1e-4])),
-                                     values=np.array([0.5e-3, 4.4, 0.2e-3]), std=np.array([0.4e-3, 0.06, 1e-6]))
-    undetermined = _undetermined(space, identification.values, identification.std, selected=names)
-    table = _base_table(identification, space, np.array([0.25, 0.3, 0.51]), undetermined)
+    chart = offset_chart(names)
+    assert chart.names == ("L1.dy", "L1.dz", "D1.x0")
+    W = np.array([[100.0, 0.0, 0.0], [0.0, 0.0, 100.0], [0.0, 0.0, 0.0]])  # L1.dz unseen: regrouped
+    base = base_parameters(W, chart.names)
+    assert base.base == ("L1.dy", "D1.x0")
+    space = SimpleNamespace(names=names, active_indices=np.arange(3), to_unit=lambda v: np.asarray(v, float))
+    y = np.array([0.52, 0.5, 0.5])  # a small offset along y
+    identification = SimpleNamespace(base=base, chart=chart, identifiable=("D1.x0",),
+                                     estimate=SimpleNamespace(x=y, covariance=np.diag([1e-4, 0.04, 1e-4])))
+    presets = np.array([0.01, 0.5, 0.51])  # unit box: |offset| = 0.01 d_max, pointing along -y
+    table = _base_table(identification, space, presets)
     first, second = table["rows"]
-    assert "undetermined" in first and first["z_score"] is None and "L1.d = 0.5 +- 0.4 mm" in first["undetermined"]
-    assert second["z_score"] == (0.5 - 0.51) / 0.01  # (estimate - truth) / sqrt(1e-4)
-    assert table["n_z_scores"] == 1 and table["z_rms"] == abs(second["z_score"])
-    assert list(table["undetermined_directions"]) == ["L1.phi"]
+    true_dy = chart.from_space(presets)[0]
+    assert true_dy < 0.5  # the true offset points along -y
+    # (estimate - truth) / sqrt(1e-4), to round-off of the chart's inverse map
+    assert abs(first["z_score"] - (0.52 - true_dy) / 0.01) < 1e-9
+    assert abs(second["z_score"] - (0.5 - 0.51) / 0.01) < 1e-9  # a source alone: its own unit coordinate; round-off
+    assert table["n_z_scores"] == 2 and table["pure"] == ["D1.x0"]

@@ -108,14 +108,12 @@ def identification_lines(report) -> list[str]:
     lines += ["| base parameter | estimate | std error | " + ("true | z |" if with_truth else ""),
               "|---|---:|---:|" + ("---:|---:|" if with_truth else "")]
     for r in table.get("rows", []):
-        std = "open*" if "undetermined" in r else f"{r['std_unit']:.3g}"
         z = "—" if r.get("z_score") is None else f"{r['z_score']:.2f}"
-        lines.append(f"| {r['label']} | {r['estimate_unit']:.4g} | {std} | "
+        lines.append(f"| {r['label']} | {r['estimate_unit']:.4g} | {r['std_unit']:.3g} | "
                      + (f"{r['true_unit']:.4g} | {z} |" if with_truth else ""))
-    for r in table.get("rows", []):
-        if "undetermined" in r:
-            lines += ["", f"\\* `{r['label'].split()[0]}`: {md_text(r['undetermined'])}; the combination it leads has "
-                          f"no meaningful bar."]
+    if any(".dy" in r["label"] or ".dz" in r["label"] for r in table.get("rows", [])):
+        lines += ["", "`X.dy`, `X.dz`: a mount offset's Cartesian components (0.5 at zero offset), the coordinates "
+                      "the estimator works in; the sources' table gives its magnitude and direction."]
     if with_truth and table.get("z_rms") is not None:
         lines += ["", f"RMS of the base parameters' z-scores: {table['z_rms']:.3g} "
                       f"(over {table.get('n_z_scores', len(table['rows']))})."]
@@ -189,10 +187,8 @@ def verify_lines(report, out) -> list[str]:
     z_base = report.get("base_parameters", {}).get("z_rms")
     if z_base is not None and np.isfinite(z_base):
         table = report["base_parameters"]
-        left_out = len(table["rows"]) - table.get("n_z_scores", len(table["rows"]))
         lines.append(f"  z-scores of the {table.get('n_z_scores', len(table['rows']))} base parameters: RMS "
-                     f"{table['z_rms']:.3g}" + (f" ({left_out} led by an undetermined offset direction left out)"
-                                                 if left_out else ""))
+                     f"{table['z_rms']:.3g}")
     for row in report.get("paper_comparison", []):
         if not row.get("shown", True):
             lines.append(f"  {row['figure']}: paper {row['paper']:g}, not observable on this mount")

@@ -299,32 +299,30 @@ def _observability(release: np.ndarray) -> dict[str, str]:
     return why
 
 
-def _base_table(identification, space: ParameterSpace, presets: np.ndarray | None,
-                undetermined: dict[str, str]) -> dict[str, Any]:
-    """Each base parameter beta = C x [unit box]: estimate, standard error sqrt(C Sigma C^T) (the
-    covariance of the sources' table: a source identified alone is its own row, with its own
-    error bar) and, with presets, the true beta and its z-score; ``z_rms`` over all of them but
-    the combinations led by an undetermined offset direction (``undetermined``, ``_undetermined``:
-    their linear bar does not hold; each such row says why and has no z-score)."""
-    base = identification.base
-    C = base.reported_combinations(space.names)
-    estimate = C @ identification.x_unit
+def _base_table(identification, space: ParameterSpace, presets: np.ndarray | None) -> dict[str, Any]:
+    """Each base parameter beta = C y on the estimator's unit box (``identification.chart``: the
+    mount offsets as Cartesian components, ``calibration.offset_chart``): estimate, standard error
+    sqrt(C Sigma C^T) (the covariance of the sources' table: a source identified alone is its own
+    row, with its own error bar) and, with presets, the true beta (the presets in the same chart)
+    and its z-score, ``z_rms`` over all of them. No combination holds an offset's direction, so
+    none has the polar chart's undefined bar at zero offset (docs/calibration.md "Session 23")."""
+    base, chart = identification.base, identification.chart
+    C = base.reported_combinations(chart.names)
+    estimate = C @ identification.estimate.x
     std = np.sqrt(np.einsum("kd,de,ke->k", C, identification.estimate.covariance, C))
     rows = [{"label": label, "estimate_unit": float(b), "std_unit": float(s)}
             for label, b, s in zip(base.labels, estimate, std)]
-    for row, lead in zip(rows, base.base):
-        if lead in undetermined:
-            row["undetermined"] = undetermined[lead]
-    out: dict[str, Any] = {"rows": rows, "units": "fractions of the sources' ranges (unit box, Eq. 9)",
-                           "pure": list(base.pure()), "undetermined_directions": undetermined}
+    out: dict[str, Any] = {"rows": rows, "units": "fractions of the sources' ranges (unit box, Eq. 9); a mount "
+                                                  "offset (X.d, X.phi) as its Cartesian components X.dy, X.dz, "
+                                                  "0.5 at zero offset (flexcal.calibration.offset_chart)",
+                           "pure": list(identification.identifiable)}
     if presets is not None:
-        truth = C @ space.to_unit(presets[space.active_indices])
+        truth = C @ chart.from_space(space.to_unit(presets[space.active_indices]))
         z = (estimate - truth) / std
         for row, t, zk in zip(rows, truth, z):
-            row["true_unit"], row["z_score"] = float(t), (None if "undetermined" in row else float(zk))
-        judged = np.array([r["z_score"] for r in rows if r["z_score"] is not None])
-        out["z_rms"] = float(np.sqrt(np.mean(judged ** 2))) if judged.size else None
-        out["n_z_scores"] = int(judged.size)
+            row["true_unit"], row["z_score"] = float(t), float(zk)
+        out["z_rms"] = float(np.sqrt(np.mean(z ** 2))) if z.size else None
+        out["n_z_scores"] = int(z.size)
     return out
 
 
@@ -415,7 +413,7 @@ def run_verify(measurement: Measurement, space: ParameterSpace, settings: Verify
                                      "meaningful": list(base.base)}
     if core.get("identification") is not None:
         identified = core["identification"]
-        report["base_parameters"] = _base_table(identified, identified.problem.space, presets, undetermined)
+        report["base_parameters"] = _base_table(identified, identified.problem.space, presets)
     if presets is not None:
         z = [r["z_score"] for r in rows if r["identifiable"] and r.get("z_score") is not None]
         report["z_rms_identifiable"] = float(np.sqrt(np.mean(np.square(z)))) if z else None
