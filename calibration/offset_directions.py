@@ -15,6 +15,11 @@ rule marks five combinations, which hold the three largest designed base z-score
 The rule is blind (the estimate and its bars only): a direction is undetermined when
 d_hat < ``UNDETERMINED_SIGMAS`` sigma_d, i.e. the data do not tell the offset from zero at
 two standard errors.
+
+Since session 23 the estimator works in the offsets' Cartesian components
+(``calibration.offset_chart``), so no base combination holds a direction any more; the rule
+now marks only the direction's own row in the sources' table (its polar bar, by the delta
+method, is what it is at the estimate and no more).
 """
 
 from __future__ import annotations
