@@ -39,7 +39,8 @@ import numpy as np
 from flexcal.fem.mesh_mapped_chain import PROTOTYPE_CHAIN_OPTIONS
 from flexcal.validation.reports.chain_cuts import (INTERFACES, _mirror_part, composed_stiffness, cut_rows,
                                                      entry_index, interface_segment_stiffness, interface_segments,
-                                                     middle_cut, one_piece_stiffness, stretch, strut_cuts)
+                                                     middle_cut, one_piece_stiffness, one_piece_tied_stiffness,
+                                                     stretch, strut_cuts)
 from flexcal.fem.interface import series_stiffness as joined
 from flexcal.geometry.exact import bounding_box
 from flexcal.validation.reports.chain_reference import reference_chain
@@ -69,6 +70,9 @@ def main() -> None:
                         help=f"also join the segments through these interfaces at the cuts (first-half stretches): "
                              f"{', '.join(INTERFACES)}, or any order p<p>, d<p>")
     parser.add_argument("--rounds", type=int, default=2, help="--interface: rounds of timing, labels alternating")
+    parser.add_argument("--one-piece", action="store_true",
+                        help="--interface: also the one-piece mesh tied by each (the exact bracket: kinematic above "
+                             "the untied, distributing below)")
     parser.add_argument("--dir", default="bench_chain_cuts")
     args = parser.parse_args()
     folder = Path(args.dir).resolve()
@@ -142,15 +146,20 @@ def interfaces(chain, name, args, options, untied, composed, rows, folder, tag) 
     dofs = [f"{3 * len(mesh.nodes)}" for mesh, _ in meshes]
     print(f"\n{name} [0, {1e3 * segments[-1].x_end:.1f} mm] joined through each interface, composed - untied [%] "
           f"(segments' mirror parts {', '.join(dofs)} DOF, scale {1e3 * scale:g} mm)")
-    print("| entry | " + " | ".join(labels) + " |")
-    print("|---|" + "---:|" * len(labels))
-    for entry, *_ in rows:
-        i, j = entry_index(entry)
-        print(f"| {entry} | " + " | ".join(f"{100 * (matrices[label][i, j] - untied[i, j]) / abs(untied[i, j]):+.3f}"
-                                           for label in labels) + " |")
-    print("| largest |dominant| | " + " | ".join(
-        f"{max(abs(100 * (matrices[label][entry_index(e)] - untied[entry_index(e)]) / untied[entry_index(e)]) for e, *_ in rows):.3f}"
-        for label in labels) + " |")
+    print_against_untied(matrices, untied, rows)
+    if args.one_piece:
+        part, cuts = stretch(chain, args.segments)
+        tied = {}
+        for label in labels:
+            path = folder / f"onepiece_{label}_{tag}.npy"
+            if not path.exists():
+                start = time.process_time()
+                np.save(path, one_piece_tied_stiffness(part, cuts, args.through, options, label))
+                print(f"one piece tied by {label}: {time.process_time() - start:.1f} s CPU", flush=True)
+            tied[label] = np.load(path)
+        print(f"\n{name}: the one-piece mesh tied by each interface (distributing: cut apart there), "
+              "tied - untied [%]")
+        print_against_untied(tied, untied, rows)
     base = [np.median(times) for times in cpu.get("rigid", cpu[labels[0]])]
     print(f"\nCPU per segment condensation [s], median of {args.rounds} (ratio to {'rigid' if 'rigid' in cpu else labels[0]})")
     print("| interface | " + " | ".join(f"segment {k + 1}" for k in range(len(segments))) + " |")
@@ -158,6 +167,21 @@ def interfaces(chain, name, args, options, untied, composed, rows, folder, tag) 
     for label in labels:
         print(f"| {label} | " + " | ".join(f"{np.median(t):.2f} ({np.median(t) / b:.2f})"
                                            for t, b in zip(cpu[label], base)) + " |")
+
+
+def print_against_untied(matrices: dict, untied: np.ndarray, rows) -> None:
+    """A markdown table: each dominant entry of ``rows``, (K - untied) / |untied| [%] per matrix,
+    and the largest |.| per matrix."""
+    labels = list(matrices)
+    relative = {label: {entry: 100 * (matrices[label][entry_index(entry)] - untied[entry_index(entry)])
+                        / abs(untied[entry_index(entry)]) for entry, *_ in rows} for label in labels}
+    print("| entry | " + " | ".join(labels) + " |")
+    print("|---|" + "---:|" * len(labels))
+    for entry, *_ in rows:
+        print(f"| {entry} | " + " | ".join(f"{relative[label][entry]:+.3f}" for label in labels) + " |")
+    print("| largest abs | " + " | ".join(f"{max(abs(v) for v in relative[label].values()):.3f}"
+                                          for label in labels) + " |")
+
 
 if __name__ == "__main__":
     main()

@@ -45,7 +45,8 @@ import scipy.sparse as sp
 from .coupling import MIRROR_PARITY, RigidCoupling
 
 __all__ = ["RIGID", "series_stiffness", "condensed_onto_ends", "polynomial_exponents", "n_interface_dofs", "section_modes", "section_mode_parity",
-           "PolynomialCoupling", "DistributingCoupling", "face_triangles", "face_mass_matrix"]
+           "PolynomialCoupling", "DistributingCoupling", "face_triangles", "face_mass_matrix",
+           "split_at_section", "shared_interfaces"]
 
 RIGID = "rigid"
 """The ``order`` of the six rigid motions (ux, uy, uz, rx, ry, rz about the centre)."""
@@ -250,3 +251,36 @@ def condensed_onto_ends(K: np.ndarray) -> np.ndarray:
     K_ei = K[np.ix_(ends, inner)]
     out = K[np.ix_(ends, ends)] - K_ei @ np.linalg.solve(K[np.ix_(inner, inner)], K_ei.T)
     return 0.5 * (out + out.T)
+
+
+def split_at_section(mesh, face_nodes: np.ndarray, x: float):
+    """(mesh cut apart at the section x [m], the copies (n_s,) of ``face_nodes``): the tets
+    on the +x side (corner centroid beyond x) get new nodes in place of the face's, so the
+    two sides meet node for node but are no longer joined (for distributing couplings on
+    matching faces, whose joined stiffness bounds the uncut mesh's from below)."""
+    from .mesh_tets import TetMesh
+
+    nodes, tets = np.asarray(mesh.nodes, float), np.array(mesh.tets)
+    face_nodes = np.unique(np.asarray(face_nodes))
+    copies = len(nodes) + np.arange(face_nodes.size)
+    renumber = np.arange(len(nodes))
+    renumber[face_nodes] = copies
+    right = nodes[tets[:, :4], 0].mean(axis=1) > x
+    tets[right] = renumber[tets[right]]
+    return TetMesh(np.vstack([nodes, nodes[face_nodes]]), tets), copies
+
+
+def shared_interfaces(K: np.ndarray, sizes: list[int], pairs: list[tuple[int, int]]) -> np.ndarray:
+    """K (n, n) on consecutive DOF blocks of ``sizes`` with the blocks of each pair (i, j)
+    made one (the same DOFs: P^T K P, the second block's rows and columns added onto the
+    first's and removed)."""
+    starts = np.concatenate([[0], np.cumsum(sizes)])
+    target = np.arange(starts[-1])
+    for i, j in pairs:
+        if sizes[i] != sizes[j]:
+            raise ValueError(f"blocks {i} and {j} have {sizes[i]} and {sizes[j]} DOFs; shared blocks must match")
+        target[starts[j]:starts[j + 1]] = target[starts[i]:starts[i + 1]]
+    kept, merged = np.unique(target, return_inverse=True)
+    P = np.zeros((starts[-1], kept.size))
+    P[np.arange(starts[-1]), merged] = 1.0
+    return P.T @ K @ P

@@ -9,7 +9,8 @@ from flexcal.fem.condense import mirrored_coupled_stiffness
 from flexcal.fem.coupling import RigidCoupling
 from flexcal.fem.interface import (RIGID, DistributingCoupling, PolynomialCoupling, condensed_onto_ends,
                                    face_mass_matrix, face_triangles, n_interface_dofs, polynomial_exponents,
-                                   section_mode_parity, section_modes, series_stiffness)
+                                   section_mode_parity, section_modes, series_stiffness, shared_interfaces,
+                                   split_at_section)
 from flexcal.fem.structured import grid_tet_mesh
 from flexcal.geometry.params import STEEL
 from test_mesh_mapped_chain_mirror import _mirrored
@@ -100,6 +101,22 @@ def test_halves_joined_through_a_field_are_the_one_piece_bar_with_that_field():
         joined, one_piece = _halves(kind, order), _one_piece(kind, order)
         # round-off of two condensations of ~1.6k-DOF halves and a Schur complement: measured 5e-15; 1e-10
         np.testing.assert_allclose(_in_si(joined), _in_si(one_piece), rtol=0, atol=1e-10 * np.abs(_in_si(one_piece)).max())
+
+
+def test_the_bar_cut_apart_in_one_mesh_is_its_halves_meshed_alone():
+    # split_at_section gives the +x side new nodes on the cut face: distributing couplings of
+    # the two faces with shared DOFs (shared_interfaces) are the halves meshed alone and joined
+    mesh = _bar(0.0, LENGTH, 8)
+    face = _face(mesh, CENTRE[0])
+    cut, copies = split_at_section(mesh, face, CENTRE[0])
+    assert len(cut.nodes) == len(mesh.nodes) + len(face) and np.array_equal(cut.nodes[copies], mesh.nodes[face])
+    sides = [DistributingCoupling(nodes=nodes, reference_point=CENTRE, order=2, scale=HALF) for nodes in (face, copies)]
+    a, b = _ends(mesh)
+    K = mirrored_coupled_stiffness(cut, STEEL, [a, *sides, b], ())
+    one_mesh = condensed_onto_ends(shared_interfaces(K, [6, 18, 18, 6], [(1, 2)]))
+    halves = _halves("distributing", 2)
+    # round-off of condensations and Schur complements of ~3k DOF (measured 2e-14): 1e-10
+    np.testing.assert_allclose(_in_si(one_mesh), _in_si(halves), rtol=0, atol=1e-10 * np.abs(_in_si(halves)).max())
 
 
 def test_a_lower_order_field_is_the_higher_order_one_with_its_extra_coefficients_held():

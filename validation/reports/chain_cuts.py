@@ -25,7 +25,7 @@ import numpy as np
 
 __all__ = ["stretch", "series_stiffness", "segment_stiffness", "one_piece_stiffness", "chain_segments",
            "composed_stiffness", "INTERFACES", "cut_coupling", "interface_segment_stiffness",
-           "composed_interface_stiffness", "interface_segments", "middle_cut", "strut_cuts", "converged_chain_estimate", "cut_rows", "entry_index"]
+           "composed_interface_stiffness", "interface_segments", "one_piece_tied_stiffness", "middle_cut", "strut_cuts", "converged_chain_estimate", "cut_rows", "entry_index"]
 
 
 def stretch(chain, n_segments: int):
@@ -79,16 +79,15 @@ def one_piece_stiffness(part, cuts, elements_through: float, options: dict,
     ``part`` meshed in one piece with grid lines at ``cuts`` [m] (module docstring),
     condensed on the mirror part (``mirrored_coupled_stiffness``). tie_sets: the cuts tied
     in each tied matrix (None: one set, every cut), each a subset of ``cuts``. interface: the
-    tie, "rigid" or a kinematic field "p<order>" (``cut_coupling``; a distributing one needs
-    the faces apart, ``composed_interface_stiffness``)."""
+    tie (``cut_coupling``): "rigid" or a kinematic field "p<order>" on the cut face; a
+    distributing one ("d-rigid", "d<order>") on the two faces of the mesh cut apart there
+    (``split_at_section``), their DOFs shared."""
     from flexcal.fem.condense import mirrored_coupled_stiffness
     from flexcal.fem.coupling import RigidCoupling, select_plane_nodes
     from flexcal.fem.interface import condensed_onto_ends
     from flexcal.geometry.exact import bounding_box, end_planes
     from flexcal.geometry.params import STEEL
 
-    if not (interface == "rigid" or interface.startswith("p")):
-        raise ValueError(f"interface={interface!r}: the one-piece mesh takes the rigid tie or a kinematic field p<order>")
     cuts = tuple(float(x) for x in cuts)
     tie_sets = [cuts] if tie_sets is None else [tuple(float(x) for x in ties) for ties in tie_sets]
     if any(x not in cuts for ties in tie_sets for x in ties):
@@ -98,12 +97,48 @@ def one_piece_stiffness(part, cuts, elements_through: float, options: dict,
     ends = [RigidCoupling(nodes=select_plane_nodes(mesh, planes[end]), reference_point=planes[end][0]) for end in "AB"]
     untied = mirrored_coupled_stiffness(mesh, STEEL, ends, axes)
     scale = float(bounding_box(part)[1][1])
-    tied = []
-    for ties in tie_sets:
-        inner = [cut_coupling(interface, select_plane_nodes(mesh, (np.array([x, 0.0, 0.0]), np.array([1.0, 0.0, 0.0]))),
-                              np.array([x, 0.0, 0.0]), scale) for x in sorted(ties)]
-        tied.append(condensed_onto_ends(mirrored_coupled_stiffness(mesh, STEEL, [ends[0], *inner, ends[1]], axes)))
+    tied = [condensed_onto_ends(_tied_one_piece(mesh, axes, ends, sorted(ties), interface, scale))
+            for ties in tie_sets]
     return 0.5 * (untied + untied.T), tied, mesh.n_dof
+
+
+def one_piece_tied_stiffness(part, cuts, elements_through: float, options: dict, interface: str) -> np.ndarray:
+    """(12, 12) [SI]: ``part`` meshed in one piece with grid lines at ``cuts`` [m], every cut
+    tied by ``interface`` (as ``one_piece_stiffness``'s tied matrices), the cuts' DOFs
+    condensed out."""
+    from flexcal.fem.coupling import RigidCoupling, select_plane_nodes
+    from flexcal.fem.interface import condensed_onto_ends
+    from flexcal.geometry.exact import bounding_box, end_planes
+
+    cuts = tuple(float(x) for x in cuts)
+    mesh, axes = _mirror_part(part, elements_through, {**options, "cuts": cuts})
+    planes = end_planes(part)
+    ends = [RigidCoupling(nodes=select_plane_nodes(mesh, planes[end]), reference_point=planes[end][0]) for end in "AB"]
+    return condensed_onto_ends(_tied_one_piece(mesh, axes, ends, sorted(cuts), interface,
+                                               float(bounding_box(part)[1][1])))
+
+
+def _tied_one_piece(mesh, axes, ends, cuts, interface: str, scale: float) -> np.ndarray:
+    """The one-piece mirror part condensed onto A, the cuts' interface DOFs (``cut_coupling``)
+    and B, in that order; a distributing interface on the two faces of the mesh cut apart at
+    each cut (``split_at_section``), their DOFs shared."""
+    from flexcal.fem.condense import mirrored_coupled_stiffness
+    from flexcal.fem.coupling import select_plane_nodes
+    from flexcal.fem.interface import shared_interfaces, split_at_section
+    from flexcal.geometry.params import STEEL
+
+    sections = [(np.array([x, 0.0, 0.0]), np.array([1.0, 0.0, 0.0])) for x in cuts]
+    if not interface.startswith("d"):
+        inner = [cut_coupling(interface, select_plane_nodes(mesh, plane), plane[0], scale) for plane in sections]
+        return mirrored_coupled_stiffness(mesh, STEEL, [ends[0], *inner, ends[1]], axes)
+    inner = []
+    for plane in sections:
+        face = select_plane_nodes(mesh, plane)
+        mesh, copies = split_at_section(mesh, face, plane[0][0])
+        inner += [cut_coupling(interface, face, plane[0], scale), cut_coupling(interface, copies, plane[0], scale)]
+    K = mirrored_coupled_stiffness(mesh, STEEL, [ends[0], *inner, ends[1]], axes)
+    sizes = [6] + [len(c.master_parity(1)) for c in inner] + [6]
+    return shared_interfaces(K, sizes, [(1 + 2 * k, 2 + 2 * k) for k in range(len(sections))])
 
 
 def middle_cut(chain):
