@@ -442,21 +442,24 @@ def mirrored_coupled_stiffness(mesh, material: Material, couplings: list, axes: 
         G_rows, d_masters, offset = [], [], 0
         for (columns, face_loads), gram, c in zip(loads, grams, distributing):
             own = _class_masters(_parities([c], axes), axes, signs)
-            G = np.zeros((own.size, free.size))
-            G[:, columns] = np.linalg.solve(gram[np.ix_(own, own)], face_loads[:, own].T)
-            G_rows.append(G[:, kept])
+            G = np.linalg.solve(gram[np.ix_(own, own)], face_loads[:, own].T)  # (n_own, n_face DOFs)
+            G_rows.append(sp.csr_matrix((G.ravel(), (np.repeat(np.arange(own.size), columns.size),
+                                                     np.tile(columns, own.size))), shape=(own.size, free.size)))
             d_masters.append(n_m + offset + own)
             offset += len(gram)
-        G = np.vstack(G_rows) if G_rows else np.zeros((0, kept.size))
+        G = sp.vstack(G_rows, format="csr")[:, kept] if G_rows else sp.csr_matrix((0, kept.size))
         d_masters = np.concatenate(d_masters) if d_masters else np.zeros(0, int)
         if masters.size + d_masters.size == 0:
             continue
         sub = upper_ii[kept][:, kept]  # rows and columns ascending: still the upper triangle, sorted
-        K_kc = K_im[kept][:, masters]
-        X = solve_spd(sub, np.hstack([K_kc, G.T]), method="pardiso" if pardiso_available() else "splu",
-                      upper_triangle=True)
+        # one dense copy [K_im, G^T], in Fortran order as PARDISO takes it (and as the rigid path's
+        # K_im[kept][:, masters] always was: the same bits)
+        rhs = np.empty((kept.size, masters.size + d_masters.size), order="F")
+        rhs[:, :masters.size] = K_im[np.ix_(kept, masters)]
+        rhs[:, masters.size:] = G.T.toarray()
+        X = solve_spd(sub, rhs, method="pardiso" if pardiso_available() else "splu", upper_triangle=True)
         X_m, X_g = X[:, :masters.size], X[:, masters.size:]
-        block = K_mm[np.ix_(masters, masters)] - K_kc.T @ X_m
+        block = K_mm[np.ix_(masters, masters)] - rhs[:, :masters.size].T @ X_m
         if d_masters.size:
             H_inv = np.linalg.inv(G @ X_g)
             B = np.hstack([G @ X_m, np.eye(d_masters.size)])  # r = B [m; q]
