@@ -12,12 +12,14 @@ segments meshed alone (the prototype's way), against the same stretch meshed in 
     python benchmarks/bench_chain_cuts.py --chain L1 --segments 2 --through 10 \\
         --options '{"slenderness": null}' --dir /tmp/cuts
     python benchmarks/bench_chain_cuts.py --chain L1 D1 --segments 2 --dir /tmp/cuts \\
-        --interface rigid p1 p2 p3 p4 d-rigid d1 d2 d3 --rounds 2   # richer ties at the cuts
+        --interface rigid p2 p4 p6 p8 p10 p12 d-rigid d4 d8 d10 d12 --rounds 3 --one-piece   # richer ties
 
 --interface: the segments also joined through other interfaces at their cuts
 (``chain_cuts.INTERFACES``, docs/meshing.md "Session 23"), each against the one piece untied,
 with the CPU of each segment's condensation (its mirror part meshed once; assembly,
-factorisation and solve), the labels alternating in each of --rounds rounds (A B A B).
+factorisation and solve), the labels alternating in each of --rounds rounds (A B A B);
+--one-piece: also the one-piece mesh tied by each (distributing: cut apart there), the exact
+bracket of the untied one (docs/meshing.md, "Session 23").
 
 Options: ``PROTOTYPE_CHAIN_OPTIONS`` updated by --options (JSON); --through: cells asked for
 (7, the prototype's). Each matrix is stored as DIR/<tag>.npy and reused. One OMP/MKL
@@ -161,7 +163,8 @@ def interfaces(chain, name, args, options, untied, composed, rows, folder, tag) 
               "tied - untied [%]")
         print_against_untied(tied, untied, rows)
     base = [np.median(times) for times in cpu.get("rigid", cpu[labels[0]])]
-    print(f"\nCPU per segment condensation [s], median of {args.rounds} (ratio to {'rigid' if 'rigid' in cpu else labels[0]})")
+    reference = "rigid" if "rigid" in cpu else labels[0]
+    print(f"\nCPU per segment condensation [s], median of {args.rounds} (ratio to {reference})")
     print("| interface | " + " | ".join(f"segment {k + 1}" for k in range(len(segments))) + " |")
     print("|---|" + "---:|" * len(segments))
     for label in labels:

@@ -29,7 +29,8 @@ from flexcal.geometry.frames import skew, twist_transform
 from flexcal.geometry.params import Material
 
 from .assembly import assemble_stiffness, check_mesh
-from .coupling import DEFAULT_PLANE_TOLERANCE, MIRROR_PARITY, CouplingMap, RigidCoupling, coupling_map, select_plane_nodes
+from .coupling import (DEFAULT_PLANE_TOLERANCE, MIRROR_PARITY, CouplingMap, RigidCoupling, coupling_map,
+                       select_plane_nodes)
 from .solve import pardiso_available, solve_spd
 
 __all__ = [
@@ -398,7 +399,7 @@ def mirrored_coupled_stiffness(mesh, material: Material, couplings: list, axes: 
 
     For each parity class (``master_parity``), with K_ii the part's free DOFs (the class's
     plane DOFs removed), m the kinematic masters, X = K_ii^-1 K_im and H = G K_ii^-1 G^T:
-    u_i = -X m + v with G v = q + G X m =: r, so the energy is m^T S m + r^T H^-1 r,
+    u_i = -X m + v with G v = q + G X m =: r, so twice the energy is m^T S m + r^T H^-1 r,
     S = K_mm - K_im^T X, one factorisation for both (docs/meshing.md, session 23). On the
     part the class's rows of G use the class block of the part's Gram matrix (the whole
     face's is 2^len(axes) times it; blocks between classes vanish on the whole face)."""

@@ -44,7 +44,8 @@ import scipy.sparse as sp
 
 from .coupling import MIRROR_PARITY, RigidCoupling
 
-__all__ = ["RIGID", "series_stiffness", "condensed_onto_ends", "polynomial_exponents", "n_interface_dofs", "section_modes", "section_mode_parity",
+__all__ = ["RIGID", "series_stiffness", "condensed_onto_ends", "polynomial_exponents", "n_interface_dofs",
+           "section_modes", "section_mode_parity",
            "PolynomialCoupling", "DistributingCoupling", "face_triangles", "face_mass_matrix",
            "split_at_section", "shared_interfaces"]
 
@@ -196,7 +197,8 @@ def _triangle_shapes(L: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """P2 triangle shape functions (q, 6) and their derivatives by (L1, L2) (q, 6, 2) at the
     barycentric points L (q, 3) (L0 = 1 - L1 - L2)."""
     l0, l1, l2 = L.T
-    N = np.column_stack([l0 * (2 * l0 - 1), l1 * (2 * l1 - 1), l2 * (2 * l2 - 1), 4 * l0 * l1, 4 * l1 * l2, 4 * l0 * l2])
+    N = np.column_stack([l0 * (2 * l0 - 1), l1 * (2 * l1 - 1), l2 * (2 * l2 - 1),
+                         4 * l0 * l1, 4 * l1 * l2, 4 * l0 * l2])
     dN = np.zeros((len(L), 6, 2))
     dN[:, 0] = -(4 * l0 - 1)[:, None]
     dN[:, 1, 0] = 4 * l1 - 1

@@ -25,7 +25,8 @@ import numpy as np
 
 __all__ = ["stretch", "series_stiffness", "segment_stiffness", "one_piece_stiffness", "chain_segments",
            "composed_stiffness", "INTERFACES", "cut_coupling", "interface_segment_stiffness",
-           "composed_interface_stiffness", "interface_segments", "one_piece_tied_stiffness", "middle_cut", "strut_cuts", "converged_chain_estimate", "cut_rows", "entry_index"]
+           "composed_interface_stiffness", "interface_segments", "one_piece_tied_stiffness", "middle_cut",
+           "strut_cuts", "converged_chain_estimate", "cut_rows", "entry_index"]
 
 
 def stretch(chain, n_segments: int):
