@@ -11,6 +11,15 @@ segments meshed alone (the prototype's way), against the same stretch meshed in 
     python benchmarks/bench_chain_cuts.py --chain L1 --strut-depth 50 --dir /tmp/cuts   # 50 mm into the strut
     python benchmarks/bench_chain_cuts.py --chain L1 --segments 2 --through 10 \\
         --options '{"slenderness": null}' --dir /tmp/cuts
+    python benchmarks/bench_chain_cuts.py --chain L1 D1 --segments 2 --dir /tmp/cuts \\
+        --interface rigid p2 p4 p6 p8 p10 p12 d-rigid d4 d8 d10 d12 --rounds 3 --one-piece   # richer ties
+
+--interface: the segments also joined through other interfaces at their cuts
+(``chain_cuts.INTERFACES``, docs/meshing.md "Session 23"), each against the one piece untied,
+with the CPU of each segment's condensation (its mirror part meshed once; assembly,
+factorisation and solve), the labels alternating in each of --rounds rounds (A B A B);
+--one-piece: also the one-piece mesh tied by each (distributing: cut apart there), the exact
+bracket of the untied one (docs/meshing.md, "Session 23").
 
 Options: ``PROTOTYPE_CHAIN_OPTIONS`` updated by --options (JSON); --through: cells asked for
 (7, the prototype's). Each matrix is stored as DIR/<tag>.npy and reused. One OMP/MKL
@@ -30,8 +39,12 @@ from pathlib import Path
 import numpy as np
 
 from flexcal.fem.mesh_mapped_chain import PROTOTYPE_CHAIN_OPTIONS
-from flexcal.validation.reports.chain_cuts import (composed_stiffness, cut_rows, entry_index, middle_cut,
-                                                     one_piece_stiffness, stretch, strut_cuts)
+from flexcal.validation.reports.chain_cuts import (INTERFACES, _mirror_part, composed_stiffness, cut_rows,
+                                                     entry_index, interface_segment_stiffness, interface_segments,
+                                                     middle_cut, one_piece_stiffness, one_piece_tied_stiffness,
+                                                     stretch, strut_cuts)
+from flexcal.fem.interface import series_stiffness as joined
+from flexcal.geometry.exact import bounding_box
 from flexcal.validation.reports.chain_reference import reference_chain
 
 
@@ -55,6 +68,13 @@ def main() -> None:
     parser.add_argument("--strut-depth", type=float, default=None,
                         help="[mm] the whole chain cut only in its strut, this far from either end of it "
                              "(three segments); --segments is ignored")
+    parser.add_argument("--interface", nargs="*", default=None,
+                        help=f"also join the segments through these interfaces at the cuts (first-half stretches): "
+                             f"{', '.join(INTERFACES)}, or any order p<p>, d<p>")
+    parser.add_argument("--rounds", type=int, default=2, help="--interface: rounds of timing, labels alternating")
+    parser.add_argument("--one-piece", action="store_true",
+                        help="--interface: also the one-piece mesh tied by each (the exact bracket: kinematic above "
+                             "the untied, distributing below)")
     parser.add_argument("--dir", default="bench_chain_cuts")
     args = parser.parse_args()
     folder = Path(args.dir).resolve()
@@ -96,6 +116,75 @@ def main() -> None:
             extra = "".join(f" {100 * (t[i, j] - untied[i, j]) / abs(untied[i, j]):+.3f} |" for t in tied[1:])
             print(f"| {entry} | {value:.6e} | {100 * composed_diff:+.3f} | {100 * tied_diff:+.3f} | "
                   f"{100 * grid_diff:+.3f} |{extra}")
+        if args.interface:
+            interfaces(chain, name, args, options, untied, composed, cut_rows(composed, tied[0], untied),
+                       folder, tag)
+
+
+def interfaces(chain, name, args, options, untied, composed, rows, folder, tag) -> None:
+    """The stretch joined through each of ``args.interface`` at its cuts: the dominant entries
+    (``rows``) against the one piece untied, and each segment's condensation CPU [s]."""
+    labels = list(dict.fromkeys(args.interface))
+    segments = interface_segments(chain, args.segments)
+    scale = float(bounding_box(stretch(chain, args.segments)[0])[1][1])
+    meshes = [_mirror_part(segment, args.through, options) for segment in segments]
+    cpu = {label: [[] for _ in segments] for label in labels}
+    matrices = {}
+    for _ in range(args.rounds):
+        for label in labels:  # A B A B: every label once per round
+            parts = []
+            for k, (segment, mesh) in enumerate(zip(segments, meshes)):
+                start = time.process_time()
+                parts.append(interface_segment_stiffness(segment, mesh, k > 0, k < len(segments) - 1, label, scale))
+                cpu[label][k].append(time.process_time() - start)
+            matrices[label] = joined(parts)
+        print(f"round done (load {os.getloadavg()[0]:.1f})", flush=True)
+    for label, value in matrices.items():
+        np.save(folder / f"interface_{label}_{tag}.npy", value)
+    if "rigid" in matrices:
+        gap = np.max(np.abs(matrices["rigid"] - composed) / np.sqrt(np.outer(np.diag(composed), np.diag(composed))))
+        print(f"\nrigid through the interface code against the prototype's composed: {gap:.1e} (largest, "
+              "relative to the diagonals' geometric mean)")
+    dofs = [f"{3 * len(mesh.nodes)}" for mesh, _ in meshes]
+    print(f"\n{name} [0, {1e3 * segments[-1].x_end:.1f} mm] joined through each interface, composed - untied [%] "
+          f"(segments' mirror parts {', '.join(dofs)} DOF, scale {1e3 * scale:g} mm)")
+    print_against_untied(matrices, untied, rows)
+    if args.one_piece:
+        part, cuts = stretch(chain, args.segments)
+        tied = {}
+        for label in labels:
+            path = folder / f"onepiece_{label}_{tag}.npy"
+            if not path.exists():
+                start = time.process_time()
+                np.save(path, one_piece_tied_stiffness(part, cuts, args.through, options, label))
+                print(f"one piece tied by {label}: {time.process_time() - start:.1f} s CPU", flush=True)
+            tied[label] = np.load(path)
+        print(f"\n{name}: the one-piece mesh tied by each interface (distributing: cut apart there), "
+              "tied - untied [%]")
+        print_against_untied(tied, untied, rows)
+    base = [np.median(times) for times in cpu.get("rigid", cpu[labels[0]])]
+    reference = "rigid" if "rigid" in cpu else labels[0]
+    print(f"\nCPU per segment condensation [s], median of {args.rounds} (ratio to {reference})")
+    print("| interface | " + " | ".join(f"segment {k + 1}" for k in range(len(segments))) + " |")
+    print("|---|" + "---:|" * len(segments))
+    for label in labels:
+        print(f"| {label} | " + " | ".join(f"{np.median(t):.2f} ({np.median(t) / b:.2f})"
+                                           for t, b in zip(cpu[label], base)) + " |")
+
+
+def print_against_untied(matrices: dict, untied: np.ndarray, rows) -> None:
+    """A markdown table: each dominant entry of ``rows``, (K - untied) / |untied| [%] per matrix,
+    and the largest |.| per matrix."""
+    labels = list(matrices)
+    relative = {label: {entry: 100 * (matrices[label][entry_index(entry)] - untied[entry_index(entry)])
+                        / abs(untied[entry_index(entry)]) for entry, *_ in rows} for label in labels}
+    print("| entry | " + " | ".join(labels) + " |")
+    print("|---|" + "---:|" * len(labels))
+    for entry, *_ in rows:
+        print(f"| {entry} | " + " | ".join(f"{relative[label][entry]:+.3f}" for label in labels) + " |")
+    print("| largest abs | " + " | ".join(f"{max(abs(v) for v in relative[label].values()):.3f}"
+                                          for label in labels) + " |")
+
 
 if __name__ == "__main__":
     main()

@@ -29,7 +29,8 @@ from flexcal.geometry.frames import skew, twist_transform
 from flexcal.geometry.params import Material
 
 from .assembly import assemble_stiffness, check_mesh
-from .coupling import DEFAULT_PLANE_TOLERANCE, CouplingMap, RigidCoupling, coupling_map, select_plane_nodes
+from .coupling import (DEFAULT_PLANE_TOLERANCE, MIRROR_PARITY, CouplingMap, RigidCoupling, coupling_map,
+                       select_plane_nodes)
 from .solve import pardiso_available, solve_spd
 
 __all__ = [
@@ -49,6 +50,7 @@ __all__ = [
     "chain_stiffness_derivative",
     "mirrored_chain_stiffness",
     "mirrored_sections_stiffness",
+    "mirrored_coupled_stiffness",
     "MIRROR_PARITY",
 ]
 
@@ -338,12 +340,6 @@ def chain_stiffness(
     return solve_chain(mesh, material, plane_a, point_a, plane_b, point_b, **options).stiffness
 
 
-# Parity of each master DOF (ux, uy, uz, rx, ry, rz) under the mirror y -> -y (axis 1) and
-# z -> -z (axis 2): +1 if a unit motion of it is mirror-symmetric (u(Mx) = M u(x)), -1 if
-# antisymmetric (u(Mx) = -M u(x)); rotations are pseudovectors, r -> -M r.
-MIRROR_PARITY = {1: np.array([1, -1, 1, -1, 1, -1]), 2: np.array([1, 1, -1, -1, -1, 1])}
-
-
 def mirrored_chain_stiffness(mesh, material: Material, plane_a: Plane, point_a: np.ndarray, plane_b: Plane,
                              point_b: np.ndarray, axes: tuple[int, ...], *,
                              relative_tolerance: float = DEFAULT_PLANE_TOLERANCE) -> np.ndarray:
@@ -375,36 +371,120 @@ def mirrored_sections_stiffness(mesh, material: Material, sections: list[tuple[P
     of each point in turn). With the two end faces it is ``mirrored_chain_stiffness``; with
     cross-sections inside the part too, it is the part cut there into rigidly tied segments
     and joined again (docs/meshing.md, "Session 20: whole chains")."""
+    couplings = [RigidCoupling(nodes=select_plane_nodes(mesh, plane, relative_tolerance=relative_tolerance),
+                               reference_point=np.asarray(point, float).reshape(3)) for plane, point in sections]
+    return mirrored_coupled_stiffness(mesh, material, couplings, axes)
+
+
+def _parities(couplings: list, axes: tuple[int, ...]) -> list[np.ndarray]:
+    """Per coupling, (n_master, len(axes)) the parity of each master DOF about each axis."""
+    return [np.stack([c.master_parity(a) for a in axes], axis=1) if axes
+            else np.zeros((len(c.master_parity(1)), 0), int) for c in couplings]
+
+
+def _class_masters(parities: list[np.ndarray], axes: tuple[int, ...], signs: tuple[int, ...]) -> np.ndarray:
+    """The master DOFs (indices into the concatenated ``parities``, one (n_k, len(axes)) array
+    per coupling) whose parity about each mirror axis is the class's sign."""
+    parity = np.concatenate(parities) if parities else np.zeros((0, len(axes)), int)
+    return np.flatnonzero(np.all(parity == np.asarray(signs, int)[None, :], axis=1))
+
+
+def mirrored_coupled_stiffness(mesh, material: Material, couplings: list, axes: tuple[int, ...]) -> np.ndarray:
+    """Stiffness (n_q, n_q) [SI] of the whole part (``mesh`` and its mirror images, as
+    ``mirrored_chain_stiffness``) condensed onto the master DOFs of ``couplings`` (in their
+    order, each coupling's own DOF order): kinematic ones (``RigidCoupling``,
+    ``flexcal.fem.interface.PolynomialCoupling``: their nodes follow their masters) and
+    distributing ones (``flexcal.fem.interface.DistributingCoupling``: their nodes stay
+    free, their masters are the face's projection q = G u_face, G = Gram^-1 loads^T).
+
+    For each parity class (``master_parity``), with K_ii the part's free DOFs (the class's
+    plane DOFs removed), m the kinematic masters, X = K_ii^-1 K_im and H = G K_ii^-1 G^T:
+    u_i = -X m + v with G v = q + G X m =: r, so twice the energy is m^T S m + r^T H^-1 r,
+    S = K_mm - K_im^T X, one factorisation for both (docs/meshing.md, session 23). On the
+    part the class's rows of G use the class block of the part's Gram matrix (the whole
+    face's is 2^len(axes) times it; blocks between classes vanish on the whole face)."""
     import itertools
+
+    from .interface import DistributingCoupling
 
     axes = tuple(int(a) for a in axes)
     if any(a not in MIRROR_PARITY for a in axes) or len(set(axes)) != len(axes):
         raise ValueError(f"axes={axes!r}: mirror axes are 1 (y) and / or 2 (z), each once")
-    couplings = [RigidCoupling(nodes=select_plane_nodes(mesh, plane, relative_tolerance=relative_tolerance),
-                               reference_point=np.asarray(point, float).reshape(3)) for plane, point in sections]
     if any(c.reference_point[a] != 0.0 for c in couplings for a in axes):
         raise ValueError("the reference points must lie on the mirror planes")
-    nodes, cmap, upper_ii, K_im, K_mm = _coupled_blocks(mesh, material, couplings)
+    distributing = [c for c in couplings if isinstance(c, DistributingCoupling)]
+    kinematic = [c for c in couplings if not isinstance(c, DistributingCoupling)]
+    nodes, cmap, upper_ii, K_im, K_mm = _coupled_blocks(mesh, material, kinematic)
     for a in axes:
         if nodes[:, a].min() != 0.0:
             raise ValueError(f"the mesh must lie on the non-negative side of its mirror plane (axis {a}) and touch it")
     free = cmap.free_node_dofs
     node, component = free // 3, free % 3
-    n_master = 6 * len(couplings)
-    stiffness = np.zeros((n_master, n_master))
+    where = np.full(3 * len(nodes), -1)
+    where[free] = np.arange(free.size)
+    loads, grams = [], []
+    for c in distributing:
+        face_loads, gram = c.projection_terms(nodes, check_mesh(mesh)[1])
+        columns = where[(3 * c.nodes[:, None] + np.arange(3)).ravel()]
+        if np.any(columns < 0):
+            raise ValueError("a distributing coupling's face nodes must not be slaves of a kinematic coupling")
+        loads.append((columns, face_loads.reshape(-1, face_loads.shape[2])))
+        grams.append(gram)
+    n_m = K_mm.shape[0]
+    n_d = sum(len(g) for g in grams)
+    stiffness = np.zeros((n_m + n_d, n_m + n_d))
     for signs in itertools.product((1, -1), repeat=len(axes)):
-        same = [np.tile(MIRROR_PARITY[a], len(couplings)) == s for a, s in zip(axes, signs)]
-        masters = np.flatnonzero(np.all(same, axis=0)) if same else np.arange(n_master)  # no planes: one class
+        masters = _class_masters(_parities([c for c in kinematic if not c.fixed], axes), axes, signs)
         keep = np.ones(free.size, bool)
         for a, s in zip(axes, signs):
             on_plane = nodes[node, a] == 0.0
             keep &= ~(on_plane & ((component == a) if s == 1 else (component != a)))
         kept = np.flatnonzero(keep)
+        G_rows, d_masters, offset = [], [], 0
+        for (columns, face_loads), gram, c in zip(loads, grams, distributing):
+            own = _class_masters(_parities([c], axes), axes, signs)
+            G = np.linalg.solve(gram[np.ix_(own, own)], face_loads[:, own].T)  # (n_own, n_face DOFs)
+            G_rows.append(sp.csr_matrix((G.ravel(), (np.repeat(np.arange(own.size), columns.size),
+                                                     np.tile(columns, own.size))), shape=(own.size, free.size)))
+            d_masters.append(n_m + offset + own)
+            offset += len(gram)
+        G = sp.vstack(G_rows, format="csr")[:, kept] if G_rows else sp.csr_matrix((0, kept.size))
+        d_masters = np.concatenate(d_masters) if d_masters else np.zeros(0, int)
+        if masters.size + d_masters.size == 0:
+            continue
         sub = upper_ii[kept][:, kept]  # rows and columns ascending: still the upper triangle, sorted
-        K_kc = K_im[kept][:, masters]
-        X = solve_spd(sub, K_kc, method="pardiso" if pardiso_available() else "splu", upper_triangle=True)
-        stiffness[np.ix_(masters, masters)] = 2.0 ** len(axes) * (K_mm[np.ix_(masters, masters)] - K_kc.T @ X)
-    return stiffness
+        # one dense copy [K_im, G^T], in Fortran order as PARDISO takes it (and as the rigid path's
+        # K_im[kept][:, masters] always was: the same bits)
+        rhs = np.empty((kept.size, masters.size + d_masters.size), order="F")
+        rhs[:, :masters.size] = K_im[np.ix_(kept, masters)]
+        rhs[:, masters.size:] = G.T.toarray()
+        X = solve_spd(sub, rhs, method="pardiso" if pardiso_available() else "splu", upper_triangle=True)
+        X_m, X_g = X[:, :masters.size], X[:, masters.size:]
+        block = K_mm[np.ix_(masters, masters)] - rhs[:, :masters.size].T @ X_m
+        if d_masters.size:
+            H_inv = np.linalg.inv(G @ X_g)
+            B = np.hstack([G @ X_m, np.eye(d_masters.size)])  # r = B [m; q]
+            block = np.pad(block, (0, d_masters.size)) + B.T @ H_inv @ B
+        both = np.concatenate([masters, d_masters])
+        stiffness[np.ix_(both, both)] = 2.0 ** len(axes) * block
+    order = _coupling_order(couplings, kinematic, distributing, n_m)
+    return stiffness[np.ix_(order, order)]
+
+
+def _coupling_order(couplings: list, kinematic: list, distributing: list, n_m: int) -> np.ndarray:
+    """Indices taking the condensation's DOFs (kinematic masters, then distributing ones) to
+    the couplings' own order."""
+    start, offset = {}, 0
+    for c in kinematic:
+        if not c.fixed:
+            start[id(c)] = offset
+            offset += len(c.master_parity(1))
+    offset = n_m
+    for c in distributing:
+        start[id(c)] = offset
+        offset += len(c.master_parity(1))
+    return np.concatenate([start[id(c)] + np.arange(len(c.master_parity(1))) for c in couplings
+                           if id(c) in start])
 
 
 def chain_displacement(solution: ChainSolution, motions: np.ndarray) -> np.ndarray:

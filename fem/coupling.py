@@ -1,4 +1,5 @@
-"""Constraints by elimination: rigid couplings (RBE2) and prescribed DOFs.
+"""Constraints by elimination: rigid couplings (RBE2), other kinematic couplings, and
+prescribed DOFs.
 
 A rigid coupling ties a set of slave nodes (an end face) to a 6-DOF reference point
 (master) at x_m: ``u_s = u_m + theta_m x (x_s - x_m)`` for every slave node s. The slave
@@ -7,8 +8,15 @@ system is ``T^T K T u_r = T^T f``. No penalty, so the coupling is exact and adds
 conditioning problem. A clamp is a coupling whose reference point is fixed: its master
 DOFs are dropped (all slave DOFs become zero).
 
+Any kinematic coupling is the same elimination: its slaves follow ``u_s = Phi(x_s) q`` for
+its n_master DOFs q, ``Phi`` given by the coupling's ``slave_modes`` ((n_s, 3, n_master));
+the rigid one's is ``[I, -[x_s - x_m]x]`` (``flexcal.fem.interface`` has polynomial ones).
+Its ``master_parity(axis)`` says how each master DOF's field behaves under the mirror
+y -> -y (axis 1) or z -> -z (axis 2), for condensations on a mirror part.
+
 Reduced DOF layout: first the 3 DOFs of every node that is not a slave, in node order;
-then 6 DOFs (ux, uy, uz, rx, ry, rz) per free reference point, in coupling order.
+then the master DOFs of every free coupling in coupling order (6: ux, uy, uz, rx, ry, rz
+for a rigid one).
 
 Planes are ``(point (3,), normal (3,))`` [m]; face nodes are the nodes within
 ``relative_tolerance * mesh_size`` of the plane, ``mesh_size`` = median corner-edge
@@ -26,6 +34,7 @@ from flexcal.geometry.frames import skew
 
 __all__ = [
     "DEFAULT_PLANE_TOLERANCE",
+    "MIRROR_PARITY",
     "RigidCoupling",
     "CouplingMap",
     "mesh_size",
@@ -40,6 +49,12 @@ DEFAULT_PLANE_TOLERANCE = 1e-3
 CAD-projected meshes put face nodes on the plane to round-off (1e-16 relative); the
 nearest off-plane node is a mid-edge node at ~ 1/2 of an edge length. 1e-3 sits far from
 both; raise it (up to ~ 0.1) for a mesher that leaves face nodes slightly off the plane."""
+
+
+# Parity of each rigid master DOF (ux, uy, uz, rx, ry, rz) under the mirror y -> -y (axis 1)
+# and z -> -z (axis 2): +1 if a unit motion of it is mirror-symmetric (u(Mx) = M u(x)), -1 if
+# antisymmetric (u(Mx) = -M u(x)); rotations are pseudovectors, r -> -M r.
+MIRROR_PARITY = {1: np.array([1, -1, 1, -1, 1, -1]), 2: np.array([1, 1, -1, -1, -1, 1])}
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -57,14 +72,27 @@ class RigidCoupling:
         if self.nodes.size == 0:
             raise ValueError("a rigid coupling needs at least one slave node")
 
+    def slave_modes(self, points: np.ndarray) -> np.ndarray:
+        """(n, 3, 6) [m per m, m per rad]: the displacement of ``points`` (n, 3) [m] per unit
+        master DOF, ``u = u_m + theta_m x (x - x_m) = u_m - [x - x_m]x theta_m``."""
+        points = np.asarray(points, float).reshape(-1, 3)
+        modes = np.zeros((len(points), 3, 6))
+        modes[:, :, :3] = np.eye(3)
+        modes[:, :, 3:] = -skew(points - self.reference_point)
+        return modes
+
+    def master_parity(self, axis: int) -> np.ndarray:
+        """(6,) +1 / -1: ``MIRROR_PARITY[axis]`` (the reference point on the mirror plane)."""
+        return MIRROR_PARITY[axis]
+
 
 @dataclass(frozen=True, kw_only=True, eq=False)
 class CouplingMap:
     """Result of ``coupling_map``.
 
     transform: T (3 n_nodes, n_reduced) CSR, u_full = T @ u_reduced.
-    master_dofs: for each coupling, the (6,) indices of its master DOFs in the reduced
-    vector, or ``None`` for a fixed reference point.
+    master_dofs: for each coupling, the (n_master,) indices of its master DOFs in the
+    reduced vector (6 for a rigid one), or ``None`` for a fixed reference point.
     free_node_dofs: (n_reduced_nodal,) full DOF index of each leading reduced DOF."""
 
     transform: sp.csr_matrix
@@ -114,8 +142,9 @@ def select_plane_nodes(
     return found
 
 
-def coupling_map(n_nodes: int, nodes: np.ndarray, couplings: list[RigidCoupling]) -> CouplingMap:
-    """Transformation T eliminating the slave DOFs of rigid couplings.
+def coupling_map(n_nodes: int, nodes: np.ndarray, couplings: list) -> CouplingMap:
+    """Transformation T eliminating the slave DOFs of kinematic couplings (``RigidCoupling``
+    or any with ``nodes``, ``fixed`` and ``slave_modes``, module docstring).
 
     n_nodes: number of mesh nodes; nodes (n_nodes, 3) [m]; couplings: slave sets must be
     disjoint. Returns a ``CouplingMap`` (see the module docstring for the layout)."""
@@ -140,19 +169,15 @@ def coupling_map(n_nodes: int, nodes: np.ndarray, couplings: list[RigidCoupling]
         if coupling.fixed:
             master_dofs.append(None)
             continue
-        master = np.arange(next_col, next_col + 6)
-        master_dofs.append(master)
-        next_col += 6
         s = coupling.nodes
-        # u_s = u_m - [x_s - x_m]x theta_m
+        modes = coupling.slave_modes(nodes[s])  # (n_s, 3, n_master): u_s = modes q
+        master = np.arange(next_col, next_col + modes.shape[2])
+        master_dofs.append(master)
+        next_col += modes.shape[2]
         slave_rows = 3 * s[:, None] + np.arange(3)  # (n_s, 3)
-        rows.append(slave_rows.ravel())
-        cols.append(np.broadcast_to(master[:3], slave_rows.shape).ravel())
-        vals.append(np.ones(slave_rows.size))
-        rot = -skew(nodes[s] - coupling.reference_point)  # (n_s, 3, 3)
-        rows.append(np.repeat(slave_rows.ravel(), 3))
-        cols.append(np.broadcast_to(master[3:], (s.size, 3, 3)).ravel())
-        vals.append(rot.ravel())
+        rows.append(np.repeat(slave_rows.ravel(), modes.shape[2]))
+        cols.append(np.broadcast_to(master, modes.shape).ravel())
+        vals.append(modes.ravel())  # zeros (a rigid mode's) are dropped below
     T = sp.csr_matrix(
         (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(3 * n_nodes, next_col)
     )

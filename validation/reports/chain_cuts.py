@@ -24,7 +24,9 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = ["stretch", "series_stiffness", "segment_stiffness", "one_piece_stiffness", "chain_segments",
-           "composed_stiffness", "middle_cut", "strut_cuts", "converged_chain_estimate", "cut_rows", "entry_index"]
+           "composed_stiffness", "INTERFACES", "cut_coupling", "interface_segment_stiffness",
+           "composed_interface_stiffness", "interface_segments", "one_piece_tied_stiffness", "middle_cut",
+           "strut_cuts", "converged_chain_estimate", "cut_rows", "entry_index"]
 
 
 def stretch(chain, n_segments: int):
@@ -44,21 +46,11 @@ def series_stiffness(segments: np.ndarray) -> np.ndarray:
     """(12, 12) [SI] between the first segment's start node and the last one's end node of
     consecutive segments (n, 12, 12) (each segment's end node the next one's start node,
     DOFs ux..rz at start then end, one frame): assembled on the n + 1 nodes, the inner
-    nodes condensed out (Schur complement)."""
-    segments = np.asarray(segments, float)
-    n = len(segments)
-    K = np.zeros((6 * (n + 1), 6 * (n + 1)))
-    for k, segment in enumerate(segments):
-        K[6 * k:6 * k + 12, 6 * k:6 * k + 12] += segment
-    return _condensed_onto_ends(K)
+    nodes condensed out (Schur complement; ``flexcal.fem.interface.series_stiffness``, which
+    also joins through richer interfaces)."""
+    from flexcal.fem.interface import series_stiffness as joined
 
-
-def _condensed_onto_ends(K: np.ndarray) -> np.ndarray:
-    ends = np.r_[0:6, K.shape[0] - 6:K.shape[0]]
-    inner = np.arange(6, K.shape[0] - 6)
-    K_ei = K[np.ix_(ends, inner)]
-    out = K[np.ix_(ends, ends)] - K_ei @ np.linalg.solve(K[np.ix_(inner, inner)], K_ei.T)
-    return 0.5 * (out + out.T)
+    return joined(np.asarray(segments, float))
 
 
 def _mirror_part(part, elements_through: float, options: dict, refinement: int = 1):
@@ -83,13 +75,18 @@ def segment_stiffness(segment, elements_through: float, options: dict, refinemen
 
 
 def one_piece_stiffness(part, cuts, elements_through: float, options: dict,
-                        tie_sets=None) -> tuple[np.ndarray, list[np.ndarray], int]:
+                        tie_sets=None, interface: str = "rigid") -> tuple[np.ndarray, list[np.ndarray], int]:
     """(untied (12, 12), [tied (12, 12) per tie set] [SI], DOF of the meshed mirror part) of
     ``part`` meshed in one piece with grid lines at ``cuts`` [m] (module docstring),
-    condensed on the mirror part (``mirrored_sections_stiffness``). tie_sets: the cuts tied
-    in each tied matrix (None: one set, every cut), each a subset of ``cuts``."""
-    from flexcal.fem.condense import mirrored_sections_stiffness
-    from flexcal.geometry.exact import end_planes
+    condensed on the mirror part (``mirrored_coupled_stiffness``). tie_sets: the cuts tied
+    in each tied matrix (None: one set, every cut), each a subset of ``cuts``. interface: the
+    tie (``cut_coupling``): "rigid" or a kinematic field "p<order>" on the cut face; a
+    distributing one ("d-rigid", "d<order>") on the two faces of the mesh cut apart there
+    (``split_at_section``), their DOFs shared."""
+    from flexcal.fem.condense import mirrored_coupled_stiffness
+    from flexcal.fem.coupling import RigidCoupling, select_plane_nodes
+    from flexcal.fem.interface import condensed_onto_ends
+    from flexcal.geometry.exact import bounding_box, end_planes
     from flexcal.geometry.params import STEEL
 
     cuts = tuple(float(x) for x in cuts)
@@ -98,14 +95,51 @@ def one_piece_stiffness(part, cuts, elements_through: float, options: dict,
         raise ValueError(f"tie_sets={tie_sets!r} must be subsets of cuts={cuts!r}")
     mesh, axes = _mirror_part(part, elements_through, {**options, "cuts": cuts})
     planes = end_planes(part)
-    ends = [(planes["A"], planes["A"][0]), (planes["B"], planes["B"][0])]
-    untied = mirrored_sections_stiffness(mesh, STEEL, ends, axes)
-    tied = []
-    for ties in tie_sets:
-        inner = [((np.array([x, 0.0, 0.0]), np.array([1.0, 0.0, 0.0])), np.array([x, 0.0, 0.0]))
-                 for x in sorted(ties)]
-        tied.append(_condensed_onto_ends(mirrored_sections_stiffness(mesh, STEEL, [ends[0], *inner, ends[1]], axes)))
+    ends = [RigidCoupling(nodes=select_plane_nodes(mesh, planes[end]), reference_point=planes[end][0]) for end in "AB"]
+    untied = mirrored_coupled_stiffness(mesh, STEEL, ends, axes)
+    scale = float(bounding_box(part)[1][1])
+    tied = [condensed_onto_ends(_tied_one_piece(mesh, axes, ends, sorted(ties), interface, scale))
+            for ties in tie_sets]
     return 0.5 * (untied + untied.T), tied, mesh.n_dof
+
+
+def one_piece_tied_stiffness(part, cuts, elements_through: float, options: dict, interface: str) -> np.ndarray:
+    """(12, 12) [SI]: ``part`` meshed in one piece with grid lines at ``cuts`` [m], every cut
+    tied by ``interface`` (as ``one_piece_stiffness``'s tied matrices), the cuts' DOFs
+    condensed out."""
+    from flexcal.fem.coupling import RigidCoupling, select_plane_nodes
+    from flexcal.fem.interface import condensed_onto_ends
+    from flexcal.geometry.exact import bounding_box, end_planes
+
+    cuts = tuple(float(x) for x in cuts)
+    mesh, axes = _mirror_part(part, elements_through, {**options, "cuts": cuts})
+    planes = end_planes(part)
+    ends = [RigidCoupling(nodes=select_plane_nodes(mesh, planes[end]), reference_point=planes[end][0]) for end in "AB"]
+    return condensed_onto_ends(_tied_one_piece(mesh, axes, ends, sorted(cuts), interface,
+                                               float(bounding_box(part)[1][1])))
+
+
+def _tied_one_piece(mesh, axes, ends, cuts, interface: str, scale: float) -> np.ndarray:
+    """The one-piece mirror part condensed onto A, the cuts' interface DOFs (``cut_coupling``)
+    and B, in that order; a distributing interface on the two faces of the mesh cut apart at
+    each cut (``split_at_section``), their DOFs shared."""
+    from flexcal.fem.condense import mirrored_coupled_stiffness
+    from flexcal.fem.coupling import select_plane_nodes
+    from flexcal.fem.interface import shared_interfaces, split_at_section
+    from flexcal.geometry.params import STEEL
+
+    sections = [(np.array([x, 0.0, 0.0]), np.array([1.0, 0.0, 0.0])) for x in cuts]
+    if not interface.startswith("d"):
+        inner = [cut_coupling(interface, select_plane_nodes(mesh, plane), plane[0], scale) for plane in sections]
+        return mirrored_coupled_stiffness(mesh, STEEL, [ends[0], *inner, ends[1]], axes)
+    inner = []
+    for plane in sections:
+        face = select_plane_nodes(mesh, plane)
+        mesh, copies = split_at_section(mesh, face, plane[0][0])
+        inner += [cut_coupling(interface, face, plane[0], scale), cut_coupling(interface, copies, plane[0], scale)]
+    K = mirrored_coupled_stiffness(mesh, STEEL, [ends[0], *inner, ends[1]], axes)
+    sizes = [6] + [len(c.master_parity(1)) for c in inner] + [6]
+    return shared_interfaces(K, sizes, [(1 + 2 * k, 2 + 2 * k) for k in range(len(sections))])
 
 
 def middle_cut(chain):
@@ -154,6 +188,88 @@ def composed_stiffness(chain, n_segments: int, elements_through: float, options:
     return series_stiffness(chain_segments(chain, n_segments,
                                            lambda segment: segment_stiffness(segment, elements_through, options),
                                            nodes))
+
+
+INTERFACES = ("rigid", "p1", "p2", "p3", "p4", "d-rigid", "d1", "d2", "d3")
+"""The interfaces at a cut (``flexcal.fem.interface``; docs/meshing.md, session 23): the rigid
+tie, kinematic polynomial fields of order p ("p1".."p4", any "p<p>"), and distributing
+couplings on the rigid motions ("d-rigid") or on fields of order p ("d1".."d3", any "d<p>")."""
+
+
+def cut_coupling(interface: str, face_nodes: np.ndarray, centre: np.ndarray, scale: float):
+    """The coupling of a cut face's nodes (n_s,) to its centre (3,) [m] for the ``interface``
+    label (``INTERFACES``), polynomials in (y, z) / ``scale`` [m]."""
+    from flexcal.fem.coupling import RigidCoupling
+    from flexcal.fem.interface import RIGID, DistributingCoupling, PolynomialCoupling
+
+    if interface == "rigid":
+        return RigidCoupling(nodes=face_nodes, reference_point=centre)
+    if interface.startswith("p") and interface[1:].isdigit():
+        return PolynomialCoupling(nodes=face_nodes, reference_point=centre, order=int(interface[1:]), scale=scale)
+    if interface == "d-rigid" or (interface.startswith("d") and interface[1:].isdigit()):
+        order = RIGID if interface == "d-rigid" else int(interface[1:])
+        return DistributingCoupling(nodes=face_nodes, reference_point=centre, order=order, scale=scale)
+    raise ValueError(f"unknown interface {interface!r}; choose one of {', '.join(INTERFACES)}")
+
+
+def interface_segment_stiffness(segment, mesh_and_axes, starts_at_cut: bool, ends_at_cut: bool, interface: str,
+                                scale: float) -> np.ndarray:
+    """(n_A + n_B, n_A + n_B) [SI] of one ``segment`` (a first-half one: not mirrored) on its
+    meshed mirror part ``mesh_and_axes`` (``mapped_mesh_chain_mirror_part``), condensed onto its
+    end sections: a cut one coupled by ``interface`` (``cut_coupling``), a chain end rigidly
+    (6 DOFs, as the prototype's)."""
+    from flexcal.fem.condense import mirrored_coupled_stiffness
+    from flexcal.fem.coupling import RigidCoupling, select_plane_nodes
+    from flexcal.geometry.exact import end_planes
+    from flexcal.geometry.params import STEEL
+
+    mesh, axes = mesh_and_axes
+    planes = end_planes(segment)
+    couplings = []
+    for end, at_cut in (("A", starts_at_cut), ("B", ends_at_cut)):
+        nodes, centre = select_plane_nodes(mesh, planes[end]), planes[end][0]
+        couplings.append(cut_coupling(interface, nodes, centre, scale) if at_cut
+                         else RigidCoupling(nodes=nodes, reference_point=centre))
+    k = mirrored_coupled_stiffness(mesh, STEEL, couplings, axes)
+    return 0.5 * (k + k.T)
+
+
+def composed_interface_stiffness(chain, n_segments: int, interface: str, elements_through: float, options: dict,
+                                 meshes=None) -> np.ndarray:
+    """(12, 12) [SI] of the first ``n_segments`` prototype segments of ``chain`` (all in its
+    first half), each meshed alone on ``options``, coupled at the cuts by ``interface`` and
+    rigidly at the stretch's two ends, joined through the cuts' shared DOFs
+    (``flexcal.fem.interface.series_stiffness``). "rigid" is ``composed_stiffness``. Polynomials
+    in (y, z) / s, s the stretch's half-extent along y. meshes: the segments' mirror parts
+    (None: meshed here)."""
+    from flexcal.fem.interface import series_stiffness as joined
+    from flexcal.geometry.exact import bounding_box
+
+    part, _ = stretch(chain, n_segments)
+    scale = float(bounding_box(part)[1][1])
+    segments = interface_segments(chain, n_segments)
+    if meshes is None:
+        meshes = [_mirror_part(segment, elements_through, options) for segment in segments]
+    matrices = [interface_segment_stiffness(segment, mesh, k > 0, k < n_segments - 1, interface, scale)
+                for k, (segment, mesh) in enumerate(zip(segments, meshes))]
+    return joined(matrices)
+
+
+def interface_segments(chain, n_segments: int) -> list:
+    """The first ``n_segments`` prototype segments of ``chain`` as meshed (``canonical_segment``);
+    all must lie in the chain's first half (a mirrored segment's field DOFs are not mapped)."""
+    from flexcal.validation.prototype.fem_provider import canonical_segment
+    from flexcal.validation.prototype.segments import section_nodes
+
+    nodes = section_nodes(chain)
+    out = []
+    for a, b in zip(nodes[:n_segments], nodes[1:n_segments + 1]):
+        segment, mirrored = canonical_segment(chain, float(a), float(b))
+        if mirrored:
+            raise ValueError(f"segment [{a}, {b}] m lies in the second half of the chain: only stretches of the "
+                             "first half are joined through field interfaces")
+        out.append(segment)
+    return out
 
 
 def converged_chain_estimate(segment_limits: np.ndarray, tied: np.ndarray, untied: np.ndarray) -> np.ndarray:
