@@ -72,19 +72,23 @@ def run_case(scenario_name: str, seed: int, trajectory: str | None, provider, no
     found = identify_all(space, measurement.inputs, measurement.angles, measurement.leg, model_error=budget,
                          settings=IdentificationSettings(profile=profile))
     budget = made[-1].samples if budget is not None else None
-    fit, base, names = found.estimate, found.base, list(space.names)
-    truth = space.to_unit(scenario.values[space.active_indices])
+    # the estimate, its bars and base parameters are in the estimator's chart (the mount offsets
+    # as Cartesian components, calibration.offset_chart): the truth is mapped alike
+    fit, base, names = found.estimate, found.base, list(found.chart.names)
+    truth = found.chart.from_space(space.to_unit(scenario.values[space.active_indices]))
     pure = list(base.pure())
     E = np.eye(len(names))[[names.index(n) for n in pure]]
     old = fit.gauss_newton_covariance if fit.gauss_newton_covariance is not None else fit.covariance
-    ranges = space.upper - space.lower
+    ranges = np.array(space.upper - space.lower, float)
+    for i, j in found.chart.pairs:  # an offset component's unit spans [-d_max, d_max]
+        ranges[i] = ranges[j] = 2.0 * ranges[i]
     errors = {n: float(abs(fit.x[names.index(n)] - truth[names.index(n)]) * ranges[names.index(n)]) for n in pure}
     walk_inputs = random_walk(standard_trajectory(scenario.space.mechanism).amplitudes, 60, 0.8, [walk_seed, seed])
     walk = dataclasses.replace(scenario, inputs=walk_inputs, leg=np.ones(60, int), noise=np.zeros(3))
     walk_angles = make_truth(walk, provider).measurement.angles
     from flexcal.calibration.problem import CalibrationProblem
 
-    predicted = CalibrationProblem(space=space, inputs=walk_inputs, angles=walk_angles).residuals(fit.x[None])[0]
+    predicted = CalibrationProblem(space=space, inputs=walk_inputs, angles=walk_angles).residuals(found.x_unit[None])[0]
     if arrays is not None:  # what the error bars are computed from, to recompute them on the same fit
         from flexcal.model.trajectory import WORKSPACE
 
