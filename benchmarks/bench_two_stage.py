@@ -107,7 +107,7 @@ def _verify(out: Path, args, trajectory: Path | None, redo: bool, start: Path | 
     heldout["z_rms_pure"] = _z_rms(rows[n].get("z_score") for n in pure)
     heldout["n_pure"] = len(pure)
     heldout["z_rms_base"] = base.get("z_rms")
-    heldout["n_base"] = base.get("n_z_scores", len(base.get("rows", [])))  # rows led by an undetermined direction have no z
+    heldout["n_base"] = base.get("n_z_scores", len(base.get("rows", [])))  # reports before session 23 left some rows out
     heldout["start"] = str(start) if start is not None else None
     return heldout
 

@@ -159,8 +159,9 @@ def identify_all(space: ParameterSpace, inputs: np.ndarray, angles: np.ndarray, 
                              dataclasses.replace(settings, profile=False, staged=False))
         start = first.values
         log(f"start: the second-order model's estimate (fit {first.estimate.rms * 1e6:.3g} urad RMS)")
-    x0 = None if start is None else np.clip(
-        chart.from_space(np.clip(space.to_unit(np.asarray(start, float)[space.active_indices]), 0.0, 1.0)), 0.0, 1.0)
+    # (the chart takes a magnitude beyond its range at the bound; a direction is periodic)
+    x0 = None if start is None else np.clip(chart.from_space(space.to_unit(np.asarray(start, float)[space.active_indices])),
+                                            0.0, 1.0)
     cv = None
     if settings.method == "free":
         scale = math.inf
@@ -200,7 +201,7 @@ def identify_all(space: ParameterSpace, inputs: np.ndarray, angles: np.ndarray, 
     ranges = space.upper - space.lower
     # the sources' bars from the chart's covariance, to first order (an offset's direction at
     # zero offset: infinite); a coordinate the data and prior leave open stays infinite
-    unit_std = np.sqrt(np.abs(np.diag(chart.covariance_to_space(fit.x, fit.covariance))))
+    unit_std = np.sqrt(np.maximum(np.diag(chart.covariance_to_space(fit.x, fit.covariance)), 0.0))
     unit_std = np.where(np.isfinite(unit_std) & np.isfinite(fit.std), unit_std, np.inf)
     std = np.zeros(len(space.parameters))
     std[space.active_indices] = unit_std * ranges

@@ -433,16 +433,18 @@ def mirrored_coupled_stiffness(mesh, material: Material, couplings: list, axes: 
     n_m = K_mm.shape[0]
     n_d = sum(len(g) for g in grams)
     stiffness = np.zeros((n_m + n_d, n_m + n_d))
+    kinematic_parities = _parities([c for c in kinematic if not c.fixed], axes)
+    distributing_parities = [_parities([c], axes) for c in distributing]
     for signs in itertools.product((1, -1), repeat=len(axes)):
-        masters = _class_masters(_parities([c for c in kinematic if not c.fixed], axes), axes, signs)
+        masters = _class_masters(kinematic_parities, axes, signs)
         keep = np.ones(free.size, bool)
         for a, s in zip(axes, signs):
             on_plane = nodes[node, a] == 0.0
             keep &= ~(on_plane & ((component == a) if s == 1 else (component != a)))
         kept = np.flatnonzero(keep)
         G_rows, d_masters, offset = [], [], 0
-        for (columns, face_loads), gram, c in zip(loads, grams, distributing):
-            own = _class_masters(_parities([c], axes), axes, signs)
+        for (columns, face_loads), gram, parities in zip(loads, grams, distributing_parities):
+            own = _class_masters(parities, axes, signs)
             G = np.linalg.solve(gram[np.ix_(own, own)], face_loads[:, own].T)  # (n_own, n_face DOFs)
             G_rows.append(sp.csr_matrix((G.ravel(), (np.repeat(np.arange(own.size), columns.size),
                                                      np.tile(columns, own.size))), shape=(own.size, free.size)))
@@ -462,9 +464,8 @@ def mirrored_coupled_stiffness(mesh, material: Material, couplings: list, axes: 
         X_m, X_g = X[:, :masters.size], X[:, masters.size:]
         block = K_mm[np.ix_(masters, masters)] - rhs[:, :masters.size].T @ X_m
         if d_masters.size:
-            H_inv = np.linalg.inv(G @ X_g)
             B = np.hstack([G @ X_m, np.eye(d_masters.size)])  # r = B [m; q]
-            block = np.pad(block, (0, d_masters.size)) + B.T @ H_inv @ B
+            block = np.pad(block, (0, d_masters.size)) + B.T @ np.linalg.solve(G @ X_g, B)  # B^T H^-1 B
         both = np.concatenate([masters, d_masters])
         stiffness[np.ix_(both, both)] = 2.0 ** len(axes) * block
     order = _coupling_order(couplings, kinematic, distributing, n_m)
