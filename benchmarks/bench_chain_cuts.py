@@ -32,6 +32,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import resource
 import time
 import zlib
 from pathlib import Path
@@ -43,7 +44,7 @@ from flexcal.validation.reports.chain_cuts import (INTERFACES, _mirror_part, com
                                                      entry_index, interface_condensations, interface_scale,
                                                      interface_segment_stiffness, interface_segments,
                                                      joined_through_interface, middle_cut, one_piece_stiffness,
-                                                     one_piece_tied_stiffness, stretch, strut_cuts)
+                                                     one_piece_tied_stiffness, plan_key, stretch, strut_cuts)
 from flexcal.validation.reports.chain_reference import reference_chain
 
 
@@ -125,20 +126,10 @@ def interfaces(chain, name, args, options, untied, composed, rows, folder, tag) 
     (``rows``) against the one piece untied, and each segment's condensation CPU [s]."""
     labels = list(dict.fromkeys(args.interface))
     plan = interface_segments(chain, args.segments)
-    jobs = interface_condensations(plan)  # a second-half segment is its twin's condensation, turned
+    pieces = {plan_key(step)[:2]: step[0] for step in plan}  # a second-half segment is its twin, turned
     scale = interface_scale(chain, args.segments)
-    meshes = {key: _mirror_part(segment, args.through, options) for key, (segment, _, _) in jobs.items()}
-    cpu = {label: {key: [] for key in jobs} for label in labels}
-    matrices = {}
-    for _ in range(args.rounds):
-        for label in labels:  # A B A B: every label once per round
-            condensed = {}
-            for key, (segment, starts, ends) in jobs.items():
-                start = time.process_time()
-                condensed[key] = interface_segment_stiffness(segment, meshes[key], starts, ends, label, scale)
-                cpu[label][key].append(time.process_time() - start)
-            matrices[label] = joined_through_interface(plan, condensed, label)
-        print(f"round done (load {os.getloadavg()[0]:.1f})", flush=True)
+    meshes = {key: _mirror_part(segment, args.through, options) for key, segment in pieces.items()}
+    cpu, matrices = timed_compositions(plan, {label: (label, meshes) for label in labels}, args.rounds, scale)
     for label, value in matrices.items():
         np.save(folder / f"interface_{label}_{tag}.npy", value)
     if "rigid" in matrices:
@@ -165,11 +156,35 @@ def interfaces(chain, name, args, options, untied, composed, rows, folder, tag) 
     reference = "rigid" if "rigid" in cpu else labels[0]
     base = {key: np.median(times) for key, times in cpu[reference].items()}
     print(f"\nCPU per segment condensation [s], median of {args.rounds} (ratio to {reference})")
-    print("| interface | " + " | ".join(f"[{1e3 * a:g}, {1e3 * b:g}] mm" for a, b, _, _ in jobs) + " |")
-    print("|---|" + "---:|" * len(jobs))
+    print("| interface | " + " | ".join(f"[{1e3 * a:g}, {1e3 * b:g}] mm" for a, b in pieces) + " |")
+    print("|---|" + "---:|" * len(pieces))
     for label in labels:
         print(f"| {label} | " + " | ".join(f"{np.median(t):.2f} ({np.median(t) / base[key]:.2f})"
                                            for key, t in cpu[label].items()) + " |")
+
+
+def timed_compositions(plan, variants: dict, rounds: int, scale: float) -> tuple[dict, dict]:
+    """({variant: {(x_start, x_end): [CPU s per round]}}, {variant: joined 12 x 12}) of the
+    stretch ``plan`` (``interface_segments``) for each variant (interface label or one per cut,
+    the meshed segments' mirror parts by (x_start, x_end)): every variant once per round, in
+    order (A B A B), each meshed segment condensed and timed (``interface_segment_stiffness``)."""
+    cpu = {variant: {} for variant in variants}
+    matrices = {}
+    for _ in range(rounds):
+        for variant, (interface, meshes) in variants.items():
+            condensed = {}
+            for key, (segment, starts, ends, labels) in interface_condensations(plan, interface).items():
+                start = time.process_time()
+                condensed[key] = interface_segment_stiffness(segment, meshes[key[:2]], starts, ends, labels, scale)
+                cpu[variant].setdefault(key[:2], []).append(time.process_time() - start)
+            matrices[variant] = joined_through_interface(plan, condensed, interface)
+        print(f"round done (load {os.getloadavg()[0]:.1f}, peak {peak_gb():.2f} GB)", flush=True)
+    return cpu, matrices
+
+
+def peak_gb() -> float:
+    """This process's peak resident memory so far [GB]."""
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6
 
 
 def print_against_untied(matrices: dict, untied: np.ndarray, rows) -> None:

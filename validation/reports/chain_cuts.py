@@ -26,7 +26,7 @@ import numpy as np
 __all__ = ["stretch", "series_stiffness", "segment_stiffness", "one_piece_stiffness", "chain_segments",
            "composed_stiffness", "INTERFACES", "cut_coupling", "interface_segment_stiffness",
            "composed_interface_stiffness", "interface_segments", "interface_order",
-           "interface_condensations", "plan_key", "joined_through_interface", "interface_scale", "one_piece_tied_stiffness", "middle_cut",
+           "interface_condensations", "step_interfaces", "plan_key", "joined_through_interface", "interface_scale", "one_piece_tied_stiffness", "middle_cut",
            "strut_cuts", "converged_chain_estimate", "cut_rows", "entry_index"]
 
 
@@ -217,8 +217,8 @@ def interface_segment_stiffness(segment, mesh_and_axes, starts_at_cut: bool, end
                                 scale: float) -> np.ndarray:
     """(n_A + n_B, n_A + n_B) [SI] of one ``segment`` (as meshed: a first-half one) on its
     meshed mirror part ``mesh_and_axes`` (``mapped_mesh_chain_mirror_part``), condensed onto its
-    end sections: a cut one coupled by ``interface`` (``cut_coupling``), a chain end rigidly
-    (6 DOFs, as the prototype's)."""
+    end sections: a cut one coupled by ``interface`` (``cut_coupling``; a pair: the start's,
+    the end's), a chain end rigidly (6 DOFs, as the prototype's)."""
     from flexcal.fem.condense import mirrored_coupled_stiffness
     from flexcal.fem.coupling import RigidCoupling, select_plane_nodes
     from flexcal.geometry.exact import end_planes
@@ -226,10 +226,11 @@ def interface_segment_stiffness(segment, mesh_and_axes, starts_at_cut: bool, end
 
     mesh, axes = mesh_and_axes
     planes = end_planes(segment)
+    labels = (interface, interface) if isinstance(interface, str) else tuple(interface)
     couplings = []
-    for end, at_cut in (("A", starts_at_cut), ("B", ends_at_cut)):
+    for end, at_cut, label in (("A", starts_at_cut, labels[0]), ("B", ends_at_cut, labels[1])):
         nodes, centre = select_plane_nodes(mesh, planes[end]), planes[end][0]
-        couplings.append(cut_coupling(interface, nodes, centre, scale) if at_cut
+        couplings.append(cut_coupling(label, nodes, centre, scale) if at_cut
                          else RigidCoupling(nodes=nodes, reference_point=centre))
     k = mirrored_coupled_stiffness(mesh, STEEL, couplings, axes)
     return 0.5 * (k + k.T)
@@ -265,33 +266,50 @@ def interface_segments(chain, n_segments: int, nodes=None) -> list:
     return out
 
 
-def interface_condensations(plan) -> dict:
-    """{key: (segment, starts at a cut, ends at a cut)}: the distinct condensations of an
-    ``interface_segments`` plan (a second-half segment is its twin's condensation, turned),
-    key (x_start, x_end, starts, ends) as ``plan_key``."""
-    return {plan_key(step): (step[0], step[2], step[3]) for step in plan}
+def interface_condensations(plan, interface) -> dict:
+    """{key: (segment, starts at a cut, ends at a cut, (label at its start, at its end))}: the
+    distinct condensations of an ``interface_segments`` plan (a second-half segment is its
+    twin's condensation, turned), key as ``plan_key``. interface: one label for every cut, or
+    one per cut in the chain's order (``step_interfaces``)."""
+    return {plan_key(step, labels): (step[0], step[2], step[3], labels)
+            for step, labels in zip(plan, step_interfaces(plan, interface))}
 
 
-def plan_key(step) -> tuple:
-    """The key of one ``interface_segments`` step's condensation."""
+def step_interfaces(plan, interface) -> list[tuple]:
+    """Per step of ``plan``, (label at the meshed segment's start, at its end) (None: a chain
+    end): ``interface`` one label for every cut or a sequence, one per cut in chain order; a
+    mirrored step's meshed start is its end."""
+    n_cuts = len(plan) - 1
+    labels = [interface] * n_cuts if isinstance(interface, str) else list(interface)
+    if len(labels) != n_cuts:
+        raise ValueError(f"{len(labels)} interfaces for {n_cuts} cuts")
+    out = []
+    for k, (_, mirrored, _, _) in enumerate(plan):
+        start, end = (labels[k - 1] if k > 0 else None), (labels[k] if k < n_cuts else None)
+        out.append((end, start) if mirrored else (start, end))
+    return out
+
+
+def plan_key(step, labels=(None, None)) -> tuple:
+    """The key of one ``interface_segments`` step's condensation with ``labels`` at its ends."""
     segment, _, starts, ends = step
-    return (round(segment.x_start, 12), round(segment.x_end, 12), bool(starts), bool(ends))
+    return (round(segment.x_start, 12), round(segment.x_end, 12), bool(starts), bool(ends), *labels)
 
 
-def joined_through_interface(plan, condensed: dict, interface: str) -> np.ndarray:
+def joined_through_interface(plan, condensed: dict, interface) -> np.ndarray:
     """(12, 12) [SI]: the segments of ``plan`` (``interface_segments``) joined through their
-    cuts' shared ``interface`` DOFs (``flexcal.fem.interface.series_stiffness``), ``condensed``
-    the meshed segments' matrices by ``plan_key`` (``interface_segment_stiffness``); a
-    mirrored one turned (``turned_segment_stiffness``: its cut fields' DOFs change sign by
-    ``section_turn_signs``)."""
+    cuts' shared ``interface`` DOFs (one label or one per cut, ``step_interfaces``;
+    ``flexcal.fem.interface.series_stiffness``), ``condensed`` the meshed segments' matrices by
+    ``plan_key`` (``interface_segment_stiffness``); a mirrored one turned
+    (``turned_segment_stiffness``: its cut fields' DOFs change sign by ``section_turn_signs``)."""
     from flexcal.fem.interface import RIGID, series_stiffness as joined, turned_segment_stiffness
 
-    order = interface_order(interface)
     matrices = []
-    for step in plan:
-        k = condensed[plan_key(step)]
+    for step, labels in zip(plan, step_interfaces(plan, interface)):
+        k = condensed[plan_key(step, labels)]
         if step[1]:
-            k = turned_segment_stiffness(k, order if step[2] else RIGID, order if step[3] else RIGID)
+            start, end = (RIGID if label is None else interface_order(label) for label in labels)
+            k = turned_segment_stiffness(k, start, end)
         matrices.append(k)
     return joined(matrices)
 
@@ -315,15 +333,16 @@ def composed_interface_stiffness(chain, n_segments: int, interface: str, element
     ``nodes``, None: ``section_nodes``), each meshed alone on ``options``, coupled at the
     cuts by ``interface`` and rigidly at the stretch's two ends, joined through the cuts'
     shared DOFs; a second-half segment is its first-half twin's condensation turned (as the
-    prototype's ``mirror_segment_stiffness``). "rigid" is ``composed_stiffness``. Polynomials
-    in (y, z) / ``interface_scale``. meshes: {plan_key: mirror part} (None: meshed here)."""
+    prototype's ``mirror_segment_stiffness``). "rigid" is ``composed_stiffness``; a sequence:
+    one label per cut. Polynomials in (y, z) / ``interface_scale``. meshes: {(x_start, x_end)
+    rounded to 1 pm: mirror part} (None: meshed here)."""
     plan = interface_segments(chain, n_segments, nodes)
     scale = interface_scale(chain, n_segments, nodes)
     meshes = {} if meshes is None else meshes
     condensed = {}
-    for key, (segment, starts, ends) in interface_condensations(plan).items():
-        mesh = meshes.get(key) or _mirror_part(segment, elements_through, options)
-        condensed[key] = interface_segment_stiffness(segment, mesh, starts, ends, interface, scale)
+    for key, (segment, starts, ends, labels) in interface_condensations(plan, interface).items():
+        mesh = meshes.get(key[:2]) or _mirror_part(segment, elements_through, options)
+        condensed[key] = interface_segment_stiffness(segment, mesh, starts, ends, labels, scale)
     return joined_through_interface(plan, condensed, interface)
 
 
