@@ -32,6 +32,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import resource
 import time
 import zlib
 from pathlib import Path
@@ -40,11 +41,10 @@ import numpy as np
 
 from flexcal.fem.mesh_mapped_chain import PROTOTYPE_CHAIN_OPTIONS
 from flexcal.validation.reports.chain_cuts import (INTERFACES, _mirror_part, composed_stiffness, cut_rows,
-                                                     entry_index, interface_segment_stiffness, interface_segments,
-                                                     middle_cut, one_piece_stiffness, one_piece_tied_stiffness,
-                                                     stretch, strut_cuts)
-from flexcal.fem.interface import series_stiffness as joined
-from flexcal.geometry.exact import bounding_box
+                                                     entry_index, interface_condensations, interface_scale,
+                                                     interface_segment_stiffness, interface_segments,
+                                                     joined_through_interface, middle_cut, one_piece_stiffness,
+                                                     one_piece_tied_stiffness, plan_key, stretch, strut_cuts)
 from flexcal.validation.reports.chain_reference import reference_chain
 
 
@@ -125,28 +125,19 @@ def interfaces(chain, name, args, options, untied, composed, rows, folder, tag) 
     """The stretch joined through each of ``args.interface`` at its cuts: the dominant entries
     (``rows``) against the one piece untied, and each segment's condensation CPU [s]."""
     labels = list(dict.fromkeys(args.interface))
-    segments = interface_segments(chain, args.segments)
-    scale = float(bounding_box(stretch(chain, args.segments)[0])[1][1])
-    meshes = [_mirror_part(segment, args.through, options) for segment in segments]
-    cpu = {label: [[] for _ in segments] for label in labels}
-    matrices = {}
-    for _ in range(args.rounds):
-        for label in labels:  # A B A B: every label once per round
-            parts = []
-            for k, (segment, mesh) in enumerate(zip(segments, meshes)):
-                start = time.process_time()
-                parts.append(interface_segment_stiffness(segment, mesh, k > 0, k < len(segments) - 1, label, scale))
-                cpu[label][k].append(time.process_time() - start)
-            matrices[label] = joined(parts)
-        print(f"round done (load {os.getloadavg()[0]:.1f})", flush=True)
+    plan = interface_segments(chain, args.segments)
+    pieces = {plan_key(step)[:2]: step[0] for step in plan}  # a second-half segment is its twin, turned
+    scale = interface_scale(chain, args.segments)
+    meshes = {key: _mirror_part(segment, args.through, options) for key, segment in pieces.items()}
+    cpu, matrices = timed_compositions(plan, {label: (label, meshes) for label in labels}, args.rounds, scale)
     for label, value in matrices.items():
         np.save(folder / f"interface_{label}_{tag}.npy", value)
     if "rigid" in matrices:
         gap = np.max(np.abs(matrices["rigid"] - composed) / np.sqrt(np.outer(np.diag(composed), np.diag(composed))))
         print(f"\nrigid through the interface code against the prototype's composed: {gap:.1e} (largest, "
               "relative to the diagonals' geometric mean)")
-    dofs = [f"{3 * len(mesh.nodes)}" for mesh, _ in meshes]
-    print(f"\n{name} [0, {1e3 * segments[-1].x_end:.1f} mm] joined through each interface, composed - untied [%] "
+    dofs = [f"{3 * len(mesh.nodes)}" for mesh, _ in meshes.values()]
+    print(f"\n{name} [0, {1e3 * plan[-1][0].x_end:.1f} mm] joined through each interface, composed - untied [%] "
           f"(segments' mirror parts {', '.join(dofs)} DOF, scale {1e3 * scale:g} mm)")
     print_against_untied(matrices, untied, rows)
     if args.one_piece:
@@ -162,14 +153,38 @@ def interfaces(chain, name, args, options, untied, composed, rows, folder, tag) 
         print(f"\n{name}: the one-piece mesh tied by each interface (distributing: cut apart there), "
               "tied - untied [%]")
         print_against_untied(tied, untied, rows)
-    base = [np.median(times) for times in cpu.get("rigid", cpu[labels[0]])]
     reference = "rigid" if "rigid" in cpu else labels[0]
+    base = {key: np.median(times) for key, times in cpu[reference].items()}
     print(f"\nCPU per segment condensation [s], median of {args.rounds} (ratio to {reference})")
-    print("| interface | " + " | ".join(f"segment {k + 1}" for k in range(len(segments))) + " |")
-    print("|---|" + "---:|" * len(segments))
+    print("| interface | " + " | ".join(f"[{1e3 * a:g}, {1e3 * b:g}] mm" for a, b in pieces) + " |")
+    print("|---|" + "---:|" * len(pieces))
     for label in labels:
-        print(f"| {label} | " + " | ".join(f"{np.median(t):.2f} ({np.median(t) / b:.2f})"
-                                           for t, b in zip(cpu[label], base)) + " |")
+        print(f"| {label} | " + " | ".join(f"{np.median(t):.2f} ({np.median(t) / base[key]:.2f})"
+                                           for key, t in cpu[label].items()) + " |")
+
+
+def timed_compositions(plan, variants: dict, rounds: int, scale: float) -> tuple[dict, dict]:
+    """({variant: {(x_start, x_end): [CPU s per round]}}, {variant: joined 12 x 12}) of the
+    stretch ``plan`` (``interface_segments``) for each variant (interface label or one per cut,
+    the meshed segments' mirror parts by (x_start, x_end)): every variant once per round, in
+    order (A B A B), each meshed segment condensed and timed (``interface_segment_stiffness``)."""
+    cpu = {variant: {} for variant in variants}
+    matrices = {}
+    for _ in range(rounds):
+        for variant, (interface, meshes) in variants.items():
+            condensed = {}
+            for key, (segment, starts, ends, labels) in interface_condensations(plan, interface).items():
+                start = time.process_time()
+                condensed[key] = interface_segment_stiffness(segment, meshes[key[:2]], starts, ends, labels, scale)
+                cpu[variant].setdefault(key[:2], []).append(time.process_time() - start)
+            matrices[variant] = joined_through_interface(plan, condensed, interface)
+        print(f"round done (load {os.getloadavg()[0]:.1f}, peak {peak_gb():.2f} GB)", flush=True)
+    return cpu, matrices
+
+
+def peak_gb() -> float:
+    """This process's peak resident memory so far [GB]."""
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6
 
 
 def print_against_untied(matrices: dict, untied: np.ndarray, rows) -> None:

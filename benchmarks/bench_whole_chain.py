@@ -59,41 +59,11 @@ def main() -> None:
     cuts_dir.mkdir(parents=True, exist_ok=True)
     change = json.loads(args.options)
     for name in args.chain:
-        chain = reference_chain(name)
-        limits, uncertainty = {}, {}
-        for index, levels in ((0, args.ref_levels), (1, args.ref_levels_2)):
-            part = segment(name, index)
-            values = np.array([_cached(ref_dir, f"hex27_{name}_{index}_r{r}", lambda r=r: reference_stiffness(part, r))
-                               for r in levels])
-            _, limits[index], uncertainty[index], _ = reference_limit(levels, values)
-        strut_levels = args.strut_levels
-        strut = [_cached(cuts_dir, f"strut_{name}_r{r}",
-                         lambda r=r: (segment_stiffness(segment(name, 2), 7.0, PROTOTYPE_CHAIN_OPTIONS, r), -1))
-                 for r in strut_levels]
-        strut_fit = richardson(1.0 / np.asarray(strut_levels, float), np.array(strut))
-        # an entrywise limit need not keep the six rigid motions in the null space, and a short
-        # stiff segment (D1's 15 mm strut) joined in series turns that defect into large errors:
-        # each limit is rebuilt from its end block K_BB (A clamped), which defines it
-        lengths = np.diff(section_nodes(chain))
-        by_start = {i: expand_end_stiffness(end_stiffness(k), float(lengths[i]))
-                    for i, k in enumerate((limits[0], limits[1], strut_fit.limit))}
-        starts = {round(float(x), 12): i for i, x in enumerate(section_nodes(chain)[:3])}
-        converged_segments = chain_segments(chain, 5, lambda seg: by_start[starts[round(seg.x_start, 12)]])
-        tag = cut_tag(name, 5, args.through, change)
-        paths = {kind: cuts_dir / f"{kind}_{tag}.npy" for kind in ("untied", "tied")}
-        if not all(p.exists() for p in paths.values()):
-            whole, cuts = stretch(chain, 5)
-            untied, (tied,), _ = one_piece_stiffness(whole, cuts, args.through, {**PROTOTYPE_CHAIN_OPTIONS, **change})
-            np.save(paths["untied"], untied)
-            np.save(paths["tied"], tied)
-        untied, tied = np.load(paths["untied"]), np.load(paths["tied"])
-        prototype_segments = chain_segments(chain, 5, lambda seg: segment_stiffness(seg, 7.0, PROTOTYPE_CHAIN_OPTIONS))
-        prototype = series_stiffness(prototype_segments)
-        strut_converged = prototype_segments.copy()
-        strut_converged[2] = by_start[2]
-        strut_part = prototype - series_stiffness(strut_converged)
-        converged = converged_chain_estimate(converged_segments, tied, untied)
-        joined = series_stiffness(converged_segments)
+        estimate = whole_chain_estimate(name, args.through, change, ref_dir, cuts_dir, args.ref_levels,
+                                        args.ref_levels_2, args.strut_levels)
+        converged, untied, tied, prototype, joined, strut_part, strut_fit, uncertainty, limits = (
+            estimate[k] for k in ("converged", "untied", "tied", "prototype", "joined", "strut_part", "strut_fit",
+                                  "uncertainty", "limits"))
         print(f"\n{name} whole chain: prototype P (its segments joined) against the estimate C (converged tied "
               f"segments joined, S, less the ties' part T - U at {args.through:g} asked for)")
         print(f"strut segment rates {np.nanmin(np.diag(strut_fit.rate)):.2f}-{np.nanmax(np.diag(strut_fit.rate)):.2f}; "
@@ -121,6 +91,50 @@ def main() -> None:
                   f"{100 * (prototype[i, j] - converged[i, j]) / scale:+.3f} | "
                   f"{100 * (prototype[i, j] - joined[i, j]) / scale:+.3f} | {100 * strut_part[i, j] / scale:+.3f} | "
                   f"{100 * (tied[i, j] - untied[i, j]) / scale:+.3f} |{tail}")
+
+
+def whole_chain_estimate(name: str, through: float, change: dict, ref_dir: Path, cuts_dir: Path, ref_levels,
+                         ref_levels_2, strut_levels) -> dict:
+    """The whole chain ``name``'s estimate C = S - (T - U) and its parts (module docstring):
+    {"converged": C, "untied": U, "tied": T (the one piece at ``through`` asked for, options
+    changed by ``change``), "prototype": P, "joined": S, "strut_part", "strut_fit",
+    "uncertainty" and "limits" of the two leaf segments' reference levels} (12 x 12 [SI])."""
+    chain = reference_chain(name)
+    limits, uncertainty = {}, {}
+    for index, levels in ((0, ref_levels), (1, ref_levels_2)):
+        part = segment(name, index)
+        values = np.array([_cached(ref_dir, f"hex27_{name}_{index}_r{r}", lambda r=r: reference_stiffness(part, r))
+                           for r in levels])
+        _, limits[index], uncertainty[index], _ = reference_limit(levels, values)
+    strut = [_cached(cuts_dir, f"strut_{name}_r{r}",
+                     lambda r=r: (segment_stiffness(segment(name, 2), 7.0, PROTOTYPE_CHAIN_OPTIONS, r), -1))
+             for r in strut_levels]
+    strut_fit = richardson(1.0 / np.asarray(strut_levels, float), np.array(strut))
+    # an entrywise limit need not keep the six rigid motions in the null space, and a short
+    # stiff segment (D1's 15 mm strut) joined in series turns that defect into large errors:
+    # each limit is rebuilt from its end block K_BB (A clamped), which defines it
+    lengths = np.diff(section_nodes(chain))
+    by_start = {i: expand_end_stiffness(end_stiffness(k), float(lengths[i]))
+                for i, k in enumerate((limits[0], limits[1], strut_fit.limit))}
+    starts = {round(float(x), 12): i for i, x in enumerate(section_nodes(chain)[:3])}
+    converged_segments = chain_segments(chain, 5, lambda seg: by_start[starts[round(seg.x_start, 12)]])
+    tag = cut_tag(name, 5, through, change)
+    paths = {kind: cuts_dir / f"{kind}_{tag}.npy" for kind in ("untied", "tied")}
+    if not all(p.exists() for p in paths.values()):
+        whole, cuts = stretch(chain, 5)
+        untied, (tied,), _ = one_piece_stiffness(whole, cuts, through, {**PROTOTYPE_CHAIN_OPTIONS, **change})
+        np.save(paths["untied"], untied)
+        np.save(paths["tied"], tied)
+    untied, tied = np.load(paths["untied"]), np.load(paths["tied"])
+    prototype_segments = chain_segments(chain, 5, lambda seg: segment_stiffness(seg, 7.0, PROTOTYPE_CHAIN_OPTIONS))
+    prototype = series_stiffness(prototype_segments)
+    strut_converged = prototype_segments.copy()
+    strut_converged[2] = by_start[2]
+    return {"converged": converged_chain_estimate(converged_segments, tied, untied), "untied": untied, "tied": tied,
+            "prototype": prototype, "joined": series_stiffness(converged_segments),
+            "strut_part": prototype - series_stiffness(strut_converged), "strut_fit": strut_fit,
+            "uncertainty": uncertainty, "limits": limits}
+
 
 if __name__ == "__main__":
     main()

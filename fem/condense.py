@@ -402,7 +402,15 @@ def mirrored_coupled_stiffness(mesh, material: Material, couplings: list, axes: 
     u_i = -X m + v with G v = q + G X m =: r, so twice the energy is m^T S m + r^T H^-1 r,
     S = K_mm - K_im^T X, one factorisation for both (docs/meshing.md, session 23). On the
     part the class's rows of G use the class block of the part's Gram matrix (the whole
-    face's is 2^len(axes) times it; blocks between classes vanish on the whole face)."""
+    face's is 2^len(axes) times it; blocks between classes vanish on the whole face).
+
+    A part (or a piece of it: a connected set of tets) held by distributing couplings alone (a
+    segment between two cuts, a middle piece cut apart twice) floats: K_ii is singular on its
+    rigid motions (``_floating``). Then K_ii + alpha G^T G is factorised instead
+    (``_floating_shift``): on G v = q the added energy is alpha |q|^2 whatever v, so the
+    constrained minimum is unchanged but for that term, taken off the q block after; it is
+    positive definite because the fields hold the rigid motions (order >= 1 or ``RIGID``), whose
+    projections G does not annul. Parts without a floating piece are computed as before."""
     import itertools
 
     from .interface import DistributingCoupling
@@ -433,6 +441,7 @@ def mirrored_coupled_stiffness(mesh, material: Material, couplings: list, axes: 
     n_m = K_mm.shape[0]
     n_d = sum(len(g) for g in grams)
     stiffness = np.zeros((n_m + n_d, n_m + n_d))
+    floats = _floating(check_mesh(mesh)[1], kinematic)
     kinematic_parities = _parities([c for c in kinematic if not c.fixed], axes)
     distributing_parities = [_parities([c], axes) for c in distributing]
     for signs in itertools.product((1, -1), repeat=len(axes)):
@@ -455,6 +464,9 @@ def mirrored_coupled_stiffness(mesh, material: Material, couplings: list, axes: 
         if masters.size + d_masters.size == 0:
             continue
         sub = upper_ii[kept][:, kept]  # rows and columns ascending: still the upper triangle, sorted
+        alpha = _floating_shift(sub, G) if floats else 0.0
+        if alpha:
+            sub = (sub + sp.triu(alpha * (G.T @ G))).tocsr()
         # one dense copy [K_im, G^T], in Fortran order as PARDISO takes it (and as the rigid path's
         # K_im[kept][:, masters] always was: the same bits)
         rhs = np.empty((kept.size, masters.size + d_masters.size), order="F")
@@ -466,10 +478,36 @@ def mirrored_coupled_stiffness(mesh, material: Material, couplings: list, axes: 
         if d_masters.size:
             B = np.hstack([G @ X_m, np.eye(d_masters.size)])  # r = B [m; q]
             block = np.pad(block, (0, d_masters.size)) + B.T @ np.linalg.solve(G @ X_g, B)  # B^T H^-1 B
+            block[masters.size:, masters.size:] -= alpha * np.eye(d_masters.size)  # the shift, undone
         both = np.concatenate([masters, d_masters])
         stiffness[np.ix_(both, both)] = 2.0 ** len(axes) * block
     order = _coupling_order(couplings, kinematic, distributing, n_m)
     return stiffness[np.ix_(order, order)]
+
+
+def _floating(tets: np.ndarray, kinematic: list) -> bool:
+    """Whether some connected piece of the mesh (tets (n_e, 10) sharing nodes) has no node of a
+    kinematic coupling (rigid motions free unless a distributing coupling holds them)."""
+    from scipy.sparse.csgraph import connected_components
+
+    tets = np.asarray(tets)
+    n = int(tets.max()) + 1
+    graph = sp.coo_matrix((np.ones(9 * len(tets)), (np.repeat(tets[:, 0], 9), tets[:, 1:].ravel())), shape=(n, n))
+    _, labels = connected_components(graph, directed=False)
+    held = np.unique(labels[np.concatenate([c.nodes for c in kinematic])]) if kinematic else np.zeros(0, int)
+    return np.setdiff1d(np.unique(labels[np.unique(tets)]), held).size > 0
+
+
+def _floating_shift(upper: sp.csr_matrix, G: sp.csr_matrix) -> float:
+    """alpha > 0 [N/m per unit q^2] for a floating part (``mirrored_coupled_stiffness``): the
+    trace of K_ii (``upper``, its upper triangle) over the DOFs that G (n_q, n) reads, divided
+    by the trace of G^T G, so alpha G^T G is of the face's own stiffness (neither lost in K_ii's
+    round-off nor swamping the q block it is taken off again)."""
+    columns = np.unique(G.indices)
+    trace = float(G.multiply(G).sum())
+    if columns.size == 0 or not trace > 0:
+        raise ValueError("a part held by no kinematic coupling needs a distributing one to hold it")
+    return float(upper.diagonal()[columns].sum()) / trace
 
 
 def _coupling_order(couplings: list, kinematic: list, distributing: list, n_m: int) -> np.ndarray:

@@ -45,7 +45,7 @@ import scipy.sparse as sp
 from .coupling import MIRROR_PARITY, RigidCoupling
 
 __all__ = ["RIGID", "series_stiffness", "condensed_onto_ends", "polynomial_exponents", "n_interface_dofs",
-           "section_modes", "section_mode_parity",
+           "section_modes", "section_mode_parity", "section_turn_signs", "turned_segment_stiffness",
            "PolynomialCoupling", "DistributingCoupling", "face_triangles", "face_mass_matrix",
            "split_at_section", "shared_interfaces"]
 
@@ -101,6 +101,46 @@ def section_mode_parity(order, axis: int) -> np.ndarray:
     exponent = polynomial_exponents(order)[:, axis - 1]
     component = np.arange(3)
     return ((-1) ** (exponent[:, None] + (component[None, :] == axis))).ravel()
+
+
+def section_turn_signs(order) -> np.ndarray:
+    """(n_q,) +1 / -1: the section field's DOFs under the turn by pi about z (a chain's second
+    half is its first half so turned: x -> L - x, y -> -y, z -> z; displacements and rotations
+    u -> R u, R = diag(-1, -1, 1), a proper rotation). The field at the turned section is
+    q = signs * q' (q' the field at the section it is the image of, about the image of its
+    centre, the same ``scale``).
+
+    Derivation (not a fit): the turned face moves as u(y, z) = R u'(-y, z). With
+    u' = sum_k,i q'_ki P_a(y / s) P_b(z / s) e_i and P_a(-t) = (-1)^a P_a(t) (Legendre's parity),
+    u(y, z) = sum_k,i (-1)^a R_ii q'_ki P_a(y / s) P_b(z / s) e_i, so q_ki = (-1)^a R_ii q'_ki:
+    a diagonal sign, no permutation (the basis is a product of one-variable polynomials and
+    the turn changes the sign of one variable). ``RIGID``: R on the translations and on the
+    rotations (a pseudovector under a proper rotation is a vector). The face's L2 projection
+    (``DistributingCoupling``) commutes with the turn (it maps the face and its mass matrix
+    onto themselves), so the same signs hold for its DOFs."""
+    turn = np.array([-1, -1, 1])
+    if order == RIGID:
+        return np.concatenate([turn, turn])
+    exponent_y = polynomial_exponents(order)[:, 0]
+    return ((-1) ** exponent_y[:, None] * turn[None, :]).ravel()
+
+
+def turned_segment_stiffness(stiffness: np.ndarray, start_order, end_order) -> np.ndarray:
+    """(n, n) [SI]: the stiffness of a segment's mirror image (turned by pi about z: the
+    second-half segment [L - b, L - a] of a chain whose first-half twin [a, b] has
+    ``stiffness`` (n, n) on its start section's DOFs, then its end section's) on the image's
+    start DOFs, then its end DOFs. ``start_order``, ``end_order``: the twin's start and end
+    sections' field (``RIGID`` or p; a chain end is ``RIGID``). The image's start is the twin's
+    end: K = D P stiffness P^T D with P swapping the two blocks and D the
+    ``section_turn_signs`` (q = D q' keeps the energy, D^-1 = D). With both ends ``RIGID`` this
+    is the prototype's ``mirror_segment_stiffness``, to the bit."""
+    stiffness = np.asarray(stiffness, float)
+    n_start, n_end = n_interface_dofs(start_order), n_interface_dofs(end_order)
+    if stiffness.shape != (n_start + n_end,) * 2:
+        raise ValueError(f"stiffness {stiffness.shape} does not match sections of {n_start} and {n_end} DOFs")
+    order = np.r_[n_start:n_start + n_end, 0:n_start]
+    signs = np.concatenate([section_turn_signs(end_order), section_turn_signs(start_order)])
+    return stiffness[np.ix_(order, order)] * np.outer(signs, signs)
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)

@@ -9,8 +9,8 @@ from flexcal.fem.condense import mirrored_coupled_stiffness
 from flexcal.fem.coupling import RigidCoupling
 from flexcal.fem.interface import (RIGID, DistributingCoupling, PolynomialCoupling, condensed_onto_ends,
                                    face_mass_matrix, face_triangles, n_interface_dofs, polynomial_exponents,
-                                   section_mode_parity, section_modes, series_stiffness, shared_interfaces,
-                                   split_at_section)
+                                   section_mode_parity, section_modes, section_turn_signs, series_stiffness,
+                                   shared_interfaces, split_at_section, turned_segment_stiffness)
 from flexcal.fem.structured import grid_tet_mesh
 from flexcal.geometry.params import STEEL
 from test_mesh_mapped_chain_mirror import _mirrored
@@ -120,6 +120,50 @@ def test_the_bar_cut_apart_in_one_mesh_is_its_halves_meshed_alone():
     np.testing.assert_allclose(_in_si(one_mesh), _in_si(halves), rtol=0, atol=1e-10 * np.abs(_in_si(halves)).max())
 
 
+@pytest.mark.parametrize("order, axes", [(2, ()), (RIGID, ()), (2, (1, 2))])
+def test_a_piece_held_only_by_distributing_couplings_is_the_bar_cut_apart_twice(order, axes):
+    # the middle third [20, 40] mm of the bar held by a distributing coupling on each face
+    # floats (its K_ii is singular on the rigid motions): mirrored_coupled_stiffness factorises
+    # K_ii + alpha G^T G and takes alpha off the q block. Joined with the two outer thirds it is
+    # the bar cut apart at both sections in one mesh with the faces' DOFs shared (the same
+    # discrete problem, held through its rigid ends); on the mirror quadrant too
+    quadrant = bool(axes)
+    thirds = [_bar(LENGTH * k / 3, LENGTH * (k + 1) / 3, 3, quadrant) for k in range(3)]
+    xs = [LENGTH / 3, 2 * LENGTH / 3]
+
+    def coupling(mesh, x):
+        return DistributingCoupling(nodes=_face(mesh, x), reference_point=np.array([x, 0.0, 0.0]), order=order,
+                                    scale=HALF)
+
+    pieces = [mirrored_coupled_stiffness(thirds[0], STEEL, [_end(thirds[0], 0.0), coupling(thirds[0], xs[0])], axes),
+              mirrored_coupled_stiffness(thirds[1], STEEL, [coupling(thirds[1], xs[0]), coupling(thirds[1], xs[1])],
+                                         axes),
+              mirrored_coupled_stiffness(thirds[2], STEEL, [coupling(thirds[2], xs[1]), _end(thirds[2], LENGTH)], axes)]
+    middle = pieces[1]
+    # the floating piece's null space: a translation projects on each face's field as its
+    # component's constant coefficient (the first three DOFs of either field)
+    for component in range(3):
+        q = np.zeros(n_interface_dofs(order))
+        q[component] = 1.0
+        motion = np.concatenate([q, q])
+        # energy of a translation: round-off against the piece's largest entry, measured <= 3e-14; 1e-9
+        assert abs(motion @ middle @ motion) <= 1e-9 * np.abs(middle).max() * (motion @ motion)
+    mesh = _bar(0.0, LENGTH, 9, quadrant)
+    sides = []
+    for x in xs:
+        face = _face(mesh, x)
+        mesh, copies = split_at_section(mesh, face, x)
+        sides += [DistributingCoupling(nodes=nodes, reference_point=np.array([x, 0.0, 0.0]), order=order, scale=HALF)
+                  for nodes in (face, copies)]
+    n = n_interface_dofs(order)
+    K = mirrored_coupled_stiffness(mesh, STEEL, [_end(mesh, 0.0), *sides, _end(mesh, LENGTH)], axes)
+    one_mesh = condensed_onto_ends(shared_interfaces(K, [6, n, n, n, n, 6], [(1, 2), (3, 4)]))
+    joined = series_stiffness(pieces)
+    # round-off of condensations (one of them shifted by alpha ~ the face's stiffness) and Schur
+    # complements of ~1-3k DOF: measured <= 1.6e-13; 1e-10
+    np.testing.assert_allclose(_in_si(joined), _in_si(one_mesh), rtol=0, atol=1e-10 * np.abs(_in_si(one_mesh)).max())
+
+
 def test_a_lower_order_field_is_the_higher_order_one_with_its_extra_coefficients_held():
     # the kinematic spaces are nested: the p = 3 condensation restricted to the p = 1
     # coefficients is the p = 1 condensation, and p = 1 restricted to its rigid motions is the
@@ -174,6 +218,33 @@ def test_the_rigid_motions_lie_in_the_linear_field_and_every_field_has_its_parit
             want = section_mode_parity(order, axis)[None, None, :] * mirror[None, :, None] * modes  # +- M u(x)
             # monomials of coordinates <= 1 after a sign flip: equal up to round-off, 1e-12
             np.testing.assert_allclose(image, want, rtol=0, atol=1e-12)
+
+
+def test_the_turn_by_pi_about_z_changes_only_the_signs_of_the_field_dofs():
+    # a second-half section is the image of a first-half one under x -> L - x, y -> -y (the
+    # turn R = diag(-1, -1, 1)): the field q' there, turned, is the field q = signs q' at the
+    # image, i.e. Phi(R x + (L, 0, 0)) signs = R Phi(x) at every point of the face, about the
+    # image of the centre (section_turn_signs' derivation, checked pointwise, not fitted)
+    rng = np.random.default_rng(11)
+    points = CENTRE + rng.uniform(-HALF, HALF, (40, 3)) * [0, 1, 1]
+    turn = np.diag([-1.0, -1.0, 1.0])
+    length = 0.3
+    image_centre = turn @ CENTRE + [length, 0.0, 0.0]
+    for order in (RIGID, 1, 2, 5, 12):
+        modes = section_modes(points, CENTRE, order, HALF)  # (n, 3, n_q) of the twin's face
+        image = section_modes(points @ turn.T + [length, 0.0, 0.0], image_centre, order, HALF)
+        want = np.einsum("ij,njq->niq", turn, modes)  # R u'(x)
+        # Legendre values <= 1 (order 12: sums of ~10 terms of up to ~1e3): round-off, 1e-11
+        np.testing.assert_allclose(image * section_turn_signs(order)[None, None, :], want, rtol=0, atol=1e-11)
+    # the turned segment: blocks swapped, signs on both; turning twice is the identity
+    k = rng.standard_normal((6 + 18, 6 + 18))
+    k = k + k.T
+    once = turned_segment_stiffness(k, RIGID, 2)
+    assert once.shape == (24, 24)
+    np.testing.assert_array_equal(once[:18, :18], k[6:, 6:] * np.outer(*[section_turn_signs(2)] * 2))
+    np.testing.assert_array_equal(turned_segment_stiffness(once, 2, RIGID), k)
+    with pytest.raises(ValueError, match="does not match"):
+        turned_segment_stiffness(k, 2, 2)
 
 
 def test_the_face_mass_matrix_integrates_the_section_s_polynomials():

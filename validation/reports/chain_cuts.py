@@ -25,7 +25,8 @@ import numpy as np
 
 __all__ = ["stretch", "series_stiffness", "segment_stiffness", "one_piece_stiffness", "chain_segments",
            "composed_stiffness", "INTERFACES", "cut_coupling", "interface_segment_stiffness",
-           "composed_interface_stiffness", "interface_segments", "one_piece_tied_stiffness", "middle_cut",
+           "composed_interface_stiffness", "interface_segments", "interface_order",
+           "interface_condensations", "step_interfaces", "plan_key", "joined_through_interface", "interface_scale", "one_piece_tied_stiffness", "middle_cut",
            "strut_cuts", "converged_chain_estimate", "cut_rows", "entry_index"]
 
 
@@ -214,10 +215,10 @@ def cut_coupling(interface: str, face_nodes: np.ndarray, centre: np.ndarray, sca
 
 def interface_segment_stiffness(segment, mesh_and_axes, starts_at_cut: bool, ends_at_cut: bool, interface: str,
                                 scale: float) -> np.ndarray:
-    """(n_A + n_B, n_A + n_B) [SI] of one ``segment`` (a first-half one: not mirrored) on its
+    """(n_A + n_B, n_A + n_B) [SI] of one ``segment`` (as meshed: a first-half one) on its
     meshed mirror part ``mesh_and_axes`` (``mapped_mesh_chain_mirror_part``), condensed onto its
-    end sections: a cut one coupled by ``interface`` (``cut_coupling``), a chain end rigidly
-    (6 DOFs, as the prototype's)."""
+    end sections: a cut one coupled by ``interface`` (``cut_coupling``; a pair: the start's,
+    the end's), a chain end rigidly (6 DOFs, as the prototype's)."""
     from flexcal.fem.condense import mirrored_coupled_stiffness
     from flexcal.fem.coupling import RigidCoupling, select_plane_nodes
     from flexcal.geometry.exact import end_planes
@@ -225,51 +226,124 @@ def interface_segment_stiffness(segment, mesh_and_axes, starts_at_cut: bool, end
 
     mesh, axes = mesh_and_axes
     planes = end_planes(segment)
+    labels = (interface, interface) if isinstance(interface, str) else tuple(interface)
     couplings = []
-    for end, at_cut in (("A", starts_at_cut), ("B", ends_at_cut)):
+    for end, at_cut, label in (("A", starts_at_cut, labels[0]), ("B", ends_at_cut, labels[1])):
         nodes, centre = select_plane_nodes(mesh, planes[end]), planes[end][0]
-        couplings.append(cut_coupling(interface, nodes, centre, scale) if at_cut
+        couplings.append(cut_coupling(label, nodes, centre, scale) if at_cut
                          else RigidCoupling(nodes=nodes, reference_point=centre))
     k = mirrored_coupled_stiffness(mesh, STEEL, couplings, axes)
     return 0.5 * (k + k.T)
 
 
-def composed_interface_stiffness(chain, n_segments: int, interface: str, elements_through: float, options: dict,
-                                 meshes=None) -> np.ndarray:
-    """(12, 12) [SI] of the first ``n_segments`` prototype segments of ``chain`` (all in its
-    first half), each meshed alone on ``options``, coupled at the cuts by ``interface`` and
-    rigidly at the stretch's two ends, joined through the cuts' shared DOFs
-    (``flexcal.fem.interface.series_stiffness``). "rigid" is ``composed_stiffness``. Polynomials
-    in (y, z) / s, s the stretch's half-extent along y. meshes: the segments' mirror parts
-    (None: meshed here)."""
-    from flexcal.fem.interface import series_stiffness as joined
-    from flexcal.geometry.exact import bounding_box
+def interface_order(interface: str):
+    """The section field's order of an ``interface`` label (``INTERFACES``): ``RIGID`` for
+    "rigid" and "d-rigid", p for "p<p>" and "d<p>"."""
+    from flexcal.fem.interface import RIGID
 
-    part, _ = stretch(chain, n_segments)
-    scale = float(bounding_box(part)[1][1])
-    segments = interface_segments(chain, n_segments)
-    if meshes is None:
-        meshes = [_mirror_part(segment, elements_through, options) for segment in segments]
-    matrices = [interface_segment_stiffness(segment, mesh, k > 0, k < n_segments - 1, interface, scale)
-                for k, (segment, mesh) in enumerate(zip(segments, meshes))]
-    return joined(matrices)
+    if interface in ("rigid", "d-rigid"):
+        return RIGID
+    if interface[:1] in ("p", "d") and interface[1:].isdigit():
+        return int(interface[1:])
+    raise ValueError(f"unknown interface {interface!r}; choose one of {', '.join(INTERFACES)}")
 
 
-def interface_segments(chain, n_segments: int) -> list:
-    """The first ``n_segments`` prototype segments of ``chain`` as meshed (``canonical_segment``);
-    all must lie in the chain's first half (a mirrored segment's field DOFs are not mapped)."""
+def interface_segments(chain, n_segments: int, nodes=None) -> list:
+    """The first ``n_segments`` prototype segments of ``chain`` (between ``nodes`` [m], None:
+    ``section_nodes``) in order, each as (the segment meshed (``canonical_segment``: a
+    second-half one's first-half twin), mirrored?, the meshed segment's start is a cut?, its
+    end is a cut?). A mirrored segment's start is its twin's end, so the twin's cut ends are
+    the real segment's swapped; the stretch's two ends are not cuts."""
     from flexcal.validation.prototype.fem_provider import canonical_segment
     from flexcal.validation.prototype.segments import section_nodes
 
-    nodes = section_nodes(chain)
+    nodes = section_nodes(chain) if nodes is None else np.asarray(nodes, float)
     out = []
-    for a, b in zip(nodes[:n_segments], nodes[1:n_segments + 1]):
+    for k, (a, b) in enumerate(zip(nodes[:n_segments], nodes[1:n_segments + 1])):
         segment, mirrored = canonical_segment(chain, float(a), float(b))
-        if mirrored:
-            raise ValueError(f"segment [{a}, {b}] m lies in the second half of the chain: only stretches of the "
-                             "first half are joined through field interfaces")
-        out.append(segment)
+        starts, ends = k > 0, k < n_segments - 1
+        out.append((segment, mirrored, *((ends, starts) if mirrored else (starts, ends))))
     return out
+
+
+def interface_condensations(plan, interface) -> dict:
+    """{key: (segment, starts at a cut, ends at a cut, (label at its start, at its end))}: the
+    distinct condensations of an ``interface_segments`` plan (a second-half segment is its
+    twin's condensation, turned), key as ``plan_key``. interface: one label for every cut, or
+    one per cut in the chain's order (``step_interfaces``)."""
+    return {plan_key(step, labels): (step[0], step[2], step[3], labels)
+            for step, labels in zip(plan, step_interfaces(plan, interface))}
+
+
+def step_interfaces(plan, interface) -> list[tuple]:
+    """Per step of ``plan``, (label at the meshed segment's start, at its end) (None: a chain
+    end): ``interface`` one label for every cut or a sequence, one per cut in chain order; a
+    mirrored step's meshed start is its end."""
+    n_cuts = len(plan) - 1
+    labels = [interface] * n_cuts if isinstance(interface, str) else list(interface)
+    if len(labels) != n_cuts:
+        raise ValueError(f"{len(labels)} interfaces for {n_cuts} cuts")
+    out = []
+    for k, (_, mirrored, _, _) in enumerate(plan):
+        start, end = (labels[k - 1] if k > 0 else None), (labels[k] if k < n_cuts else None)
+        out.append((end, start) if mirrored else (start, end))
+    return out
+
+
+def plan_key(step, labels=(None, None)) -> tuple:
+    """The key of one ``interface_segments`` step's condensation with ``labels`` at its ends."""
+    segment, _, starts, ends = step
+    return (round(segment.x_start, 12), round(segment.x_end, 12), bool(starts), bool(ends), *labels)
+
+
+def joined_through_interface(plan, condensed: dict, interface) -> np.ndarray:
+    """(12, 12) [SI]: the segments of ``plan`` (``interface_segments``) joined through their
+    cuts' shared ``interface`` DOFs (one label or one per cut, ``step_interfaces``;
+    ``flexcal.fem.interface.series_stiffness``), ``condensed`` the meshed segments' matrices by
+    ``plan_key`` (``interface_segment_stiffness``); a mirrored one turned
+    (``turned_segment_stiffness``: its cut fields' DOFs change sign by ``section_turn_signs``)."""
+    from flexcal.fem.interface import RIGID, series_stiffness as joined, turned_segment_stiffness
+
+    matrices = []
+    for step, labels in zip(plan, step_interfaces(plan, interface)):
+        k = condensed[plan_key(step, labels)]
+        if step[1]:
+            start, end = (RIGID if label is None else interface_order(label) for label in labels)
+            k = turned_segment_stiffness(k, start, end)
+        matrices.append(k)
+    return joined(matrices)
+
+
+def interface_scale(chain, n_segments: int, nodes=None) -> float:
+    """[m] the length the section fields' coordinates are divided by: the stretch's
+    half-extent along y (the chains' square section: 25 mm on L1 and D1)."""
+    from flexcal.geometry.exact import bounding_box
+    from flexcal.geometry.params import ChainSegment
+
+    if nodes is None:
+        part = stretch(chain, n_segments)[0]
+    else:
+        part = ChainSegment(chain=chain, x_start=float(nodes[0]), x_end=float(nodes[n_segments]))
+    return float(bounding_box(part)[1][1])
+
+
+def composed_interface_stiffness(chain, n_segments: int, interface: str, elements_through: float, options: dict,
+                                 meshes=None, nodes=None) -> np.ndarray:
+    """(12, 12) [SI] of the first ``n_segments`` prototype segments of ``chain`` (between
+    ``nodes``, None: ``section_nodes``), each meshed alone on ``options``, coupled at the
+    cuts by ``interface`` and rigidly at the stretch's two ends, joined through the cuts'
+    shared DOFs; a second-half segment is its first-half twin's condensation turned (as the
+    prototype's ``mirror_segment_stiffness``). "rigid" is ``composed_stiffness``; a sequence:
+    one label per cut. Polynomials in (y, z) / ``interface_scale``. meshes: {(x_start, x_end)
+    rounded to 1 pm: mirror part} (None: meshed here)."""
+    plan = interface_segments(chain, n_segments, nodes)
+    scale = interface_scale(chain, n_segments, nodes)
+    meshes = {} if meshes is None else meshes
+    condensed = {}
+    for key, (segment, starts, ends, labels) in interface_condensations(plan, interface).items():
+        mesh = meshes.get(key[:2]) or _mirror_part(segment, elements_through, options)
+        condensed[key] = interface_segment_stiffness(segment, mesh, starts, ends, labels, scale)
+    return joined_through_interface(plan, condensed, interface)
 
 
 def converged_chain_estimate(segment_limits: np.ndarray, tied: np.ndarray, untied: np.ndarray) -> np.ndarray:
