@@ -10,6 +10,7 @@ the four cuts add (tied - untied of the one-piece chain mesh, ``bench_chain_cuts
     python benchmarks/bench_whole_chain.py --chain D1 --through 8 --ref-dir D --cuts-dir C \\
         --ref-levels 2 3 4 5 6 --ref-levels-2 2 3 4 5
     python benchmarks/bench_whole_chain.py --chain D1 --through 8 --middle-through 8 ...  # + the cut at L/2
+    python benchmarks/bench_whole_chain.py --chain L1 ... --segment-options JSON  # P on a candidate grid
 
 The reference levels are read from D/hex27_<chain>_<0|1>_r<r>.npy (computed and stored if
 missing: r = 6 is ~9 GB); the one-piece matrices from C (bench_chain_cuts.py's, computed if
@@ -41,6 +42,9 @@ def main() -> None:
     parser.add_argument("--chain", nargs="+", default=["L1"])
     parser.add_argument("--through", type=float, default=7.0, help="cells asked for of the one-piece mesh")
     parser.add_argument("--options", default="{}", help="JSON, updates PROTOTYPE_CHAIN_OPTIONS (one-piece mesh)")
+    parser.add_argument("--segment-options", default="{}",
+                        help="JSON, updates PROTOTYPE_CHAIN_OPTIONS for the prototype's segments P (a "
+                             "candidate grid; the strut's limit stays that of today's grid refined)")
     parser.add_argument("--ref-levels", type=int, nargs="+", default=[2, 3, 4, 5, 6], help="[0, m1]")
     parser.add_argument("--ref-levels-2", type=int, nargs="+", default=[3, 4, 5, 6], help="[m1, s0]")
     parser.add_argument("--strut-levels", type=int, nargs=3, default=[4, 5, 6])
@@ -87,7 +91,8 @@ def main() -> None:
             np.save(paths["untied"], untied)
             np.save(paths["tied"], tied)
         untied, tied = np.load(paths["untied"]), np.load(paths["tied"])
-        prototype_segments = chain_segments(chain, 5, lambda seg: segment_stiffness(seg, 7.0, PROTOTYPE_CHAIN_OPTIONS))
+        segment_options = {**PROTOTYPE_CHAIN_OPTIONS, **json.loads(args.segment_options)}
+        prototype_segments = chain_segments(chain, 5, lambda seg: segment_stiffness(seg, 7.0, segment_options))
         prototype = series_stiffness(prototype_segments)
         strut_converged = prototype_segments.copy()
         strut_converged[2] = by_start[2]

@@ -100,8 +100,8 @@ PROTOTYPE_CHAIN_OPTIONS = {**DEFAULT_CHAIN_OPTIONS, "aspect": 2.0, "side_aspect"
 # instead of a half), the width graded by 1 from the side faces (was 2), block cells of 2 neck
 # cells at the leaf faces (was 3) graded by 0.75 along x (was 1); flat-part cells 2.5 neck cells
 # long (was 2) and the largest 32 (was 24), which cost nothing measurable in accuracy; the strut
-# segments' cells split in 8 (strut_refinement 2: their share of a chain's error from <= 0.08 %
-# to <= 0.02 %). 1.5x the CPU of a cold table1 truth's segments. docs/meshing.md, "Session 24:
+# segments' cells split in 8 (strut_refinement 2: their share of a chain's error from 0.084 %
+# to 0.021 %). 1.5x the CPU of a cold table1 truth's segments. docs/meshing.md, "Session 24:
 # the prototype's grid for tied cuts" (figures, cost).
 PROTOTYPE_FINE_CHAIN_OPTIONS = {**PROTOTYPE_CHAIN_OPTIONS, "slenderness": 6.25, "even_through": True,
                                 "grading": 1.0, "edge_aspect": 2.0, "block_grading": 0.75, "aspect": 2.5,
