@@ -10,6 +10,7 @@ the four cuts add (tied - untied of the one-piece chain mesh, ``bench_chain_cuts
     python benchmarks/bench_whole_chain.py --chain D1 --through 8 --ref-dir D --cuts-dir C \\
         --ref-levels 2 3 4 5 6 --ref-levels-2 2 3 4 5
     python benchmarks/bench_whole_chain.py --chain D1 --through 8 --middle-through 8 ...  # + the cut at L/2
+    python benchmarks/bench_whole_chain.py --chain L1 ... --segment-options JSON  # P on a candidate grid
 
 The reference levels are read from D/hex27_<chain>_<0|1>_r<r>.npy (computed and stored if
 missing: r = 6 is ~9 GB); the one-piece matrices from C (bench_chain_cuts.py's, computed if
@@ -41,6 +42,9 @@ def main() -> None:
     parser.add_argument("--chain", nargs="+", default=["L1"])
     parser.add_argument("--through", type=float, default=7.0, help="cells asked for of the one-piece mesh")
     parser.add_argument("--options", default="{}", help="JSON, updates PROTOTYPE_CHAIN_OPTIONS (one-piece mesh)")
+    parser.add_argument("--segment-options", default="{}",
+                        help="JSON, updates PROTOTYPE_CHAIN_OPTIONS for the prototype's segments P (a "
+                             "candidate grid; the strut's limit stays that of today's grid refined)")
     parser.add_argument("--ref-levels", type=int, nargs="+", default=[2, 3, 4, 5, 6], help="[0, m1]")
     parser.add_argument("--ref-levels-2", type=int, nargs="+", default=[3, 4, 5, 6], help="[m1, s0]")
     parser.add_argument("--strut-levels", type=int, nargs=3, default=[4, 5, 6])
@@ -60,7 +64,8 @@ def main() -> None:
     change = json.loads(args.options)
     for name in args.chain:
         estimate = whole_chain_estimate(name, args.through, change, ref_dir, cuts_dir, args.ref_levels,
-                                        args.ref_levels_2, args.strut_levels)
+                                        args.ref_levels_2, args.strut_levels,
+                                        segment_change=json.loads(args.segment_options))
         converged, untied, tied, prototype, joined, strut_part, strut_fit, uncertainty, limits = (
             estimate[k] for k in ("converged", "untied", "tied", "prototype", "joined", "strut_part", "strut_fit",
                                   "uncertainty", "limits"))
@@ -94,11 +99,12 @@ def main() -> None:
 
 
 def whole_chain_estimate(name: str, through: float, change: dict, ref_dir: Path, cuts_dir: Path, ref_levels,
-                         ref_levels_2, strut_levels) -> dict:
+                         ref_levels_2, strut_levels, segment_change: dict | None = None) -> dict:
     """The whole chain ``name``'s estimate C = S - (T - U) and its parts (module docstring):
     {"converged": C, "untied": U, "tied": T (the one piece at ``through`` asked for, options
     changed by ``change``), "prototype": P, "joined": S, "strut_part", "strut_fit",
-    "uncertainty" and "limits" of the two leaf segments' reference levels} (12 x 12 [SI])."""
+    "uncertainty" and "limits" of the two leaf segments' reference levels} (12 x 12 [SI]);
+    ``segment_change``: P's segments on the prototype's options changed by it (a candidate grid)."""
     chain = reference_chain(name)
     limits, uncertainty = {}, {}
     for index, levels in ((0, ref_levels), (1, ref_levels_2)):
@@ -126,7 +132,8 @@ def whole_chain_estimate(name: str, through: float, change: dict, ref_dir: Path,
         np.save(paths["untied"], untied)
         np.save(paths["tied"], tied)
     untied, tied = np.load(paths["untied"]), np.load(paths["tied"])
-    prototype_segments = chain_segments(chain, 5, lambda seg: segment_stiffness(seg, 7.0, PROTOTYPE_CHAIN_OPTIONS))
+    segment_options = {**PROTOTYPE_CHAIN_OPTIONS, **(segment_change or {})}
+    prototype_segments = chain_segments(chain, 5, lambda seg: segment_stiffness(seg, 7.0, segment_options))
     prototype = series_stiffness(prototype_segments)
     strut_converged = prototype_segments.copy()
     strut_converged[2] = by_start[2]

@@ -60,7 +60,7 @@ from .structured import _EDGES, _folded_tets, _straighten, grid_tet_mesh
 __all__ = ["ChainGrid", "cells_through", "chain_grid", "chain_mapped_supported", "mapped_mesh_chain",
            "mapped_mesh_chain_mirror_part",
            "DEFAULT_CHAIN_OPTIONS", "FAST_CHAIN_OPTIONS",
-           "PROTOTYPE_CHAIN_OPTIONS", "EXTRA_CHAIN_OPTIONS"]
+           "PROTOTYPE_CHAIN_OPTIONS", "PROTOTYPE_FINE_CHAIN_OPTIONS", "EXTRA_CHAIN_OPTIONS"]
 
 # The defaults of the chain mapper, chosen by accuracy with n = 7 through the neck
 # (docs/meshing.md, "Convergence": against the Richardson limit of a nested reference
@@ -89,9 +89,27 @@ FAST_CHAIN_OPTIONS = {**DEFAULT_CHAIN_OPTIONS, "side_aspect": 3.0, "slenderness"
 # (+5 % of a cold truth's, load ~15); docs/meshing.md, "Session 20: whole chains".
 PROTOTYPE_CHAIN_OPTIONS = {**DEFAULT_CHAIN_OPTIONS, "aspect": 2.0, "side_aspect": 1.0, "grading": 2.0,
                            "rim_aspect": 24.0, "block_grading": 1.0}
+# A candidate grid for the prototype once its cuts are tied interfaces (session 24, not used
+# by default: the lead adopts it with the ties, so that the truth changes once). The ties add
+# ~0.06-0.12 % to a chain's torsion, so the segments' own error must leave room: every dominant
+# entry of the four leaf segments within 0.282 % of the Q2-hex reference limit (PROTOTYPE_CHAIN_
+# OPTIONS: 0.488 %, the torsion K[rx,rx]). Measured one knob at a time, the torsion error sits
+# mostly in the cells through the leaf, then in the width lines and the block cells at the leaf
+# faces: 10 cells through the L leaves and 8 through the D leaves at 7 asked for (slenderness
+# 6.25, even_through: both mirror planes on every leaf segment, the D segments a quarter
+# instead of a half), the width graded by 1 from the side faces (was 2), block cells of 2 neck
+# cells at the leaf faces (was 3) graded by 0.75 along x (was 1); flat-part cells 2.5 neck cells
+# long (was 2) and the largest 32 (was 24), which cost nothing measurable in accuracy; the strut
+# segments' cells split in 8 (strut_refinement 2: their share of a chain's error from 0.084 %
+# to 0.021 %). 1.5x the CPU of a cold table1 truth's segments. docs/meshing.md, "Session 24:
+# the prototype's grid for tied cuts" (figures, cost).
+PROTOTYPE_FINE_CHAIN_OPTIONS = {**PROTOTYPE_CHAIN_OPTIONS, "slenderness": 6.25, "even_through": True,
+                                "grading": 1.0, "edge_aspect": 2.0, "block_grading": 0.75, "aspect": 2.5,
+                                "max_aspect": 32.0, "strut_refinement": 2}
 # Options of ``chain_grid`` that the defaults leave out (None there: as the defaults'
 # edge_aspect and grading), so the default grid and its cache keys stay as they were.
-EXTRA_CHAIN_OPTIONS = ("rim_aspect", "block_grading", "section_grading", "cuts")
+EXTRA_CHAIN_OPTIONS = ("rim_aspect", "block_grading", "section_grading", "cuts", "even_through",
+                       "strut_refinement")
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -217,28 +235,34 @@ def _refine(lines: np.ndarray, r: int) -> np.ndarray:
     return np.concatenate([inner, lines[-1:]])
 
 
-def cells_through(params, n_thickness: int, slenderness: float | None) -> int:
+def cells_through(params, n_thickness: int, slenderness: float | None, even: bool = False) -> int:
     """Cells across the thinnest leaf's neck for ``n_thickness`` requested [-]: n, or more
     where a leaf is stubbier than ``slenderness`` (length l / thickness t): the neck cell
     t / n is at most l / (slenderness n) for every leaf (module docstring, "a-priori n").
-    None: n as given. A part without leaves: n."""
+    None: n as given. even: an odd count raised by one, so that the core of the leaves
+    has a grid line at its middle and the part both mirror planes
+    (``mapped_mesh_chain_mirror_part``: a quarter, condensed in four parity classes, instead
+    of a half in two). A part without leaves: n (its section always has both planes)."""
     n = int(n_thickness)
     leaves = _leaves(params)
-    if slenderness is None or not leaves:
+    if not leaves:
         return n
-    if not (math.isfinite(slenderness) and slenderness > 0):
-        raise ValueError(f"slenderness={slenderness!r} must be > 0 (or None to take n as given)")
-    cell = min(min(leaf.thickness for leaf in leaves) / n,
-               min(leaf.x1 - leaf.x0 for leaf in leaves) / (slenderness * n))
-    # 1e-9: t / cell is n exactly (to round-off) when no leaf is stubbier than the bound
-    return max(n, math.ceil(min(leaf.thickness for leaf in leaves) / cell - 1e-9))
+    if slenderness is not None:
+        if not (math.isfinite(slenderness) and slenderness > 0):
+            raise ValueError(f"slenderness={slenderness!r} must be > 0 (or None to take n as given)")
+        cell = min(min(leaf.thickness for leaf in leaves) / n,
+                   min(leaf.x1 - leaf.x0 for leaf in leaves) / (slenderness * n))
+        # 1e-9: t / cell is n exactly (to round-off) when no leaf is stubbier than the bound
+        n = max(n, math.ceil(min(leaf.thickness for leaf in leaves) / cell - 1e-9))
+    return n + n % 2 if even else n
 
 
 def chain_grid(params, n_thickness: int, *, aspect: float = 3.0, n_arc: int = 8, width_aspect: float = 12.0,
                side_aspect: float = 1.5, edge_aspect: float = 3.0, grading: float = 0.5, max_aspect: float = 24.0,
                slenderness: float | None = 5.5, refinement: int = 1, rim_aspect: float | None = None,
                block_grading: float | None = None, section_grading: float | None = None,
-               cuts: tuple[float, ...] | None = None) -> ChainGrid:
+               cuts: tuple[float, ...] | None = None, even_through: bool = False,
+               strut_refinement: int = 1) -> ChainGrid:
     """The parent grid of a chain or segment (module docstring).
 
     n_thickness: cells across every leaf's core (so across t at its neck), raised by
@@ -259,11 +283,15 @@ def chain_grid(params, n_thickness: int, *, aspect: float = 3.0, n_arc: int = 8,
     cuts: x [m] of cross-sections inside blocks that get a grid line each, graded as the
     part's end faces (``rim_aspect``): the part cut there into the segments the prototype
     condenses has, along x, exactly those segments' lines (docs/meshing.md, "Session 20:
-    whole chains"; None: no cuts).
+    whole chains"; None: no cuts). even_through: an odd number of cells through the leaves
+    raised by one (``cells_through``; both mirror planes on every leaf segment);
+    strut_refinement: a part without leaves (a segment of strut) has every cell split into
+    strut_refinement^3 on top of ``refinement`` (its cells are sized from a quarter of the
+    section, so at 1 the strut segments are coarse: docs/meshing.md, "Session 24").
     """
     if not chain_mapped_supported(params):
         raise ValueError(f"the chain mapper takes a FlexureChain or ChainSegment of leaves, got {type(params).__name__}")
-    n = cells_through(params, n_thickness, slenderness)
+    n = cells_through(params, n_thickness, slenderness, even_through)
     ps = pieces(params)
     leaves = _leaves(params)
     half_section = max(max(p.half_y, p.half_z) for p in ps if isinstance(p, BoxPiece))
@@ -300,7 +328,9 @@ def chain_grid(params, n_thickness: int, *, aspect: float = 3.0, n_arc: int = 8,
                                     for k, (a, b) in enumerate(zip(ends[:-1], ends[1:]))])
         x_parts.append(lines if not x_parts else lines[1:])
     x = np.concatenate(x_parts)
-    r = int(refinement)
+    if int(strut_refinement) != strut_refinement or strut_refinement < 1:
+        raise ValueError(f"strut_refinement={strut_refinement!r} must be a positive integer")
+    r = int(refinement) * (1 if leaves else int(strut_refinement))
     x, p, q = _refine(x, r), _refine(p, r), _refine(q, r)
     for name, lines in (("x", x), ("y", p), ("z", q)):
         if np.min(np.diff(lines)) < 1e-6 * cell:  # a flat layer of cells: its tets have no volume
@@ -376,7 +406,7 @@ def mapped_mesh_chain(params, *, elements_through_thickness: float = 7, refineme
     timings["map"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     if measure:
-        measured = _measure(params, mesh, corners, cells_through(params, n, settings["slenderness"]))
+        measured = _measure(params, mesh, corners, cells_through(params, n, settings["slenderness"], settings.get("even_through", False)))
     else:
         measured = _unmeasured(params, mesh, len(corners), volumes=quality)
     ratio = float(_jacobian_ratios(mesh.nodes, mesh.tets).min()) if measure or quality else float("nan")
@@ -386,7 +416,7 @@ def mapped_mesh_chain(params, *, elements_through_thickness: float = 7, refineme
     report = MeshReport(
         n_nodes=mesh.n_nodes, n_tets=mesh.n_tets, epsilon=0.0, n_retries=0, retry_reasons=(),
         options=dict(mesher="mapped", elements_through_thickness=float(n), refinement=int(refinement), **settings,
-                     cells_through=cells_through(params, n, settings["slenderness"]),
+                     cells_through=cells_through(params, n, settings["slenderness"], settings.get("even_through", False)),
                      n_cells=[len(grid.x) - 1, len(grid.p) - 1, len(grid.q) - 1], n_hexes=int(grid.active.sum())),
         timings=timings, **measured)
     return mesh, report
