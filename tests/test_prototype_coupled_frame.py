@@ -120,3 +120,52 @@ def test_a_coupled_stiffness_must_cover_each_segment_once():
         CoupledStiffness(blocks=np.zeros((2, 30, 30)), segments=np.array([[0, 1, 2, 3, 4], [4, 5, 6, 7, 8]]))
     with pytest.raises(ValueError, match="n_groups, 6 m, 6 m"):
         CoupledStiffness(blocks=np.zeros((2, 30, 30)), segments=np.arange(8).reshape(2, 4))
+
+
+def _block_diagonal_provider():
+    """The analytic provider, also giving each chain's K_chain as the block diagonal of its
+    segments' K_jj (what rigid ties are, ``flexcal.fem.cut_warping``)."""
+    from flexcal.validation.prototype.segments import analytic_provider, section_nodes
+
+    base = analytic_provider()
+
+    def provider(chain, x_start, x_end):
+        return base(chain, x_start, x_end)
+
+    def chain_stiffness(chain):
+        nodes = section_nodes(chain)
+        out = np.zeros((30, 30))
+        for s in range(N_SEGMENTS):
+            out[6 * s:6 * s + 6, 6 * s:6 * s + 6] = base(chain, float(nodes[s]), float(nodes[s + 1]))[6:, 6:]
+        return out
+
+    provider.chain_stiffness = chain_stiffness
+    return provider
+
+
+class _Softer:
+    name = "softer"
+
+    def modify_stiffness(self, stiffness, context):
+        return 0.99 * stiffness
+
+
+def test_a_prototype_whose_chains_carry_their_block_diagonal_is_todays_and_refuses_stiffness_effects():
+    from flexcal.geometry.params import reference_mechanism
+    from flexcal.validation.prototype.mechanism import build_prototype, simulate
+    from flexcal.validation.prototype.segments import analytic_provider
+    from flexcal.validation.prototype.transmission import ActuatorTransmission
+
+    mechanism = reference_mechanism()
+    transmissions = [ActuatorTransmission(initial_position=-0.20e-3, clearance=0.42e-3, hysteresis=0.83)] * 3
+    inputs = np.array([[0, 0, 0], [0.5e-3, 0, 0], [0.5e-3, -0.4e-3, 0.2e-3], [0, 0, -0.6e-3]])
+    today = simulate(build_prototype(mechanism, transmissions, analytic_provider()), inputs)
+    tied_prototype = build_prototype(mechanism, transmissions, _block_diagonal_provider())
+    assert tied_prototype.chain_stiffness.shape == (6, 30, 30)
+    tied = simulate(tied_prototype, inputs)
+    # both converge to the same equilibria within Newton's tolerances (1e-5 N, 1e-5 N m: < 1e-11
+    # rad, SolverSettings); angles ~1e-3 rad; measured 0 (the same iterates); 1e-10 rad
+    assert np.abs(tied.true_angles - today.true_angles).max() <= 1e-10
+    assert np.abs(tied.axial_loads - today.axial_loads).max() <= 1e-4  # [N] of ~3e3 N: the load tolerance; measured 0
+    with pytest.raises(ValueError, match="not defined with tied cuts"):
+        simulate(tied_prototype, inputs[:1], effects=[_Softer()])
