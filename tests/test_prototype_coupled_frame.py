@@ -71,6 +71,7 @@ def test_block_diagonal_coupled_stiffness_is_the_uncoupled_frame():
     # ~1e-16 of the largest term; 1e-12
     assert tied[0] == pytest.approx(today[0], rel=1e-12)
     for a, b in ((tied[1], today[1]), (tied[3], today[3])):
+        # as above: round-off of the same sums in another order; 1e-12
         assert np.abs(a - b).max() <= 1e-12 * np.abs(b).max(), np.abs(a - b).max() / np.abs(b).max()
     # the tangent is a central difference (step 1e-6) of gradients that now differ by round-off
     # (~1e-16 of K xi), which the difference amplifies by ~1e6: measured 5.4e-12 of the
@@ -87,6 +88,7 @@ def test_coupled_residual_is_the_gradient_of_its_energy_and_its_tangent_the_hess
     rng = np.random.default_rng(1)
     assembly, poses = _two_chains(rng)
     stiffness = _coupled(rng)
+    # the random groups couple their segments strongly (0.1: an off-diagonal block a tenth of a diagonal one)
     assert np.abs(stiffness.blocks[0, :6, 6:]).max() > 0.1 * np.abs(stiffness.blocks[0, :6, :6]).max()
     energy, residual, tangent, _ = evaluate(assembly, poses, stiffness, Loads())
     scale = np.where(assembly.dof_is_rotation, 0.02, 1.0)  # [m] per unit DOF
@@ -102,17 +104,18 @@ def test_coupled_residual_is_the_gradient_of_its_energy_and_its_tangent_the_hess
     # central differences (h = 1e-6 m or 1e-6 x 20 mm): truncation O(h^2 / 2 cm^2) ~1e-9,
     # round-off ~1e-16 of the energy / h against the residual; measured 7e-11 of the largest
     # residual component; 1e-6
-    assert np.abs(gradient - residual).max() <= 1e-6 * np.abs(residual).max()
+    assert np.abs(gradient - residual).max() <= 1e-6 * np.abs(residual).max()  # 1e-6: see above
     # the residual's manifold derivative is the Hessian plus a part antisymmetric in (a, b)
     # (superelement docstring): its symmetric part is the tangent. Both are central differences
     # (the tangent's own of each segment's gradient), measured 2.6e-11 of the largest entry; 1e-6
     symmetric = 0.5 * (jacobian + jacobian.T)
-    assert np.abs(symmetric - tangent).max() <= 1e-6 * np.abs(tangent).max(), \
-        np.abs(symmetric - tangent).max() / np.abs(tangent).max()
-    # the cross-segment blocks matter: without them the tangent is off by 0.19 of its largest entry
+    error = np.abs(symmetric - tangent).max() / np.abs(tangent).max()
+    assert error <= 1e-6, error  # 1e-6: see above
+    # the cross-segment blocks matter: without them the tangent is off by 0.19 of its largest
+    # entry; 1e-2
     uncoupled = evaluate(assembly, poses, CoupledStiffness(blocks=stiffness.blocks * np.kron(
         np.eye(5), np.ones((6, 6))), segments=stiffness.segments), Loads())[2]
-    assert np.abs(uncoupled - tangent).max() > 1e-2 * np.abs(tangent).max()
+    assert np.abs(uncoupled - tangent).max() > 1e-2 * np.abs(tangent).max()  # 1e-2: see above
 
 
 def test_a_coupled_stiffness_must_cover_each_segment_once():

@@ -300,8 +300,8 @@ def build_segments(slices: Iterable[tuple[FlexureChain, float, float]], material
 
 def fem_provider(material: Material = STEEL, *, elements_through_thickness: float = DEFAULT_ELEMENTS_THROUGH,
                  cache_directory=None, progress: bool = True, workers: int | None = 0,
-                 scheduler: str | None = None, mesher: str = DEFAULT_MESHER,
-                 ties: str | None = None) -> Callable[[FlexureChain, float, float], np.ndarray]:
+                 scheduler: str | None = None,
+                 mesher: str = DEFAULT_MESHER) -> Callable[[FlexureChain, float, float], np.ndarray]:
     """A provider ``(chain, x_start, x_end) -> (12, 12)`` for ``build_prototype``.
 
     workers / scheduler: where ``provider.prepare(slices)`` builds the missing segments
@@ -309,20 +309,9 @@ def fem_provider(material: Material = STEEL, *, elements_through_thickness: floa
     after the other in this process as the provider is called (the command line's
     default, ``--workers`` not given, is None: one thread per usable core,
     ``plan_local_builds``). mesher: "mapped" (default) or "tetwild" (``MESHERS``).
-    ties: None (default: the segments joined rigidly at the cuts) or a label of
-    ``tied_chains.TIES`` ("d12/p8"): the provider also gives ``provider.chain_stiffness(chain)``,
-    the chain's 30 x 30 on its segments' twists joined through those fields
-    (``tied_chains.tied_chain_stiffness``), which ``build_prototype`` then uses in the frame;
-    the 12 x 12 per segment stay the rigidly tied ones (reports, structure assessment).
     """
     if mesher not in MESHERS:  # refused here, not at the first segment
         raise ValueError(f"mesher={mesher!r} must be one of {', '.join(MESHERS)}")
-    if ties is not None:
-        from .tied_chains import cut_interfaces
-
-        cut_interfaces(ties)  # refused here if unknown
-        if mesher != "mapped":
-            raise ValueError(f"ties={ties!r} needs the mapped mesher (the fields' faces), not {mesher!r}")
 
     def provider(chain: FlexureChain, x_start: float, x_end: float) -> np.ndarray:
         segment, mirrored = canonical_segment(chain, x_start, x_end)
@@ -345,7 +334,7 @@ def fem_provider(material: Material = STEEL, *, elements_through_thickness: floa
         """This provider (same material, cache, executor, mesher) with ``n`` elements through
         the thinnest section: what the compliance slopes are measured with (their own cache keys)."""
         return fem_provider(material, elements_through_thickness=n, cache_directory=cache_directory,
-                            progress=progress, workers=workers, scheduler=scheduler, mesher=mesher, ties=ties)
+                            progress=progress, workers=workers, scheduler=scheduler, mesher=mesher)
 
     provider.prepare = prepare
     provider.on_grid = on_grid
@@ -356,19 +345,4 @@ def fem_provider(material: Material = STEEL, *, elements_through_thickness: floa
     provider.elements_through_thickness = float(elements_through_thickness)
     provider.description = (f"FEM (quadratic tets, {mesher} mesh, {elements_through_thickness:g} through the thinnest "
                             f"section)")
-    if ties is not None:
-        from .tied_chains import tied_chain_stiffness
-
-        def chain_stiffness(chain: FlexureChain) -> np.ndarray:
-            start = time.perf_counter()
-            stiffness = tied_chain_stiffness(chain, ties, material, elements_through_thickness=elements_through_thickness,
-                                             cache_directory=cache_directory)
-            if progress and time.perf_counter() - start > 0.5:
-                print(f"  FEM tied chain ({ties}) of a {chain.length * 1e3:.1f} mm chain: "
-                      f"{time.perf_counter() - start:.1f} s", file=sys.stderr)
-            return stiffness
-
-        provider.chain_stiffness = chain_stiffness
-        provider.description = provider.description[:-1] + f", cuts tied through {ties} fields)"
-    provider.ties = ties
     return provider

@@ -77,7 +77,7 @@ class Prototype:
     provider gave it; section_x (6, 6) [m] local x of the section nodes; assembly;
     initial_poses (29, 4, 4) undeformed body poses; settings; provider_description;
     chain_stiffness (6, 30, 30) [SI] or None: with a provider whose cuts are tied through
-    section fields (``fem_provider(ties=...)``), each chain's stiffness on its five segments'
+    section fields (``tied_chains.tied_fem_provider``), each chain's stiffness on its five segments'
     twists, which the frame then uses instead of the K_jj (``frame_stiffness``); the K_jj and
     the 12 x 12 stay the provider's rigidly tied segments (reports, structure assessment).
     """

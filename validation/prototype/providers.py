@@ -29,7 +29,7 @@ def stiffness_provider(kind: str, *, progress: bool = True, workers: int | None 
         return fem_provider(progress=progress, workers=workers, scheduler=scheduler, mesher="tetwild",
                             elements_through_thickness=TETWILD_ELEMENTS_THROUGH)
     if kind == "fem-tied":
-        from .tied_chains import DEFAULT_TIES
+        from .tied_chains import DEFAULT_TIES, tied_fem_provider
 
-        return fem_provider(progress=progress, workers=workers, scheduler=scheduler, ties=DEFAULT_TIES)
+        return tied_fem_provider(DEFAULT_TIES, progress=progress, workers=workers, scheduler=scheduler)
     return fem_provider(progress=progress, workers=workers, scheduler=scheduler)

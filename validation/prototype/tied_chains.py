@@ -13,11 +13,15 @@ into the section bodies' rigid motions and the cuts' warping, the warping conden
 
 from __future__ import annotations
 
+import sys
+import time
+
 import numpy as np
 
 from flexcal.geometry.params import STEEL, FlexureChain, Material
 
-__all__ = ["TIES", "DEFAULT_TIES", "TIED_STRUT_REFINEMENT", "cut_interfaces", "tied_chain_stiffness"]
+__all__ = ["TIES", "DEFAULT_TIES", "TIED_STRUT_REFINEMENT", "cut_interfaces", "tied_chain_stiffness",
+           "tied_fem_provider"]
 
 # "m/s": the interface at the mid-connector cuts m1, m2, then at the strut cuts s0, s1
 # (chain_cuts.cut_coupling's labels; "d12": all four). d12/p8 and d12/d8 brought the whole
@@ -69,3 +73,32 @@ def tied_chain_stiffness(chain: FlexureChain, ties: str = DEFAULT_TIES, material
         return {"stiffness": twist_stiffness_through_interface(plan, condensed, interfaces, scale)}
 
     return cached(parts, compute, cache_directory)["stiffness"]
+
+
+def tied_fem_provider(ties: str = DEFAULT_TIES, **fem_options):
+    """``fem_provider(**fem_options)`` (the mapped mesher) that also gives
+    ``provider.chain_stiffness(chain)``: the chain's 30 x 30 on its segments' twists, joined
+    through the ``ties`` fields (``tied_chain_stiffness``), which ``build_prototype`` then uses
+    in the frame. Its 12 x 12 per segment stay the rigidly tied ones (the reports and the
+    structure assessment read them)."""
+    from .fem_provider import DEFAULT_ELEMENTS_THROUGH, fem_provider
+
+    cut_interfaces(ties)  # refused here if unknown
+    if fem_options.get("mesher", "mapped") != "mapped":
+        raise ValueError(f"ties={ties!r} need the mapped mesher (the fields' faces), not {fem_options['mesher']!r}")
+    provider = fem_provider(**fem_options)
+    material = fem_options.get("material", STEEL)
+    through = fem_options.get("elements_through_thickness", DEFAULT_ELEMENTS_THROUGH)
+
+    def chain_stiffness(chain: FlexureChain) -> np.ndarray:
+        start = time.perf_counter()
+        stiffness = tied_chain_stiffness(chain, ties, material, elements_through_thickness=through,
+                                         cache_directory=fem_options.get("cache_directory"))
+        if fem_options.get("progress", True) and time.perf_counter() - start > 0.5:
+            print(f"  FEM tied chain ({ties}) of a {chain.length * 1e3:.1f} mm chain: "
+                  f"{time.perf_counter() - start:.1f} s", file=sys.stderr)
+        return stiffness
+
+    provider.chain_stiffness, provider.ties = chain_stiffness, ties
+    provider.description = provider.description[:-1] + f", cuts tied through {ties} fields)"
+    return provider
