@@ -172,3 +172,18 @@ def test_a_prototype_whose_chains_carry_their_block_diagonal_is_todays_and_refus
     assert np.abs(tied.axial_loads - today.axial_loads).max() <= 1e-4  # [N] of ~3e3 N: the load tolerance; measured 0
     with pytest.raises(ValueError, match="not defined with tied cuts"):
         simulate(tied_prototype, inputs[:1], effects=[_Softer()])
+
+
+def test_the_tied_provider_names_its_cuts_and_refuses_what_it_cannot_tie():
+    from flexcal.validation.prototype.providers import stiffness_provider
+    from flexcal.validation.prototype.tied_chains import cut_interfaces, tied_fem_provider
+
+    assert cut_interfaces("d12/p8") == ("d12", "p8", "p8", "d12")  # m1, s0, s1, m2
+    assert cut_interfaces("d12") == ("d12",) * 4
+    provider = stiffness_provider("fem-tied", progress=False)
+    assert callable(provider.chain_stiffness) and "d12/p8" in provider.description
+    assert not hasattr(stiffness_provider("fem", progress=False), "chain_stiffness")  # the default: rigid ties
+    with pytest.raises(ValueError, match="unknown ties"):
+        tied_fem_provider("d7")
+    with pytest.raises(ValueError, match="mapped mesher"):
+        tied_fem_provider("d12/p8", mesher="tetwild")

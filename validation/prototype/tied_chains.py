@@ -43,6 +43,18 @@ def cut_interfaces(ties: str) -> tuple[str, str, str, str]:
     return (middle, strut, strut, middle)
 
 
+def _tied_chain_parts(chain: FlexureChain, ties: str, material: Material, elements_through_thickness: float) -> dict:
+    """The cache key's parts of ``tied_chain_stiffness``."""
+    from flexcal.fem.mesh_mapped_chain import PROTOTYPE_CHAIN_OPTIONS
+
+    if material != STEEL:
+        raise ValueError("tied chains are condensed in STEEL only (chain_cuts' condensations); use the provider fem")
+    return {"kind": "tied_chain_stiffness", "chain": chain, "material": material, "ties": list(cut_interfaces(ties)),
+            "mesh": {"mesher": "mapped", "elements_through_thickness": float(elements_through_thickness),
+                     "options": PROTOTYPE_CHAIN_OPTIONS, "strut_refinement": TIED_STRUT_REFINEMENT,
+                     "mirrored": True}}
+
+
 def tied_chain_stiffness(chain: FlexureChain, ties: str = DEFAULT_TIES, material: Material = STEEL, *,
                          elements_through_thickness: float, cache_directory=None) -> np.ndarray:
     """K_chain (30, 30) [SI] of ``chain`` on its five segments' twists (module docstring),
@@ -52,12 +64,7 @@ def tied_chain_stiffness(chain: FlexureChain, ties: str = DEFAULT_TIES, material
     from flexcal.fem.mesh_mapped_chain import PROTOTYPE_CHAIN_OPTIONS
 
     interfaces = cut_interfaces(ties)
-    if material != STEEL:
-        raise ValueError("tied chains are condensed in STEEL only (chain_cuts' condensations); use ties=None")
-    parts = {"kind": "tied_chain_stiffness", "chain": chain, "material": material, "ties": list(interfaces),
-             "mesh": {"mesher": "mapped", "elements_through_thickness": float(elements_through_thickness),
-                      "options": PROTOTYPE_CHAIN_OPTIONS, "strut_refinement": TIED_STRUT_REFINEMENT,
-                      "mirrored": True}}
+    parts = _tied_chain_parts(chain, ties, material, elements_through_thickness)
 
     def compute() -> dict[str, np.ndarray]:
         from ..reports.chain_cuts import (_mirror_part, interface_condensed, interface_scale, interface_segments,
@@ -79,8 +86,10 @@ def tied_fem_provider(ties: str = DEFAULT_TIES, **fem_options):
     """``fem_provider(**fem_options)`` (the mapped mesher) that also gives
     ``provider.chain_stiffness(chain)``: the chain's 30 x 30 on its segments' twists, joined
     through the ``ties`` fields (``tied_chain_stiffness``), which ``build_prototype`` then uses
-    in the frame. Its 12 x 12 per segment stay the rigidly tied ones (the reports and the
-    structure assessment read them)."""
+    in the frame, one chain after another in this process (on job threads they took as long in
+    total: mapped meshing holds the interpreter lock; table1 seed 1, 2026-11-29, load ~3). Its
+    12 x 12 per segment stay the rigidly tied ones (the reports and the structure assessment read
+    them)."""
     from .fem_provider import DEFAULT_ELEMENTS_THROUGH, fem_provider
 
     cut_interfaces(ties)  # refused here if unknown
