@@ -172,6 +172,10 @@ def test_a_prototype_whose_chains_carry_their_block_diagonal_is_todays_and_refus
     assert np.abs(tied.axial_loads - today.axial_loads).max() <= 1e-4  # [N] of ~3e3 N: the load tolerance; measured 0
     with pytest.raises(ValueError, match="not defined with tied cuts"):
         simulate(tied_prototype, inputs[:1], effects=[_Softer()])
+    from flexcal.validation.structure.mount import nominal_state
+
+    with pytest.raises(ValueError, match="structure assessment is not defined yet"):
+        nominal_state(tied_prototype)
 
 
 def test_the_tied_provider_names_its_cuts_and_refuses_what_it_cannot_tie():
