@@ -32,7 +32,8 @@ import scipy.linalg
 
 from .interface import RIGID, n_interface_dofs, polynomial_exponents, section_modes
 
-__all__ = ["rigid_field_coefficients", "section_gram_diagonal", "warping_basis", "chain_twist_stiffness"]
+__all__ = ["rigid_field_coefficients", "section_gram_diagonal", "warping_basis", "chain_twist_stiffness",
+           "clamped_end_stiffness"]
 
 
 def rigid_field_coefficients(order, scale: float) -> np.ndarray:
@@ -104,4 +105,25 @@ def chain_twist_stiffness(segments, cut_orders, scale: float) -> np.ndarray:
     coupling = K[np.ix_(twist, warp)]
     out = K[np.ix_(twist, twist)] - coupling @ np.linalg.solve(K[np.ix_(warp, warp)], coupling.T) if warp.size \
         else K
+    return 0.5 * (out + out.T)
+
+
+def clamped_end_stiffness(twist_stiffness: np.ndarray, lengths) -> np.ndarray:
+    """(6, 6) [SI]: the end block (start clamped) of a chain whose n segments of ``lengths``
+    (n,) [m] along x carry ``twist_stiffness`` (6 n, 6 n) on their twists, linearised in the
+    section bodies' twists r_1..r_n (xi_s = r_s - Ad(D_s) r_(s-1), r_0 = 0, D_s the translation
+    by -lengths[s]), the n - 1 interior bodies condensed out. For ``chain_twist_stiffness`` it
+    is the end block of the segments joined through their cuts (``series_stiffness``)."""
+    from flexcal.geometry.frames import se3_adjoint, translation_pose
+
+    lengths = np.asarray(lengths, float)
+    n = len(lengths)
+    if twist_stiffness.shape != (6 * n, 6 * n):
+        raise ValueError(f"twist stiffness {twist_stiffness.shape} does not match {n} segments")
+    B = np.eye(6 * n)
+    for s in range(1, n):
+        B[6 * s:6 * s + 6, 6 * (s - 1):6 * s] = -se3_adjoint(translation_pose(np.array([-lengths[s], 0.0, 0.0])))
+    K = B.T @ twist_stiffness @ B
+    inner, end = np.arange(6 * (n - 1)), np.arange(6 * (n - 1), 6 * n)
+    out = K[np.ix_(end, end)] - K[np.ix_(end, inner)] @ np.linalg.solve(K[np.ix_(inner, inner)], K[np.ix_(inner, end)])
     return 0.5 * (out + out.T)

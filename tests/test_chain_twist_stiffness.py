@@ -6,10 +6,10 @@ import functools
 import numpy as np
 import pytest
 
-from flexcal.fem.cut_warping import rigid_field_coefficients, section_gram_diagonal, warping_basis
+from flexcal.fem.cut_warping import (clamped_end_stiffness, rigid_field_coefficients, section_gram_diagonal,
+                                     warping_basis)
 from flexcal.fem.interface import RIGID, section_modes
 from flexcal.fem.mesh_mapped_chain import PROTOTYPE_CHAIN_OPTIONS
-from flexcal.validation.prototype.kinematics import se3_adjoint, translation_pose
 from flexcal.validation.prototype.segments import section_nodes
 from flexcal.validation.reports.chain_cuts import (chain_order_matrices, interface_condensed, interface_scale,
                                                    interface_segments, joined_through_interface,
@@ -55,25 +55,11 @@ def test_rigid_ties_give_the_segments_end_blocks_on_the_diagonal_exactly():
     np.testing.assert_array_equal(K_chain, expected)  # no warping: nothing is condensed
 
 
-def _end_block_through_bodies(K_chain: np.ndarray, nodes: np.ndarray) -> np.ndarray:
-    """(6, 6): K_chain on Xi linearised in the bodies' twists r_1..r_5 (xi_s = r_s - Ad(D_s)
-    r_(s-1), r_0 = 0: A clamped), the four interior bodies condensed out."""
-    B = np.zeros((30, 30))
-    for s in range(5):
-        B[6 * s:6 * s + 6, 6 * s:6 * s + 6] = np.eye(6)
-        if s:
-            shift = translation_pose(np.array([-(nodes[s + 1] - nodes[s]), 0.0, 0.0]))
-            B[6 * s:6 * s + 6, 6 * (s - 1):6 * s] = -se3_adjoint(shift)
-    K = B.T @ K_chain @ B
-    inner, end = np.arange(24), np.arange(24, 30)
-    return K[np.ix_(end, end)] - K[np.ix_(end, inner)] @ np.linalg.solve(K[np.ix_(inner, inner)], K[np.ix_(inner, end)])
-
-
 @pytest.mark.parametrize("interface", [INTERFACE, "rigid"])
 def test_the_twist_stiffness_with_its_bodies_condensed_is_the_tied_chains_end_block(interface):
     chain, plan, condensed, scale = _coarse_chain(interface)
     K_chain = twist_stiffness_through_interface(plan, condensed, interface, scale)
-    end_block = _end_block_through_bodies(K_chain, section_nodes(chain))
+    end_block = clamped_end_stiffness(K_chain, np.diff(section_nodes(chain)))
     joined = joined_through_interface(plan, condensed, interface)[6:, 6:]
     size = np.sqrt(np.outer(np.diag(joined), np.diag(joined)))
     # the same energy minimised in two orders. The transverse translations' stiffness at B is the
