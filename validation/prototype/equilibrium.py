@@ -29,7 +29,8 @@ import numpy as np
 import scipy.linalg
 
 from .kinematics import hat, orthonormalize, se3_adjoint, se3_exp, se3_inverse
-from .superelement import DEFAULT_STEP, relative_pose, segment_energy, segment_gradient, segment_tangent
+from .superelement import (DEFAULT_STEP, CoupledStiffness, relative_pose, segment_deformation, segment_energy,
+                           segment_gradient, segment_jacobian, segment_tangent)
 
 __all__ = [
     "SolverSettings",
@@ -202,29 +203,87 @@ def _load_terms(assembly: Assembly, body_poses: np.ndarray, loads: Loads, with_t
     return energy, grad, hess
 
 
-def evaluate(assembly: Assembly, body_poses: np.ndarray, stiffness: np.ndarray, loads: Loads,
+def evaluate(assembly: Assembly, body_poses: np.ndarray, stiffness, loads: Loads,
              with_tangent: bool = True, step: float = DEFAULT_STEP):
     """Total potential [J], residual (n_dofs,) [N, N m], tangent (n_dofs, n_dofs) or None,
     and the segment gradients (n_segments, 12), at ``body_poses`` (n_bodies, 4, 4).
 
-    ``stiffness`` (n_segments, 6, 6): each segment's K_jj [SI].
+    ``stiffness``: each segment's K_jj (n_segments, 6, 6) [SI], or a ``CoupledStiffness``
+    (groups of segments with one stiffness on their twists, ``superelement``).
     """
     nodes = node_poses(assembly, body_poses)
     rel = relative_pose(nodes[assembly.segment_nodes[:, 0]], nodes[assembly.segment_nodes[:, 1]])
     d = assembly.segment_reference_inverse
+    if isinstance(stiffness, CoupledStiffness):
+        return _evaluate_coupled(assembly, body_poses, rel, stiffness, loads, with_tangent, step)
     seg_grad = segment_gradient(rel, d, stiffness)
-    n, m, dofs = assembly.n_dofs, assembly.segment_map, assembly.segment_dofs
     energy_l, grad_l, hess_l = _load_terms(assembly, body_poses, loads, with_tangent)
     energy = float(np.sum(segment_energy(rel, d, stiffness))) + energy_l
-    local = np.einsum("ska,sk->sa", m, seg_grad)  # M^T g per segment
-    residual = np.bincount(dofs.ravel(), weights=local.ravel(), minlength=n + 1)[:n] + grad_l
+    residual = _gathered_residual(assembly, seg_grad) + grad_l
     tangent = None
     if with_tangent:
-        seg_tan = np.swapaxes(m, -1, -2) @ segment_tangent(rel, d, stiffness, step) @ m
-        flat = dofs[:, :, None] * (n + 1) + dofs[:, None, :]
-        tangent = np.bincount(flat.ravel(), weights=seg_tan.ravel(), minlength=(n + 1) ** 2)
-        tangent = tangent.reshape(n + 1, n + 1)[:n, :n] + hess_l
-        tangent = 0.5 * (tangent + tangent.T)
+        tangent = _gathered_tangent(assembly, segment_tangent(rel, d, stiffness, step), hess_l)
+    return energy, residual, tangent, seg_grad
+
+
+def _gathered_residual(assembly: Assembly, seg_grad: np.ndarray) -> np.ndarray:
+    """(n_dofs,): the segments' gradients (n_segments, 12) mapped to and summed on the DOFs."""
+    n, m, dofs = assembly.n_dofs, assembly.segment_map, assembly.segment_dofs
+    local = np.einsum("ska,sk->sa", m, seg_grad)  # M^T g per segment
+    return np.bincount(dofs.ravel(), weights=local.ravel(), minlength=n + 1)[:n]
+
+
+def _gathered_tangent(assembly: Assembly, seg_tangent: np.ndarray, hess_l: np.ndarray,
+                      cross: np.ndarray | None = None, groups: np.ndarray | None = None) -> np.ndarray:
+    """(n_dofs, n_dofs), symmetrized: the segments' tangents (n_segments, 12, 12) mapped and summed,
+    plus the loads' Hessian; cross (n_groups, 12 m, 12 m): blocks between the node DOFs of the
+    segments ``groups`` (n_groups, m) (a coupled group's cross-segment terms)."""
+    n, m, dofs = assembly.n_dofs, assembly.segment_map, assembly.segment_dofs
+    seg_tan = np.swapaxes(m, -1, -2) @ seg_tangent @ m
+    flat = dofs[:, :, None] * (n + 1) + dofs[:, None, :]
+    values, where = [seg_tan.ravel()], [flat.ravel()]
+    if cross is not None:
+        n_groups, size = groups.shape
+        maps = m[groups]  # (g, m, 12, 12)
+        big = np.zeros((n_groups, 12 * size, 12 * size))
+        for s in range(size):
+            big[:, 12 * s:12 * s + 12, 12 * s:12 * s + 12] = maps[:, s]
+        mapped = np.swapaxes(big, -1, -2) @ cross @ big
+        group_dofs = dofs[groups].reshape(n_groups, -1)
+        values.append(mapped.ravel())
+        where.append((group_dofs[:, :, None] * (n + 1) + group_dofs[:, None, :]).ravel())
+    tangent = np.bincount(np.concatenate(where), weights=np.concatenate(values), minlength=(n + 1) ** 2)
+    tangent = tangent.reshape(n + 1, n + 1)[:n, :n] + hess_l
+    return 0.5 * (tangent + tangent.T)
+
+
+def _evaluate_coupled(assembly: Assembly, body_poses: np.ndarray, rel: np.ndarray, stiffness: CoupledStiffness,
+                      loads: Loads, with_tangent: bool, step: float):
+    """``evaluate`` for coupled segments (``superelement`` module docstring): energy 1/2 Xi^T K Xi
+    per group, each segment's gradient (3) with its share (K Xi)_s of the wrench, the tangent's
+    segment blocks by central differences with the other segments' share held fixed and the
+    cross-segment blocks J_s^T K_st J_t."""
+    d = assembly.segment_reference_inverse
+    if stiffness.n_segments != len(rel):
+        raise ValueError(f"the coupled stiffness covers {stiffness.n_segments} segments, the assembly has {len(rel)}")
+    xi = segment_deformation(rel, d)
+    diagonal = stiffness.diagonal()
+    wrench = stiffness.wrench(xi)
+    offset = wrench - np.einsum("sij,sj->si", diagonal, xi)
+    seg_grad = segment_gradient(rel, d, diagonal, offset)
+    energy_l, grad_l, hess_l = _load_terms(assembly, body_poses, loads, with_tangent)
+    energy = 0.5 * float(np.sum(xi * wrench)) + energy_l
+    residual = _gathered_residual(assembly, seg_grad) + grad_l
+    tangent = None
+    if with_tangent:
+        groups = stiffness.segments
+        n_groups, size = groups.shape
+        jacobian = segment_jacobian(rel, d)[groups]  # (g, m, 6, 12)
+        blocks = stiffness.blocks.reshape(n_groups, size, 6, size, 6).copy()
+        blocks[:, np.arange(size), :, np.arange(size), :] = 0.0  # the segments' own blocks: in their tangents
+        cross = np.einsum("gsai,gsatb,gtbj->gsitj", jacobian, blocks, jacobian).reshape(n_groups, 12 * size,
+                                                                                      12 * size)
+        tangent = _gathered_tangent(assembly, segment_tangent(rel, d, diagonal, step, offset), hess_l, cross, groups)
     return energy, residual, tangent, seg_grad
 
 

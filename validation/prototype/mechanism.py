@@ -42,6 +42,7 @@ from .fixed_point import anderson_step
 from .kinematics import pose, so3_log, translation_pose
 from ..effects.hooks import EffectContext, PointConditions, PointResult, effect_record, room_temperature
 from .equilibrium import (Assembly, Loads, NonConvergenceError, SolverSettings, build_assembly, solve_equilibrium)
+from .superelement import CoupledStiffness
 from .segments import (StiffnessProvider, chain_slices, end_stiffness, prepare_provider, rigid_mode_defect, section_nodes)
 from .transmission import ActuatorTransmission, nut_offset, point_class
 
@@ -51,6 +52,7 @@ __all__ = [
     "build_prototype",
     "apply_mount_offsets",
     "simulate",
+    "frame_stiffness",
     "FRAME_BODY",
     "NUT_BODIES",
 ]
@@ -73,7 +75,11 @@ class Prototype:
     mechanism (mount offsets applied); transmissions: D1..D3; segment_stiffness
     (6, 5, 6, 6) K_jj [SI] per chain and segment; segment_stiffness_12 (6, 5, 12, 12) as the
     provider gave it; section_x (6, 6) [m] local x of the section nodes; assembly;
-    initial_poses (29, 4, 4) undeformed body poses; settings; provider_description.
+    initial_poses (29, 4, 4) undeformed body poses; settings; provider_description;
+    chain_stiffness (6, 30, 30) [SI] or None: with a provider whose cuts are tied through
+    section fields (``tied_chains.tied_fem_provider``), each chain's stiffness on its five segments'
+    twists, which the frame then uses instead of the K_jj (``frame_stiffness``); the K_jj and
+    the 12 x 12 stay the provider's rigidly tied segments (reports, structure assessment).
     """
 
     mechanism: MechanismParams
@@ -85,6 +91,7 @@ class Prototype:
     initial_poses: np.ndarray
     settings: SolverSettings
     provider_description: str
+    chain_stiffness: np.ndarray | None = None
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -185,6 +192,47 @@ def _segment_stiffness(mechanism: MechanismParams, provider: StiffnessProvider):
     return k12, kjj, xs
 
 
+def _chain_stiffness(mechanism: MechanismParams, provider: StiffnessProvider) -> np.ndarray | None:
+    """(6, 30, 30) [SI] from ``provider.chain_stiffness(chain)`` (equal chains asked once), checked
+    symmetric positive definite; None for a provider without it (rigid ties)."""
+    ask = getattr(provider, "chain_stiffness", None)
+    if not callable(ask):
+        return None
+    asked: dict = {}
+    out = np.zeros((N_CHAINS, 6 * N_SEGMENTS, 6 * N_SEGMENTS))
+    for c, placement in enumerate(mechanism.chains):
+        if placement.chain not in asked:
+            asked[placement.chain] = np.asarray(ask(placement.chain), dtype=float)
+        k = asked[placement.chain]
+        where = f"provider chain stiffness of {placement.name}"
+        if k.shape != out.shape[1:] or not np.all(np.isfinite(k)):
+            raise ValueError(f"{where} must be a finite {out.shape[1:]} array, got shape {k.shape}")
+        if np.max(np.abs(k - k.T)) > 1e-8 * np.max(np.abs(k)):
+            raise ValueError(f"{where} is not symmetric; a stiffness matrix must be")
+        out[c] = 0.5 * (k + k.T)
+    if np.any(np.linalg.eigvalsh(out)[..., 0] <= 0):
+        raise ValueError("a chain stiffness on the segments' twists is not positive definite; check the provider")
+    return out
+
+
+TIED_STIFFNESS_EFFECTS = ("effects that change the segments' stiffness (modify_stiffness, or modify_mechanism "
+                          "replacing segment_stiffness) are not defined with tied cuts (provider fem-tied): their "
+                          "K_jj are not what the frame uses; use the provider fem for them")
+
+
+def frame_stiffness(prototype: Prototype, segment_stiffness: np.ndarray):
+    """What the frame's equilibrium takes (``equilibrium.evaluate``): the K_jj
+    ``segment_stiffness`` (6, 5, 6, 6) as (30, 6, 6), or, for a prototype with tied cuts
+    (``chain_stiffness``), a ``CoupledStiffness`` of its chains; that one accepts only the
+    prototype's own K_jj (effects that change the segments' stiffness are not defined for it)."""
+    if prototype.chain_stiffness is None:
+        return segment_stiffness.reshape(-1, 6, 6)
+    if not np.array_equal(segment_stiffness, prototype.segment_stiffness):
+        raise ValueError(TIED_STIFFNESS_EFFECTS)
+    return CoupledStiffness(blocks=prototype.chain_stiffness,
+                            segments=np.arange(N_CHAINS * N_SEGMENTS).reshape(N_CHAINS, N_SEGMENTS))
+
+
 def _assembly(mechanism: MechanismParams, xs: np.ndarray):
     selection = [np.eye(6)] + [np.eye(6)] * 24 + [np.eye(6)[:, :1]] * 3 + [np.zeros((6, 0))]
     poses0 = np.broadcast_to(np.eye(4), (29, 4, 4)).copy()
@@ -227,13 +275,14 @@ def build_prototype(mechanism: MechanismParams, transmissions: Sequence, provide
     if mount_offsets:
         mechanism = apply_mount_offsets(mechanism, mount_offsets)
     k12, kjj, xs = _segment_stiffness(mechanism, provider)
+    chains = _chain_stiffness(mechanism, provider)
     assembly, poses0 = _assembly(mechanism, xs)
-    for array in (k12, kjj, xs, poses0):
+    for array in (k12, kjj, xs, poses0) + (() if chains is None else (chains,)):
         array.setflags(write=False)
     description = getattr(provider, "description", getattr(provider, "__name__", type(provider).__name__))
     return Prototype(mechanism=mechanism, transmissions=_transmissions(transmissions), segment_stiffness=kjj,
                      segment_stiffness_12=k12, section_x=xs, assembly=assembly, initial_poses=poses0,
-                     settings=settings, provider_description=str(description))
+                     settings=settings, provider_description=str(description), chain_stiffness=chains)
 
 
 def _loads(prototype: Prototype, conditions: PointConditions, anchors: np.ndarray) -> Loads:
@@ -369,6 +418,8 @@ def _simulate(prototype: Prototype, inputs: np.ndarray, effects: tuple, progress
         for hook in _hook(effects, "modify_screw_position"):
             screw = np.array([float(hook(i, float(command[i]), float(screw[i]), context)) for i in range(3)])
         stiffness = np.array(prototype.segment_stiffness)
+        if prototype.chain_stiffness is not None and _hook(effects, "modify_stiffness"):
+            raise ValueError(TIED_STIFFNESS_EFFECTS)
         for hook in _hook(effects, "modify_stiffness"):
             stiffness = np.asarray(hook(stiffness.copy(), context), dtype=float)
         conditions = PointConditions(segment_stiffness=stiffness, frame_forces=(weight,),
@@ -384,7 +435,8 @@ def _simulate(prototype: Prototype, inputs: np.ndarray, effects: tuple, progress
         iterates, images = [], []
         for outer in range(1, settings.max_offset_iterations + 1):
             loads = _loads(prototype, conditions, screw + offsets)
-            poses, info = solve_equilibrium(prototype.assembly, poses, conditions.segment_stiffness.reshape(-1, 6, 6),
+            poses, info = solve_equilibrium(prototype.assembly, poses,
+                                            frame_stiffness(prototype, conditions.segment_stiffness),
                                             loads, settings, where=f"at point {k}", tangent=tangent)
             tangent = info.tangent
             iters[k] += info.iterations

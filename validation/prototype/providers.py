@@ -1,13 +1,15 @@
 """The virtual prototype's segment stiffness, chosen by name: ``fem`` (FEM condensation of the
 as-built segments on the mapped multi-block mesh, cached), ``fem-tetwild`` (the same on fTetWild
-meshes of the CadQuery solids) or ``analytic`` (the closed-form compliance; truth then shares the
+meshes of the CadQuery solids), ``fem-tied`` (``fem`` with each chain's segments joined through
+section fields at its four cuts, ``tied_chains.DEFAULT_TIES``, instead of rigidly: an option,
+docs/meshing.md "Session 24: the tied-cut frame") or ``analytic`` (the closed-form compliance; truth then shares the
 model's hinge formulas, so it is for checks only)."""
 
 from __future__ import annotations
 
 __all__ = ["stiffness_provider", "PROVIDERS"]
 
-PROVIDERS = ("fem", "fem-tetwild", "analytic")
+PROVIDERS = ("fem", "fem-tetwild", "fem-tied", "analytic")
 
 
 def stiffness_provider(kind: str, *, progress: bool = True, workers: int | None = 0, scheduler: str | None = None):
@@ -26,4 +28,8 @@ def stiffness_provider(kind: str, *, progress: bool = True, workers: int | None 
 
         return fem_provider(progress=progress, workers=workers, scheduler=scheduler, mesher="tetwild",
                             elements_through_thickness=TETWILD_ELEMENTS_THROUGH)
+    if kind == "fem-tied":
+        from .tied_chains import DEFAULT_TIES, tied_fem_provider
+
+        return tied_fem_provider(DEFAULT_TIES, progress=progress, workers=workers, scheduler=scheduler)
     return fem_provider(progress=progress, workers=workers, scheduler=scheduler)

@@ -25,7 +25,7 @@ import numpy as np
 
 __all__ = ["stretch", "series_stiffness", "segment_stiffness", "one_piece_stiffness", "chain_segments",
            "composed_stiffness", "INTERFACES", "cut_coupling", "interface_segment_stiffness",
-           "composed_interface_stiffness", "interface_segments", "interface_order",
+           "composed_interface_stiffness", "chain_order_matrices", "cut_orders", "twist_stiffness_through_interface", "interface_condensed", "interface_segments", "interface_order",
            "interface_condensations", "step_interfaces", "plan_key", "joined_through_interface", "interface_scale", "one_piece_tied_stiffness", "middle_cut",
            "strut_cuts", "converged_chain_estimate", "cut_rows", "entry_index"]
 
@@ -296,13 +296,13 @@ def plan_key(step, labels=(None, None)) -> tuple:
     return (round(segment.x_start, 12), round(segment.x_end, 12), bool(starts), bool(ends), *labels)
 
 
-def joined_through_interface(plan, condensed: dict, interface) -> np.ndarray:
-    """(12, 12) [SI]: the segments of ``plan`` (``interface_segments``) joined through their
-    cuts' shared ``interface`` DOFs (one label or one per cut, ``step_interfaces``;
-    ``flexcal.fem.interface.series_stiffness``), ``condensed`` the meshed segments' matrices by
-    ``plan_key`` (``interface_segment_stiffness``); a mirrored one turned
-    (``turned_segment_stiffness``: its cut fields' DOFs change sign by ``section_turn_signs``)."""
-    from flexcal.fem.interface import RIGID, series_stiffness as joined, turned_segment_stiffness
+def chain_order_matrices(plan, condensed: dict, interface) -> list[np.ndarray]:
+    """The segments' matrices of ``plan`` (``interface_segments``) in chain order, each on its
+    start section's DOFs then its end section's, chain frame: ``condensed`` the meshed segments'
+    matrices by ``plan_key`` (``interface_segment_stiffness``), a mirrored one turned
+    (``turned_segment_stiffness``: its cut fields' DOFs change sign by ``section_turn_signs``).
+    interface: one label or one per cut (``step_interfaces``)."""
+    from flexcal.fem.interface import RIGID, turned_segment_stiffness
 
     matrices = []
     for step, labels in zip(plan, step_interfaces(plan, interface)):
@@ -311,7 +311,34 @@ def joined_through_interface(plan, condensed: dict, interface) -> np.ndarray:
             start, end = (RIGID if label is None else interface_order(label) for label in labels)
             k = turned_segment_stiffness(k, start, end)
         matrices.append(k)
-    return joined(matrices)
+    return matrices
+
+
+def cut_orders(plan, interface) -> list:
+    """The section field's order (``interface_order``) at each cut of ``plan``, in chain order."""
+    n_cuts = len(plan) - 1
+    labels = [interface] * n_cuts if isinstance(interface, str) else list(interface)
+    return [interface_order(label) for label in labels]
+
+
+def joined_through_interface(plan, condensed: dict, interface) -> np.ndarray:
+    """(12, 12) [SI]: the segments of ``plan`` (``interface_segments``) joined through their
+    cuts' shared ``interface`` DOFs (one label or one per cut, ``step_interfaces``;
+    ``flexcal.fem.interface.series_stiffness``), ``condensed`` the meshed segments' matrices by
+    ``plan_key`` (``chain_order_matrices``)."""
+    from flexcal.fem.interface import series_stiffness as joined
+
+    return joined(chain_order_matrices(plan, condensed, interface))
+
+
+def twist_stiffness_through_interface(plan, condensed: dict, interface, scale: float) -> np.ndarray:
+    """(6 n, 6 n) [SI]: the n segments of ``plan`` joined through their cuts' ``interface``
+    fields as one stiffness on their deformation twists, every cut's warping condensed out
+    (``flexcal.fem.cut_warping.chain_twist_stiffness``; arguments as ``joined_through_interface``,
+    scale [m] the fields' length, ``interface_scale``)."""
+    from flexcal.fem.cut_warping import chain_twist_stiffness
+
+    return chain_twist_stiffness(chain_order_matrices(plan, condensed, interface), cut_orders(plan, interface), scale)
 
 
 def interface_scale(chain, n_segments: int, nodes=None) -> float:
@@ -337,13 +364,23 @@ def composed_interface_stiffness(chain, n_segments: int, interface: str, element
     one label per cut. Polynomials in (y, z) / ``interface_scale``. meshes: {(x_start, x_end)
     rounded to 1 pm: mirror part} (None: meshed here)."""
     plan = interface_segments(chain, n_segments, nodes)
-    scale = interface_scale(chain, n_segments, nodes)
+    condensed = interface_condensed(plan, interface, elements_through, options, meshes,
+                                    interface_scale(chain, n_segments, nodes))
+    return joined_through_interface(plan, condensed, interface)
+
+
+def interface_condensed(plan, interface, elements_through: float, options: dict, meshes=None,
+                        scale: float = 1.0) -> dict:
+    """{``plan_key``: matrix}: the distinct condensations (``interface_condensations``) of
+    ``plan``'s meshed segments (``interface_segment_stiffness``, fields' length ``scale``
+    [m]), each on its mesh in ``meshes`` ({(x_start, x_end) rounded to 1 pm: mirror part};
+    one missing is meshed on ``options`` with ``elements_through`` asked for)."""
     meshes = {} if meshes is None else meshes
     condensed = {}
     for key, (segment, starts, ends, labels) in interface_condensations(plan, interface).items():
         mesh = meshes.get(key[:2]) or _mirror_part(segment, elements_through, options)
         condensed[key] = interface_segment_stiffness(segment, mesh, starts, ends, labels, scale)
-    return joined_through_interface(plan, condensed, interface)
+    return condensed
 
 
 def converged_chain_estimate(segment_limits: np.ndarray, tied: np.ndarray, untied: np.ndarray) -> np.ndarray:
