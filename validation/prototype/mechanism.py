@@ -79,7 +79,9 @@ class Prototype:
     chain_stiffness (6, 30, 30) [SI] or None: with a provider whose cuts are tied through
     section fields (``tied_chains.tied_fem_provider``), each chain's stiffness on its five segments'
     twists, which the frame then uses instead of the K_jj (``frame_stiffness``); the K_jj and
-    the 12 x 12 stay the provider's rigidly tied segments (reports, structure assessment).
+    the 12 x 12 are then the provider's, the same condensations with the cut fields held rigid
+    (``cut_warping.rigid_part_stiffness``), which no frame or report of it solves with (the
+    structure assessment refuses it).
     """
 
     mechanism: MechanismParams
