@@ -1,6 +1,6 @@
 """The tied provider's builds (validation/prototype/tied_chains.py; docs/meshing.md, "Session
 24: the tied-cut frame", "Cost, session 24 (cost26)"): one set of condensations per chain gives
-both K_chain and the segments' 12 x 12, and the chains are built on the executor's processes."""
+both K_chain and the segments' 12 x 12, and the chains are built on the executor's threads."""
 
 import numpy as np
 import pytest
@@ -44,7 +44,7 @@ def test_the_tied_provider_gives_the_chains_own_segments_from_its_condensations_
     assert provider.mesher == "mapped" and provider.workers == 0 and callable(provider.on_grid)
 
 
-def test_the_tied_chains_go_to_worker_processes_once_each(monkeypatch, tmp_path):
+def test_the_tied_chains_go_to_job_threads_once_each(monkeypatch, tmp_path):
     plans, submitted = [], []
 
     def record(items, job, on_done, **kw):
@@ -57,25 +57,25 @@ def test_the_tied_chains_go_to_worker_processes_once_each(monkeypatch, tmp_path)
     mechanism = reference_mechanism()
     provider = tc.tied_fem_provider(progress=False, workers=None, cache_directory=tmp_path)
     provider.prepare(chain_slices(p.chain for p in mechanism.chains))
-    # the nominal mount's six chains are three designs: each built once, on two processes of one core each
+    # the nominal mount's six chains are three designs: each built once, on two threads of one core each
     assert submitted == list(dict.fromkeys(p.chain for p in mechanism.chains)) and len(submitted) == 3
-    assert plans == [(tc.build_tied_chain_job, 2, False, 1)]
+    assert plans == [(tc.build_tied_chain_job, 2, True, 1)]
 
 
 @pytest.mark.slow
-def test_a_tied_chain_built_on_a_worker_process_is_the_one_built_here_to_the_bit(tmp_path):
+def test_a_tied_chain_built_on_a_job_thread_is_the_one_built_here_to_the_bit(tmp_path):
     from flexcal.fem.solve import solver_threads
 
     from flexcal.validation.executor import usable_cores
 
     chain = reference_mechanism().chains[3].chain  # a driving chain: the smallest condensations
-    assert tc.build_tied_chains([chain], cache_directory=tmp_path / "process", workers=1, progress=False,
+    assert tc.build_tied_chains([chain], cache_directory=tmp_path / "thread", workers=1, progress=False,
                                 elements_through_thickness=fp.DEFAULT_ELEMENTS_THROUGH) == 1
     cores = fp.plan_local_builds(1, 1, cores=usable_cores(), available_bytes=0.0)[1]
-    with solver_threads(cores):  # PARDISO on the worker's threads (plan_local_builds of this 1-job build)
+    with solver_threads(cores):  # PARDISO on the job's threads (plan_local_builds of this 1-job build)
         here = tc.tied_chain_matrices(chain, elements_through_thickness=fp.DEFAULT_ELEMENTS_THROUGH,
                                       cache_directory=tmp_path / "here")
     there = tc.tied_chain_matrices(chain, elements_through_thickness=fp.DEFAULT_ELEMENTS_THROUGH,
-                                   cache_directory=tmp_path / "process")  # a cache hit: the worker's
+                                   cache_directory=tmp_path / "thread")  # a cache hit: the job thread's
     for name in ("stiffness", "segments"):
         np.testing.assert_array_equal(there[name], here[name])

@@ -11,7 +11,7 @@ into the section bodies' rigid motions and the cuts' warping, the warping conden
 (``flexcal.fem.cut_warping``): K_chain (30, 30), cached per chain under a key with the ties,
 together with the segments' 12 x 12 from the same condensations (the fields held rigid), so the
 tied provider builds no rigidly tied segment. The missing chains are built on the executor's
-worker processes (``build_tied_chains``; docs/meshing.md, "Cost, session 24 (cost26)").
+job threads (``build_tied_chains``; docs/meshing.md, "Cost, session 24 (cost26)").
 """
 
 from __future__ import annotations
@@ -113,11 +113,11 @@ def tied_chain_stiffness(chain: FlexureChain, ties: str = DEFAULT_TIES, material
 
 def build_tied_chain_job(chain: FlexureChain, *, ties: str, material: Material, elements_through_thickness: float,
                          cache_directory=None, mesher_threads: int = 0, solver_threads: int = 0) -> dict[str, Any]:
-    """One chain's ``tied_chain_matrices`` on a worker: {"key": its cache key there, the
-    matrices, "wall_s": [s]}; the worker's cache gets the entry too; PARDISO on
-    ``solver_threads`` MKL threads (0: all cores; ``flexcal.fem.solve.solver_threads``).
-    mesher_threads: unused (``build_missing`` hands it to every job; the mapped mesher runs on
-    the calling thread)."""
+    """One chain's ``tied_chain_matrices`` on a job thread or worker: {"key": its cache key
+    there, the matrices, "wall_s": [s]}; its cache gets the entry too; PARDISO on
+    ``solver_threads`` MKL threads of the calling thread (0: all cores;
+    ``flexcal.fem.solve.solver_threads``). mesher_threads: unused (``build_missing`` hands it to
+    every job; the mapped mesher runs on the calling thread)."""
     import contextlib
 
     from flexcal.fem.solve import solver_threads as mkl_threads
@@ -135,11 +135,13 @@ def build_tied_chains(chains: Iterable[FlexureChain], ties: str = DEFAULT_TIES, 
                       scheduler: str | None = None, progress: bool = True) -> int:
     """Build the ``tied_chain_matrices`` of ``chains`` that the cache lacks, on the shared
     executor (``fem_provider.build_missing``), into the cache; returns how many were built.
-    workers: local worker processes (``plan_local_builds``; 0: this process, one after the other);
-    scheduler: a Dask scheduler address. Processes, not the threads today's segments use: a
-    chain's mapped meshing holds the interpreter lock (two job threads took as long as one,
-    table1 seed 1, 2026-11-29). The same matrices as built here one after the other, to the bit,
-    with PARDISO on as many threads (tests/test_tied_chain_builds.py)."""
+    workers: local job threads (``plan_local_builds``; 0: this process, one after the other);
+    scheduler: a Dask scheduler address. Threads, as today's segments: ~70 % of a chain is
+    PARDISO, which runs outside the interpreter lock, and the mapped meshing ~1 %. Cold table1
+    seed 1 at load ~1.3: 2 threads 26 s wall for 47 s CPU, this process 48 s for 48 s; worker
+    processes cost ~10 s more CPU (Dask, the imports) (docs/meshing.md, "Cost, session 24
+    (cost26)"). The same matrices as built here one after the other, to the bit, with PARDISO on
+    as many threads (tests/test_tied_chain_builds.py)."""
     from .fem_provider import build_missing
 
     missing = {tied_chain_key(chain, ties, material, elements_through_thickness=elements_through_thickness): chain
@@ -149,7 +151,7 @@ def build_tied_chains(chains: Iterable[FlexureChain], ties: str = DEFAULT_TIES, 
     return build_missing(missing, build_tied_chain_job, options, ("stiffness", "segments"),
                          lambda chain: f"tied chain ({ties}) of a {chain.length * 1e3:.1f} mm chain",
                          workers=workers, scheduler=scheduler, progress=progress, cache_directory=cache_directory,
-                         in_threads=False, task_prefix="fem-tied-chain", what="tied chains")
+                         in_threads=True, task_prefix="fem-tied-chain", what="tied chains")
 
 
 def tied_fem_provider(ties: str = DEFAULT_TIES, **fem_options):
