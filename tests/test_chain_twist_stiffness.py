@@ -11,8 +11,8 @@ from flexcal.fem.cut_warping import (clamped_end_stiffness, rigid_field_coeffici
 from flexcal.fem.interface import RIGID, section_modes
 from flexcal.fem.mesh_mapped_chain import PROTOTYPE_CHAIN_OPTIONS
 from flexcal.validation.prototype.segments import section_nodes
-from flexcal.validation.reports.chain_cuts import (chain_order_matrices, cut_orders, interface_condensed, interface_scale,
-                                                   interface_segments, joined_through_interface,
+from flexcal.validation.reports.chain_cuts import (chain_order_matrices, cut_orders, interface_condensed,
+                                                   interface_scale, interface_segments, joined_through_interface,
                                                    twist_stiffness_through_interface)
 from flexcal.validation.reports.chain_reference import reference_chain
 

@@ -10,7 +10,7 @@ into ``TIED_STRUT_REFINEMENT``^3 so its 2 x 2-cell section can carry them), the 
 into the section bodies' rigid motions and the cuts' warping, the warping condensed
 (``flexcal.fem.cut_warping``): K_chain (30, 30), cached per chain under a key with the ties,
 together with the segments' 12 x 12 from the same condensations (the fields held rigid), so the
-tied provider builds no rigidly tied segment. The missing chains are built on the executor's
+tied prototype needs no rigidly tied segment. The missing chains are built on the executor's
 job threads (``build_tied_chains``; docs/meshing.md, "Cost, session 24 (cost26)").
 """
 
@@ -155,22 +155,22 @@ def build_tied_chains(chains: Iterable[FlexureChain], ties: str = DEFAULT_TIES, 
 
 
 def tied_fem_provider(ties: str = DEFAULT_TIES, **fem_options):
-    """A provider ``(chain, x_start, x_end) -> (12, 12)`` for ``build_prototype`` whose chains'
-    cuts are tied through the ``ties`` fields: ``fem_provider(**fem_options)``'s attributes (the
-    mapped mesher), with ``provider.chain_stiffness(chain)`` the chain's 30 x 30 on its segments'
-    twists (``tied_chain_matrices``), which ``build_prototype`` then uses in the frame. Its 12 x 12
-    per segment are the same condensations' with the cut fields held rigid (``rigid_part_stiffness``;
-    the stored K_jj, which no frame or report of a tied prototype solves with), so no segment is
-    built twice; only the chains' own segments (``section_nodes``) are asked for. ``prepare(slices)``
-    builds the slices' chains on the executor (``build_tied_chains``; ``workers=0``: none, each
-    chain is built at its first call)."""
+    """``fem_provider(**fem_options)`` (the mapped mesher: its ``(chain, x_start, x_end)`` and
+    ``prepare`` stay the rigidly tied segments', for the model's corrections and anything else
+    that asks for a slice) that also gives, per chain, from one set of condensations
+    (``tied_chain_matrices``): ``provider.chain_stiffness(chain)``, the chain's 30 x 30 on its
+    segments' twists joined through the ``ties`` fields, which ``build_prototype`` then uses in
+    the frame, and ``provider.chain_segments(chain)``, its five 12 x 12 with the cut fields held
+    rigid (``rigid_part_stiffness``), which ``build_prototype`` stores as the K_jj instead of
+    building the rigid segments too. ``provider.prepare_chains(chains)`` builds the missing
+    chains on the executor (``build_tied_chains``; ``workers=0``: none, each chain is built at
+    its first call)."""
     from .fem_provider import DEFAULT_ELEMENTS_THROUGH, fem_provider
-    from .segments import section_nodes
 
     cut_interfaces(ties)  # refused here if unknown
     if fem_options.get("mesher", "mapped") != "mapped":
         raise ValueError(f"ties={ties!r} need the mapped mesher (the fields' faces), not {fem_options['mesher']!r}")
-    rigid = fem_provider(**fem_options)
+    provider = fem_provider(**fem_options)
     material = fem_options.get("material", STEEL)
     through = fem_options.get("elements_through_thickness", DEFAULT_ELEMENTS_THROUGH)
     cache_directory, progress = fem_options.get("cache_directory"), fem_options.get("progress", True)
@@ -184,23 +184,15 @@ def tied_fem_provider(ties: str = DEFAULT_TIES, **fem_options):
                   f"{time.perf_counter() - start:.1f} s", file=sys.stderr)
         return out
 
-    def provider(chain: FlexureChain, x_start: float, x_end: float) -> np.ndarray:
-        nodes = section_nodes(chain)
-        at = np.flatnonzero((nodes[:-1] == x_start) & (nodes[1:] == x_end))
-        if at.size != 1:
-            raise ValueError(f"the tied provider gives the chain's own segments ({np.round(nodes * 1e3, 4)} mm) only, "
-                             f"not [{x_start * 1e3:.4g}, {x_end * 1e3:.4g}] mm; use the provider fem")
-        return matrices(chain)["segments"][int(at[0])]
-
-    def prepare(slices: Iterable[tuple[FlexureChain, float, float]]) -> int:
-        if rigid.scheduler is None and rigid.workers == 0:
+    def prepare_chains(chains: Iterable[FlexureChain]) -> int:
+        if provider.scheduler is None and provider.workers == 0:
             return 0  # built lazily, in order, by the calls that follow
-        return build_tied_chains(dict.fromkeys(chain for chain, _, _ in slices), ties, material,
-                                 elements_through_thickness=through, cache_directory=cache_directory,
-                                 workers=rigid.workers, scheduler=rigid.scheduler, progress=progress)
+        return build_tied_chains(chains, ties, material, elements_through_thickness=through,
+                                 cache_directory=cache_directory, workers=provider.workers,
+                                 scheduler=provider.scheduler, progress=progress)
 
-    provider.__dict__.update(rigid.__dict__)
-    provider.prepare, provider.ties = prepare, ties
+    provider.prepare_chains, provider.ties = prepare_chains, ties
     provider.chain_stiffness = lambda chain: matrices(chain)["stiffness"]
-    provider.description = rigid.description[:-1] + f", cuts tied through {ties} fields)"
+    provider.chain_segments = lambda chain: matrices(chain)["segments"]
+    provider.description = provider.description[:-1] + f", cuts tied through {ties} fields)"
     return provider
