@@ -7,7 +7,7 @@ runs' curves.csv, the angles' difference (RMS and max per angle, µrad).
     python benchmarks/bench_tied_frame.py --scenario table1 --seed 1
     python benchmarks/bench_tied_frame.py --curves A/curves.csv B/curves.csv
 
-The first builds the tied provider's matrices into the FEM cache (FLEXCAL_CACHE_DIR) if they
+The first builds the tied and the rigid providers' matrices into the FEM cache (FLEXCAL_CACHE_DIR) if they
 are missing. Not a test (tests/test_chain_twist_stiffness.py, tests/test_prototype_coupled_frame.py).
 """
 
@@ -33,12 +33,16 @@ def chain_softening(scenario_name: str, seed: int | None) -> None:
     transmissions = [(x0, cl, mu, scenario.breakaway_force) for x0, cl, mu in drives]
     prototype = build_prototype(mechanism, transmissions, stiffness_provider("fem-tied", progress=False),
                                 mount_offsets=offsets)
+    # the rigidly tied segments: the provider fem's (the tied prototype's own K_jj hold the cut
+    # fields rigid instead, tied_chains.tied_fem_provider)
+    rigid_ties = build_prototype(mechanism, transmissions, stiffness_provider("fem", progress=False),
+                                 mount_offsets=offsets)
     print("chain | " + " | ".join(NAMES) + "   (tied - rigid) / rigid [%], end block with A clamped")
     for c, placement in enumerate(prototype.mechanism.chains):
         lengths = np.diff(prototype.section_x[c])
         rigid = np.zeros((30, 30))
         for s in range(5):
-            rigid[6 * s:6 * s + 6, 6 * s:6 * s + 6] = prototype.segment_stiffness[c, s]
+            rigid[6 * s:6 * s + 6, 6 * s:6 * s + 6] = rigid_ties.segment_stiffness[c, s]
         tied = clamped_end_stiffness(prototype.chain_stiffness[c], lengths)
         rigid = clamped_end_stiffness(rigid, lengths)
         print(f"{placement.name} | " + " | ".join(f"{100 * (tied[i, i] / rigid[i, i] - 1):+.2f}" for i in range(6)))

@@ -23,6 +23,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.linalg
 import scipy.sparse as sp
 
 from flexcal.geometry.frames import skew, twist_transform
@@ -389,7 +390,8 @@ def _class_masters(parities: list[np.ndarray], axes: tuple[int, ...], signs: tup
     return np.flatnonzero(np.all(parity == np.asarray(signs, int)[None, :], axis=1))
 
 
-def mirrored_coupled_stiffness(mesh, material: Material, couplings: list, axes: tuple[int, ...]) -> np.ndarray:
+def mirrored_coupled_stiffness(mesh, material: Material, couplings: list, axes: tuple[int, ...], *,
+                               floating: str = "pinned") -> np.ndarray:
     """Stiffness (n_q, n_q) [SI] of the whole part (``mesh`` and its mirror images, as
     ``mirrored_chain_stiffness``) condensed onto the master DOFs of ``couplings`` (in their
     order, each coupling's own DOF order): kinematic ones (``RigidCoupling``,
@@ -406,16 +408,24 @@ def mirrored_coupled_stiffness(mesh, material: Material, couplings: list, axes: 
 
     A part (or a piece of it: a connected set of tets) held by distributing couplings alone (a
     segment between two cuts, a middle piece cut apart twice) floats: K_ii is singular on its
-    rigid motions (``_floating``). Then K_ii + alpha G^T G is factorised instead
-    (``_floating_shift``): on G v = q the added energy is alpha |q|^2 whatever v, so the
-    constrained minimum is unchanged but for that term, taken off the q block after; it is
-    positive definite because the fields hold the rigid motions (order >= 1 or ``RIGID``), whose
-    projections G does not annul. Parts without a floating piece are computed as before."""
+    rigid motions R (``_floating_pieces``, ``_class_rigid_motions``). ``floating="pinned"``
+    (default) fixes them by pinning k DOFs of the class where R's rows are invertible
+    (``_pinned_dofs``) and restores them exactly on the n_q-sized side: with v = v_F + R a (K R =
+    0, K_im^T R = 0, so the energy depends on v_F alone) and C = G R, minimising over a leaves
+    H^-1 - H^-1 C (C^T H^-1 C)^-1 C^T H^-1 in place of H^-1, H = G_F K_FF^-1 G_F^T: K_FF is K_ii
+    without k rows and columns, no fill (docs/meshing.md, "Cost, session 24 (cost26)").
+    ``floating="shift"`` (session 24's, the cross-check) factorises K_ii + alpha G^T G instead
+    (``_floating_shift``): on G v = q the added energy is alpha |q|^2 whatever v, taken off the q
+    block after; it couples every face DOF with every other (fill). Both need the fields to hold
+    the rigid motions (order >= 1 or ``RIGID``), whose projections G does not annul. Parts
+    without a floating piece are computed as before, to the bit."""
     import itertools
 
     from .interface import DistributingCoupling
 
     axes = tuple(int(a) for a in axes)
+    if floating not in ("pinned", "shift"):
+        raise ValueError(f"floating={floating!r}: 'pinned' or 'shift'")
     if any(a not in MIRROR_PARITY for a in axes) or len(set(axes)) != len(axes):
         raise ValueError(f"axes={axes!r}: mirror axes are 1 (y) and / or 2 (z), each once")
     if any(c.reference_point[a] != 0.0 for c in couplings for a in axes):
@@ -441,7 +451,7 @@ def mirrored_coupled_stiffness(mesh, material: Material, couplings: list, axes: 
     n_m = K_mm.shape[0]
     n_d = sum(len(g) for g in grams)
     stiffness = np.zeros((n_m + n_d, n_m + n_d))
-    floats = _floating(check_mesh(mesh)[1], kinematic)
+    pieces = _floating_pieces(check_mesh(mesh)[1], kinematic)
     kinematic_parities = _parities([c for c in kinematic if not c.fixed], axes)
     distributing_parities = [_parities([c], axes) for c in distributing]
     for signs in itertools.product((1, -1), repeat=len(axes)):
@@ -464,7 +474,14 @@ def mirrored_coupled_stiffness(mesh, material: Material, couplings: list, axes: 
         if masters.size + d_masters.size == 0:
             continue
         sub = upper_ii[kept][:, kept]  # rows and columns ascending: still the upper triangle, sorted
-        alpha = _floating_shift(sub, G) if floats else 0.0
+        if pieces and floating == "pinned":
+            rigid = _class_rigid_motions(nodes, free, kept, pieces)
+            if rigid.shape[1]:
+                block = _pinned_block(sub, G, K_im[kept][:, masters], K_mm[np.ix_(masters, masters)], rigid)
+                both = np.concatenate([masters, d_masters])
+                stiffness[np.ix_(both, both)] = 2.0 ** len(axes) * block
+                continue
+        alpha = _floating_shift(sub, G) if pieces and floating == "shift" else 0.0
         if alpha:
             sub = (sub + sp.triu(alpha * (G.T @ G))).tocsr()
         # one dense copy [K_im, G^T], in Fortran order as PARDISO takes it (and as the rigid path's
@@ -485,9 +502,10 @@ def mirrored_coupled_stiffness(mesh, material: Material, couplings: list, axes: 
     return stiffness[np.ix_(order, order)]
 
 
-def _floating(tets: np.ndarray, kinematic: list) -> bool:
-    """Whether some connected piece of the mesh (tets (n_e, 10) sharing nodes) has no node of a
-    kinematic coupling (rigid motions free unless a distributing coupling holds them)."""
+def _floating_pieces(tets: np.ndarray, kinematic: list) -> list[np.ndarray]:
+    """The node sets (ascending) of the connected pieces of the mesh (tets (n_e, 10) sharing
+    nodes) that have no node of a kinematic coupling (rigid motions free unless a distributing
+    coupling holds them); [] when every piece is held."""
     from scipy.sparse.csgraph import connected_components
 
     tets = np.asarray(tets)
@@ -495,7 +513,68 @@ def _floating(tets: np.ndarray, kinematic: list) -> bool:
     graph = sp.coo_matrix((np.ones(9 * len(tets)), (np.repeat(tets[:, 0], 9), tets[:, 1:].ravel())), shape=(n, n))
     _, labels = connected_components(graph, directed=False)
     held = np.unique(labels[np.concatenate([c.nodes for c in kinematic])]) if kinematic else np.zeros(0, int)
-    return np.setdiff1d(np.unique(labels[np.unique(tets)]), held).size > 0
+    used = np.unique(tets)
+    return [used[labels[used] == label] for label in np.setdiff1d(np.unique(labels[used]), held)]
+
+
+def _class_rigid_motions(nodes: np.ndarray, free: np.ndarray, kept: np.ndarray, pieces: list) -> np.ndarray:
+    """R (kept.size, k): a basis of the floating ``pieces``' rigid motions on the kept free DOFs
+    of a parity class (``mirrored_coupled_stiffness``): per piece, the combinations of its six
+    rigid motions (about its centroid, rotations times its extent) that vanish on the class's
+    removed DOFs (the mirror planes' DOFs of the other parity), so K_ii R = 0 on the kept DOFs."""
+    node, component = free // 3, free % 3
+    is_kept = np.zeros(free.size, bool)
+    is_kept[kept] = True
+    bases = []
+    for piece in pieces:
+        rows = np.flatnonzero(np.isin(node, piece))
+        offset = nodes[node[rows]] - nodes[piece].mean(axis=0)
+        extent = float(np.abs(offset).max()) or 1.0
+        modes = np.zeros((rows.size, 6))
+        modes[np.arange(rows.size), component[rows]] = 1.0
+        # rotation about axis j: e_j x offset, its component[rows] entry
+        modes[:, 3:] = -skew(offset / extent)[np.arange(rows.size), component[rows]]
+        combinations = scipy.linalg.null_space(modes[~is_kept[rows]]) if np.any(~is_kept[rows]) else np.eye(6)
+        full = np.zeros((free.size, combinations.shape[1]))
+        full[rows] = modes @ combinations
+        bases.append(full[kept])
+    return np.hstack(bases) if bases else np.zeros((kept.size, 0))
+
+
+def _pinned_dofs(rigid: np.ndarray) -> np.ndarray:
+    """k row indices (ascending) of ``rigid`` (n, k) whose k x k block is invertible, picked by
+    QR with column pivoting of its transpose (the rows farthest from dependence first)."""
+    _, _, pivots = scipy.linalg.qr(rigid.T, mode="economic", pivoting=True)
+    return np.sort(pivots[:rigid.shape[1]])
+
+
+def _pinned_block(sub: sp.csr_matrix, G: sp.csr_matrix, K_im: np.ndarray, K_mm: np.ndarray,
+                  rigid: np.ndarray) -> np.ndarray:
+    """One parity class's condensed block on [kinematic masters; distributing masters] of a part
+    with floating pieces (``mirrored_coupled_stiffness``, ``floating="pinned"``): ``sub`` the
+    class's K_ii (upper triangle, kept DOFs), G its distributing rows, K_im, K_mm its kinematic
+    blocks, ``rigid`` R (``_class_rigid_motions``). The DOFs ``_pinned_dofs`` are held at zero
+    (K_FF is K_ii without them: positive definite, no fill), their rigid motions restored through
+    C = G R on the q side."""
+    pinned = _pinned_dofs(rigid)
+    kept = np.setdiff1d(np.arange(sub.shape[0]), pinned)
+    K_FF = sub[kept][:, kept]  # ascending: still the upper triangle, sorted
+    G_F = G[:, kept]
+    n_m = K_im.shape[1]
+    rhs = np.empty((kept.size, n_m + G.shape[0]), order="F")
+    rhs[:, :n_m] = K_im[kept]
+    rhs[:, n_m:] = G_F.T.toarray()
+    X = solve_spd(K_FF, rhs, method="pardiso" if pardiso_available() else "splu", upper_triangle=True)
+    X_m, X_g = X[:, :n_m], X[:, n_m:]
+    block = np.pad(K_mm - rhs[:, :n_m].T @ X_m, (0, G.shape[0]))
+    C = G @ rigid
+    if np.linalg.matrix_rank(C) < C.shape[1]:
+        raise ValueError("a part held by no kinematic coupling needs a distributing one to hold it")
+    H = scipy.linalg.cho_factor(G_F @ X_g)
+    B = np.hstack([G_F @ X_m, np.eye(G.shape[0])])  # r = B [m; q]
+    H_B, H_C = scipy.linalg.cho_solve(H, B), scipy.linalg.cho_solve(H, C)
+    # min over the rigid motions a of (B x - C a)^T H^-1 (B x - C a)
+    return block + B.T @ H_B - H_B.T @ C @ np.linalg.solve(C.T @ H_C, H_C.T @ B)
 
 
 def _floating_shift(upper: sp.csr_matrix, G: sp.csr_matrix) -> float:

@@ -33,7 +33,7 @@ import scipy.linalg
 from .interface import RIGID, n_interface_dofs, polynomial_exponents, section_modes
 
 __all__ = ["rigid_field_coefficients", "section_gram_diagonal", "warping_basis", "chain_twist_stiffness",
-           "clamped_end_stiffness"]
+           "rigid_part_stiffness", "clamped_end_stiffness"]
 
 
 def rigid_field_coefficients(order, scale: float) -> np.ndarray:
@@ -106,6 +106,30 @@ def chain_twist_stiffness(segments, cut_orders, scale: float) -> np.ndarray:
     out = K[np.ix_(twist, twist)] - coupling @ np.linalg.solve(K[np.ix_(warp, warp)], coupling.T) if warp.size \
         else K
     return 0.5 * (out + out.T)
+
+
+def rigid_part_stiffness(segments, cut_orders, scale: float) -> np.ndarray:
+    """(n, 12, 12) [SI]: each of the n ``segments`` (as ``chain_twist_stiffness`` takes them) on
+    the rigid motions of its two end sections only, E^T K E with E = blockdiag(E_start, E_end)
+    (``rigid_field_coefficients``): the segment with each cut's field held to a rigid motion
+    (q = E r, no warping), DOFs ux..rz of its start section then its end section, each about its
+    centre. For a kinematic field that is the face tied rigidly (the field's motions include the
+    rigid ones, so restricting them is tying the face), for a distributing one the face's L2
+    projection held rigid; ``RIGID`` ends stay as they are (E = I). Their end blocks, side by
+    side, are ``chain_twist_stiffness``'s before the warping is condensed out (w = 0)."""
+    segments = [np.asarray(k, float) for k in segments]
+    orders = [RIGID] + list(cut_orders) + [RIGID]
+    if len(orders) != len(segments) + 1:
+        raise ValueError(f"{len(segments)} segments need {len(segments) - 1} cut orders, got {len(cut_orders)}")
+    out = np.zeros((len(segments), 12, 12))
+    for k, segment in enumerate(segments):
+        rigid = scipy.linalg.block_diag(rigid_field_coefficients(orders[k], scale),
+                                        rigid_field_coefficients(orders[k + 1], scale))
+        if segment.shape != (rigid.shape[0],) * 2:
+            raise ValueError(f"segment {k} has shape {segment.shape}; its ends' orders need {rigid.shape[0]} DOFs")
+        restricted = rigid.T @ segment @ rigid
+        out[k] = 0.5 * (restricted + restricted.T)
+    return out
 
 
 def clamped_end_stiffness(twist_stiffness: np.ndarray, lengths) -> np.ndarray:

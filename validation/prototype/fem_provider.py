@@ -235,24 +235,48 @@ def build_segments(slices: Iterable[tuple[FlexureChain, float, float]], material
     workers: local job threads (``plan_local_builds``; None: one per usable core, at most
     one per missing segment and per ``BUILD_MEMORY_BYTES`` of free memory; 0: this
     process); scheduler: a Dask scheduler address. Each result is stored under the key a
-    sequential build uses (the worker's own cache write makes that a no-op on shared
-    storage; a remote worker without it hands the matrix back); a cache folder that cannot
-    be written is found before the builds start, warned about once, and the matrices are
-    kept in this process's memory instead (``flexcal.fem.cache.keep_cached``). A worker whose flexcal
-    code differs (other cache key) is an error: its matrix is not this version's.
+    sequential build uses (``build_missing``).
     """
+    wanted: dict[str, ChainSegment] = {}  # build_missing skips those already cached
+    for chain, x_start, x_end in slices:
+        segment, _ = canonical_segment(chain, float(x_start), float(x_end))
+        key = segment_cache_key(segment, material, elements_through_thickness=elements_through_thickness,
+                                mesher=mesher)
+        wanted.setdefault(key, segment)
+    options = {"material": material, "elements_through_thickness": float(elements_through_thickness),
+               "cache_directory": None if cache_directory is None else str(cache_directory), "mesher": mesher}
+    # longest first (stable): the cheap strut segments fill the gaps at the end instead of a
+    # leaf segment started last keeping one worker busy while the others idle
+    return build_missing(dict(sorted(wanted.items(), key=lambda item: segment_build_cost(item[1]), reverse=True)),
+                         build_segment_job, options, ("stiffness",),
+                         lambda segment: (f"segment [{segment.x_start * 1e3:.1f}, {segment.x_end * 1e3:.1f}] mm of a "
+                                          f"{segment.chain.length * 1e3:.1f} mm chain"),
+                         workers=workers, scheduler=scheduler, progress=progress, cache_directory=cache_directory,
+                         in_threads=True, task_prefix="fem-segment", what="segments")
+
+
+def build_missing(missing: dict[str, Any], job: Callable[..., dict[str, Any]], options: dict[str, Any],
+                  arrays: tuple[str, ...], describe: Callable[[Any], str], *, workers: int | None,
+                  scheduler: str | None, progress: bool, cache_directory, in_threads: bool, task_prefix: str,
+                  what: str) -> int:
+    """Run ``job(item, **options, mesher_threads=n, solver_threads=n)`` (n: each local job's
+    share of the cores, ``plan_local_builds``; 0: all) for each of ``missing``
+    ({cache key: item}, in the order handed out; those already cached are skipped) on the shared
+    executor and store each result's ``arrays`` under its key; returns how many were built.
+
+    workers / scheduler as ``build_segments``; in_threads: local jobs on threads of this process
+    (``LOCAL_BUILDS_IN_THREADS``), else on worker processes. A job returns {"key": its cache key
+    there, the arrays, "wall_s": [s]}; the worker's own cache write makes the store a no-op on
+    shared storage, a remote worker without it hands the arrays back, and a cache folder that
+    cannot be written keeps them in this process's memory (``flexcal.fem.cache.keep_cached``). A
+    worker whose flexcal code differs (other cache key) is an error: its result is not this
+    version's."""
     from flexcal.fem.cache import cache_is_writable, keep_cached, load_cached
 
     from ..executor import run_jobs, usable_cores, where
 
     cache_is_writable(cache_directory)  # up front: an unwritable cache warns once, before any FEM work
-    missing: dict[str, ChainSegment] = {}
-    for chain, x_start, x_end in slices:
-        segment, _ = canonical_segment(chain, float(x_start), float(x_end))
-        key = segment_cache_key(segment, material, elements_through_thickness=elements_through_thickness,
-                                mesher=mesher)
-        if key not in missing and load_cached(key, cache_directory) is None:
-            missing[key] = segment
+    missing = {key: item for key, item in missing.items() if load_cached(key, cache_directory) is None}
     if not missing:
         return 0
     if scheduler is None:
@@ -262,38 +286,32 @@ def build_segments(slices: Iterable[tuple[FlexureChain, float, float]], material
                                                   available_bytes=psutil.virtual_memory().available)
     else:
         n_workers, cores_each = 0, 0  # the cluster's workers keep their cores
-    in_threads = n_workers > 0  # LOCAL_BUILDS_IN_THREADS
+    in_threads = in_threads and n_workers > 0  # LOCAL_BUILDS_IN_THREADS
     log = (lambda text: print(text, file=sys.stderr, flush=True)) if progress else (lambda text: None)
-    log(f"  FEM segments: {len(missing)} to build on {where(n_workers, scheduler, in_threads)}")
+    log(f"  FEM {what}: {len(missing)} to build on {where(n_workers, scheduler, in_threads)}")
     start, built = time.perf_counter(), []
-    keys = {id(segment): key for key, segment in missing.items()}
+    keys = {id(item): key for key, item in missing.items()}
 
-    def on_done(segment: ChainSegment, result: dict[str, Any]) -> None:
-        key = keys[id(segment)]
+    def on_done(item: Any, result: dict[str, Any]) -> None:
+        key = keys[id(item)]
         if result["key"] != key:
             raise RuntimeError("a Dask worker runs another flexcal version (its FEM cache key differs); install the "
                                "same flexcal on the workers as on this machine")
         if load_cached(key, cache_directory) is None:  # an unwritable cache keeps it in memory (warned once)
-            keep_cached(key, {"stiffness": result["stiffness"]}, cache_directory)
+            keep_cached(key, {name: result[name] for name in arrays}, cache_directory)
         built.append(key)
-        log(f"  FEM segment [{segment.x_start * 1e3:.1f}, {segment.x_end * 1e3:.1f}] mm of a "
-            f"{segment.chain.length * 1e3:.1f} mm chain: {result['wall_s']:.1f} s ({len(built)}/{len(missing)}, "
+        log(f"  FEM {describe(item)}: {result['wall_s']:.1f} s ({len(built)}/{len(missing)}, "
             f"{time.perf_counter() - start:.0f} s elapsed)")
 
     # the jobs write into the same folder when it is shared (threads of this process: always)
-    options = {"material": material, "elements_through_thickness": float(elements_through_thickness),
-               "cache_directory": None if cache_directory is None else str(cache_directory),
-               "mesher_threads": cores_each, "solver_threads": cores_each, "mesher": mesher}
-    # longest first (stable): the cheap strut segments fill the gaps at the end instead of a
-    # leaf segment started last keeping one worker busy while the others idle
-    ordered = sorted(missing.values(), key=segment_build_cost, reverse=True)
-    failures = run_jobs(ordered, build_segment_job, on_done, key=lambda seg: keys[id(seg)][:16],
-                        workers=n_workers, scheduler=scheduler, job_options=options, task_prefix="fem-segment",
-                        in_threads=in_threads)
+    failures = run_jobs(list(missing.values()), job, on_done, key=lambda item: keys[id(item)][:16],
+                        workers=n_workers, scheduler=scheduler,
+                        job_options={**options, "mesher_threads": cores_each, "solver_threads": cores_each},
+                        task_prefix=task_prefix, in_threads=in_threads)
     if failures:
         key, text = next(iter(failures.items()))
-        raise RuntimeError(f"{len(failures)} FEM segment build(s) failed, e.g. {text}; the {len(built)} finished "
-                           "segment(s) are cached, run the same command again to retry (--workers 0 builds them "
+        raise RuntimeError(f"{len(failures)} FEM build(s) of {what} failed, e.g. {text}; the {len(built)} finished "
+                           "one(s) are cached, run the same command again to retry (--workers 0 builds them "
                            "in this process)")
     return len(built)
 

@@ -79,7 +79,9 @@ class Prototype:
     chain_stiffness (6, 30, 30) [SI] or None: with a provider whose cuts are tied through
     section fields (``tied_chains.tied_fem_provider``), each chain's stiffness on its five segments'
     twists, which the frame then uses instead of the K_jj (``frame_stiffness``); the K_jj and
-    the 12 x 12 stay the provider's rigidly tied segments (reports, structure assessment).
+    the 12 x 12 are then the provider's ``chain_segments``, the same condensations with the cut
+    fields held rigid (``cut_warping.rigid_part_stiffness``), which no frame or report of it
+    solves with (the structure assessment refuses it).
     """
 
     mechanism: MechanismParams
@@ -164,17 +166,27 @@ def _transmissions(values: Sequence) -> tuple[ActuatorTransmission, ...]:
 
 
 def _segment_stiffness(mechanism: MechanismParams, provider: StiffnessProvider):
+    """(12 x 12, K_jj, section x) of every segment: ``provider(chain, x_start, x_end)``, or, for a
+    provider with ``chain_segments(chain)`` (the tied one: its chains' five 12 x 12 from the
+    condensations that give ``chain_stiffness``, so no segment is built twice), those; its
+    ``prepare_chains(chains)`` first builds them at once."""
     k12 = np.zeros((N_CHAINS, N_SEGMENTS, 12, 12))
     xs = np.zeros((N_CHAINS, 6))
     asked: dict = {}  # equal chains (L1-L3, D1-D3 by default) ask the provider once
-    prepare_provider(provider, chain_slices(p.chain for p in mechanism.chains))  # parallel FEM builds
+    by_chain = getattr(provider, "chain_segments", None)
+    if callable(by_chain):
+        prepare_chains = getattr(provider, "prepare_chains", lambda chains: None)
+        prepare_chains(list(dict.fromkeys(p.chain for p in mechanism.chains)))  # parallel FEM builds
+    else:
+        prepare_provider(provider, chain_slices(p.chain for p in mechanism.chains))  # parallel FEM builds
     for c, placement in enumerate(mechanism.chains):
         xs[c] = section_nodes(placement.chain)
         for s in range(N_SEGMENTS):
             x0, x1 = xs[c, s], xs[c, s + 1]
             key = (placement.chain, float(x0), float(x1))
             if key not in asked:
-                asked[key] = np.asarray(provider(placement.chain, float(x0), float(x1)), dtype=float)
+                asked[key] = np.asarray(by_chain(placement.chain)[s] if callable(by_chain)
+                                        else provider(placement.chain, float(x0), float(x1)), dtype=float)
             k = asked[key]
             where = f"provider stiffness of {placement.name} segment {s} [{x0 * 1e3:.4g}, {x1 * 1e3:.4g}] mm"
             if k.shape != (12, 12) or not np.all(np.isfinite(k)):

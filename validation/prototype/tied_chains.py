@@ -8,19 +8,24 @@ With ``ties="d12/p8"`` each segment is condensed onto order-12 distributing fiel
 and order-8 kinematic ones at s0, s1 (the strut segment [s0, s1] meshed with every cell split
 into ``TIED_STRUT_REFINEMENT``^3 so its 2 x 2-cell section can carry them), the fields split
 into the section bodies' rigid motions and the cuts' warping, the warping condensed
-(``flexcal.fem.cut_warping``): K_chain (30, 30), cached per chain under a key with the ties.
+(``flexcal.fem.cut_warping``): K_chain (30, 30), cached per chain under a key with the ties,
+together with the segments' 12 x 12 from the same condensations (the fields held rigid), so the
+tied prototype needs no rigidly tied segment. The missing chains are built on the executor's
+job threads (``build_tied_chains``; docs/meshing.md, "Cost, session 24 (cost26)").
 """
 
 from __future__ import annotations
 
 import sys
 import time
+from typing import Any, Iterable
 
 import numpy as np
 
 from flexcal.geometry.params import STEEL, FlexureChain, Material
 
-__all__ = ["TIES", "DEFAULT_TIES", "TIED_STRUT_REFINEMENT", "cut_interfaces", "tied_chain_stiffness",
+__all__ = ["TIES", "DEFAULT_TIES", "TIED_STRUT_REFINEMENT", "cut_interfaces", "tied_chain_key",
+           "tied_chain_matrices", "tied_chain_stiffness", "build_tied_chain_job", "build_tied_chains",
            "tied_fem_provider"]
 
 # "m/s": the interface at the mid-connector cuts m1, m2, then at the strut cuts s0, s1
@@ -44,22 +49,35 @@ def cut_interfaces(ties: str) -> tuple[str, str, str, str]:
 
 
 def _tied_chain_parts(chain: FlexureChain, ties: str, material: Material, elements_through_thickness: float) -> dict:
-    """The cache key's parts of ``tied_chain_stiffness``."""
+    """The cache key's parts of ``tied_chain_matrices``."""
     from flexcal.fem.mesh_mapped_chain import PROTOTYPE_CHAIN_OPTIONS
 
     if material != STEEL:
         raise ValueError("tied chains are condensed in STEEL only (chain_cuts' condensations); use the provider fem")
-    return {"kind": "tied_chain_stiffness", "chain": chain, "material": material, "ties": list(cut_interfaces(ties)),
+    # "tied_chain_matrices": K_chain and the segments' 12 x 12 (session 24's "tied_chain_stiffness"
+    # entries held K_chain alone)
+    return {"kind": "tied_chain_matrices", "chain": chain, "material": material, "ties": list(cut_interfaces(ties)),
             "mesh": {"mesher": "mapped", "elements_through_thickness": float(elements_through_thickness),
                      "options": PROTOTYPE_CHAIN_OPTIONS, "strut_refinement": TIED_STRUT_REFINEMENT,
                      "mirrored": True}}
 
 
-def tied_chain_stiffness(chain: FlexureChain, ties: str = DEFAULT_TIES, material: Material = STEEL, *,
-                         elements_through_thickness: float, cache_directory=None) -> np.ndarray:
-    """K_chain (30, 30) [SI] of ``chain`` on its five segments' twists (module docstring),
-    each segment on the prototype's grid (``PROTOTYPE_CHAIN_OPTIONS``, ``elements_through_thickness``
-    asked for; the strut segment refined), cached (``flexcal.fem.cache``)."""
+def tied_chain_key(chain: FlexureChain, ties: str = DEFAULT_TIES, material: Material = STEEL, *,
+                   elements_through_thickness: float) -> str:
+    """The FEM cache key of ``tied_chain_matrices``."""
+    from flexcal.fem.cache import cache_key
+
+    return cache_key(_tied_chain_parts(chain, ties, material, elements_through_thickness))
+
+
+def tied_chain_matrices(chain: FlexureChain, ties: str = DEFAULT_TIES, material: Material = STEEL, *,
+                        elements_through_thickness: float, cache_directory=None) -> dict[str, np.ndarray]:
+    """{"stiffness": K_chain (30, 30), "segments": (5, 12, 12)} [SI] of ``chain`` from one set of
+    condensations, cached (``flexcal.fem.cache``): K_chain on its five segments' twists (module
+    docstring) and each segment's 12 x 12 on its end sections' rigid motions with the cuts' fields
+    held rigid (``flexcal.fem.cut_warping.rigid_part_stiffness``; chain order, chain frame, as
+    the provider's ``(chain, x_start, x_end)`` gives them). Each segment on the prototype's grid
+    (``PROTOTYPE_CHAIN_OPTIONS``, ``elements_through_thickness`` asked for; the strut segment refined)."""
     from flexcal.fem.cache import cached
     from flexcal.fem.mesh_mapped_chain import PROTOTYPE_CHAIN_OPTIONS
 
@@ -67,8 +85,10 @@ def tied_chain_stiffness(chain: FlexureChain, ties: str = DEFAULT_TIES, material
     parts = _tied_chain_parts(chain, ties, material, elements_through_thickness)
 
     def compute() -> dict[str, np.ndarray]:
-        from ..reports.chain_cuts import (_mirror_part, interface_condensed, interface_scale, interface_segments,
-                                          plan_key, twist_stiffness_through_interface)
+        from flexcal.fem.cut_warping import chain_twist_stiffness, rigid_part_stiffness
+
+        from ..reports.chain_cuts import (_mirror_part, chain_order_matrices, cut_orders, interface_condensed,
+                                          interface_scale, interface_segments, plan_key)
 
         plan = interface_segments(chain, 5)
         strut = plan[STRUT_STEP]
@@ -77,19 +97,74 @@ def tied_chain_stiffness(chain: FlexureChain, ties: str = DEFAULT_TIES, material
         scale = interface_scale(chain, 5)
         condensed = interface_condensed(plan, interfaces, elements_through_thickness, PROTOTYPE_CHAIN_OPTIONS,
                                         meshes, scale)
-        return {"stiffness": twist_stiffness_through_interface(plan, condensed, interfaces, scale)}
+        matrices, orders = chain_order_matrices(plan, condensed, interfaces), cut_orders(plan, interfaces)
+        return {"stiffness": chain_twist_stiffness(matrices, orders, scale),
+                "segments": rigid_part_stiffness(matrices, orders, scale)}
 
-    return cached(parts, compute, cache_directory)["stiffness"]
+    return cached(parts, compute, cache_directory)
+
+
+def tied_chain_stiffness(chain: FlexureChain, ties: str = DEFAULT_TIES, material: Material = STEEL, *,
+                         elements_through_thickness: float, cache_directory=None) -> np.ndarray:
+    """K_chain (30, 30) [SI] of ``chain`` (``tied_chain_matrices``)."""
+    return tied_chain_matrices(chain, ties, material, elements_through_thickness=elements_through_thickness,
+                               cache_directory=cache_directory)["stiffness"]
+
+
+def build_tied_chain_job(chain: FlexureChain, *, ties: str, material: Material, elements_through_thickness: float,
+                         cache_directory=None, mesher_threads: int = 0, solver_threads: int = 0) -> dict[str, Any]:
+    """One chain's ``tied_chain_matrices`` on a job thread or worker: {"key": its cache key
+    there, the matrices, "wall_s": [s]}; its cache gets the entry too; PARDISO on
+    ``solver_threads`` MKL threads of the calling thread (0: all cores;
+    ``flexcal.fem.solve.solver_threads``). mesher_threads: unused (``build_missing`` hands it to
+    every job; the mapped mesher runs on the calling thread)."""
+    import contextlib
+
+    from flexcal.fem.solve import solver_threads as mkl_threads
+
+    start = time.perf_counter()
+    with mkl_threads(solver_threads) if solver_threads else contextlib.nullcontext():
+        matrices = tied_chain_matrices(chain, ties, material, elements_through_thickness=elements_through_thickness,
+                                       cache_directory=cache_directory)
+    return {"key": tied_chain_key(chain, ties, material, elements_through_thickness=elements_through_thickness),
+            **matrices, "wall_s": time.perf_counter() - start}
+
+
+def build_tied_chains(chains: Iterable[FlexureChain], ties: str = DEFAULT_TIES, material: Material = STEEL, *,
+                      elements_through_thickness: float, cache_directory=None, workers: int | None = None,
+                      scheduler: str | None = None, progress: bool = True) -> int:
+    """Build the ``tied_chain_matrices`` of ``chains`` that the cache lacks, on the shared
+    executor (``fem_provider.build_missing``), into the cache; returns how many were built.
+    workers: local job threads (``plan_local_builds``; 0: this process, one after the other);
+    scheduler: a Dask scheduler address. Threads, as today's segments: ~70 % of a chain is
+    PARDISO, which runs outside the interpreter lock, and the mapped meshing ~1 %. Cold table1
+    seed 1 at load ~1.3: 2 threads 26 s wall for 47 s CPU, this process 48 s for 48 s; worker
+    processes cost ~10 s more CPU (Dask, the imports) (docs/meshing.md, "Cost, session 24
+    (cost26)"). The same matrices as built here one after the other, to the bit, with PARDISO on
+    as many threads (tests/test_tied_chain_builds.py)."""
+    from .fem_provider import build_missing
+
+    missing = {tied_chain_key(chain, ties, material, elements_through_thickness=elements_through_thickness): chain
+               for chain in chains}
+    options = {"ties": ties, "material": material, "elements_through_thickness": float(elements_through_thickness),
+               "cache_directory": None if cache_directory is None else str(cache_directory)}
+    return build_missing(missing, build_tied_chain_job, options, ("stiffness", "segments"),
+                         lambda chain: f"tied chain ({ties}) of a {chain.length * 1e3:.1f} mm chain",
+                         workers=workers, scheduler=scheduler, progress=progress, cache_directory=cache_directory,
+                         in_threads=True, task_prefix="fem-tied-chain", what="tied chains")
 
 
 def tied_fem_provider(ties: str = DEFAULT_TIES, **fem_options):
-    """``fem_provider(**fem_options)`` (the mapped mesher) that also gives
-    ``provider.chain_stiffness(chain)``: the chain's 30 x 30 on its segments' twists, joined
-    through the ``ties`` fields (``tied_chain_stiffness``), which ``build_prototype`` then uses
-    in the frame, one chain after another in this process (on job threads they took as long in
-    total: mapped meshing holds the interpreter lock; table1 seed 1, 2026-11-29, load ~3). Its
-    12 x 12 per segment stay the rigidly tied ones (the reports and the structure assessment read
-    them)."""
+    """``fem_provider(**fem_options)`` (the mapped mesher: its ``(chain, x_start, x_end)`` and
+    ``prepare`` stay the rigidly tied segments', for the model's corrections and anything else
+    that asks for a slice) that also gives, per chain, from one set of condensations
+    (``tied_chain_matrices``): ``provider.chain_stiffness(chain)``, the chain's 30 x 30 on its
+    segments' twists joined through the ``ties`` fields, which ``build_prototype`` then uses in
+    the frame, and ``provider.chain_segments(chain)``, its five 12 x 12 with the cut fields held
+    rigid (``rigid_part_stiffness``), which ``build_prototype`` stores as the K_jj instead of
+    building the rigid segments too. ``provider.prepare_chains(chains)`` builds the missing
+    chains on the executor (``build_tied_chains``; ``workers=0``: none, each chain is built at
+    its first call)."""
     from .fem_provider import DEFAULT_ELEMENTS_THROUGH, fem_provider
 
     cut_interfaces(ties)  # refused here if unknown
@@ -98,16 +173,26 @@ def tied_fem_provider(ties: str = DEFAULT_TIES, **fem_options):
     provider = fem_provider(**fem_options)
     material = fem_options.get("material", STEEL)
     through = fem_options.get("elements_through_thickness", DEFAULT_ELEMENTS_THROUGH)
+    cache_directory, progress = fem_options.get("cache_directory"), fem_options.get("progress", True)
 
-    def chain_stiffness(chain: FlexureChain) -> np.ndarray:
+    def matrices(chain: FlexureChain) -> dict[str, np.ndarray]:
         start = time.perf_counter()
-        stiffness = tied_chain_stiffness(chain, ties, material, elements_through_thickness=through,
-                                         cache_directory=fem_options.get("cache_directory"))
-        if fem_options.get("progress", True) and time.perf_counter() - start > 0.5:
+        out = tied_chain_matrices(chain, ties, material, elements_through_thickness=through,
+                                  cache_directory=cache_directory)
+        if progress and time.perf_counter() - start > 0.5:
             print(f"  FEM tied chain ({ties}) of a {chain.length * 1e3:.1f} mm chain: "
                   f"{time.perf_counter() - start:.1f} s", file=sys.stderr)
-        return stiffness
+        return out
 
-    provider.chain_stiffness, provider.ties = chain_stiffness, ties
+    def prepare_chains(chains: Iterable[FlexureChain]) -> int:
+        if provider.scheduler is None and provider.workers == 0:
+            return 0  # built lazily, in order, by the calls that follow
+        return build_tied_chains(chains, ties, material, elements_through_thickness=through,
+                                 cache_directory=cache_directory, workers=provider.workers,
+                                 scheduler=provider.scheduler, progress=progress)
+
+    provider.prepare_chains, provider.ties = prepare_chains, ties
+    provider.chain_stiffness = lambda chain: matrices(chain)["stiffness"]
+    provider.chain_segments = lambda chain: matrices(chain)["segments"]
     provider.description = provider.description[:-1] + f", cuts tied through {ties} fields)"
     return provider
