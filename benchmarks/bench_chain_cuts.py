@@ -40,7 +40,7 @@ from pathlib import Path
 import numpy as np
 
 from flexcal.fem.mesh_mapped_chain import PROTOTYPE_CHAIN_OPTIONS
-from flexcal.validation.reports.chain_cuts import (INTERFACES, _mirror_part, composed_stiffness, cut_rows,
+from flexcal.validation.reports.chain_cuts import (INTERFACES, mirror_part, composed_stiffness, cut_rows,
                                                      entry_index, interface_condensations, interface_scale,
                                                      interface_segment_stiffness, interface_segments,
                                                      joined_through_interface, middle_cut, one_piece_stiffness,
@@ -128,7 +128,7 @@ def interfaces(chain, name, args, options, untied, composed, rows, folder, tag) 
     plan = interface_segments(chain, args.segments)
     pieces = {plan_key(step)[:2]: step[0] for step in plan}  # a second-half segment is its twin, turned
     scale = interface_scale(chain, args.segments)
-    meshes = {key: _mirror_part(segment, args.through, options) for key, segment in pieces.items()}
+    meshes = {key: mirror_part(segment, args.through, options) for key, segment in pieces.items()}
     cpu, matrices = timed_compositions(plan, {label: (label, meshes) for label in labels}, args.rounds, scale)
     for label, value in matrices.items():
         np.save(folder / f"interface_{label}_{tag}.npy", value)

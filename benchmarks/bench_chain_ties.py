@@ -37,7 +37,7 @@ import numpy as np
 
 from bench_chain_cuts import cut_tag, peak_gb, print_against_untied, timed_compositions
 from flexcal.fem.mesh_mapped_chain import PROTOTYPE_CHAIN_OPTIONS
-from flexcal.validation.reports.chain_cuts import (_mirror_part, cut_rows, entry_index, interface_scale,
+from flexcal.validation.reports.chain_cuts import (mirror_part, cut_rows, entry_index, interface_scale,
                                                    interface_segments, one_piece_stiffness, plan_key, stretch)
 from flexcal.validation.reports.chain_reference import reference_chain
 
@@ -95,9 +95,9 @@ def main() -> None:
         scale = interface_scale(chain, 5)
         pieces = {plan_key(step)[:2]: step[0] for step in plan}  # the three meshed segments
         strut = plan_key(plan[STRUT])[:2]
-        meshes = {key: _mirror_part(segment, args.through, options, args.strut_refinement if key == strut else 1)
+        meshes = {key: mirror_part(segment, args.through, options, args.strut_refinement if key == strut else 1)
                   for key, segment in pieces.items()}
-        prototype_meshes = {**meshes, strut: _mirror_part(pieces[strut], args.through, options)}
+        prototype_meshes = {**meshes, strut: mirror_part(pieces[strut], args.through, options)}
         variants = {"prototype": ("rigid", prototype_meshes),
                     **{label: (cut_labels(label), meshes) for label in labels}}
         cpu, matrices = timed_compositions(plan, variants, args.rounds, scale)

@@ -241,13 +241,13 @@ def test_the_whole_chain_through_order_12_fields_at_every_cut_is_its_one_piece_w
     # one piece untied (docs/meshing.md, "Session 24: ties at every cut"). Measured, every dominant
     # entry: L1 <= 0.093 %, D1 <= 0.039 %, where the rigid ties give 18.8 % and 23.0 % (ux);
     # both chains 73 s CPU, 1 min 22 s wall, 1.85 GB peak (load ~1, 2026-11-28)
-    from flexcal.validation.reports.chain_cuts import _mirror_part, plan_key
+    from flexcal.validation.reports.chain_cuts import mirror_part, plan_key
 
     chain = reference_chain(chain_name)
     part, cuts = stretch(chain, 5)
     untied, _, _ = one_piece_stiffness(part, cuts, through, PROTOTYPE_CHAIN_OPTIONS, tie_sets=[])
     strut = plan_key(interface_segments(chain, 5)[2])[:2]
-    meshes = {strut: _mirror_part(interface_segments(chain, 5)[2][0], through, PROTOTYPE_CHAIN_OPTIONS, 3)}
+    meshes = {strut: mirror_part(interface_segments(chain, 5)[2][0], through, PROTOTYPE_CHAIN_OPTIONS, 3)}
     composed = composed_interface_stiffness(chain, 5, "d12", through, PROTOTYPE_CHAIN_OPTIONS, meshes=meshes)
     for entry, value, difference, _, _ in cut_rows(composed, untied, untied):
         # 0.2 %: twice the measured largest (L1 0.093 %), below the 0.5 %

@@ -53,7 +53,7 @@ def _tied_chain_parts(chain: FlexureChain, ties: str, material: Material, elemen
     from flexcal.fem.mesh_mapped_chain import PROTOTYPE_CHAIN_OPTIONS
 
     if material != STEEL:
-        raise ValueError("tied chains are condensed in STEEL only (chain_cuts' condensations); use the provider fem")
+        raise ValueError("tied chains are condensed in STEEL only (cut_fields' condensations); use the provider fem")
     # "tied_chain_matrices": K_chain and the segments' 12 x 12 (session 24's "tied_chain_stiffness"
     # entries held K_chain alone)
     return {"kind": "tied_chain_matrices", "chain": chain, "material": material, "ties": list(cut_interfaces(ties)),
@@ -87,12 +87,12 @@ def tied_chain_matrices(chain: FlexureChain, ties: str = DEFAULT_TIES, material:
     def compute() -> dict[str, np.ndarray]:
         from flexcal.fem.cut_warping import chain_twist_stiffness, rigid_part_stiffness
 
-        from ..reports.chain_cuts import (_mirror_part, chain_order_matrices, cut_orders, interface_condensed,
-                                          interface_scale, interface_segments, plan_key)
+        from .cut_fields import (chain_order_matrices, cut_orders, interface_condensed, interface_scale,
+                                 interface_segments, mirror_part, plan_key)
 
         plan = interface_segments(chain, 5)
         strut = plan[STRUT_STEP]
-        meshes = {plan_key(strut)[:2]: _mirror_part(strut[0], elements_through_thickness, PROTOTYPE_CHAIN_OPTIONS,
+        meshes = {plan_key(strut)[:2]: mirror_part(strut[0], elements_through_thickness, PROTOTYPE_CHAIN_OPTIONS,
                                                     TIED_STRUT_REFINEMENT)}
         scale = interface_scale(chain, 5)
         condensed = interface_condensed(plan, interfaces, elements_through_thickness, PROTOTYPE_CHAIN_OPTIONS,

@@ -23,11 +23,19 @@ from __future__ import annotations
 
 import numpy as np
 
+from flexcal.validation.prototype.cut_fields import (INTERFACES, chain_order_matrices, cut_coupling, cut_orders,
+                                                     interface_condensations, interface_condensed, interface_order,
+                                                     interface_scale, interface_segment_stiffness, interface_segments,
+                                                     joined_through_interface, mirror_part, plan_key, step_interfaces,
+                                                     twist_stiffness_through_interface)
+
 __all__ = ["stretch", "series_stiffness", "segment_stiffness", "one_piece_stiffness", "chain_segments",
            "composed_stiffness", "INTERFACES", "cut_coupling", "interface_segment_stiffness",
-           "composed_interface_stiffness", "chain_order_matrices", "cut_orders", "twist_stiffness_through_interface", "interface_condensed", "interface_segments", "interface_order",
-           "interface_condensations", "step_interfaces", "plan_key", "joined_through_interface", "interface_scale", "one_piece_tied_stiffness", "middle_cut",
-           "strut_cuts", "converged_chain_estimate", "cut_rows", "entry_index"]
+           "composed_interface_stiffness", "chain_order_matrices", "cut_orders",
+           "twist_stiffness_through_interface", "interface_condensed", "interface_segments", "interface_order",
+           "interface_condensations", "step_interfaces", "plan_key", "joined_through_interface", "interface_scale",
+           "one_piece_tied_stiffness", "middle_cut", "strut_cuts", "converged_chain_estimate", "cut_rows",
+           "entry_index", "mirror_part"]
 
 
 def stretch(chain, n_segments: int):
@@ -54,13 +62,6 @@ def series_stiffness(segments: np.ndarray) -> np.ndarray:
     return joined(np.asarray(segments, float))
 
 
-def _mirror_part(part, elements_through: float, options: dict, refinement: int = 1):
-    from flexcal.fem.mesh_mapped_chain import mapped_mesh_chain_mirror_part
-
-    return mapped_mesh_chain_mirror_part(part, elements_through_thickness=elements_through, refinement=refinement,
-                                         **options)
-
-
 def segment_stiffness(segment, elements_through: float, options: dict, refinement: int = 1) -> np.ndarray:
     """(12, 12) [SI] of one segment meshed alone on ``options`` (every cell split into
     ``refinement``^3), condensed on its mirror part: the prototype's provider's matrix at
@@ -69,7 +70,7 @@ def segment_stiffness(segment, elements_through: float, options: dict, refinemen
     from flexcal.geometry.exact import end_planes
     from flexcal.geometry.params import STEEL
 
-    mesh, axes = _mirror_part(segment, elements_through, options, refinement)
+    mesh, axes = mirror_part(segment, elements_through, options, refinement)
     planes = end_planes(segment)
     k = mirrored_chain_stiffness(mesh, STEEL, planes["A"], planes["A"][0], planes["B"], planes["B"][0], axes)
     return 0.5 * (k + k.T)
@@ -94,7 +95,7 @@ def one_piece_stiffness(part, cuts, elements_through: float, options: dict,
     tie_sets = [cuts] if tie_sets is None else [tuple(float(x) for x in ties) for ties in tie_sets]
     if any(x not in cuts for ties in tie_sets for x in ties):
         raise ValueError(f"tie_sets={tie_sets!r} must be subsets of cuts={cuts!r}")
-    mesh, axes = _mirror_part(part, elements_through, {**options, "cuts": cuts})
+    mesh, axes = mirror_part(part, elements_through, {**options, "cuts": cuts})
     planes = end_planes(part)
     ends = [RigidCoupling(nodes=select_plane_nodes(mesh, planes[end]), reference_point=planes[end][0]) for end in "AB"]
     untied = mirrored_coupled_stiffness(mesh, STEEL, ends, axes)
@@ -113,7 +114,7 @@ def one_piece_tied_stiffness(part, cuts, elements_through: float, options: dict,
     from flexcal.geometry.exact import bounding_box, end_planes
 
     cuts = tuple(float(x) for x in cuts)
-    mesh, axes = _mirror_part(part, elements_through, {**options, "cuts": cuts})
+    mesh, axes = mirror_part(part, elements_through, {**options, "cuts": cuts})
     planes = end_planes(part)
     ends = [RigidCoupling(nodes=select_plane_nodes(mesh, planes[end]), reference_point=planes[end][0]) for end in "AB"]
     return condensed_onto_ends(_tied_one_piece(mesh, axes, ends, sorted(cuts), interface,
@@ -191,169 +192,6 @@ def composed_stiffness(chain, n_segments: int, elements_through: float, options:
                                            nodes))
 
 
-INTERFACES = ("rigid", "p1", "p2", "p3", "p4", "d-rigid", "d1", "d2", "d3")
-"""The interfaces at a cut (``flexcal.fem.interface``; docs/meshing.md, session 23): the rigid
-tie, kinematic polynomial fields of order p ("p1".."p4", any "p<p>"), and distributing
-couplings on the rigid motions ("d-rigid") or on fields of order p ("d1".."d3", any "d<p>")."""
-
-
-def cut_coupling(interface: str, face_nodes: np.ndarray, centre: np.ndarray, scale: float):
-    """The coupling of a cut face's nodes (n_s,) to its centre (3,) [m] for the ``interface``
-    label (``INTERFACES``), polynomials in (y, z) / ``scale`` [m]."""
-    from flexcal.fem.coupling import RigidCoupling
-    from flexcal.fem.interface import RIGID, DistributingCoupling, PolynomialCoupling
-
-    if interface == "rigid":
-        return RigidCoupling(nodes=face_nodes, reference_point=centre)
-    if interface.startswith("p") and interface[1:].isdigit():
-        return PolynomialCoupling(nodes=face_nodes, reference_point=centre, order=int(interface[1:]), scale=scale)
-    if interface == "d-rigid" or (interface.startswith("d") and interface[1:].isdigit()):
-        order = RIGID if interface == "d-rigid" else int(interface[1:])
-        return DistributingCoupling(nodes=face_nodes, reference_point=centre, order=order, scale=scale)
-    raise ValueError(f"unknown interface {interface!r}; choose one of {', '.join(INTERFACES)}")
-
-
-def interface_segment_stiffness(segment, mesh_and_axes, starts_at_cut: bool, ends_at_cut: bool, interface: str,
-                                scale: float) -> np.ndarray:
-    """(n_A + n_B, n_A + n_B) [SI] of one ``segment`` (as meshed: a first-half one) on its
-    meshed mirror part ``mesh_and_axes`` (``mapped_mesh_chain_mirror_part``), condensed onto its
-    end sections: a cut one coupled by ``interface`` (``cut_coupling``; a pair: the start's,
-    the end's), a chain end rigidly (6 DOFs, as the prototype's)."""
-    from flexcal.fem.condense import mirrored_coupled_stiffness
-    from flexcal.fem.coupling import RigidCoupling, select_plane_nodes
-    from flexcal.geometry.exact import end_planes
-    from flexcal.geometry.params import STEEL
-
-    mesh, axes = mesh_and_axes
-    planes = end_planes(segment)
-    labels = (interface, interface) if isinstance(interface, str) else tuple(interface)
-    couplings = []
-    for end, at_cut, label in (("A", starts_at_cut, labels[0]), ("B", ends_at_cut, labels[1])):
-        nodes, centre = select_plane_nodes(mesh, planes[end]), planes[end][0]
-        couplings.append(cut_coupling(label, nodes, centre, scale) if at_cut
-                         else RigidCoupling(nodes=nodes, reference_point=centre))
-    k = mirrored_coupled_stiffness(mesh, STEEL, couplings, axes)
-    return 0.5 * (k + k.T)
-
-
-def interface_order(interface: str):
-    """The section field's order of an ``interface`` label (``INTERFACES``): ``RIGID`` for
-    "rigid" and "d-rigid", p for "p<p>" and "d<p>"."""
-    from flexcal.fem.interface import RIGID
-
-    if interface in ("rigid", "d-rigid"):
-        return RIGID
-    if interface[:1] in ("p", "d") and interface[1:].isdigit():
-        return int(interface[1:])
-    raise ValueError(f"unknown interface {interface!r}; choose one of {', '.join(INTERFACES)}")
-
-
-def interface_segments(chain, n_segments: int, nodes=None) -> list:
-    """The first ``n_segments`` prototype segments of ``chain`` (between ``nodes`` [m], None:
-    ``section_nodes``) in order, each as (the segment meshed (``canonical_segment``: a
-    second-half one's first-half twin), mirrored?, the meshed segment's start is a cut?, its
-    end is a cut?). A mirrored segment's start is its twin's end, so the twin's cut ends are
-    the real segment's swapped; the stretch's two ends are not cuts."""
-    from flexcal.validation.prototype.fem_provider import canonical_segment
-    from flexcal.validation.prototype.segments import section_nodes
-
-    nodes = section_nodes(chain) if nodes is None else np.asarray(nodes, float)
-    out = []
-    for k, (a, b) in enumerate(zip(nodes[:n_segments], nodes[1:n_segments + 1])):
-        segment, mirrored = canonical_segment(chain, float(a), float(b))
-        starts, ends = k > 0, k < n_segments - 1
-        out.append((segment, mirrored, *((ends, starts) if mirrored else (starts, ends))))
-    return out
-
-
-def interface_condensations(plan, interface) -> dict:
-    """{key: (segment, starts at a cut, ends at a cut, (label at its start, at its end))}: the
-    distinct condensations of an ``interface_segments`` plan (a second-half segment is its
-    twin's condensation, turned), key as ``plan_key``. interface: one label for every cut, or
-    one per cut in the chain's order (``step_interfaces``)."""
-    return {plan_key(step, labels): (step[0], step[2], step[3], labels)
-            for step, labels in zip(plan, step_interfaces(plan, interface))}
-
-
-def step_interfaces(plan, interface) -> list[tuple]:
-    """Per step of ``plan``, (label at the meshed segment's start, at its end) (None: a chain
-    end): ``interface`` one label for every cut or a sequence, one per cut in chain order; a
-    mirrored step's meshed start is its end."""
-    n_cuts = len(plan) - 1
-    labels = [interface] * n_cuts if isinstance(interface, str) else list(interface)
-    if len(labels) != n_cuts:
-        raise ValueError(f"{len(labels)} interfaces for {n_cuts} cuts")
-    out = []
-    for k, (_, mirrored, _, _) in enumerate(plan):
-        start, end = (labels[k - 1] if k > 0 else None), (labels[k] if k < n_cuts else None)
-        out.append((end, start) if mirrored else (start, end))
-    return out
-
-
-def plan_key(step, labels=(None, None)) -> tuple:
-    """The key of one ``interface_segments`` step's condensation with ``labels`` at its ends."""
-    segment, _, starts, ends = step
-    return (round(segment.x_start, 12), round(segment.x_end, 12), bool(starts), bool(ends), *labels)
-
-
-def chain_order_matrices(plan, condensed: dict, interface) -> list[np.ndarray]:
-    """The segments' matrices of ``plan`` (``interface_segments``) in chain order, each on its
-    start section's DOFs then its end section's, chain frame: ``condensed`` the meshed segments'
-    matrices by ``plan_key`` (``interface_segment_stiffness``), a mirrored one turned
-    (``turned_segment_stiffness``: its cut fields' DOFs change sign by ``section_turn_signs``).
-    interface: one label or one per cut (``step_interfaces``)."""
-    from flexcal.fem.interface import RIGID, turned_segment_stiffness
-
-    matrices = []
-    for step, labels in zip(plan, step_interfaces(plan, interface)):
-        k = condensed[plan_key(step, labels)]
-        if step[1]:
-            start, end = (RIGID if label is None else interface_order(label) for label in labels)
-            k = turned_segment_stiffness(k, start, end)
-        matrices.append(k)
-    return matrices
-
-
-def cut_orders(plan, interface) -> list:
-    """The section field's order (``interface_order``) at each cut of ``plan``, in chain order."""
-    n_cuts = len(plan) - 1
-    labels = [interface] * n_cuts if isinstance(interface, str) else list(interface)
-    return [interface_order(label) for label in labels]
-
-
-def joined_through_interface(plan, condensed: dict, interface) -> np.ndarray:
-    """(12, 12) [SI]: the segments of ``plan`` (``interface_segments``) joined through their
-    cuts' shared ``interface`` DOFs (one label or one per cut, ``step_interfaces``;
-    ``flexcal.fem.interface.series_stiffness``), ``condensed`` the meshed segments' matrices by
-    ``plan_key`` (``chain_order_matrices``)."""
-    from flexcal.fem.interface import series_stiffness as joined
-
-    return joined(chain_order_matrices(plan, condensed, interface))
-
-
-def twist_stiffness_through_interface(plan, condensed: dict, interface, scale: float) -> np.ndarray:
-    """(6 n, 6 n) [SI]: the n segments of ``plan`` joined through their cuts' ``interface``
-    fields as one stiffness on their deformation twists, every cut's warping condensed out
-    (``flexcal.fem.cut_warping.chain_twist_stiffness``; arguments as ``joined_through_interface``,
-    scale [m] the fields' length, ``interface_scale``)."""
-    from flexcal.fem.cut_warping import chain_twist_stiffness
-
-    return chain_twist_stiffness(chain_order_matrices(plan, condensed, interface), cut_orders(plan, interface), scale)
-
-
-def interface_scale(chain, n_segments: int, nodes=None) -> float:
-    """[m] the length the section fields' coordinates are divided by: the stretch's
-    half-extent along y (the chains' square section: 25 mm on L1 and D1)."""
-    from flexcal.geometry.exact import bounding_box
-    from flexcal.geometry.params import ChainSegment
-
-    if nodes is None:
-        part = stretch(chain, n_segments)[0]
-    else:
-        part = ChainSegment(chain=chain, x_start=float(nodes[0]), x_end=float(nodes[n_segments]))
-    return float(bounding_box(part)[1][1])
-
-
 def composed_interface_stiffness(chain, n_segments: int, interface: str, elements_through: float, options: dict,
                                  meshes=None, nodes=None) -> np.ndarray:
     """(12, 12) [SI] of the first ``n_segments`` prototype segments of ``chain`` (between
@@ -367,20 +205,6 @@ def composed_interface_stiffness(chain, n_segments: int, interface: str, element
     condensed = interface_condensed(plan, interface, elements_through, options, meshes,
                                     interface_scale(chain, n_segments, nodes))
     return joined_through_interface(plan, condensed, interface)
-
-
-def interface_condensed(plan, interface, elements_through: float, options: dict, meshes=None,
-                        scale: float = 1.0) -> dict:
-    """{``plan_key``: matrix}: the distinct condensations (``interface_condensations``) of
-    ``plan``'s meshed segments (``interface_segment_stiffness``, fields' length ``scale``
-    [m]), each on its mesh in ``meshes`` ({(x_start, x_end) rounded to 1 pm: mirror part};
-    one missing is meshed on ``options`` with ``elements_through`` asked for)."""
-    meshes = {} if meshes is None else meshes
-    condensed = {}
-    for key, (segment, starts, ends, labels) in interface_condensations(plan, interface).items():
-        mesh = meshes.get(key[:2]) or _mirror_part(segment, elements_through, options)
-        condensed[key] = interface_segment_stiffness(segment, mesh, starts, ends, labels, scale)
-    return condensed
 
 
 def converged_chain_estimate(segment_limits: np.ndarray, tied: np.ndarray, untied: np.ndarray) -> np.ndarray:
