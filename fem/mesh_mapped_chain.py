@@ -405,8 +405,9 @@ def mapped_mesh_chain(params, *, elements_through_thickness: float = 7, refineme
     mesh = TetMesh(nodes, tets)
     timings["map"] = time.perf_counter() - t0
     t0 = time.perf_counter()
+    through = cells_through(params, n, settings["slenderness"], settings.get("even_through", False))
     if measure:
-        measured = _measure(params, mesh, corners, cells_through(params, n, settings["slenderness"], settings.get("even_through", False)))
+        measured = _measure(params, mesh, corners, through)
     else:
         measured = _unmeasured(params, mesh, len(corners), volumes=quality)
     ratio = float(_jacobian_ratios(mesh.nodes, mesh.tets).min()) if measure or quality else float("nan")
@@ -416,7 +417,7 @@ def mapped_mesh_chain(params, *, elements_through_thickness: float = 7, refineme
     report = MeshReport(
         n_nodes=mesh.n_nodes, n_tets=mesh.n_tets, epsilon=0.0, n_retries=0, retry_reasons=(),
         options=dict(mesher="mapped", elements_through_thickness=float(n), refinement=int(refinement), **settings,
-                     cells_through=cells_through(params, n, settings["slenderness"], settings.get("even_through", False)),
+                     cells_through=through,
                      n_cells=[len(grid.x) - 1, len(grid.p) - 1, len(grid.q) - 1], n_hexes=int(grid.active.sum())),
         timings=timings, **measured)
     return mesh, report

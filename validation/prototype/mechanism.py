@@ -174,6 +174,7 @@ def _segment_stiffness(mechanism: MechanismParams, provider: StiffnessProvider):
     xs = np.zeros((N_CHAINS, 6))
     asked: dict = {}  # equal chains (L1-L3, D1-D3 by default) ask the provider once
     by_chain = getattr(provider, "chain_segments", None)
+    chain_matrices: dict = {}  # a chain's five 12 x 12 read once, not once per segment
     if callable(by_chain):
         prepare_chains = getattr(provider, "prepare_chains", lambda chains: None)
         prepare_chains(list(dict.fromkeys(p.chain for p in mechanism.chains)))  # parallel FEM builds
@@ -185,7 +186,9 @@ def _segment_stiffness(mechanism: MechanismParams, provider: StiffnessProvider):
             x0, x1 = xs[c, s], xs[c, s + 1]
             key = (placement.chain, float(x0), float(x1))
             if key not in asked:
-                asked[key] = np.asarray(by_chain(placement.chain)[s] if callable(by_chain)
+                if callable(by_chain) and placement.chain not in chain_matrices:
+                    chain_matrices[placement.chain] = by_chain(placement.chain)
+                asked[key] = np.asarray(chain_matrices[placement.chain][s] if callable(by_chain)
                                         else provider(placement.chain, float(x0), float(x1)), dtype=float)
             k = asked[key]
             where = f"provider stiffness of {placement.name} segment {s} [{x0 * 1e3:.4g}, {x1 * 1e3:.4g}] mm"
@@ -430,8 +433,6 @@ def _simulate(prototype: Prototype, inputs: np.ndarray, effects: tuple, progress
         for hook in _hook(effects, "modify_screw_position"):
             screw = np.array([float(hook(i, float(command[i]), float(screw[i]), context)) for i in range(3)])
         stiffness = np.array(prototype.segment_stiffness)
-        if prototype.chain_stiffness is not None and _hook(effects, "modify_stiffness"):
-            raise ValueError(TIED_STIFFNESS_EFFECTS)
         for hook in _hook(effects, "modify_stiffness"):
             stiffness = np.asarray(hook(stiffness.copy(), context), dtype=float)
         conditions = PointConditions(segment_stiffness=stiffness, frame_forces=(weight,),

@@ -37,7 +37,6 @@ DEFAULT_TIES = "d12/p8"
 # every cell of the strut segment split into 3^3: 13 x 13 face nodes at s0, s1 (2 x 2 cells as
 # meshed today cannot carry an order-8 field: its Gram matrix is singular there)
 TIED_STRUT_REFINEMENT = 3
-STRUT_STEP = 2  # the strut segment [s0, s1] in the chain's plan
 
 
 def cut_interfaces(ties: str) -> tuple[str, str, str, str]:
@@ -87,16 +86,15 @@ def tied_chain_matrices(chain: FlexureChain, ties: str = DEFAULT_TIES, material:
     def compute() -> dict[str, np.ndarray]:
         from flexcal.fem.cut_warping import chain_twist_stiffness, rigid_part_stiffness
 
-        from .cut_fields import (chain_order_matrices, cut_orders, interface_condensed, interface_scale,
-                                 interface_segments, mirror_part, plan_key)
+        from .cut_fields import chain_order_matrices, cut_orders, interface_condensed, interface_scale, interface_segments
 
         plan = interface_segments(chain, 5)
-        strut = plan[STRUT_STEP]
-        meshes = {plan_key(strut)[:2]: mirror_part(strut[0], elements_through_thickness, PROTOTYPE_CHAIN_OPTIONS,
-                                                    TIED_STRUT_REFINEMENT)}
+        # the grid's own strut knob (it splits only the leafless strut segment's cells), at least
+        # TIED_STRUT_REFINEMENT: one knob, not a refinement on top of the grid's
+        options = {**PROTOTYPE_CHAIN_OPTIONS,
+                   "strut_refinement": max(PROTOTYPE_CHAIN_OPTIONS.get("strut_refinement", 1), TIED_STRUT_REFINEMENT)}
         scale = interface_scale(chain, 5)
-        condensed = interface_condensed(plan, interfaces, elements_through_thickness, PROTOTYPE_CHAIN_OPTIONS,
-                                        meshes, scale)
+        condensed = interface_condensed(plan, interfaces, elements_through_thickness, options, None, scale)
         matrices, orders = chain_order_matrices(plan, condensed, interfaces), cut_orders(plan, interfaces)
         return {"stiffness": chain_twist_stiffness(matrices, orders, scale),
                 "segments": rigid_part_stiffness(matrices, orders, scale)}
