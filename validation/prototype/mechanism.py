@@ -53,6 +53,8 @@ __all__ = [
     "apply_mount_offsets",
     "simulate",
     "frame_stiffness",
+    "stiffness_congruence",
+    "tied_chain_stiffness",
     "FRAME_BODY",
     "NUT_BODIES",
 ]
@@ -80,8 +82,8 @@ class Prototype:
     section fields (``tied_chains.tied_fem_provider``), each chain's stiffness on its five segments'
     twists, which the frame then uses instead of the K_jj (``frame_stiffness``); the K_jj and
     the 12 x 12 are then the provider's ``chain_segments``, the same condensations with the cut
-    fields held rigid (``cut_warping.rigid_part_stiffness``), which no frame or report of it
-    solves with (the structure assessment refuses it).
+    fields held rigid (``cut_warping.rigid_part_stiffness``): effects change them, and the frame
+    takes the change to K_chain (``frame_stiffness``).
     """
 
     mechanism: MechanismParams
@@ -230,22 +232,52 @@ def _chain_stiffness(mechanism: MechanismParams, provider: StiffnessProvider) ->
     return out
 
 
-TIED_STIFFNESS_EFFECTS = ("effects that change the segments' stiffness (modify_stiffness, or modify_mechanism "
-                          "replacing segment_stiffness) are not defined with tied cuts (provider fem-tied): their "
-                          "K_jj are not what the frame uses; use the provider fem for them")
+def stiffness_congruence(before: np.ndarray, after: np.ndarray) -> np.ndarray:
+    """T (..., 6, 6) with T^T K T = K' for symmetric positive definite K = ``before`` and K' =
+    ``after`` (..., 6, 6) [SI]: the positive one, T = K^-1 (K # K') (# the matrix geometric
+    mean), computed as L^-T (L^-1 K' L^-T)^(1/2) L^T from K = L L^T. For K' = s K, T = sqrt(s)
+    I. Raises ``ValueError`` if K' is not positive definite (docs/effects.md, "Effects on tied
+    cuts")."""
+    L = np.linalg.cholesky(before)
+    inverse = np.linalg.inv(L)
+    middle = inverse @ after @ np.swapaxes(inverse, -1, -2)
+    values, vectors = np.linalg.eigh(0.5 * (middle + np.swapaxes(middle, -1, -2)))
+    if np.any(values <= 0):
+        raise ValueError("an effect made a segment's stiffness K_jj not positive definite; with tied cuts (provider "
+                         "fem-tied) its change acts on the chain's K_chain by a congruence that needs one")
+    root = vectors @ (np.sqrt(values)[..., None] * np.swapaxes(vectors, -1, -2))
+    return np.swapaxes(inverse, -1, -2) @ root @ np.swapaxes(L, -1, -2)
+
+
+def tied_chain_stiffness(chain_stiffness: np.ndarray, before: np.ndarray, after: np.ndarray) -> np.ndarray:
+    """Each chain's K_chain (6, 30, 30) [SI] after effects changed its segments' K_jj from
+    ``before`` to ``after`` (6, 5, 6, 6): T^T K_chain T, T = blockdiag(T_s) of the segments'
+    ``stiffness_congruence`` (the identity for a segment left as it was). With K_chain the
+    block diagonal of the K_jj this gives the block diagonal of the changed ones; a factor s_c
+    on a whole chain scales its K_chain by s_c; per-segment factors s give S^1/2 K_chain S^1/2
+    (docs/effects.md, "Effects on tied cuts")."""
+    out = np.array(chain_stiffness, dtype=float)
+    changed = np.any(before != after, axis=(-1, -2))
+    for c in np.flatnonzero(np.any(changed, axis=1)):
+        T = np.eye(6 * N_SEGMENTS)
+        for s in np.flatnonzero(changed[c]):
+            T[6 * s:6 * s + 6, 6 * s:6 * s + 6] = stiffness_congruence(before[c, s], after[c, s])
+        k = T.T @ out[c] @ T
+        out[c] = 0.5 * (k + k.T)
+    return out
 
 
 def frame_stiffness(prototype: Prototype, segment_stiffness: np.ndarray):
     """What the frame's equilibrium takes (``equilibrium.evaluate``): the K_jj
     ``segment_stiffness`` (6, 5, 6, 6) as (30, 6, 6), or, for a prototype with tied cuts
-    (``chain_stiffness``), a ``CoupledStiffness`` of its chains; that one accepts only the
-    prototype's own K_jj (effects that change the segments' stiffness are not defined for it)."""
+    (``chain_stiffness``), a ``CoupledStiffness`` of its chains, their K_chain changed as effects
+    changed the K_jj from the prototype's own (``tied_chain_stiffness``)."""
     if prototype.chain_stiffness is None:
         return segment_stiffness.reshape(-1, 6, 6)
+    blocks = prototype.chain_stiffness
     if not np.array_equal(segment_stiffness, prototype.segment_stiffness):
-        raise ValueError(TIED_STIFFNESS_EFFECTS)
-    return CoupledStiffness(blocks=prototype.chain_stiffness,
-                            segments=np.arange(N_CHAINS * N_SEGMENTS).reshape(N_CHAINS, N_SEGMENTS))
+        blocks = tied_chain_stiffness(blocks, prototype.segment_stiffness, np.asarray(segment_stiffness, float))
+    return CoupledStiffness(blocks=blocks, segments=np.arange(N_CHAINS * N_SEGMENTS).reshape(N_CHAINS, N_SEGMENTS))
 
 
 def _assembly(mechanism: MechanismParams, xs: np.ndarray):
