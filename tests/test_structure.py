@@ -108,6 +108,25 @@ def _pivot_provider(k: float):
     return provider
 
 
+PIVOT_CHAIN = 1  # L2: ground at A, frame at B
+
+
+def pivot_chain_buckling(prototype, axial: float, shortening: float):
+    """(``chain_buckling_factors``, L_p [m]) at a state made by hand: chain ``PIVOT_CHAIN`` under a
+    pure axial compression ``axial`` [N], each of its segments shortened by ``shortening`` [m]."""
+    mechanism = prototype.mechanism
+    axis = mechanism.chains[PIVOT_CHAIN].rotation[:, 0]
+    poses = prototype.initial_poses.copy()
+    bodies = list(prototype.assembly.node_body[6 * PIVOT_CHAIN + 1:6 * PIVOT_CHAIN + 6])  # 4 interior nodes, the frame
+    for k_node, body in enumerate(bodies, start=1):
+        poses[body, :3, 3] -= k_node * shortening * axis
+    state = NominalState(poses=poses, tangent=None, segment_gradient=None, tension=np.full(6, -axial),
+                         weight_factor=1.0, commands=np.zeros(3))
+    placement = mechanism.chains[PIVOT_CHAIN].chain
+    return (chain_buckling_factors(prototype, state),
+            placement.length - 2 * placement.end_block_length - placement.hinge_length)
+
+
 def test_chain_sway_buckling_is_2k_over_L_for_ideal_pivots():
     """A chain whose only flexibility is two pivots (rotational stiffness k about local z,
     at the leaf-1 centres, L_p apart) between rigid pieces, under a pure axial compression
@@ -118,22 +137,10 @@ def test_chain_sway_buckling_is_2k_over_L_for_ideal_pivots():
     1e-10 compliance against 1/k = 5e-4 and the tangent's central differences move it
     by ~1e-6 (bound 1e-5)."""
     k, axial = 2000.0, 3000.0
-    mechanism = reference_mechanism()
-    prototype = build_prototype(mechanism, NOMINAL, _pivot_provider(k))
-    chain = 1  # L2: ground at A, frame at B
-    axis = mechanism.chains[chain].rotation[:, 0]
-    poses = prototype.initial_poses.copy()
-    step = axial * 1e-10  # shortening of each segment [m]
-    bodies = list(prototype.assembly.node_body[6 * chain + 1:6 * chain + 6])  # 4 interior nodes, then the frame
-    for k_node, body in enumerate(bodies, start=1):
-        poses[body, :3, 3] -= k_node * step * axis
-    state = NominalState(poses=poses, tangent=None, segment_gradient=None, tension=np.full(6, -axial),
-                         weight_factor=1.0, commands=np.zeros(3))
-    factors = chain_buckling_factors(prototype, state)
-    placement = mechanism.chains[chain].chain
-    pivots = placement.length - 2 * placement.end_block_length - placement.hinge_length
+    prototype = build_prototype(reference_mechanism(), NOMINAL, _pivot_provider(k))
+    factors, pivots = pivot_chain_buckling(prototype, axial, axial * 1e-10)
     # 1e-5: rigid-piece compliance and central differences ~1e-6 (docstring)
-    assert factors["sway"][chain] * axial == pytest.approx(2 * k / pivots, rel=1e-5)
+    assert factors["sway"][PIVOT_CHAIN] * axial == pytest.approx(2 * k / pivots, rel=1e-5)
 
 
 def test_leaf_von_mises_closed_forms():

@@ -21,6 +21,7 @@ EXAMPLES = (
     "flexcal structure --out runs/structure                  # beam-theory segments, ~7 s of CPU",
     "flexcal structure --segments fem --out runs/structure-fem  # meshed segments (mapped), ~1 min of CPU cold, cached",
     "flexcal structure --segments fem --mesher tetwild --out runs/structure-tw  # fTetWild segments, ~5 min cold",
+    "flexcal structure --segments fem --provider fem-tied --out runs/structure-tied  # the tied-cut truth's frame",
 )
 
 
@@ -41,6 +42,12 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--workers", type=worker_count, metavar="N", default=None,
                         help="FEM segments: build threads (default: one per usable core, memory permitting; 0: one "
                              "after the other in this process)")
+    from ..prototype.providers import PROVIDERS
+
+    parser.add_argument("--provider", choices=PROVIDERS,
+                        help="the prototype's stiffness from the truth's provider instead of the segments' own "
+                             "(fem-tied: each chain's cuts tied through section fields, docs/structure.md \"Tied "
+                             "cuts\"); masses and stress fields stay the segments'")
     parser.add_argument("--modes", type=int, default=12, help="number of mount modes (default %(default)s)")
     parser.add_argument("--trajectory-points", type=int, default=77,
                         help="points of the standard trajectory the stresses are taken over (1 + a multiple of 4, >= 13; 0: nominal only; "
@@ -75,7 +82,7 @@ def run(args: argparse.Namespace) -> int:
         report = structure_report(mount_option(args) or reference_mechanism(), segments=args.segments,
                                   elements_through=args.elements_through, mesher=args.mesher, n_modes=args.modes,
                                   trajectory_points=args.trajectory_points, refine=args.refine, figures=staging,
-                                  progress=show_progress(args), workers=args.workers)
+                                  progress=show_progress(args), workers=args.workers, provider=args.provider)
         write_report(staging, report)
         write_text(staging / "report.md", markdown(report))
     f = report["modes"]["frequencies_Hz"]

@@ -33,11 +33,11 @@ import numpy as np
 from flexcal.geometry.params import STEEL, ChainSegment, FlexureChain, Material
 
 from ..prototype.fem_provider import _TURN_Z, canonical_segment
-from ..prototype.mechanism import N_CHAINS, N_SEGMENTS, Prototype
+from ..prototype.mechanism import N_CHAINS, N_SEGMENTS, Prototype, frame_stiffness
 from ..prototype.superelement import relative_pose, segment_deformation
 
 __all__ = ["DEFAULT_ELEMENTS_THROUGH", "DEFAULT_MESHER", "MESHERS", "REFINE_STEP", "segment_structure", "mirror_map",
-           "FemSegments", "chain_peak_stress_fem",
+           "FemSegments", "chain_peak_stress_fem", "stress_twists",
            "peak_von_mises_of", "von_mises_quadratic_form", "VON_MISES_FORM"]
 
 MESHERS = ("mapped", "tetwild")
@@ -340,15 +340,35 @@ def peak_von_mises_of(unit_stress: np.ndarray, motion: np.ndarray, form_of=None)
     return float(von_mises(v @ unit_stress[6 * h:6 * h + 6, k])), k
 
 
-def chain_peak_stress_fem(prototype: Prototype, poses: np.ndarray, segments: FemSegments) -> np.ndarray:
-    """Peak nodal von Mises stress (6,) [Pa] of each chain at body ``poses`` (FEM
-    segments; module docstring)."""
+def stress_twists(prototype: Prototype, poses: np.ndarray, segments: FemSegments) -> np.ndarray:
+    """(6, 5, 6) [m, rad]: the end-node motion of each of ``segments``' slices (start held) whose
+    stress field is the segment's at body ``poses``: its deformation twist xi
+    (``superelement.segment_deformation``); with tied cuts (``Prototype.chain_stiffness``) the
+    twist under which the slice carries the segment's share of its chain's wrench, K_jj^-1
+    (K_chain Xi)_s, K_jj the slice's own (its cuts held rigid, as its stress fields are): away
+    from the cuts, where the leaves are, the field of the same load (Saint-Venant)."""
     from ..prototype.equilibrium import node_poses
 
     a = prototype.assembly
     nodes = node_poses(a, poses)
     rel = relative_pose(nodes[a.segment_nodes[:, 0]], nodes[a.segment_nodes[:, 1]])
-    xi = segment_deformation(rel, a.segment_reference_inverse).reshape(N_CHAINS, N_SEGMENTS, 6)
+    xi = segment_deformation(rel, a.segment_reference_inverse)
+    if prototype.chain_stiffness is None:
+        return xi.reshape(N_CHAINS, N_SEGMENTS, 6)
+    wrench = frame_stiffness(prototype, prototype.segment_stiffness).wrench(xi).reshape(N_CHAINS, N_SEGMENTS, 6)
+    out = np.zeros((N_CHAINS, N_SEGMENTS, 6))
+    for c, placement in enumerate(prototype.mechanism.chains):
+        xs = prototype.section_x[c]
+        for s in range(N_SEGMENTS):
+            own = segments(placement.chain, float(xs[s]), float(xs[s + 1]))[6:, 6:]
+            out[c, s] = np.linalg.solve(own, wrench[c, s])
+    return out
+
+
+def chain_peak_stress_fem(prototype: Prototype, poses: np.ndarray, segments: FemSegments) -> np.ndarray:
+    """Peak nodal von Mises stress (6,) [Pa] of each chain at body ``poses`` (FEM
+    segments; module docstring; ``stress_twists``)."""
+    xi = stress_twists(prototype, poses, segments)
     out = np.zeros(N_CHAINS)
     for c, placement in enumerate(prototype.mechanism.chains):
         xs = prototype.section_x[c]

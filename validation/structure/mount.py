@@ -23,6 +23,14 @@ DOFs this module adds:
   clamped, end B either held (translations fixed, turning free) or free to sway
   laterally (turning held, as the payload frame holds it).
 
+A prototype whose cuts are tied through section fields (``Prototype.chain_stiffness``, the
+provider fem-tied; docs/meshing.md, "Session 24: the tied-cut frame") is assessed on what its
+frame uses (``mechanism.frame_stiffness``, a ``CoupledStiffness``): its equilibrium, tangent
+(the segments' blocks with the cross-segment blocks J_s^T K_st J_t; geometric stiffness per
+segment from its share (K Xi)_s of the chain's wrench) and segment loads (the share again),
+and each chain's linear stiffness on its section nodes J^T K_chain J (``chain_node_stiffness``)
+instead of the sum of its segments' 12 x 12 (docs/structure.md, "Tied cuts").
+
 Body-frame DOFs as in ``flexcal.validation.prototype.equilibrium``: translations then
 rotations of each body in its own axes; the frame's axes are the mechanism axes at the
 design pose. SI throughout.
@@ -39,14 +47,14 @@ from flexcal.fem.eigen import buckling_modes, effective_modal_mass, natural_mode
 from flexcal.fem.mass import box_inertia, rigid_body_mass
 from flexcal.geometry.params import MechanismParams
 
-from ..prototype.equilibrium import Loads, solve_equilibrium
+from ..prototype.equilibrium import Loads, build_assembly, evaluate, node_poses, solve_equilibrium
 from ..prototype.kinematics import se3_inverse
-from ..prototype.mechanism import FRAME_BODY, N_CHAINS, N_SEGMENTS, NUT_BODIES, Prototype
-from ..prototype.superelement import relative_pose
+from ..prototype.mechanism import FRAME_BODY, N_CHAINS, N_SEGMENTS, NUT_BODIES, Prototype, frame_stiffness
+from ..prototype.superelement import CoupledStiffness, segment_jacobian
 
 __all__ = ["PAYLOAD_BOX", "NominalState", "nominal_state", "payload_mass_matrix", "assemble_segment_matrices",
            "mount_mass", "rigid_influence", "support_stiffness", "mount_modes", "MountModes",
-           "mount_buckling_factor", "chain_buckling_factors", "chain_end_reduction", "require_rigid_ties"]
+           "mount_buckling_factor", "chain_buckling_factors", "chain_end_reduction", "chain_node_stiffness"]
 
 PAYLOAD_BOX = (0.200, 1.400, 0.420)  # the reference mount's (MechanismParams.payload_box, a mount file's box_mm)
 """Sides [m] of the box the 300 kg payload fills (x along the grating normal, y along the
@@ -68,15 +76,6 @@ class NominalState:
     commands: np.ndarray
 
 
-def require_rigid_ties(prototype: Prototype) -> None:
-    """Refuse a prototype whose cuts are tied through section fields (``chain_stiffness``, the
-    provider fem-tied): this assessment reads the segments' K_jj and 12 x 12, which are then not
-    what its frame uses (docs/meshing.md, "Session 24: the tied-cut frame", what is left)."""
-    if prototype.chain_stiffness is not None:
-        raise ValueError("the structure assessment is not defined yet for a prototype with tied cuts (provider "
-                         "fem-tied); build it with the provider fem")
-
-
 def nominal_state(prototype: Prototype, weight_factor: float = 1.0, *, commands: np.ndarray | None = None,
                   start: np.ndarray | None = None, extra_forces: tuple = ()) -> NominalState:
     """Equilibrium with the payload's weight times ``weight_factor`` at actuator
@@ -84,7 +83,6 @@ def nominal_state(prototype: Prototype, weight_factor: float = 1.0, *, commands:
     initial positions plus the command, no clearance or hysteresis), by Newton from
     ``start`` poses (default the design pose). ``extra_forces``: more dead loads
     ``(body, force (3,) [N] world, point (3,) [m] body frame)``."""
-    require_rigid_ties(prototype)
     mech = prototype.mechanism
     commands = np.zeros(3) if commands is None else np.asarray(commands, float)
     weight = weight_factor * mech.payload_mass * np.asarray(mech.gravity, float)
@@ -95,7 +93,7 @@ def nominal_state(prototype: Prototype, weight_factor: float = 1.0, *, commands:
     loads = Loads(point_forces=((FRAME_BODY, weight, np.asarray(mech.centre_of_gravity, float)),) + tuple(extra_forces),
                   springs=springs)
     poses, info = solve_equilibrium(prototype.assembly, prototype.initial_poses if start is None else start,
-                                    prototype.segment_stiffness.reshape(-1, 6, 6), loads, prototype.settings,
+                                    frame_stiffness(prototype, prototype.segment_stiffness), loads, prototype.settings,
                                     where=f"at commands {commands * 1e3} mm, weight x {weight_factor:g}")
     tension = -info.segment_gradient.reshape(N_CHAINS, N_SEGMENTS, 12)[:, 0, 0]
     return NominalState(poses=poses, tangent=info.tangent, segment_gradient=info.segment_gradient, tension=tension,
@@ -211,27 +209,39 @@ def mount_buckling_factor(unloaded: NominalState, loaded: NominalState) -> float
     return float(buckling_modes(sp.csr_matrix(K0), sp.csr_matrix(dK / scale), 6).factors[0]) + unloaded.weight_factor
 
 
+def _chain_alone(prototype: Prototype, chain: int):
+    """(assembly, stiffness) of chain ``chain`` alone: its six section nodes as free bodies
+    (6 DOF each, node axes, identity offsets; DOFs 6 k .. 6 k + 5 of node k) joined by its five
+    segments as the prototype's frame joins them (``frame_stiffness``: the K_jj, or the chain's
+    K_chain with tied cuts)."""
+    seg = np.arange(chain * N_SEGMENTS, (chain + 1) * N_SEGMENTS)
+    assembly = build_assembly([np.eye(6)] * (N_SEGMENTS + 1), np.arange(N_SEGMENTS + 1),
+                              np.broadcast_to(np.eye(4), (N_SEGMENTS + 1, 4, 4)),
+                              np.c_[np.arange(N_SEGMENTS), np.arange(1, N_SEGMENTS + 1)],
+                              prototype.assembly.segment_reference_inverse[seg])
+    stiffness = frame_stiffness(prototype, prototype.segment_stiffness)
+    if isinstance(stiffness, CoupledStiffness):
+        return assembly, CoupledStiffness(blocks=stiffness.blocks[chain:chain + 1],
+                                          segments=np.arange(N_SEGMENTS)[None])
+    return assembly, stiffness[seg]
+
+
 def _chain_matrices(prototype: Prototype, state: NominalState, chain: int) -> tuple[np.ndarray, np.ndarray]:
     """(K_0, dK) (36, 36) of chain ``chain`` alone on its six section nodes (node axes):
-    the segments' unloaded tangent and the change of their tangent at ``state``."""
-    from ..prototype.equilibrium import node_poses
-    from ..prototype.superelement import segment_tangent
-
+    the segments' unloaded tangent and the change of their tangent at ``state``
+    (``_chain_alone``; the cross-segment blocks of a tied chain in both)."""
+    assembly, stiffness = _chain_alone(prototype, chain)
     a = prototype.assembly
-    seg = np.arange(chain * N_SEGMENTS, (chain + 1) * N_SEGMENTS)
     nodes = node_poses(a, state.poses)
-    rel = relative_pose(nodes[a.segment_nodes[seg, 0]], nodes[a.segment_nodes[seg, 1]])
-    D = a.segment_reference_inverse[seg]
-    K_jj = prototype.segment_stiffness[chain]
-    loaded = segment_tangent(rel, D, K_jj, prototype.settings.step)
-    unloaded = segment_tangent(se3_inverse(D), D, K_jj, prototype.settings.step)
-    K0 = np.zeros((36, 36))
-    dK = np.zeros((36, 36))
-    for s in range(N_SEGMENTS):
-        dofs = np.arange(6 * s, 6 * s + 12)
-        K0[np.ix_(dofs, dofs)] += unloaded[s]
-        dK[np.ix_(dofs, dofs)] += loaded[s] - unloaded[s]
-    return K0, dK
+    ends = a.segment_nodes[chain * N_SEGMENTS:(chain + 1) * N_SEGMENTS]
+    loaded_poses = np.concatenate([nodes[ends[:, 0]], nodes[ends[-1:, 1]]])
+    unloaded_poses = np.broadcast_to(np.eye(4), (N_SEGMENTS + 1, 4, 4)).copy()
+    for s in range(N_SEGMENTS):  # the undeformed chain, node 0 at the origin
+        unloaded_poses[s + 1] = unloaded_poses[s] @ se3_inverse(assembly.segment_reference_inverse[s])
+    step = prototype.settings.step
+    loaded = evaluate(assembly, loaded_poses, stiffness, Loads(), True, step)[2]
+    unloaded = evaluate(assembly, unloaded_poses, stiffness, Loads(), True, step)[2]
+    return unloaded, loaded - unloaded
 
 
 def chain_buckling_factors(prototype: Prototype, state: NominalState) -> dict[str, np.ndarray]:
@@ -258,18 +268,37 @@ def chain_buckling_factors(prototype: Prototype, state: NominalState) -> dict[st
     return out
 
 
+def chain_node_stiffness(prototype: Prototype, chain: int) -> np.ndarray:
+    """(36, 36) [SI] linear stiffness of chain ``chain`` on its six section nodes (DOFs ux..rz
+    of node 0 .. 5, node axes): its segments' 12 x 12 summed; with tied cuts J^T K_chain J, J
+    (30, 36) the linear map of node motions to the segments' twists (xi_s = u_(s+1) - Ad(D_s)
+    u_s, ``segment_jacobian`` at the undeformed pose), which is that sum when K_chain is the
+    block diagonal of the segments' K_jj."""
+    K = np.zeros((36, 36))
+    if prototype.chain_stiffness is None:
+        for s in range(N_SEGMENTS):
+            dofs = np.arange(6 * s, 6 * s + 12)
+            K[np.ix_(dofs, dofs)] += prototype.segment_stiffness_12[chain, s]
+        return K
+    D = prototype.assembly.segment_reference_inverse[chain * N_SEGMENTS:(chain + 1) * N_SEGMENTS]
+    jacobian = segment_jacobian(se3_inverse(D), D)  # (5, 6, 12)
+    J = np.zeros((6 * N_SEGMENTS, 36))
+    for s in range(N_SEGMENTS):
+        J[6 * s:6 * s + 6, 6 * s:6 * s + 12] = jacobian[s]
+    K = J.T @ prototype.chain_stiffness[chain] @ J
+    return 0.5 * (K + K.T)
+
+
 def chain_end_reduction(prototype: Prototype, segment_mass: np.ndarray, chain: int) -> tuple[np.ndarray, np.ndarray]:
     """(K_c, M_c) (12, 12) of chain ``chain`` Guyan-reduced onto its end nodes A and B
     (DOFs ux..rz at A then B, chain axes, SI): the six section nodes joined by the
-    segments' linear 12 x 12 stiffness and ``segment_mass`` (6, 5, 12, 12); the interior
+    chain's linear stiffness (``chain_node_stiffness``) and ``segment_mass`` (6, 5, 12, 12); the interior
     nodes follow statically, Psi = [I; -K_ii^-1 K_ie; I]. Exact at zero frequency: M_c
     keeps the chain's rigid-body mass."""
-    require_rigid_ties(prototype)
-    K = np.zeros((36, 36))
+    K = chain_node_stiffness(prototype, chain)
     M = np.zeros((36, 36))
     for s in range(N_SEGMENTS):
         dofs = np.arange(6 * s, 6 * s + 12)
-        K[np.ix_(dofs, dofs)] += prototype.segment_stiffness_12[chain, s]
         M[np.ix_(dofs, dofs)] += segment_mass[chain, s]
     ends = np.r_[0:6, 30:36]
     interior = np.arange(6, 30)

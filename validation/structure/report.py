@@ -5,7 +5,10 @@ buckling factors (docs/structure.md says what each figure means and how far to t
 prototype's reduced model (``flexcal.validation.structure.mount``) with either
 "analytic" segments (beam-theory stiffness, rigid-piece mass, beam stresses) or "fem"
 segments (``FemSegments``: Guyan stiffness and mass of meshed segments, FEM stresses,
-beam stresses alongside). Returns a JSON-able dict; ``markdown(report)`` renders it.
+beam stresses alongside). ``provider`` (a name of ``prototype.providers.PROVIDERS``) builds the
+prototype's stiffness from the truth's provider instead (``fem-tied``: its chains' cuts tied
+through section fields), the masses and stress fields staying the segments'. Returns a
+JSON-able dict; ``markdown(report)`` renders it.
 """
 
 from __future__ import annotations
@@ -39,7 +42,8 @@ def _segment_masses(prototype, source) -> np.ndarray:
 
 def structure_report(mechanism: MechanismParams, *, segments: str = "analytic", elements_through: float | None = None,
                      mesher: str = "mapped", n_modes: int = N_MODES, trajectory_points: int = 77, refine: bool = False,
-                     figures=None, progress: bool = False, workers: int | None = None) -> dict[str, Any]:
+                     figures=None, progress: bool = False, workers: int | None = None,
+                     provider: str | None = None) -> dict[str, Any]:
     """The structural report of ``mechanism`` (module docstring); ``segments`` "analytic"
     or "fem"; ``mesher`` ("mapped" or "tetwild") and ``elements_through`` (None: the
     mesher's default, ``fem_segments.DEFAULT_ELEMENTS_THROUGH``): the FEM mesh;
@@ -76,8 +80,13 @@ def structure_report(mechanism: MechanismParams, *, segments: str = "analytic", 
         fem = FemSegments(mechanism.material, elements_through=elements_through, mesher=mesher, progress=progress,
                           workers=workers)
     fem_fine = fem.refined() if refine else None
-    provider = fem if fem is not None else analytic_provider(mechanism.material)
-    prototype = build_prototype(mechanism, [ActuatorTransmission()] * 3, provider)
+    if provider is not None:
+        from ..prototype.providers import stiffness_provider
+
+        stiffness = stiffness_provider(provider, progress=progress, workers=workers)
+    else:
+        stiffness = fem if fem is not None else analytic_provider(mechanism.material)
+    prototype = build_prototype(mechanism, [ActuatorTransmission()] * 3, stiffness)
     if fem_fine is not None:  # the refined driving chains built side by side now, not one by one later
         from ..prototype.segments import chain_slices
         from .workspace_report import REFINED_CHAINS

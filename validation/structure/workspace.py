@@ -126,8 +126,7 @@ def stress_at(prototype: Prototype, state: NominalState, fem=None, chains=None) 
     """Peak stresses and where they sit (``StressAt``) at ``state``; ``fem`` a
     ``FemSegments`` or None (beam bound only); ``chains``: indices of the chains the FEM
     figure is taken for (default all; the others get NaN and "")."""
-    from ..prototype.equilibrium import node_poses
-    from ..prototype.superelement import relative_pose, segment_deformation
+    from .fem_segments import stress_twists
     from .stress import chain_leaf_stresses
 
     values, labels = chain_leaf_stresses(prototype, state.segment_gradient)
@@ -136,10 +135,7 @@ def stress_at(prototype: Prototype, state: NominalState, fem=None, chains=None) 
     beam_where = tuple(labels[c][k[c]] for c in range(N_CHAINS))
     if fem is None:
         return StressAt(beam=beam, beam_where=beam_where)
-    a = prototype.assembly
-    nodes = node_poses(a, state.poses)
-    rel = relative_pose(nodes[a.segment_nodes[:, 0]], nodes[a.segment_nodes[:, 1]])
-    xi = segment_deformation(rel, a.segment_reference_inverse).reshape(N_CHAINS, N_SEGMENTS, 6)
+    xi = stress_twists(prototype, state.poses, fem)
     peak, where = np.full(N_CHAINS, np.nan), []
     for c, placement in enumerate(prototype.mechanism.chains):
         if chains is not None and c not in chains:
