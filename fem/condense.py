@@ -32,7 +32,7 @@ from flexcal.geometry.params import Material
 from .assembly import assemble_stiffness, check_mesh
 from .coupling import (DEFAULT_PLANE_TOLERANCE, MIRROR_PARITY, CouplingMap, RigidCoupling, coupling_map,
                        select_plane_nodes)
-from .solve import pardiso_available, solve_spd
+from .solve import inverse_quadratic_form, pardiso_available, solve_spd
 
 __all__ = [
     "HingeSolution",
@@ -484,22 +484,28 @@ def mirrored_coupled_stiffness(mesh, material: Material, couplings: list, axes: 
         alpha = _floating_shift(sub, G) if pieces and floating == "shift" else 0.0
         if alpha:
             sub = (sub + sp.triu(alpha * (G.T @ G))).tocsr()
-        # one dense copy [K_im, G^T], in Fortran order as PARDISO takes it (and as the rigid path's
-        # K_im[kept][:, masters] always was: the same bits)
-        rhs = np.empty((kept.size, masters.size + d_masters.size), order="F")
-        rhs[:, :masters.size] = K_im[np.ix_(kept, masters)]
-        rhs[:, masters.size:] = G.T.toarray()
-        X = solve_spd(sub, rhs, method="pardiso" if pardiso_available() else "splu", upper_triangle=True)
-        X_m, X_g = X[:, :masters.size], X[:, masters.size:]
-        block = K_mm[np.ix_(masters, masters)] - rhs[:, :masters.size].T @ X_m
+        # only M = [K_im, G^T]^T K_ii^-1 [K_im, G^T] is needed: its blocks are K_im^T X, G X_m and
+        # G X_g of X = K_ii^-1 [K_im, G^T] (inverse_quadratic_form: forward substitution only)
+        M = inverse_quadratic_form(sub, _class_rhs(K_im, kept, masters, G), upper_triangle=True)
+        n_k = masters.size
+        block = K_mm[np.ix_(masters, masters)] - M[:n_k, :n_k]
         if d_masters.size:
-            B = np.hstack([G @ X_m, np.eye(d_masters.size)])  # r = B [m; q]
-            block = np.pad(block, (0, d_masters.size)) + B.T @ np.linalg.solve(G @ X_g, B)  # B^T H^-1 B
-            block[masters.size:, masters.size:] -= alpha * np.eye(d_masters.size)  # the shift, undone
+            B = np.hstack([M[n_k:, :n_k], np.eye(d_masters.size)])  # r = B [m; q]
+            block = np.pad(block, (0, d_masters.size)) + B.T @ np.linalg.solve(M[n_k:, n_k:], B)  # B^T H^-1 B
+            block[n_k:, n_k:] -= alpha * np.eye(d_masters.size)  # the shift, undone
         both = np.concatenate([masters, d_masters])
         stiffness[np.ix_(both, both)] = 2.0 ** len(axes) * block
     order = _coupling_order(couplings, kinematic, distributing, n_m)
     return stiffness[np.ix_(order, order)]
+
+
+def _class_rhs(K_im: np.ndarray, kept: np.ndarray, masters: np.ndarray, G: sp.csr_matrix) -> np.ndarray:
+    """[K_im, G^T] (kept.size, n_masters + n_q) of one parity class, one dense copy in Fortran
+    order as PARDISO takes it (``mirrored_coupled_stiffness``)."""
+    rhs = np.empty((kept.size, masters.size + G.shape[0]), order="F")
+    rhs[:, :masters.size] = K_im[np.ix_(kept, masters)]
+    rhs[:, masters.size:] = G.T.toarray()
+    return rhs
 
 
 def _floating_pieces(tets: np.ndarray, kinematic: list) -> list[np.ndarray]:
@@ -564,14 +570,13 @@ def _pinned_block(sub: sp.csr_matrix, G: sp.csr_matrix, K_im: np.ndarray, K_mm: 
     rhs = np.empty((kept.size, n_m + G.shape[0]), order="F")
     rhs[:, :n_m] = K_im[kept]
     rhs[:, n_m:] = G_F.T.toarray()
-    X = solve_spd(K_FF, rhs, method="pardiso" if pardiso_available() else "splu", upper_triangle=True)
-    X_m, X_g = X[:, :n_m], X[:, n_m:]
-    block = np.pad(K_mm - rhs[:, :n_m].T @ X_m, (0, G.shape[0]))
+    M = inverse_quadratic_form(K_FF, rhs, upper_triangle=True)  # [K_im, G_F^T]^T K_FF^-1 [K_im, G_F^T]
+    block = np.pad(K_mm - M[:n_m, :n_m], (0, G.shape[0]))
     C = G @ rigid
     if np.linalg.matrix_rank(C) < C.shape[1]:
         raise ValueError("a part held by no kinematic coupling needs a distributing one to hold it")
-    H = scipy.linalg.cho_factor(G_F @ X_g)
-    B = np.hstack([G_F @ X_m, np.eye(G.shape[0])])  # r = B [m; q]
+    H = scipy.linalg.cho_factor(M[n_m:, n_m:])
+    B = np.hstack([M[n_m:, :n_m], np.eye(G.shape[0])])  # r = B [m; q]
     H_B, H_C = scipy.linalg.cho_solve(H, B), scipy.linalg.cho_solve(H, C)
     # min over the rigid motions a of (B x - C a)^T H^-1 (B x - C a)
     return block + B.T @ H_B - H_B.T @ C @ np.linalg.solve(C.T @ H_C, H_C.T @ B)
