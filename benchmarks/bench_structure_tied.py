@@ -1,5 +1,5 @@
 """The structure assessment of a scenario's as-built prototype with rigid ties (``--provider fem``)
-against tied cuts (``--provider fem-tied``) (docs/structure.md, "Tied cuts"): the first modes,
+against tied cuts (``--provider fem``) (docs/structure.md, "Tied cuts"): the first modes,
 the support stiffness at O_C (nuts held), the mount's and the chains' buckling factors and the
 lowest safety against yield (FEM segments: nominal and over the 77-point standard trajectory),
 at the design commands under the payload's weight; with ``--chain-newton D1`` also a Newton
@@ -113,7 +113,7 @@ def main() -> None:
     parser.add_argument("--chain-newton", metavar="CHAIN", help="a chain's name (D1, ...): its Newton path too")
     args = parser.parse_args()
     results = {}
-    for provider in ("fem", "fem-tied"):
+    for provider in ("fem-rigid", "fem"):
         prototype = as_built_prototype(args.scenario, args.seed, provider)
         results[provider] = figures(prototype)
         if args.chain_newton:
@@ -123,7 +123,7 @@ def main() -> None:
             linear = chain_buckling_factors(prototype, nominal_state(prototype))["held"][c]
             path = ", ".join(f"{s:g}: {mu:.3f}" for s, mu in chain_newton(prototype, c))
             print(f"{provider}: {args.chain_newton} alone, linearized held factor {linear:.3f}; Newton s: mu = {path}")
-    rigid, tied = results["fem"], results["fem-tied"]
+    rigid, tied = results["fem-rigid"], results["fem"]
 
     def row(name, a, b, fmt="{:.4g}"):
         with np.errstate(invalid="ignore"):  # inf -> inf (a chain in tension) reads nan
@@ -131,7 +131,7 @@ def main() -> None:
         print(f"{name}: " + ", ".join(fmt.format(v) for v in np.atleast_1d(a)) + " -> "
               + ", ".join(fmt.format(v) for v in np.atleast_1d(b)) + f"  [%: {change}]")
 
-    print(f"scenario {args.scenario}: rigid ties (fem) -> tied cuts (fem-tied)")
+    print(f"scenario {args.scenario}: rigid ties (fem-rigid) -> tied cuts (fem)")
     row("modes 1-6 [Hz]", rigid["frequencies_Hz"], tied["frequencies_Hz"])
     row("support stiffness, nuts held, " + " ".join(AXES), rigid["support_diagonal"], tied["support_diagonal"])
     row("mount buckling factor", rigid["mount_buckling"], tied["mount_buckling"])

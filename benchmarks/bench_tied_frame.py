@@ -1,4 +1,4 @@
-"""The prototype with its chains' cuts tied through section fields (``--provider fem-tied``)
+"""The prototype with its chains' cuts tied through section fields (``--provider fem``)
 against today's rigid ties (issue 26, docs/meshing.md "Session 24: the tied-cut frame"): per
 chain of a scenario's as-built mount, the end block (A clamped) of the frame's chain stiffness
 K_chain against that of the rigid segments' K_jj, in % on the diagonal; and, given two truth
@@ -31,11 +31,11 @@ def chain_softening(scenario_name: str, seed: int | None) -> None:
     scenario = load_scenario(scenario_name, seed=seed)
     mechanism, offsets, drives = as_built(scenario.space, scenario.values)
     transmissions = [(x0, cl, mu, scenario.breakaway_force) for x0, cl, mu in drives]
-    prototype = build_prototype(mechanism, transmissions, stiffness_provider("fem-tied", progress=False),
+    prototype = build_prototype(mechanism, transmissions, stiffness_provider("fem", progress=False),
                                 mount_offsets=offsets)
     # the rigidly tied segments: the provider fem's (the tied prototype's own K_jj hold the cut
     # fields rigid instead, tied_chains.tied_fem_provider)
-    rigid_ties = build_prototype(mechanism, transmissions, stiffness_provider("fem", progress=False),
+    rigid_ties = build_prototype(mechanism, transmissions, stiffness_provider("fem-rigid", progress=False),
                                  mount_offsets=offsets)
     print("chain | " + " | ".join(NAMES) + "   (tied - rigid) / rigid [%], end block with A clamped")
     for c, placement in enumerate(prototype.mechanism.chains):

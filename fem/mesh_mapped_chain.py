@@ -60,7 +60,7 @@ from .structured import _EDGES, _folded_tets, _straighten, grid_tet_mesh
 __all__ = ["ChainGrid", "cells_through", "chain_grid", "chain_mapped_supported", "mapped_mesh_chain",
            "mapped_mesh_chain_mirror_part",
            "DEFAULT_CHAIN_OPTIONS", "FAST_CHAIN_OPTIONS",
-           "PROTOTYPE_CHAIN_OPTIONS", "PROTOTYPE_FINE_CHAIN_OPTIONS", "EXTRA_CHAIN_OPTIONS"]
+           "PROTOTYPE_CHAIN_OPTIONS", "COARSE_PROTOTYPE_CHAIN_OPTIONS", "EXTRA_CHAIN_OPTIONS"]
 
 # The defaults of the chain mapper, chosen by accuracy with n = 7 through the neck
 # (docs/meshing.md, "Convergence": against the Richardson limit of a nested reference
@@ -74,10 +74,11 @@ DEFAULT_CHAIN_OPTIONS = {"aspect": 3.0, "n_arc": 8, "width_aspect": 12.0, "side_
 # Session 13's grid (n as given, side cells of 3 neck cells), used at n = 6: L1's leaf segments
 # within 0.85 % of the nested limit, D1's 0.61 % (docs/meshing.md, "Convergence"). The
 # structure assessment (validation/structure/fem_segments.py) still uses it; the virtual
-# prototype's segments did until session 15 and have PROTOTYPE_CHAIN_OPTIONS since.
+# prototype's segments did until session 15.
 FAST_CHAIN_OPTIONS = {**DEFAULT_CHAIN_OPTIONS, "side_aspect": 3.0, "slenderness": None}
-# The grid of the virtual prototype's segments (session 16), used at n = 7 asked for (8 through
-# the L leaves, 7 through the D leaves): the accurate default's cells through, but its DOF
+# The grid of the virtual prototype's segments from session 16 to 24, when its cuts were tied
+# rigidly (kept as the base of today's and for the measurements that compare with it), used at
+# n = 7 asked for (8 through the L leaves, 7 through the D leaves): the accurate default's cells through, but its DOF
 # moved to where they buy accuracy (docs/meshing.md, "The prototype's grid"): side cells of
 # 1 neck cell graded fast (2 per unit distance) into the width, blocks graded twice as fast
 # (block_grading 1), no refinement at the part's end faces and section rims (rim_aspect
@@ -87,13 +88,13 @@ FAST_CHAIN_OPTIONS = {**DEFAULT_CHAIN_OPTIONS, "side_aspect": 3.0, "slenderness"
 # torsion K[rx,rx] of L1 [m1, s0] went from +0.506 % to +0.476 %, every dominant entry of the
 # four leaf segments within 0.488 % (was 0.506 %), for +16 % of the table1 segments' CPU
 # (+5 % of a cold truth's, load ~15); docs/meshing.md, "Session 20: whole chains".
-PROTOTYPE_CHAIN_OPTIONS = {**DEFAULT_CHAIN_OPTIONS, "aspect": 2.0, "side_aspect": 1.0, "grading": 2.0,
-                           "rim_aspect": 24.0, "block_grading": 1.0}
-# A candidate grid for the prototype once its cuts are tied interfaces (session 24, not used
-# by default: the lead adopts it with the ties, so that the truth changes once). The ties add
+COARSE_PROTOTYPE_CHAIN_OPTIONS = {**DEFAULT_CHAIN_OPTIONS, "aspect": 2.0, "side_aspect": 1.0, "grading": 2.0,
+                                  "rim_aspect": 24.0, "block_grading": 1.0}
+# The prototype's grid since session 25, adopted with the cuts tied through section fields
+# (validation/prototype/tied_chains.py), so that the truth changed once. The ties add
 # ~0.06-0.12 % to a chain's torsion, so the segments' own error must leave room: every dominant
-# entry of the four leaf segments within 0.282 % of the Q2-hex reference limit (PROTOTYPE_CHAIN_
-# OPTIONS: 0.488 %, the torsion K[rx,rx]). Measured one knob at a time, the torsion error sits
+# entry of the four leaf segments within 0.282 % of the Q2-hex reference limit (COARSE_PROTOTYPE_
+# CHAIN_OPTIONS: 0.488 %, the torsion K[rx,rx]). Measured one knob at a time, the torsion error sits
 # mostly in the cells through the leaf, then in the width lines and the block cells at the leaf
 # faces: 10 cells through the L leaves and 8 through the D leaves at 7 asked for (slenderness
 # 6.25, even_through: both mirror planes on every leaf segment, the D segments a quarter
@@ -103,9 +104,9 @@ PROTOTYPE_CHAIN_OPTIONS = {**DEFAULT_CHAIN_OPTIONS, "aspect": 2.0, "side_aspect"
 # segments' cells split in 8 (strut_refinement 2: their share of a chain's error from 0.084 %
 # to 0.021 %). 1.5x the CPU of a cold table1 truth's segments. docs/meshing.md, "Session 24:
 # the prototype's grid for tied cuts" (figures, cost).
-PROTOTYPE_FINE_CHAIN_OPTIONS = {**PROTOTYPE_CHAIN_OPTIONS, "slenderness": 6.25, "even_through": True,
-                                "grading": 1.0, "edge_aspect": 2.0, "block_grading": 0.75, "aspect": 2.5,
-                                "max_aspect": 32.0, "strut_refinement": 2}
+PROTOTYPE_CHAIN_OPTIONS = {**COARSE_PROTOTYPE_CHAIN_OPTIONS, "slenderness": 6.25, "even_through": True,
+                           "grading": 1.0, "edge_aspect": 2.0, "block_grading": 0.75, "aspect": 2.5,
+                           "max_aspect": 32.0, "strut_refinement": 2}
 # Options of ``chain_grid`` that the defaults leave out (None there: as the defaults'
 # edge_aspect and grading), so the default grid and its cache keys stay as they were.
 EXTRA_CHAIN_OPTIONS = ("rim_aspect", "block_grading", "section_grading", "cuts", "even_through",

@@ -144,21 +144,23 @@ def test_the_prototypes_grid_within_half_a_percent_of_the_converged_stiffness(na
 def test_the_prototypes_grid_is_coarse_away_from_the_leaves():
     # where the prototype's grid saves its DOF (docs/meshing.md, "The prototype's grid"):
     # no refinement at the part's end faces and the section's rims, so a strut segment
-    # (no leaf) is a few cells; the leaves keep the accurate grid's cells through
+    # (no leaf) is a few cells before its own strut_refinement (session 24: every cell split in
+    # 2^3 for the tied cuts' fields); the leaves get at least the accurate grid's cells through
     from flexcal.fem.mesh_mapped_chain import PROTOTYPE_CHAIN_OPTIONS
     from flexcal.validation.prototype.fem_provider import DEFAULT_ELEMENTS_THROUGH
 
     strut = _segment("L1", 2)
     fine = chain_grid(strut, DEFAULT_ELEMENTS_THROUGH, **DEFAULT_CHAIN_OPTIONS)
-    coarse = chain_grid(strut, DEFAULT_ELEMENTS_THROUGH, **PROTOTYPE_CHAIN_OPTIONS)
+    coarse = chain_grid(strut, DEFAULT_ELEMENTS_THROUGH, **{**PROTOTYPE_CHAIN_OPTIONS, "strut_refinement": 1})
     assert coarse.active.sum() * 4 < fine.active.sum()
+    refined = chain_grid(strut, DEFAULT_ELEMENTS_THROUGH, **PROTOTYPE_CHAIN_OPTIONS)
+    assert refined.active.sum() == PROTOTYPE_CHAIN_OPTIONS["strut_refinement"] ** 3 * coarse.active.sum()
     for name in ("L1", "D1"):
         segment = _segment(name, 0)
-        assert (cells_through(segment, DEFAULT_ELEMENTS_THROUGH, PROTOTYPE_CHAIN_OPTIONS["slenderness"])
-                == cells_through(segment, 7, DEFAULT_CHAIN_OPTIONS["slenderness"]))
+        assert (cells_through(segment, DEFAULT_ELEMENTS_THROUGH, PROTOTYPE_CHAIN_OPTIONS["slenderness"], even=True)
+                >= cells_through(segment, 7, DEFAULT_CHAIN_OPTIONS["slenderness"]))
         grid = chain_grid(segment, DEFAULT_ELEMENTS_THROUGH, **PROTOTYPE_CHAIN_OPTIONS)
         accurate = chain_grid(segment, 7, **DEFAULT_CHAIN_OPTIONS)
-        assert grid.active.sum() < accurate.active.sum()
         # the end face x = 0 of the end block: no fine cell at its rim (the accurate grid's
         # is edge_aspect neck cells wide)
         assert np.diff(grid.x)[0] > 2 * np.diff(accurate.x)[0]
@@ -179,7 +181,7 @@ def test_even_through_gives_every_leaf_segment_both_mirror_planes():
     # session 24's knob (docs/meshing.md, "Session 24: the prototype's grid for tied cuts"): an
     # odd number of cells through the leaves is raised by one, so the core has a line at its
     # middle and a D leaf segment (7 through at 7 asked for) is condensed on a quarter, not a half
-    from flexcal.fem.mesh_mapped_chain import (PROTOTYPE_CHAIN_OPTIONS, PROTOTYPE_FINE_CHAIN_OPTIONS,
+    from flexcal.fem.mesh_mapped_chain import (COARSE_PROTOTYPE_CHAIN_OPTIONS, PROTOTYPE_CHAIN_OPTIONS,
                                                mapped_mesh_chain_mirror_part)
 
     d1, l1, strut = _segment("D1", 0), _segment("L1", 0), _segment("L1", 2)
@@ -187,27 +189,28 @@ def test_even_through_gives_every_leaf_segment_both_mirror_planes():
     assert cells_through(l1, 7, 5.5, even=True) == 8  # already even: as it was
     assert cells_through(l1, 7, None, even=True) == 8  # n as given, then made even
     assert cells_through(strut, 7, 5.5, even=True) == 7  # no leaf: its section has both planes anyway
-    # the fine grid: 10 through the L leaves (l / t = 5: 7 x 6.25 / 5 = 8.75 -> 9 -> 10), 8 through D's
-    fine = PROTOTYPE_FINE_CHAIN_OPTIONS
-    assert [cells_through(s, 7, fine["slenderness"], even=True) for s in (l1, d1)] == [10, 8]
-    assert mapped_mesh_chain_mirror_part(d1, elements_through_thickness=7, **PROTOTYPE_CHAIN_OPTIONS)[1] == (2,)
+    # the prototype's grid: 10 through the L leaves (l / t = 5: 7 x 6.25 / 5 = 8.75 -> 9 -> 10), 8 through D's
+    grid_options = PROTOTYPE_CHAIN_OPTIONS
+    assert [cells_through(s, 7, grid_options["slenderness"], even=True) for s in (l1, d1)] == [10, 8]
+    coarse = COARSE_PROTOTYPE_CHAIN_OPTIONS  # without even_through: a D leaf segment on a half
+    assert mapped_mesh_chain_mirror_part(d1, elements_through_thickness=7, **coarse)[1] == (2,)
     assert mapped_mesh_chain_mirror_part(d1, elements_through_thickness=7,
-                                         **{**PROTOTYPE_CHAIN_OPTIONS, "even_through": True})[1] == (1, 2)
-    grid = chain_grid(d1, 7, **{**PROTOTYPE_CHAIN_OPTIONS, "even_through": True})
+                                         **{**coarse, "even_through": True})[1] == (1, 2)
+    grid = chain_grid(d1, 7, **{**coarse, "even_through": True})
     core = CHAINS["D1"].thickness_1 + 2 * CHAINS["D1"].fillet
     # 1e-9: the core's end line, exact to round-off
     assert np.count_nonzero(np.abs(grid.p) < 0.5 * core * (1 - 1e-9)) + 1 == 8 and np.any(grid.p == 0.0)
 
 
 def test_strut_refinement_splits_only_the_cells_of_strut_segments():
-    from flexcal.fem.mesh_mapped_chain import PROTOTYPE_CHAIN_OPTIONS
+    from flexcal.fem.mesh_mapped_chain import COARSE_PROTOTYPE_CHAIN_OPTIONS as base
 
     strut, leaf = _segment("L1", 2), _segment("D1", 1)
-    finer = {**PROTOTYPE_CHAIN_OPTIONS, "strut_refinement": 2}
-    coarse, fine = chain_grid(strut, 7, **PROTOTYPE_CHAIN_OPTIONS), chain_grid(strut, 7, **finer)
+    finer = {**base, "strut_refinement": 2}
+    coarse, fine = chain_grid(strut, 7, **base), chain_grid(strut, 7, **finer)
     for a, b in ((coarse.x, fine.x), (coarse.p, fine.p), (coarse.q, fine.q)):
         assert len(b) - 1 == 2 * (len(a) - 1) and np.array_equal(b[::2], a)  # nested: every cell halved
-    same, kept = chain_grid(leaf, 7, **PROTOTYPE_CHAIN_OPTIONS), chain_grid(leaf, 7, **finer)
+    same, kept = chain_grid(leaf, 7, **base), chain_grid(leaf, 7, **finer)
     assert all(np.array_equal(u, v) for u, v in ((same.x, kept.x), (same.p, kept.p), (same.q, kept.q)))
     with pytest.raises(ValueError, match="strut_refinement"):
-        chain_grid(strut, 7, **{**PROTOTYPE_CHAIN_OPTIONS, "strut_refinement": 1.5})
+        chain_grid(strut, 7, **{**base, "strut_refinement": 1.5})

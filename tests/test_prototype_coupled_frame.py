@@ -185,9 +185,9 @@ def test_the_tied_provider_names_its_cuts_and_refuses_what_it_cannot_tie():
 
     assert cut_interfaces("d12/p8") == ("d12", "p8", "p8", "d12")  # m1, s0, s1, m2
     assert cut_interfaces("d12") == ("d12",) * 4
-    provider = stiffness_provider("fem-tied", progress=False)
+    provider = stiffness_provider("fem", progress=False)
     assert callable(provider.chain_stiffness) and "d12/p8" in provider.description
-    assert not hasattr(stiffness_provider("fem", progress=False), "chain_stiffness")  # the default: rigid ties
+    assert not hasattr(stiffness_provider("fem-rigid", progress=False), "chain_stiffness")  # rigid ties
     with pytest.raises(ValueError, match="unknown ties"):
         tied_fem_provider("d7")
     with pytest.raises(ValueError, match="mapped mesher"):

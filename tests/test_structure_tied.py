@@ -244,11 +244,11 @@ def test_a_chain_alone_has_the_mounts_tangent_on_its_interior_nodes(mounts):
 
 @pytest.fixture(scope="module")
 def tied_truth():
-    """The reference mount with the provider fem-tied (d12/p8), built once (cold ~50 s of CPU for
+    """The reference mount with the provider fem (cuts tied d12/p8), built once (cold ~50 s of CPU for
     its two tied chains; then from the FEM cache)."""
     from flexcal.validation.prototype.providers import stiffness_provider
 
-    return build_prototype(reference_mechanism(), NOMINAL, stiffness_provider("fem-tied", progress=False))
+    return build_prototype(reference_mechanism(), NOMINAL, stiffness_provider("fem", progress=False))
 
 
 @pytest.mark.slow

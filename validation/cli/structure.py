@@ -21,7 +21,7 @@ EXAMPLES = (
     "flexcal structure --out runs/structure                  # beam-theory segments, ~7 s of CPU",
     "flexcal structure --segments fem --out runs/structure-fem  # meshed segments (mapped), ~1 min of CPU cold, cached",
     "flexcal structure --segments fem --mesher tetwild --out runs/structure-tw  # fTetWild segments, ~5 min cold",
-    "flexcal structure --segments fem --provider fem-tied --out runs/structure-tied  # the tied-cut truth's frame",
+    "flexcal structure --segments fem --provider fem --out runs/structure-truth  # the truth's frame (cuts tied)",
 )
 
 
@@ -46,8 +46,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
     parser.add_argument("--provider", choices=PROVIDERS,
                         help="the prototype's stiffness from the truth's provider instead of the segments' own "
-                             "(fem-tied: each chain's cuts tied through section fields, docs/structure.md \"Tied "
-                             "cuts\"); masses and stress fields stay the segments'")
+                             "(fem: each chain's cuts tied through section fields, docs/structure.md \"Tied cuts\"; "
+                             "fem-rigid: tied rigidly); masses and stress fields stay the segments'")
     parser.add_argument("--modes", type=int, default=12, help="number of mount modes (default %(default)s)")
     parser.add_argument("--trajectory-points", type=int, default=77,
                         help="points of the standard trajectory the stresses are taken over (1 + a multiple of 4, >= 13; 0: nominal only; "

@@ -34,10 +34,11 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--noise-urad", type=float, default=None,
                         help="sensor noise standard deviation per channel [urad] (default: the scenario's; table1: 0)")
     parser.add_argument("--provider", choices=PROVIDERS,
-                        help="segment stiffness: FEM condensation of the as-built segments on the mapped mesh "
-                             "(default), the same on fTetWild meshes (fem-tetwild), the same with each chain's "
-                             "segments joined through section fields at the cuts instead of rigidly (fem-tied, an "
-                             "option: docs/meshing.md) or the closed-form compliance "
+                        help="segment stiffness: FEM condensation of the as-built segments on the mapped mesh, "
+                             "each chain's segments joined through section fields at its cuts (fem, the default; "
+                             "docs/meshing.md), the same joined rigidly (fem-rigid: the chains 19-23 %% too stiff "
+                             "axially, for comparison), rigidly joined segments on fTetWild meshes (fem-tetwild) "
+                             "or the closed-form compliance "
                              "(fast, for checks only: then truth shares the model's hinge formulas)")
     add_trajectory(parser)
     add_mount(parser)

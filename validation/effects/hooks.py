@@ -12,7 +12,7 @@ the order the effects are given:
 ``modify_stiffness(stiffness, context) -> stiffness``
     stiffness (6, 5, 6, 6): K_jj [SI] of the five segments of chains L1..L3, D1..D3;
     return the modified array (a weaker hinge, a cracked strut, temperature). With tied cuts
-    (provider fem-tied) the frame takes the change to each chain's K_chain by the segments'
+    (the provider fem) the frame takes the change to each chain's K_chain by the segments'
     congruences (``mechanism.tied_chain_stiffness``; docs/effects.md, "Effects on tied cuts"),
     as for the K_jj that ``modify_mechanism`` and ``modify_loaded_mechanism`` change.
 ``modify_mechanism(conditions, context) -> conditions``

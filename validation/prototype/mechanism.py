@@ -243,8 +243,8 @@ def stiffness_congruence(before: np.ndarray, after: np.ndarray) -> np.ndarray:
     middle = inverse @ after @ np.swapaxes(inverse, -1, -2)
     values, vectors = np.linalg.eigh(0.5 * (middle + np.swapaxes(middle, -1, -2)))
     if np.any(values <= 0):
-        raise ValueError("an effect made a segment's stiffness K_jj not positive definite; with tied cuts (provider "
-                         "fem-tied) its change acts on the chain's K_chain by a congruence that needs one")
+        raise ValueError("an effect made a segment's stiffness K_jj not positive definite; with tied cuts (the provider "
+                         "fem) its change acts on the chain's K_chain by a congruence that needs one")
     root = vectors @ (np.sqrt(values)[..., None] * np.swapaxes(vectors, -1, -2))
     return np.swapaxes(inverse, -1, -2) @ root @ np.swapaxes(L, -1, -2)
 

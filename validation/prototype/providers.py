@@ -1,15 +1,18 @@
 """The virtual prototype's segment stiffness, chosen by name: ``fem`` (FEM condensation of the
-as-built segments on the mapped multi-block mesh, cached), ``fem-tetwild`` (the same on fTetWild
-meshes of the CadQuery solids), ``fem-tied`` (``fem`` with each chain's segments joined through
-section fields at its four cuts, ``tied_chains.DEFAULT_TIES``, instead of rigidly: an option,
-docs/meshing.md "Session 24: the tied-cut frame") or ``analytic`` (the closed-form compliance; truth then shares the
-model's hinge formulas, so it is for checks only)."""
+as-built segments on the mapped multi-block mesh, each chain's five segments joined through
+section fields at its four cuts, ``tied_chains.DEFAULT_TIES``: the default since session 25;
+docs/meshing.md "Session 25: the prototype's cuts tied by default"), ``fem-rigid`` (the same
+segments joined rigidly at the cuts, as the prototype was until session 24: the whole chains
+19-23 % too stiff axially; for comparison), ``fem-tetwild`` (rigidly joined segments on fTetWild
+meshes of the CadQuery solids: the ties need the mapped mesh's faces) or ``analytic`` (the
+closed-form compliance; truth then shares the model's hinge formulas, so it is for checks
+only). Every FEM provider meshes on the prototype's grid (``PROTOTYPE_CHAIN_OPTIONS``)."""
 
 from __future__ import annotations
 
 __all__ = ["stiffness_provider", "PROVIDERS"]
 
-PROVIDERS = ("fem", "fem-tetwild", "fem-tied", "analytic")
+PROVIDERS = ("fem", "fem-rigid", "fem-tetwild", "analytic")
 
 
 def stiffness_provider(kind: str, *, progress: bool = True, workers: int | None = 0, scheduler: str | None = None):
@@ -28,7 +31,7 @@ def stiffness_provider(kind: str, *, progress: bool = True, workers: int | None 
 
         return fem_provider(progress=progress, workers=workers, scheduler=scheduler, mesher="tetwild",
                             elements_through_thickness=TETWILD_ELEMENTS_THROUGH)
-    if kind == "fem-tied":
+    if kind == "fem":
         from .tied_chains import DEFAULT_TIES, tied_fem_provider
 
         return tied_fem_provider(DEFAULT_TIES, progress=progress, workers=workers, scheduler=scheduler)

@@ -24,7 +24,7 @@ DOFs this module adds:
   laterally (turning held, as the payload frame holds it).
 
 A prototype whose cuts are tied through section fields (``Prototype.chain_stiffness``, the
-provider fem-tied; docs/meshing.md, "Session 24: the tied-cut frame") is assessed on what its
+the provider fem; docs/meshing.md, "Session 24: the tied-cut frame") is assessed on what its
 frame uses (``mechanism.frame_stiffness``, a ``CoupledStiffness``): its equilibrium, tangent
 (the segments' blocks with the cross-segment blocks J_s^T K_st J_t; geometric stiffness per
 segment from its share (K Xi)_s of the chain's wrench) and segment loads (the share again),

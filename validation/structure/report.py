@@ -6,8 +6,8 @@ prototype's reduced model (``flexcal.validation.structure.mount``) with either
 "analytic" segments (beam-theory stiffness, rigid-piece mass, beam stresses) or "fem"
 segments (``FemSegments``: Guyan stiffness and mass of meshed segments, FEM stresses,
 beam stresses alongside). ``provider`` (a name of ``prototype.providers.PROVIDERS``) builds the
-prototype's stiffness from the truth's provider instead (``fem-tied``: its chains' cuts tied
-through section fields), the masses and stress fields staying the segments'. Returns a
+prototype's stiffness from the truth's provider instead (``fem``: its chains' cuts tied
+through section fields; ``fem-rigid``: tied rigidly), the masses and stress fields staying the segments'. Returns a
 JSON-able dict; ``markdown(report)`` renders it.
 """
 

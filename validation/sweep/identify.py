@@ -61,10 +61,10 @@ def identification_accuracy(params, settings: dict[str, Any], *, cache_directory
     start = time.perf_counter()
     space = parameter_space(mount_with_design(params, settings.get("mount")))
     scenario = load_scenario(settings["scenario"], space=space)
-    if settings["provider"] == "fem":
-        from ..prototype.fem_provider import fem_provider
+    if settings["provider"] == "fem":  # the truth's: each chain's cuts tied (providers.stiffness_provider)
+        from ..prototype.tied_chains import DEFAULT_TIES, tied_fem_provider
 
-        provider = fem_provider(cache_directory=cache_directory, progress=False)
+        provider = tied_fem_provider(DEFAULT_TIES, cache_directory=cache_directory, progress=False)
     else:
         from ..prototype.segments import analytic_provider
 
