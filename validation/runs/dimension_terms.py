@@ -44,8 +44,8 @@ from flexcal.model.parameters import DIMENSION_SYMBOLS, ParameterSpace
 
 from ..prototype.segments import StiffnessProvider, chain_slices, prepare_provider
 from .chain_kinematics import chain_shortening
-from .model_correction import (SLOPE_STEPS, compliance_factors, provider_chain_compliance, same_design,
-                               unchanged_slices)
+from .model_correction import (SLOPE_STEPS, compliance_factors, provider_chain_compliance, rigid_cuts, same_design,
+                               tied_factor_ratios, unchanged_slices)
 
 __all__ = ["compliance_curvatures", "shortening_slopes", "curved_space", "moved_chain", "moved_factors", "slice_owners"]
 
@@ -121,7 +121,7 @@ def compliance_curvatures(space: ParameterSpace, provider: StiffnessProvider,
     prepare_provider(provider, list(dict.fromkeys(slices)))  # parallel FEM builds
     ratio = {key: moved_factors(alike[key][0], chain, provider, mech.material, alike[key][1:])
              for key, chain in chains.items()}
-    nominal = compliance_factors(space, provider)
+    nominal = compliance_factors(space, rigid_cuts(provider))  # the moved chains' own composition
     h = np.array([steps[s] for s in DIMENSION_SYMBOLS])
     out = np.zeros((len(mech.chains), len(DIMENSION_SYMBOLS), len(DIMENSION_SYMBOLS), 8))
     for c in first:
@@ -132,6 +132,8 @@ def compliance_curvatures(space: ParameterSpace, provider: StiffnessProvider,
         for k, m in itertools.combinations(range(len(DIMENSION_SYMBOLS)), 2):
             out[c, k, m] = out[c, m, k] = ((both[k, m] - h[k] ** 2 * out[c, k, k] - h[m] ** 2 * out[c, m, m])
                                            / (2.0 * h[k] * h[m]))
+    if (ratios := tied_factor_ratios(space, provider)) is not None:  # tied: the rigid cuts' relative curvature
+        out *= ratios[:, None, None, :]
     return out[design]
 
 

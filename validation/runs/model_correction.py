@@ -20,46 +20,81 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
+import scipy.linalg
 
 from flexcal.geometry.params import FlexureChain
 from flexcal.model.chain import chain_compliance_matrix
 from flexcal.model.hinge import ENTRY_INDEX
-from flexcal.model.serial import serial_compliance
 from flexcal.model.parameters import ParameterSpace
 
-from ..prototype.segments import (StiffnessProvider, chain_slices, end_stiffness, prepare_provider, section_nodes)
-from .model_names import DEFAULT_BREAKAWAY_N, MODELS
+from ..prototype.segments import (StiffnessProvider, chain_slices, end_stiffness, prepare_chains, prepare_provider,
+                                  section_nodes)
+from .model_names import DEFAULT_BREAKAWAY_N, MODEL_STIFFNESS, MODELS
 
-__all__ = ["provider_chain_compliance", "compliance_factors", "compliance_slopes", "slope_provider", "unchanged_slices", "same_design", "corrected_space",
-           "model_space", "MODELS", "DEFAULT_BREAKAWAY_N", "SLOPE_STEPS", "SLOPE_ELEMENTS_THROUGH",
+__all__ = ["provider_chain_compliance", "twist_end_compliance", "compliance_factors", "rigid_cuts", "tied_factor_ratios", "compliance_slopes", "slope_provider", "unchanged_slices", "same_design", "corrected_space",
+           "model_space", "MODEL_STIFFNESS", "MODELS", "DEFAULT_BREAKAWAY_N", "SLOPE_STEPS", "SLOPE_ELEMENTS_THROUGH",
            "SLOPE_METHODS", "SLOPE_METHOD", "segment_stiffness_slopes", "DERIVATIVE_STEP"]
 
 
 def provider_chain_compliance(chain: FlexureChain, provider: StiffnessProvider) -> np.ndarray:
-    """(6, 6) compliance at end B of ``chain`` (A clamped, chain frame) [SI] from a
-    segment stiffness provider: each segment's end compliance moved to B and summed (Eq. 1)."""
+    """(6, 6) compliance at end B of ``chain`` (A clamped, chain frame) [SI] from a segment
+    stiffness provider, the chain as the virtual prototype's frame holds it
+    (``twist_end_compliance``): a provider with ``chain_stiffness(chain)`` (the tied one,
+    ``tied_chains.tied_fem_provider``: the five segments joined through section fields at the
+    cuts) on its K_chain (30, 30); any other on the block diagonal of its five segments' K_jj
+    (rigid cuts), which is Eq. 1's sum of each segment's end compliance moved to B."""
+    tied = getattr(provider, "chain_stiffness", None)
+    if callable(tied):
+        return twist_end_compliance(np.asarray(tied(chain), dtype=float), section_nodes(chain))
     nodes = section_nodes(chain)
     return _composed_compliance(chain, [provider(chain, float(start), float(end))
                                         for start, end in zip(nodes[:-1], nodes[1:])])
 
 
 def _composed_compliance(chain: FlexureChain, segments) -> np.ndarray:
-    """``provider_chain_compliance`` from the chain's five segment stiffnesses (12, 12) in order."""
-    nodes = section_nodes(chain)
-    stiffness = np.array([end_stiffness(k) for k in segments])
-    compliance = np.linalg.inv(0.5 * (stiffness + np.swapaxes(stiffness, -1, -2)))
-    ends = np.stack([nodes[1:], np.zeros(len(compliance)), np.zeros(len(compliance))], axis=-1)
-    total = serial_compliance(compliance, np.broadcast_to(np.eye(3), compliance.shape[:1] + (3, 3)), ends,
-                              np.array([chain.length, 0.0, 0.0]))
+    """``provider_chain_compliance`` from the chain's five segment stiffnesses (12, 12) in order,
+    joined rigidly at the cuts: K_chain the block diagonal of their K_jj."""
+    return twist_end_compliance(scipy.linalg.block_diag(*(end_stiffness(k) for k in segments)), section_nodes(chain))
+
+
+def twist_end_compliance(twist_stiffness: np.ndarray, nodes: np.ndarray) -> np.ndarray:
+    """(6, 6) [SI] compliance at the last of ``nodes`` (n + 1,) [m, along x] of n segments in
+    series whose deformation twists carry ``twist_stiffness`` (6 n, 6 n) [SI] (energy 1/2 Xi^T K
+    Xi, each segment's twist at its end node, chain frame; ``fem.cut_warping.chain_twist_stiffness``),
+    the first node clamped, chain frame.
+
+    A wrench f at B loads segment s's end node x_(s+1) with T_s^T f, T_s the twist transfer from
+    there to B (``twist_transform``, offset (x_(s+1) - x_B) e_x); the twists Xi = K^-1 T^T f move B
+    by T Xi, so C = T K^-1 T^T, T = [T_1 .. T_n] (6, 6 n) (Eq. 1 for coupled segments). With K
+    block diagonal (the segments joined rigidly: K_ss their K_jj) it is Eq. 1, sum_s T_s K_ss^-1
+    T_s^T. K is solved Jacobi-scaled (its entries span ~1e9 N/m to the leaves' N m/rad) by Cholesky."""
+    from flexcal.geometry.frames import twist_transform
+
+    nodes = np.asarray(nodes, dtype=float)
+    n = len(nodes) - 1
+    stiffness = np.asarray(twist_stiffness, dtype=float)
+    if stiffness.shape != (6 * n, 6 * n):
+        raise ValueError(f"twist stiffness {stiffness.shape} does not match {n} segments (6 n, 6 n)")
+    offsets = np.stack([nodes[1:] - nodes[-1], np.zeros(n), np.zeros(n)], axis=-1)
+    transfer = np.concatenate(list(twist_transform(np.broadcast_to(np.eye(3), (n, 3, 3)), offsets)), axis=1)
+    root = 1.0 / np.sqrt(np.diag(stiffness))
+    scaled = 0.5 * (stiffness + stiffness.T) * root[:, None] * root[None, :]
+    try:
+        factor = scipy.linalg.cho_factor(scaled)
+    except np.linalg.LinAlgError:
+        raise ValueError("the chain's twist stiffness is not positive definite; check the provider") from None
+    weighted = transfer * root[None, :]
+    total = weighted @ scipy.linalg.cho_solve(factor, weighted.T)
     return 0.5 * (total + total.T)
 
 
 def compliance_factors(space: ParameterSpace, provider: StiffnessProvider) -> np.ndarray:
     """(n_chains, 8) ratios provider / closed form of the eight entries (``ENTRY_INDEX``
-    order) at the nominal chains of ``space.mechanism`` (no actuator spring) [-]."""
+    order) at the nominal chains of ``space.mechanism`` (no actuator spring) [-], each chain
+    as ``provider_chain_compliance`` composes it (a tied provider's: through its cut fields)."""
     mech = space.mechanism
     rows, done = [], {}
-    prepare_provider(provider, chain_slices(p.chain for p in mech.chains))  # parallel FEM builds
+    prepare_chains(provider, [p.chain for p in mech.chains])  # parallel FEM builds
     for placement in mech.chains:
         key = placement.chain
         if key not in done:  # identical chains (L1-L3, D1-D3) share their FEM solve
@@ -72,6 +107,31 @@ def compliance_factors(space: ParameterSpace, provider: StiffnessProvider) -> np
         raise ValueError("the provider's chain compliance has an entry of another sign than the closed form's; "
                          "the segment stiffness is not a valid chain (check the provider)")
     return factors
+
+
+def rigid_cuts(provider: StiffnessProvider) -> StiffnessProvider:
+    """``provider``'s segments joined rigidly at the cuts: ``provider`` itself unless it has
+    ``chain_stiffness`` (the tied one), else its ``(chain, x_start, x_end)`` (the rigidly tied
+    segments, ``tied_chains.tied_fem_provider``) and ``prepare`` alone, so that a chain composed
+    from it (``provider_chain_compliance``, ``chain_kinematics.chain_shortening``) is joined rigidly."""
+    if not callable(getattr(provider, "chain_stiffness", None)):
+        return provider
+
+    def segments(chain: FlexureChain, x_start: float, x_end: float) -> np.ndarray:
+        return provider(chain, x_start, x_end)
+
+    segments.prepare = getattr(provider, "prepare", None)
+    return segments
+
+
+def tied_factor_ratios(space: ParameterSpace, provider: StiffnessProvider) -> np.ndarray | None:
+    """(n_chains, 8): ``compliance_factors`` of a tied ``provider`` (with ``chain_stiffness``) over
+    those of its segments joined rigidly (``rigid_cuts``), at the nominal chains [-]; None for any
+    other provider. The dimension terms (slopes, curvatures) are measured on the rigidly joined
+    segments as relative changes and scaled by these (docs/model.md 7, "Session 25")."""
+    if rigid_cuts(provider) is provider:
+        return None
+    return compliance_factors(space, provider) / compliance_factors(space, rigid_cuts(provider))
 
 
 # Relative step of each dimension for the slopes (central difference, +-step), inside the
@@ -213,6 +273,8 @@ def _slopes_by_builds(space: ParameterSpace, provider: StiffnessProvider,
         middle[c, DIMENSION_SYMBOLS.index(symbol)] += 0.5 * done[chain]
     if provider is not fine:  # on a coarser grid: its relative slope times the factor on the provider's grid
         out *= compliance_factors(space, fine)[:, None, :] / np.where(middle == 0.0, 1.0, middle)  # 0: a design's copy
+    elif (ratios := tied_factor_ratios(space, fine)) is not None:  # tied: the rigid cuts' relative slope
+        out *= ratios[:, None, :]
     return out[design]
 
 
@@ -405,6 +467,8 @@ def _slopes_condensed(space: ParameterSpace, provider: StiffnessProvider,
                 closed = chain_compliance_matrix(moved, mech.material)
                 factors[sign] = np.array([richer[i, j] / closed[i, j] for i, j in ENTRY_INDEX.values()])
             out[c, k] = (factors[1] - factors[-1]) / (2.0 * step)
+    if (ratios := tied_factor_ratios(space, provider)) is not None:  # tied: the rigid cuts' relative slope
+        out *= ratios[:, None, :]
     return out[design]
 
 
@@ -429,15 +493,15 @@ def model_space(stiffness: str = "fem", second_order: bool = True, *, progress: 
 
     model (``MODELS``): "paper" is Eq. 1-8 as written (closed-form chains, no second-order
     terms; ``stiffness`` and ``second_order`` are not read); "second-order" takes ``stiffness``
-    "fem" (FEM-informed chain compliance, FEM solves cached) or "closed-form" (the paper's
-    Eq. 1) and ``second_order`` (the geometric second-order terms,
-    ``flexcal.model.second_order``); "consistent" (``second_order`` True only) with
-    ``stiffness`` "fem" is ``chain_kinematics.consistent_space`` over FEM factors with their
-    slopes, with "closed-form" the same model on Eq. 1's chains with the chains' own
-    shortening form (no measured correction); both with the clearance's play state at
-    ``breakaway_force`` (None: ``DEFAULT_BREAKAWAY_N``). The quadratic dimension terms are added on
-    top by ``dimension_terms.curved_space`` (which reads this module's slopes: the command line
-    composes the two, ``cli.opening.calibration_model``).
+    (``MODEL_STIFFNESS``) "fem" or "fem-tied" (FEM-informed chain compliance from the provider of
+    that name, FEM solves cached) or "closed-form" (the paper's Eq. 1) and ``second_order`` (the
+    geometric second-order terms, ``flexcal.model.second_order``); "consistent" (``second_order``
+    True only) with ``stiffness`` "fem" or "fem-tied" is ``chain_kinematics.consistent_space``
+    over that provider's factors with their slopes, with "closed-form" the same model on Eq. 1's
+    chains with the chains' own shortening form (no measured correction); both with the
+    clearance's play state at ``breakaway_force`` (None: ``DEFAULT_BREAKAWAY_N``). The quadratic
+    dimension terms are added on top by ``dimension_terms.curved_space`` (which reads this
+    module's slopes: the command line composes the two, ``cli.opening.calibration_model``).
     breakaway_force [N] for "second-order": the clearance's play state with that breakaway
     force (None: Eq. 7's memoryless clip; docs/model.md 9). workers / scheduler: where missing
     FEM segments are built (``fem_provider``)."""
@@ -445,8 +509,8 @@ def model_space(stiffness: str = "fem", second_order: bool = True, *, progress: 
 
     if model not in MODELS:
         raise ValueError(f"model {model!r} must be one of {', '.join(MODELS)}")
-    if stiffness not in ("fem", "closed-form"):
-        raise ValueError(f"model stiffness {stiffness!r} must be 'fem' or 'closed-form'")
+    if stiffness not in MODEL_STIFFNESS:
+        raise ValueError(f"model stiffness {stiffness!r} must be one of {', '.join(MODEL_STIFFNESS)}")
     space = parameter_space(mechanism)
     if model == "paper":
         return space
@@ -458,14 +522,15 @@ def model_space(stiffness: str = "fem", second_order: bool = True, *, progress: 
         if stiffness == "closed-form":  # Eq. 1's chains and the chains' own shortening form, nothing measured
             return dataclasses.replace(space, second_order=True, breakaway_force=force,
                                        chain_shortening=(0.0,) * (36 * len(space.mechanism.chains)))
-        from ..prototype.fem_provider import fem_provider
+        from ..prototype.providers import stiffness_provider
         from .chain_kinematics import consistent_space
 
-        provider = fem_provider(progress=progress, workers=workers, scheduler=scheduler)
+        provider = stiffness_provider(stiffness, progress=progress, workers=workers, scheduler=scheduler)
         space = consistent_space(corrected_space(space, provider, slopes=True), provider)
         return dataclasses.replace(space, breakaway_force=force)
-    if stiffness == "fem":
-        from ..prototype.fem_provider import fem_provider
+    if stiffness != "closed-form":
+        from ..prototype.providers import stiffness_provider
 
-        space = corrected_space(space, fem_provider(progress=progress, workers=workers, scheduler=scheduler))
+        space = corrected_space(space, stiffness_provider(stiffness, progress=progress, workers=workers,
+                                                          scheduler=scheduler))
     return dataclasses.replace(space, second_order=bool(second_order), breakaway_force=breakaway_force)
