@@ -16,8 +16,7 @@ from flexcal.validation.prototype.cut_fields import (interface_condensed, interf
 from flexcal.validation.prototype.segments import analytic_provider, end_stiffness, section_nodes
 from flexcal.validation.reports.chain_reference import reference_chain
 from flexcal.validation.runs.chain_kinematics import chain_shortening
-from flexcal.validation.runs.model_correction import (compliance_factors, provider_chain_compliance, rigid_cuts,
-                                                      tied_factor_ratios, twist_end_compliance)
+from flexcal.validation.runs.model_correction import compliance_factors, provider_chain_compliance, twist_end_compliance
 
 # the coarse whole L1 chain (2 through), distributing order-2 fields at the mid-connector cuts and
 # kinematic order-2 ones at the strut cuts: a K_chain with the warping's coupling, in < 1 s
@@ -94,17 +93,43 @@ def test_the_tied_chains_end_compliance_is_the_joined_stretchs():
 def test_a_tied_providers_factors_come_from_its_chain_stiffness():
     space = parameter_space()
     plain = compliance_factors(space, analytic_provider())
-    # K_chain the rigid cuts' block diagonal: today's factors (rounding only, 1e-12 as above)
+    # K_chain the rigid cuts' block diagonal: today's factors (the same composition, to the bit)
     same = _tied(analytic_provider(), _rigid_twist_stiffness)
-    np.testing.assert_allclose(compliance_factors(space, same), plain, rtol=1e-12, atol=0)  # 1e-12: as above
+    np.testing.assert_array_equal(compliance_factors(space, same), plain)
     # K_chain at half the stiffness: every compliance, and so every factor, doubles (exactly, but for
-    # the rounding of the scaled Cholesky solve, 1e-12 as above); the ratios say so
+    # the rounding of the scaled Cholesky solve, ~1e-15); 1e-12
     half = _tied(analytic_provider(), lambda chain: 0.5 * _rigid_twist_stiffness(chain))
     np.testing.assert_allclose(compliance_factors(space, half), 2.0 * plain, rtol=1e-12, atol=0)  # 1e-12: as above
-    np.testing.assert_allclose(tied_factor_ratios(space, half), 2.0, rtol=1e-12, atol=0)  # 1e-12: as above
-    assert tied_factor_ratios(space, analytic_provider()) is None
-    # rigid_cuts(...) hides the chain stiffness: the segments joined rigidly
-    np.testing.assert_array_equal(compliance_factors(space, rigid_cuts(half)), plain)
+
+
+def _softer_with_width(nominal_width):
+    """A tied provider on analytic segments whose chains' compliance goes as w0 / w: every factor is
+    w0 / w times the analytic one (1 to 1e-7), 1 / (1 + r_w) in the relative width change r_w."""
+    return _tied(analytic_provider(), lambda chain: _rigid_twist_stiffness(chain) * chain.width / nominal_width)
+
+
+def test_a_tied_providers_slopes_and_curvatures_are_its_own_chains():
+    from flexcal.model.parameters import DIMENSION_SYMBOLS
+    from flexcal.validation.runs.dimension_terms import compliance_curvatures
+    from flexcal.validation.runs.model_correction import SLOPE_STEPS, compliance_slopes
+
+    space = parameter_space()
+    assert len({p.chain.width for p in space.mechanism.chains}) == 1  # one nominal width, w0
+    provider = _softer_with_width(space.mechanism.chains[0].chain.width)
+    s, w = SLOPE_STEPS["w"], DIMENSION_SYMBOLS.index("w")
+    slopes = compliance_slopes(space, provider)  # the builds: the moved chains asked whole
+    expected = np.zeros_like(slopes)
+    expected[:, w] = -1.0 / (1.0 - s * s)  # the central difference of 1 / (1 + r) over +-s
+    # the analytic factors' rounding over 2 s = 0.06 (the same segments' rounding on both sides, and in
+    # the closed form: measured 2e-13); 1e-9
+    np.testing.assert_allclose(slopes, expected, rtol=0, atol=1e-9)
+    curvatures = compliance_curvatures(space, provider)
+    expected = np.zeros_like(curvatures)
+    expected[:, w, w] = 2.0 / (1.0 - s * s)  # the second difference of 1 / (1 + r) over +-s
+    # that rounding over s^2 = 9e-4 (and the mixed terms' over 2 s_k s_m): measured 3.8e-11; 1e-7
+    np.testing.assert_allclose(curvatures, expected, rtol=0, atol=1e-7)
+    with pytest.raises(ValueError, match="builds"):  # no condensed derivative of a tied chain
+        compliance_slopes(space, provider, method="condensed")
 
 
 def test_the_shortening_probe_runs_on_the_tied_chain():

@@ -10,9 +10,14 @@ compliance entries by the ratio measured once at the nominal design:
     C_e(P) = C_e,closed-form(P) * C_e,provider(P0) / C_e,closed-form(P0)
 
 where the provider is the same segment stiffness the virtual prototype is built from
-(``flexcal.validation.prototype.segments``), composed along the chain with Eq. 1. With the
-analytic provider the factors are 1 (to the beam-theory rounding); with the FEM provider
-they carry the FEM's verdict into every model evaluation at no run-time cost.
+(``flexcal.validation.prototype.segments``), composed along the chain as the prototype's frame
+joins it (``twist_end_compliance``): rigidly at the cuts (Eq. 1), or for the tied provider
+(``--provider fem-tied``) through the cut fields, from its K_chain on the five segments' twists.
+With the analytic provider the factors are 1 (to the beam-theory rounding); with the FEM provider
+they carry the FEM's verdict into every model evaluation at no run-time cost. The corrections
+must come from the truth's own provider: the tied chains are 19-23 % softer axially than the
+rigidly joined ones, and the consistent model with the rigid corrections against the tied truth
+is 16-18 / 13-15 urad RMS off (theta_x / theta_y, table1 seeds 1-3; docs/model.md 7, "Session 25").
 """
 
 from __future__ import annotations
@@ -31,7 +36,7 @@ from ..prototype.segments import (StiffnessProvider, chain_slices, end_stiffness
                                   section_nodes)
 from .model_names import DEFAULT_BREAKAWAY_N, MODEL_STIFFNESS, MODELS
 
-__all__ = ["provider_chain_compliance", "twist_end_compliance", "compliance_factors", "rigid_cuts", "tied_factor_ratios", "compliance_slopes", "slope_provider", "unchanged_slices", "same_design", "corrected_space",
+__all__ = ["provider_chain_compliance", "twist_end_compliance", "compliance_factors", "compliance_slopes", "slope_provider", "unchanged_slices", "same_design", "corrected_space",
            "model_space", "MODEL_STIFFNESS", "MODELS", "DEFAULT_BREAKAWAY_N", "SLOPE_STEPS", "SLOPE_ELEMENTS_THROUGH",
            "SLOPE_METHODS", "SLOPE_METHOD", "segment_stiffness_slopes", "DERIVATIVE_STEP"]
 
@@ -109,31 +114,6 @@ def compliance_factors(space: ParameterSpace, provider: StiffnessProvider) -> np
     return factors
 
 
-def rigid_cuts(provider: StiffnessProvider) -> StiffnessProvider:
-    """``provider``'s segments joined rigidly at the cuts: ``provider`` itself unless it has
-    ``chain_stiffness`` (the tied one), else its ``(chain, x_start, x_end)`` (the rigidly tied
-    segments, ``tied_chains.tied_fem_provider``) and ``prepare`` alone, so that a chain composed
-    from it (``provider_chain_compliance``, ``chain_kinematics.chain_shortening``) is joined rigidly."""
-    if not callable(getattr(provider, "chain_stiffness", None)):
-        return provider
-
-    def segments(chain: FlexureChain, x_start: float, x_end: float) -> np.ndarray:
-        return provider(chain, x_start, x_end)
-
-    segments.prepare = getattr(provider, "prepare", None)
-    return segments
-
-
-def tied_factor_ratios(space: ParameterSpace, provider: StiffnessProvider) -> np.ndarray | None:
-    """(n_chains, 8): ``compliance_factors`` of a tied ``provider`` (with ``chain_stiffness``) over
-    those of its segments joined rigidly (``rigid_cuts``), at the nominal chains [-]; None for any
-    other provider. The dimension terms (slopes, curvatures) are measured on the rigidly joined
-    segments as relative changes and scaled by these (docs/model.md 7, "Session 25")."""
-    if rigid_cuts(provider) is provider:
-        return None
-    return compliance_factors(space, provider) / compliance_factors(space, rigid_cuts(provider))
-
-
 # Relative step of each dimension for the slopes (central difference, +-step), inside the
 # +-10 % the error sources span. The fillet's is 2.5 %: the driving chain's leaf segments at
 # fillet x 1.03 (6.18 mm) fail to build (PARDISO error -4 on the mapped mesh, session 14),
@@ -208,10 +188,14 @@ def compliance_slopes(space: ParameterSpace, provider: StiffnessProvider,
     the builds' secant with each segment's stiffness linear in the dimension.
     "builds" (the default): the central difference of full FEM builds at +-``steps``
     (``SLOPE_STEPS``), ``_slopes_by_builds`` (sessions 13-15): a secant, which follows the
-    mapper's cell-count changes between the dimensions (docs/model.md 7, session 16)."""
+    mapper's cell-count changes between the dimensions (docs/model.md 7, session 16); the only
+    method for a tied provider (the condensed ones differentiate the rigidly joined segments)."""
     method = SLOPE_METHOD if method is None else method
     if method not in SLOPE_METHODS:
         raise ValueError(f"slope method {method!r} must be one of {', '.join(SLOPE_METHODS)}")
+    if method != "builds" and callable(getattr(provider, "chain_stiffness", None)):
+        raise ValueError(f"the slope method {method!r} differentiates the rigidly joined segments' condensation; a "
+                         "tied provider's chains have no such derivative: use the method 'builds'")
     if method != "builds" and elements_through is None and getattr(provider, "mesher", None) == "mapped":
         secant = SLOPE_STEPS if steps is None else steps
         return _slopes_condensed(space, provider, secant if method == "condensed-secant" else None)
@@ -230,6 +214,10 @@ def _slopes_by_builds(space: ParameterSpace, provider: StiffnessProvider,
     and all three slices of every moved chain), the same slopes to 1e-14.
     Central, not forward: the true dimensions sit up to 10 % either side of nominal, and a
     forward difference's slope is that of the secant to one side.
+    A tied provider (``chain_stiffness``) on its own grid: each moved chain is condensed whole
+    through its cut fields (``tied_chains.tied_chain_matrices``, 20 chains for the reference
+    mount; none of its segments is shared), since the rigidly joined segments' slopes miss how the
+    cuts' axial compliance follows the dimensions (docs/model.md 7, "Session 25").
     elements_through: the FEM grid of those builds (``slope_provider``; None, the default
     ``SLOPE_ELEMENTS_THROUGH``: ``provider``'s own); the segments' cache keys carry it. On
     another grid than ``provider``'s the slopes are that grid's relative change of each factor,
@@ -256,7 +244,14 @@ def _slopes_by_builds(space: ParameterSpace, provider: StiffnessProvider,
         nominal, chain = mech.chains[key[0]].chain, moved[key]
         return [(nominal if (x0, x1) in shared[key] else chain, x0, x1) for _, x0, x1 in chain_slices([chain])]
 
-    prepare_provider(provider, list(dict.fromkeys(s for key in moved for s in slices_of(key))))  # parallel FEM builds
+    # a tied provider on its own grid: each moved chain condensed whole through its cut fields
+    # (``tied_chains``; no segment of it is shared), since the rigid cuts' slopes miss how the cuts'
+    # axial compliance follows the dimensions (docs/model.md 7, "Session 25")
+    tied = provider is fine and callable(getattr(fine, "chain_stiffness", None))
+    if tied:
+        prepare_chains(fine, list(dict.fromkeys(moved.values())))  # parallel FEM builds
+    else:
+        prepare_provider(provider, list(dict.fromkeys(s for key in moved for s in slices_of(key))))
     done, out = {}, np.zeros((len(mech.chains), len(DIMENSION_SYMBOLS), 8))
     middle = np.zeros_like(out)  # the mean of the +- ratios: the factor on the slopes' grid, to O(step^2)
     for (c, symbol, sign), chain in moved.items():
@@ -266,15 +261,13 @@ def _slopes_by_builds(space: ParameterSpace, provider: StiffnessProvider,
             def asked(at, x0, x1, nominal=nominal, same=same):
                 return provider(nominal if (x0, x1) in same else at, x0, x1)
 
-            richer = provider_chain_compliance(chain, asked)
+            richer = provider_chain_compliance(chain, fine if tied else asked)
             closed = chain_compliance_matrix(chain, mech.material)
             done[chain] = np.array([richer[i, j] / closed[i, j] for i, j in ENTRY_INDEX.values()])
         out[c, DIMENSION_SYMBOLS.index(symbol)] += sign * done[chain] / (2.0 * steps[symbol])
         middle[c, DIMENSION_SYMBOLS.index(symbol)] += 0.5 * done[chain]
     if provider is not fine:  # on a coarser grid: its relative slope times the factor on the provider's grid
         out *= compliance_factors(space, fine)[:, None, :] / np.where(middle == 0.0, 1.0, middle)  # 0: a design's copy
-    elif (ratios := tied_factor_ratios(space, fine)) is not None:  # tied: the rigid cuts' relative slope
-        out *= ratios[:, None, :]
     return out[design]
 
 
@@ -467,8 +460,6 @@ def _slopes_condensed(space: ParameterSpace, provider: StiffnessProvider,
                 closed = chain_compliance_matrix(moved, mech.material)
                 factors[sign] = np.array([richer[i, j] / closed[i, j] for i, j in ENTRY_INDEX.values()])
             out[c, k] = (factors[1] - factors[-1]) / (2.0 * step)
-    if (ratios := tied_factor_ratios(space, provider)) is not None:  # tied: the rigid cuts' relative slope
-        out *= ratios[:, None, :]
     return out[design]
 
 
