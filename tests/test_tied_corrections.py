@@ -130,6 +130,8 @@ def test_a_tied_providers_slopes_and_curvatures_are_its_own_chains():
     np.testing.assert_allclose(curvatures, expected, rtol=0, atol=1e-7)
     with pytest.raises(ValueError, match="builds"):  # no condensed derivative of a tied chain
         compliance_slopes(space, provider, method="condensed")
+    with pytest.raises(ValueError, match="builds"):  # nor the rigid segments' relative slopes on another grid
+        compliance_slopes(space, provider, elements_through=3)
 
 
 def test_the_shortening_probe_runs_on_the_tied_chain():

@@ -193,9 +193,10 @@ def compliance_slopes(space: ParameterSpace, provider: StiffnessProvider,
     method = SLOPE_METHOD if method is None else method
     if method not in SLOPE_METHODS:
         raise ValueError(f"slope method {method!r} must be one of {', '.join(SLOPE_METHODS)}")
-    if method != "builds" and callable(getattr(provider, "chain_stiffness", None)):
-        raise ValueError(f"the slope method {method!r} differentiates the rigidly joined segments' condensation; a "
-                         "tied provider's chains have no such derivative: use the method 'builds'")
+    if callable(getattr(provider, "chain_stiffness", None)) and (method != "builds" or elements_through is not None):
+        raise ValueError(f"a tied provider's slopes are the builds of its own chains on its own grid (method 'builds', "
+                         f"elements_through None), not {method!r} on {elements_through}: the rigidly joined "
+                         "segments' (relative) slopes miss the tied chains' (docs/model.md 7, 'Session 25')")
     if method != "builds" and elements_through is None and getattr(provider, "mesher", None) == "mapped":
         secant = SLOPE_STEPS if steps is None else steps
         return _slopes_condensed(space, provider, secant if method == "condensed-secant" else None)
