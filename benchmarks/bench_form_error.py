@@ -1,6 +1,7 @@
 """The model-form error budget: each model at the true values against the FEM prototype.
 
     .venv/bin/python benchmarks/bench_form_error.py [--scenario table1[,paper]] [--provider fem]
+        [--corrections fem|fem-tied] [--scenario-seeds 1,2,3]
         [--walks 3] [--points 60] [--strokes 0.5,0.8] [--seed 1] [--breakaway 2] [--slopes]
         [--slope-grids default,provider] [--curvatures]
         [--trajectory table1=DIR/trajectory.csv ...]
@@ -20,7 +21,11 @@ the per-point equilibrium with Newton steps on the clearance (docs/model.md 10).
 2 N); ``--trajectory NAME=FILE`` adds a trajectory file (e.g. ``flexcal design``'s
 trajectory.csv) for scenario NAME. Each is evaluated at the scenario's true values
 by ``flexcal.validation.runs.form_floor.model_form_floor``: RMS per angle and max [urad], and
-the RMS over multi-actuator postures and near a drive's unloading.
+the RMS over multi-actuator postures and near a drive's unloading. ``--provider`` is the truth's
+segment stiffness, ``--corrections`` the provider the model's FEM corrections (factors, slopes,
+shortening) are measured on (default: the truth's; ``fem-tied`` with ``--provider fem`` or the
+other way round shows what a mismatched pair costs, docs/model.md 7 "Session 25");
+``--scenario-seeds`` draws the scenario's errors with each seed (default: its own draw).
 
 A walk (``random_walk``): 60 points from zero; at each step every actuator moves with
 probability 2/3 by a uniform step of up to 0.35 x its stroke limit in a random direction,
@@ -74,7 +79,11 @@ def main(argv=None) -> int:
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--scenario", default="table1")
-    parser.add_argument("--provider", default="fem", choices=("fem", "analytic"))
+    parser.add_argument("--provider", default="fem", choices=("fem", "fem-tied", "analytic"))
+    parser.add_argument("--corrections", default=None, choices=("fem", "fem-tied"),
+                        help="the provider of the model's FEM corrections (default: --provider's; none for analytic)")
+    parser.add_argument("--scenario-seeds", default=None,
+                        help="comma-separated seeds of the scenario's drawn errors (default: the scenario's own)")
     parser.add_argument("--walks", type=int, default=3)
     parser.add_argument("--points", type=int, default=60)
     parser.add_argument("--strokes", default="0.5,0.8")
@@ -99,15 +108,22 @@ def main(argv=None) -> int:
     files = dict(item.split("=", 1) for item in args.trajectory)
     start = time.perf_counter()
     provider = stiffness_provider(args.provider, progress=False, workers=None)
+    kind = args.corrections or (args.provider if args.provider != "analytic" else None)
+    corrections = None if kind is None else (provider if kind == args.provider else
+                                             stiffness_provider(kind, progress=False, workers=None))
+    seeds = [None] if args.scenario_seeds is None else [int(s) for s in args.scenario_seeds.split(",")]
     for name in args.scenario.split(","):
-        for force in forces:
-            _table(name, provider, args, strokes, force, files.get(name))
+        for seed in seeds:
+            for force in forces:
+                _table(name, provider, corrections, args, strokes, force, files.get(name), seed)
     print(f"bench_form_error: {time.perf_counter() - start:.0f} s", file=sys.stderr)
     return 0
 
 
-def _table(scenario_name, provider, args, strokes, force, trajectory_file) -> None:
-    """One table: every trajectory of one scenario at one prototype breakaway force [N]."""
+def _table(scenario_name, provider, corrections, args, strokes, force, trajectory_file, seed) -> None:
+    """One table: every trajectory of one scenario (its errors drawn with ``seed``, None: its own)
+    at one prototype breakaway force [N]; truth on ``provider``, the model's FEM corrections on
+    ``corrections`` (None: none, the analytic truth's closed-form model)."""
     from flexcal.model.parameters import parameter_space
     from flexcal.model.trajectory import standard_trajectory
     from flexcal.validation.prototype.scenario import load_scenario, read_trajectory
@@ -117,22 +133,23 @@ def _table(scenario_name, provider, args, strokes, force, trajectory_file) -> No
     from flexcal.validation.runs.model_correction import corrected_space
 
 
-    scenario = dataclasses.replace(load_scenario(scenario_name), breakaway_force=force)
+    drawn = load_scenario(scenario_name) if seed is None else load_scenario(scenario_name, seed=seed)
+    scenario = dataclasses.replace(drawn, breakaway_force=force)
     paper = parameter_space(scenario.space.mechanism)
-    fem = corrected_space(paper, provider) if args.provider == "fem" else paper
+    fem = corrected_space(paper, corrections) if corrections is not None else paper
     second = dataclasses.replace(fem, second_order=True)
-    consistent = dataclasses.replace(consistent_space(fem, provider), breakaway_force=force)
+    consistent = dataclasses.replace(consistent_space(fem, corrections or provider), breakaway_force=force)
     models = (("paper's model", paper), ("+ FEM-informed compliance", fem), ("+ second order (default)", second),
               (f"+ play state (F_b {force:g} N given)", dataclasses.replace(second, breakaway_force=force)),
               ("+ consistent: chain kinematics from its elements (S corrected at nominal, lateral defect, "
                "load form), lever arms, nut tangent, solved with the clearance", consistent))
-    if args.slopes and args.provider == "fem":
+    if args.slopes and corrections is not None:
         from flexcal.validation.runs.model_correction import SLOPE_ELEMENTS_THROUGH, compliance_slopes
 
         for grid in args.slope_grids.split(","):
             through = {"default": SLOPE_ELEMENTS_THROUGH, "provider": None}.get(grid)
             through = float(grid) if grid not in ("default", "provider") else through
-            slopes = tuple(float(v) for v in compliance_slopes(paper, provider, elements_through=through).ravel())
+            slopes = tuple(float(v) for v in compliance_slopes(paper, corrections, elements_through=through).ravel())
             shown = f"{through:g} through" if through is not None else "the prototype's grid"
             models += ((f"+ FEM compliance factors following the dimensions (slopes at nominal, {shown})",
                         dataclasses.replace(consistent, compliance_slopes=slopes)),)
@@ -142,7 +159,7 @@ def _table(scenario_name, provider, args, strokes, force, trajectory_file) -> No
             sloped = models[-1][1]
             models += (("+ the factors to second order and the shortening correction following the dimensions "
                         "(curvatures, shortening slopes at nominal)",
-                        curved_space(sloped, provider)),)
+                        curved_space(sloped, corrections)),)
     amplitudes = standard_trajectory(scenario.space.mechanism).amplitudes
     trajectories = [("standard (77 points)", scenario.inputs, scenario.leg)]
     if trajectory_file:
@@ -154,7 +171,9 @@ def _table(scenario_name, provider, args, strokes, force, trajectory_file) -> No
             inputs = random_walk(amplitudes, args.points, stroke, seed)
             trajectories.append((f"walk {k + 1}, stroke {stroke:g}, seed {seed}", inputs,
                                  np.ones(args.points, dtype=int)))
-    print(f"\nbench_form_error: scenario {scenario_name}, provider {args.provider}, prototype breakaway force "
+    print(f"\nbench_form_error: scenario {scenario_name}"
+          + ("" if seed is None else f" (errors drawn with seed {seed})")
+          + f", provider {args.provider}, corrections {args.corrections or 'the provider'}, prototype breakaway force "
           f"{force:g} N, amplitudes "
           + ", ".join(f"{a * 1e3:.3f}" for a in amplitudes) + " mm; urad, true values vs the noise-free prototype curve",
           flush=True)

@@ -131,3 +131,35 @@ def test_a_bad_model_choice_is_one_line_and_exit_2(tmp_path, capsys, closed_form
     assert status == 2 and len(err.strip().splitlines()) == 1, err
     assert all(word in err for word in words), err
     assert not out.exists()
+
+
+def test_model_stiffness_fem_tied_takes_the_tied_providers_chains(monkeypatch):
+    """``--model-stiffness fem-tied`` (issue 26): the corrections from the provider fem-tied, whose
+    chains are its ``chain_stiffness`` (here the analytic segments' block diagonal at half the
+    stiffness: every factor 2 where the analytic provider's are 1, to their 1e-7 rounding)."""
+    import scipy.linalg
+
+    from flexcal.validation.cli.opening import dimension_terms
+    from flexcal.validation.prototype import tied_chains
+    from flexcal.validation.prototype.segments import analytic_provider, end_stiffness, section_nodes
+
+    def half_stiff(ties, **_):
+        segments = analytic_provider()
+
+        def provider(chain, x_start, x_end):
+            return segments(chain, x_start, x_end)
+
+        def chain_stiffness(chain):
+            nodes = section_nodes(chain)
+            return 0.5 * scipy.linalg.block_diag(*(end_stiffness(segments(chain, float(a), float(b)))
+                                                   for a, b in zip(nodes[:-1], nodes[1:])))
+
+        provider.chain_stiffness = chain_stiffness
+        return provider
+
+    monkeypatch.setattr(tied_chains, "tied_fem_provider", half_stiff)
+    space = _space("--model", "second-order", "--model-stiffness", "fem-tied")
+    # the analytic factors' rounding (test_model_correction.py: 1e-7), doubled; 1e-6
+    np.testing.assert_allclose(np.array(space.compliance_factors), 2.0, rtol=0, atol=1e-6)
+    args = _parsed("verify", "--model-stiffness", "fem-tied", "--dimension-terms", "quadratic")
+    assert dimension_terms(args) == "quadratic"  # the tied corrections take the quadratic terms too

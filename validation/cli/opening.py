@@ -80,13 +80,15 @@ def dimension_terms(args: argparse.Namespace) -> str:
     from .options import DEFAULT_DIMENSION_TERMS
 
     terms = getattr(args, "dimension_terms", None) or DEFAULT_DIMENSION_TERMS
+    from ..runs.model_names import FEM_STIFFNESS
+
     model, stiffness = model_option(args), getattr(args, "model_stiffness", "fem")
-    if terms == "linear" or (model == "consistent" and stiffness == "fem"):
+    if terms == "linear" or (model == "consistent" and stiffness in FEM_STIFFNESS):
         return terms
     if terms == DEFAULT_DIMENSION_TERMS:
         return "linear"
     raise ValueError(f"--dimension-terms quadratic shapes the consistent model's FEM factors: add --model "
-                     f"consistent --model-stiffness fem (this run: {model}, {stiffness})")
+                     f"consistent --model-stiffness fem or fem-tied (this run: {model}, {stiffness})")
 
 
 def check_model_options(args: argparse.Namespace) -> None:
@@ -116,11 +118,12 @@ def calibration_model(args: argparse.Namespace, mechanism, *, progress: bool):
     terms = dimension_terms(args)
     space = model_space(args.model_stiffness, args.second_order, progress=progress, mechanism=mechanism,
                         model=model, breakaway_force=force, **executor_options(args))
-    if terms == "quadratic":
-        from ..prototype.fem_provider import fem_provider
+    if terms == "quadratic":  # on the provider of the model's own factors (fem or fem-tied)
+        from ..prototype.providers import stiffness_provider
         from ..runs.dimension_terms import curved_space
 
-        space = curved_space(space, fem_provider(progress=progress, **executor_options(args)))
+        space = curved_space(space, stiffness_provider(args.model_stiffness, progress=progress,
+                                                       **executor_options(args)))
     return space
 
 

@@ -217,7 +217,7 @@ def calibration_defaults(*names: str, **overrides: Any) -> dict[str, Any]:
 def add_model_options(parser: argparse.ArgumentParser) -> None:
     """Which model the calibration uses (``verify``, ``sensitivity``, ``identify``,
     ``compensate``); defaults from the command's DEFAULT_CONFIG (``MODEL_DEFAULTS``)."""
-    from ..runs.model_names import DEFAULT_BREAKAWAY_N, MODELS
+    from ..runs.model_names import DEFAULT_BREAKAWAY_N, MODEL_STIFFNESS, MODELS
 
     parser.add_argument("--model", choices=MODELS,
                         help="the calibration model: paper (Eq. 1-8 as written: closed-form chains, no second-order "
@@ -230,9 +230,11 @@ def add_model_options(parser: argparse.ArgumentParser) -> None:
                         help="--model second-order's geometric terms: chain-force P-delta and rigid second-order "
                              "frame kinematics (docs/model.md 8; default: on; --model second-order --no-second-order "
                              "--model-stiffness closed-form = --model paper)")
-    parser.add_argument("--model-stiffness", choices=("fem", "closed-form"),
+    parser.add_argument("--model-stiffness", choices=MODEL_STIFFNESS,
                         help="the chain compliance of --model second-order and consistent: closed-form (the paper's "
-                             "Eq. 1) or corrected by the FEM at the nominal design (docs/model.md 7; default "
+                             "Eq. 1) or corrected by the FEM at the nominal design, its segments joined rigidly at "
+                             "the cuts (fem, as the prototype of --provider fem) or through the cut fields "
+                             "(fem-tied, as --provider fem-tied: use it with that truth) (docs/model.md 7; default "
                              "%(default)s)")
     parser.add_argument("--breakaway-force", type=float, metavar="N", default=None,
                         help=f"--model consistent's breakaway force of the drives' friction [N] (the clearance's "

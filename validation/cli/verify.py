@@ -79,7 +79,8 @@ def run(args: argparse.Namespace) -> int:
     budget = error_budget_option(args, space, measurement.inputs, progress=not args.quiet)
     result = run_verify(measurement, space, settings, presets=opening.presets, truth=opening.truth,
                         progress=not args.quiet, budget=budget)
-    result.report["model_stiffness"] = ("closed-form chains scaled by FEM factors at the nominal design "
+    tied = " (its segments joined through the cut fields: fem-tied)" if args.model_stiffness == "fem-tied" else ""
+    result.report["model_stiffness"] = (f"closed-form chains scaled by FEM factors at the nominal design{tied} "
                                         "(docs/model.md 7)" if space.compliance_factors else "closed-form (paper Eq. 1)")
     result.report["model_second_order"] = bool(space.second_order)
     from ..runs.form_floor import model_description

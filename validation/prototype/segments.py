@@ -46,6 +46,7 @@ __all__ = [
     "analytic_provider",
     "chain_slices",
     "prepare_provider",
+    "prepare_chains",
 ]
 
 StiffnessProvider = Callable[[FlexureChain, float, float], np.ndarray]
@@ -78,6 +79,19 @@ def prepare_provider(provider: StiffnessProvider, slices: list[tuple[FlexureChai
     prepare = getattr(provider, "prepare", None)
     if callable(prepare):
         prepare(slices)
+
+
+def prepare_chains(provider: StiffnessProvider, chains) -> None:
+    """Let ``provider`` build at once what a chain's compliance or shortening
+    (``runs.model_correction``, ``runs.chain_kinematics``) will ask it for about ``chains``:
+    the tied chains (its ``prepare_chains``) of a provider with ``chain_stiffness``, the
+    segments (``prepare_provider``) of any other."""
+    tied = getattr(provider, "prepare_chains", None)
+    if callable(getattr(provider, "chain_stiffness", None)):
+        if callable(tied):
+            tied(list(dict.fromkeys(chains)))
+        return
+    prepare_provider(provider, chain_slices(chains))
 
 
 def rigid_transfer(length: float | np.ndarray) -> np.ndarray:

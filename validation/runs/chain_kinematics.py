@@ -29,20 +29,19 @@ from flexcal.model.parameters import ParameterSpace
 
 from ..prototype.equilibrium import Loads, SolverSettings, build_assembly, solve_equilibrium
 from ..prototype.kinematics import pose, se3_exp, translation_pose
-from ..prototype.segments import StiffnessProvider, chain_slices, end_stiffness, prepare_provider, section_nodes
+from ..prototype.segments import StiffnessProvider, end_stiffness, prepare_chains, section_nodes
+from ..prototype.superelement import CoupledStiffness
 
-__all__ = ["chain_shortening", "shortening_corrections", "consistent_space"]
+__all__ = ["chain_shortening", "chain_frame_stiffness", "shortening_corrections", "consistent_space"]
 
 TRANSLATION_STEP = 2e-4  # [m] lateral probe: S D^2 ~ 10 nm of shortening, 1e-4 of the 1e-5 N force tolerance's noise
 ROTATION_STEP = 2e-3  # [rad] about 0.4x the workspace's largest rotation
 
 
 def _chain_assembly(chain: FlexureChain, provider: StiffnessProvider):
-    """One chain: interior nodes free (bodies 0-3), A on ground (body 4), B prescribed (body 5)."""
+    """One chain: interior nodes free (bodies 0-3), A on ground (body 4), B prescribed (body 5);
+    with its ``chain_frame_stiffness``."""
     xs = section_nodes(chain)
-    kjj = np.array([end_stiffness(np.asarray(provider(chain, float(xs[s]), float(xs[s + 1]))))
-                    for s in range(5)])
-    kjj = 0.5 * (kjj + np.swapaxes(kjj, 1, 2))
     selection = [np.eye(6)] * 4 + [np.zeros((6, 0)), np.zeros((6, 0))]
     node_body = [4, 0, 1, 2, 3, 5]
     poses = np.broadcast_to(np.eye(4), (6, 4, 4)).copy()
@@ -57,19 +56,36 @@ def _chain_assembly(chain: FlexureChain, provider: StiffnessProvider):
     references = [translation_pose(np.array([-(xs[s + 1] - xs[s]), 0.0, 0.0])) for s in range(5)]
     assembly = build_assembly(selection, node_body, np.array(offsets), [(s, s + 1) for s in range(5)],
                               np.array(references))
-    return assembly, poses, kjj, float(xs[-1])
+    return assembly, poses, chain_frame_stiffness(chain, provider), float(xs[-1])
+
+
+def chain_frame_stiffness(chain: FlexureChain, provider: StiffnessProvider):
+    """What one chain's equilibrium takes (``equilibrium.evaluate``), as the prototype's frame
+    holds the chain (``mechanism.frame_stiffness``): for a provider with ``chain_stiffness(chain)``
+    (the tied one, ``tied_chains.tied_fem_provider``) a one-chain ``CoupledStiffness`` of its
+    K_chain (30, 30) on the five segments' twists; for any other its five segments' K_jj (5, 6, 6)
+    [SI], symmetrized (rigid cuts)."""
+    tied = getattr(provider, "chain_stiffness", None)
+    if callable(tied):
+        return CoupledStiffness(blocks=np.asarray(tied(chain), dtype=float)[None], segments=np.arange(5)[None])
+    xs = section_nodes(chain)
+    kjj = np.array([end_stiffness(np.asarray(provider(chain, float(xs[s]), float(xs[s + 1]))))
+                    for s in range(5)])
+    return 0.5 * (kjj + np.swapaxes(kjj, 1, 2))
 
 
 def chain_shortening(chain: FlexureChain, provider: StiffnessProvider) -> tuple[np.ndarray, float]:
-    """(S (6, 6) [1/m, 1, m], k [N/m]) of one chain (module docstring), chain frame at B."""
-    assembly, poses0, kjj, length = _chain_assembly(chain, provider)
+    """(S (6, 6) [1/m, 1, m], k [N/m]) of one chain (module docstring), chain frame at B; the
+    chain as the prototype's frame holds it (``chain_frame_stiffness``: a tied provider's
+    segments joined through its cut fields)."""
+    assembly, poses0, frame, length = _chain_assembly(chain, provider)
     settings = SolverSettings()
     steps = np.array([TRANSLATION_STEP] * 3 + [ROTATION_STEP] * 3)
 
     def tension(d: np.ndarray) -> float:
         poses = poses0.copy()
         poses[5] = pose(se3_exp(np.r_[0.0, 0.0, 0.0, d[3:]])[:3, :3], np.array([length, 0.0, 0.0]) + d[:3])
-        _, info = solve_equilibrium(assembly, poses, kjj, Loads(), settings, where="(chain shortening probe)")
+        _, info = solve_equilibrium(assembly, poses, frame, Loads(), settings, where="(chain shortening probe)")
         return float(-info.segment_gradient[0, 0])  # the chain's pull on node A along +x
 
     unit = np.eye(6) * steps
@@ -89,7 +105,7 @@ def shortening_corrections(space: ParameterSpace, provider: StiffnessProvider) -
     """(n_chains, 6, 6): measured S minus the model's own shortening form
     (``flexcal.model.shortening.chain_shortening_form``) at the nominal chains of ``space``."""
     mech = space.mechanism
-    prepare_provider(provider, chain_slices(p.chain for p in mech.chains))
+    prepare_chains(provider, [p.chain for p in mech.chains])
     done, rows = {}, []
     for placement in mech.chains:
         key = placement.chain

@@ -27,7 +27,10 @@ that error is what the walks show (session 18). Its slopes (n_chains, 5, 6, 6) a
 difference of the same probe on the slopes' moved chains (their segments cached: no FEM build).
 
 Measured once at the nominal chains, like the factors and slopes; ``model/`` only receives the
-numbers (``ParameterSpace.compliance_curvatures``, ``ParameterSpace.shortening_slopes``).
+numbers (``ParameterSpace.compliance_curvatures``, ``ParameterSpace.shortening_slopes``). A tied
+provider (``chain_stiffness``, ``--model-stiffness fem-tied``) is asked for each moved chain whole
+(its segments joined through the cut fields; nothing shared): 60 tied chains for the reference
+mount's curvatures, 20 of them the slopes' (the shortening slopes ask for those 20 only).
 """
 
 from __future__ import annotations
@@ -42,7 +45,7 @@ from flexcal.model.chain import chain_compliance_matrix
 from flexcal.model.hinge import ENTRY_INDEX
 from flexcal.model.parameters import DIMENSION_SYMBOLS, ParameterSpace
 
-from ..prototype.segments import StiffnessProvider, chain_slices, prepare_provider
+from ..prototype.segments import StiffnessProvider, chain_slices, prepare_chains, prepare_provider
 from .chain_kinematics import chain_shortening
 from .model_correction import (SLOPE_STEPS, compliance_factors, provider_chain_compliance, same_design,
                                unchanged_slices)
@@ -69,9 +72,17 @@ def slice_owners(chain: FlexureChain, alike) -> dict[tuple[float, float], Flexur
     return owners
 
 
+def _tied(provider: StiffnessProvider) -> bool:
+    """Whether ``provider`` joins a chain's segments through its cut fields (``chain_stiffness``)."""
+    return callable(getattr(provider, "chain_stiffness", None))
+
+
 def _shared(alike, chain: FlexureChain, provider: StiffnessProvider) -> StiffnessProvider:
     """``provider`` asking for a slice ``chain`` shares with a chain of ``alike`` (a sequence of
-    chains; ``slice_owners``) as that chain's (the same segment, built once)."""
+    chains; ``slice_owners``) as that chain's (the same segment, built once); a tied provider
+    itself (its chains are condensed whole: no segment to share, docs/model.md 7 "Session 25")."""
+    if _tied(provider):
+        return provider
     owners = slice_owners(chain, alike)
 
     def asked(at, x0, x1):
@@ -118,7 +129,10 @@ def compliance_curvatures(space: ParameterSpace, provider: StiffnessProvider,
     for key, chain in chains.items():
         owners = slice_owners(chain, alike[key])
         slices += [(owners.get((x0, x1), chain), x0, x1) for _, x0, x1 in chain_slices([chain])]
-    prepare_provider(provider, list(dict.fromkeys(slices)))  # parallel FEM builds
+    if _tied(provider):  # parallel FEM builds
+        prepare_chains(provider, list(dict.fromkeys(chains.values())))
+    else:
+        prepare_provider(provider, list(dict.fromkeys(slices)))
     ratio = {key: moved_factors(alike[key][0], chain, provider, mech.material, alike[key][1:])
              for key, chain in chains.items()}
     nominal = compliance_factors(space, provider)

@@ -10,9 +10,14 @@ compliance entries by the ratio measured once at the nominal design:
     C_e(P) = C_e,closed-form(P) * C_e,provider(P0) / C_e,closed-form(P0)
 
 where the provider is the same segment stiffness the virtual prototype is built from
-(``flexcal.validation.prototype.segments``), composed along the chain with Eq. 1. With the
-analytic provider the factors are 1 (to the beam-theory rounding); with the FEM provider
-they carry the FEM's verdict into every model evaluation at no run-time cost.
+(``flexcal.validation.prototype.segments``), composed along the chain as the prototype's frame
+joins it (``twist_end_compliance``): rigidly at the cuts (Eq. 1), or for the tied provider
+(``--provider fem-tied``) through the cut fields, from its K_chain on the five segments' twists.
+With the analytic provider the factors are 1 (to the beam-theory rounding); with the FEM provider
+they carry the FEM's verdict into every model evaluation at no run-time cost. The corrections
+must come from the truth's own provider: the tied chains are 19-23 % softer axially than the
+rigidly joined ones, and the consistent model with the rigid corrections against the tied truth
+is 16-18 / 13-15 urad RMS off (theta_x / theta_y, table1 seeds 1-3; docs/model.md 7, "Session 25").
 """
 
 from __future__ import annotations
@@ -20,46 +25,81 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
+import scipy.linalg
 
 from flexcal.geometry.params import FlexureChain
 from flexcal.model.chain import chain_compliance_matrix
 from flexcal.model.hinge import ENTRY_INDEX
-from flexcal.model.serial import serial_compliance
 from flexcal.model.parameters import ParameterSpace
 
-from ..prototype.segments import (StiffnessProvider, chain_slices, end_stiffness, prepare_provider, section_nodes)
-from .model_names import DEFAULT_BREAKAWAY_N, MODELS
+from ..prototype.segments import (StiffnessProvider, chain_slices, end_stiffness, prepare_chains, prepare_provider,
+                                  section_nodes)
+from .model_names import DEFAULT_BREAKAWAY_N, MODEL_STIFFNESS, MODELS
 
-__all__ = ["provider_chain_compliance", "compliance_factors", "compliance_slopes", "slope_provider", "unchanged_slices", "same_design", "corrected_space",
-           "model_space", "MODELS", "DEFAULT_BREAKAWAY_N", "SLOPE_STEPS", "SLOPE_ELEMENTS_THROUGH",
+__all__ = ["provider_chain_compliance", "twist_end_compliance", "compliance_factors", "compliance_slopes", "slope_provider", "unchanged_slices", "same_design", "corrected_space",
+           "model_space", "MODEL_STIFFNESS", "MODELS", "DEFAULT_BREAKAWAY_N", "SLOPE_STEPS", "SLOPE_ELEMENTS_THROUGH",
            "SLOPE_METHODS", "SLOPE_METHOD", "segment_stiffness_slopes", "DERIVATIVE_STEP"]
 
 
 def provider_chain_compliance(chain: FlexureChain, provider: StiffnessProvider) -> np.ndarray:
-    """(6, 6) compliance at end B of ``chain`` (A clamped, chain frame) [SI] from a
-    segment stiffness provider: each segment's end compliance moved to B and summed (Eq. 1)."""
+    """(6, 6) compliance at end B of ``chain`` (A clamped, chain frame) [SI] from a segment
+    stiffness provider, the chain as the virtual prototype's frame holds it
+    (``twist_end_compliance``): a provider with ``chain_stiffness(chain)`` (the tied one,
+    ``tied_chains.tied_fem_provider``: the five segments joined through section fields at the
+    cuts) on its K_chain (30, 30); any other on the block diagonal of its five segments' K_jj
+    (rigid cuts), which is Eq. 1's sum of each segment's end compliance moved to B."""
+    tied = getattr(provider, "chain_stiffness", None)
+    if callable(tied):
+        return twist_end_compliance(np.asarray(tied(chain), dtype=float), section_nodes(chain))
     nodes = section_nodes(chain)
     return _composed_compliance(chain, [provider(chain, float(start), float(end))
                                         for start, end in zip(nodes[:-1], nodes[1:])])
 
 
 def _composed_compliance(chain: FlexureChain, segments) -> np.ndarray:
-    """``provider_chain_compliance`` from the chain's five segment stiffnesses (12, 12) in order."""
-    nodes = section_nodes(chain)
-    stiffness = np.array([end_stiffness(k) for k in segments])
-    compliance = np.linalg.inv(0.5 * (stiffness + np.swapaxes(stiffness, -1, -2)))
-    ends = np.stack([nodes[1:], np.zeros(len(compliance)), np.zeros(len(compliance))], axis=-1)
-    total = serial_compliance(compliance, np.broadcast_to(np.eye(3), compliance.shape[:1] + (3, 3)), ends,
-                              np.array([chain.length, 0.0, 0.0]))
+    """``provider_chain_compliance`` from the chain's five segment stiffnesses (12, 12) in order,
+    joined rigidly at the cuts: K_chain the block diagonal of their K_jj."""
+    return twist_end_compliance(scipy.linalg.block_diag(*(end_stiffness(k) for k in segments)), section_nodes(chain))
+
+
+def twist_end_compliance(twist_stiffness: np.ndarray, nodes: np.ndarray) -> np.ndarray:
+    """(6, 6) [SI] compliance at the last of ``nodes`` (n + 1,) [m, along x] of n segments in
+    series whose deformation twists carry ``twist_stiffness`` (6 n, 6 n) [SI] (energy 1/2 Xi^T K
+    Xi, each segment's twist at its end node, chain frame; ``fem.cut_warping.chain_twist_stiffness``),
+    the first node clamped, chain frame.
+
+    A wrench f at B loads segment s's end node x_(s+1) with T_s^T f, T_s the twist transfer from
+    there to B (``twist_transform``, offset (x_(s+1) - x_B) e_x); the twists Xi = K^-1 T^T f move B
+    by T Xi, so C = T K^-1 T^T, T = [T_1 .. T_n] (6, 6 n) (Eq. 1 for coupled segments). With K
+    block diagonal (the segments joined rigidly: K_ss their K_jj) it is Eq. 1, sum_s T_s K_ss^-1
+    T_s^T. K is solved Jacobi-scaled (its entries span ~1e9 N/m to the leaves' N m/rad) by Cholesky."""
+    from flexcal.geometry.frames import twist_transform
+
+    nodes = np.asarray(nodes, dtype=float)
+    n = len(nodes) - 1
+    stiffness = np.asarray(twist_stiffness, dtype=float)
+    if stiffness.shape != (6 * n, 6 * n):
+        raise ValueError(f"twist stiffness {stiffness.shape} does not match {n} segments (6 n, 6 n)")
+    offsets = np.stack([nodes[1:] - nodes[-1], np.zeros(n), np.zeros(n)], axis=-1)
+    transfer = np.concatenate(list(twist_transform(np.broadcast_to(np.eye(3), (n, 3, 3)), offsets)), axis=1)
+    root = 1.0 / np.sqrt(np.diag(stiffness))
+    scaled = 0.5 * (stiffness + stiffness.T) * root[:, None] * root[None, :]
+    try:
+        factor = scipy.linalg.cho_factor(scaled)
+    except np.linalg.LinAlgError:
+        raise ValueError("the chain's twist stiffness is not positive definite; check the provider") from None
+    weighted = transfer * root[None, :]
+    total = weighted @ scipy.linalg.cho_solve(factor, weighted.T)
     return 0.5 * (total + total.T)
 
 
 def compliance_factors(space: ParameterSpace, provider: StiffnessProvider) -> np.ndarray:
     """(n_chains, 8) ratios provider / closed form of the eight entries (``ENTRY_INDEX``
-    order) at the nominal chains of ``space.mechanism`` (no actuator spring) [-]."""
+    order) at the nominal chains of ``space.mechanism`` (no actuator spring) [-], each chain
+    as ``provider_chain_compliance`` composes it (a tied provider's: through its cut fields)."""
     mech = space.mechanism
     rows, done = [], {}
-    prepare_provider(provider, chain_slices(p.chain for p in mech.chains))  # parallel FEM builds
+    prepare_chains(provider, [p.chain for p in mech.chains])  # parallel FEM builds
     for placement in mech.chains:
         key = placement.chain
         if key not in done:  # identical chains (L1-L3, D1-D3) share their FEM solve
@@ -148,10 +188,15 @@ def compliance_slopes(space: ParameterSpace, provider: StiffnessProvider,
     the builds' secant with each segment's stiffness linear in the dimension.
     "builds" (the default): the central difference of full FEM builds at +-``steps``
     (``SLOPE_STEPS``), ``_slopes_by_builds`` (sessions 13-15): a secant, which follows the
-    mapper's cell-count changes between the dimensions (docs/model.md 7, session 16)."""
+    mapper's cell-count changes between the dimensions (docs/model.md 7, session 16); the only
+    method for a tied provider (the condensed ones differentiate the rigidly joined segments)."""
     method = SLOPE_METHOD if method is None else method
     if method not in SLOPE_METHODS:
         raise ValueError(f"slope method {method!r} must be one of {', '.join(SLOPE_METHODS)}")
+    if callable(getattr(provider, "chain_stiffness", None)) and (method != "builds" or elements_through is not None):
+        raise ValueError(f"a tied provider's slopes are the builds of its own chains on its own grid (method 'builds', "
+                         f"elements_through None), not {method!r} on {elements_through}: the rigidly joined "
+                         "segments' (relative) slopes miss the tied chains' (docs/model.md 7, 'Session 25')")
     if method != "builds" and elements_through is None and getattr(provider, "mesher", None) == "mapped":
         secant = SLOPE_STEPS if steps is None else steps
         return _slopes_condensed(space, provider, secant if method == "condensed-secant" else None)
@@ -170,6 +215,10 @@ def _slopes_by_builds(space: ParameterSpace, provider: StiffnessProvider,
     and all three slices of every moved chain), the same slopes to 1e-14.
     Central, not forward: the true dimensions sit up to 10 % either side of nominal, and a
     forward difference's slope is that of the secant to one side.
+    A tied provider (``chain_stiffness``) on its own grid: each moved chain is condensed whole
+    through its cut fields (``tied_chains.tied_chain_matrices``, 20 chains for the reference
+    mount; none of its segments is shared), since the rigidly joined segments' slopes miss how the
+    cuts' axial compliance follows the dimensions (docs/model.md 7, "Session 25").
     elements_through: the FEM grid of those builds (``slope_provider``; None, the default
     ``SLOPE_ELEMENTS_THROUGH``: ``provider``'s own); the segments' cache keys carry it. On
     another grid than ``provider``'s the slopes are that grid's relative change of each factor,
@@ -196,7 +245,14 @@ def _slopes_by_builds(space: ParameterSpace, provider: StiffnessProvider,
         nominal, chain = mech.chains[key[0]].chain, moved[key]
         return [(nominal if (x0, x1) in shared[key] else chain, x0, x1) for _, x0, x1 in chain_slices([chain])]
 
-    prepare_provider(provider, list(dict.fromkeys(s for key in moved for s in slices_of(key))))  # parallel FEM builds
+    # a tied provider on its own grid: each moved chain condensed whole through its cut fields
+    # (``tied_chains``; no segment of it is shared), since the rigid cuts' slopes miss how the cuts'
+    # axial compliance follows the dimensions (docs/model.md 7, "Session 25")
+    tied = provider is fine and callable(getattr(fine, "chain_stiffness", None))
+    if tied:
+        prepare_chains(fine, list(dict.fromkeys(moved.values())))  # parallel FEM builds
+    else:
+        prepare_provider(provider, list(dict.fromkeys(s for key in moved for s in slices_of(key))))
     done, out = {}, np.zeros((len(mech.chains), len(DIMENSION_SYMBOLS), 8))
     middle = np.zeros_like(out)  # the mean of the +- ratios: the factor on the slopes' grid, to O(step^2)
     for (c, symbol, sign), chain in moved.items():
@@ -206,7 +262,7 @@ def _slopes_by_builds(space: ParameterSpace, provider: StiffnessProvider,
             def asked(at, x0, x1, nominal=nominal, same=same):
                 return provider(nominal if (x0, x1) in same else at, x0, x1)
 
-            richer = provider_chain_compliance(chain, asked)
+            richer = provider_chain_compliance(chain, fine if tied else asked)
             closed = chain_compliance_matrix(chain, mech.material)
             done[chain] = np.array([richer[i, j] / closed[i, j] for i, j in ENTRY_INDEX.values()])
         out[c, DIMENSION_SYMBOLS.index(symbol)] += sign * done[chain] / (2.0 * steps[symbol])
@@ -429,15 +485,15 @@ def model_space(stiffness: str = "fem", second_order: bool = True, *, progress: 
 
     model (``MODELS``): "paper" is Eq. 1-8 as written (closed-form chains, no second-order
     terms; ``stiffness`` and ``second_order`` are not read); "second-order" takes ``stiffness``
-    "fem" (FEM-informed chain compliance, FEM solves cached) or "closed-form" (the paper's
-    Eq. 1) and ``second_order`` (the geometric second-order terms,
-    ``flexcal.model.second_order``); "consistent" (``second_order`` True only) with
-    ``stiffness`` "fem" is ``chain_kinematics.consistent_space`` over FEM factors with their
-    slopes, with "closed-form" the same model on Eq. 1's chains with the chains' own
-    shortening form (no measured correction); both with the clearance's play state at
-    ``breakaway_force`` (None: ``DEFAULT_BREAKAWAY_N``). The quadratic dimension terms are added on
-    top by ``dimension_terms.curved_space`` (which reads this module's slopes: the command line
-    composes the two, ``cli.opening.calibration_model``).
+    (``MODEL_STIFFNESS``) "fem" or "fem-tied" (FEM-informed chain compliance from the provider of
+    that name, FEM solves cached) or "closed-form" (the paper's Eq. 1) and ``second_order`` (the
+    geometric second-order terms, ``flexcal.model.second_order``); "consistent" (``second_order``
+    True only) with ``stiffness`` "fem" or "fem-tied" is ``chain_kinematics.consistent_space``
+    over that provider's factors with their slopes, with "closed-form" the same model on Eq. 1's
+    chains with the chains' own shortening form (no measured correction); both with the
+    clearance's play state at ``breakaway_force`` (None: ``DEFAULT_BREAKAWAY_N``). The quadratic
+    dimension terms are added on top by ``dimension_terms.curved_space`` (which reads this
+    module's slopes: the command line composes the two, ``cli.opening.calibration_model``).
     breakaway_force [N] for "second-order": the clearance's play state with that breakaway
     force (None: Eq. 7's memoryless clip; docs/model.md 9). workers / scheduler: where missing
     FEM segments are built (``fem_provider``)."""
@@ -445,8 +501,8 @@ def model_space(stiffness: str = "fem", second_order: bool = True, *, progress: 
 
     if model not in MODELS:
         raise ValueError(f"model {model!r} must be one of {', '.join(MODELS)}")
-    if stiffness not in ("fem", "closed-form"):
-        raise ValueError(f"model stiffness {stiffness!r} must be 'fem' or 'closed-form'")
+    if stiffness not in MODEL_STIFFNESS:
+        raise ValueError(f"model stiffness {stiffness!r} must be one of {', '.join(MODEL_STIFFNESS)}")
     space = parameter_space(mechanism)
     if model == "paper":
         return space
@@ -458,14 +514,15 @@ def model_space(stiffness: str = "fem", second_order: bool = True, *, progress: 
         if stiffness == "closed-form":  # Eq. 1's chains and the chains' own shortening form, nothing measured
             return dataclasses.replace(space, second_order=True, breakaway_force=force,
                                        chain_shortening=(0.0,) * (36 * len(space.mechanism.chains)))
-        from ..prototype.fem_provider import fem_provider
+        from ..prototype.providers import stiffness_provider
         from .chain_kinematics import consistent_space
 
-        provider = fem_provider(progress=progress, workers=workers, scheduler=scheduler)
+        provider = stiffness_provider(stiffness, progress=progress, workers=workers, scheduler=scheduler)
         space = consistent_space(corrected_space(space, provider, slopes=True), provider)
         return dataclasses.replace(space, breakaway_force=force)
-    if stiffness == "fem":
-        from ..prototype.fem_provider import fem_provider
+    if stiffness != "closed-form":
+        from ..prototype.providers import stiffness_provider
 
-        space = corrected_space(space, fem_provider(progress=progress, workers=workers, scheduler=scheduler))
+        space = corrected_space(space, stiffness_provider(stiffness, progress=progress, workers=workers,
+                                                          scheduler=scheduler))
     return dataclasses.replace(space, second_order=bool(second_order), breakaway_force=breakaway_force)
