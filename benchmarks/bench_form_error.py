@@ -1,7 +1,7 @@
 """The model-form error budget: each model at the true values against the FEM prototype.
 
     .venv/bin/python benchmarks/bench_form_error.py [--scenario table1[,paper]] [--provider fem]
-        [--corrections fem|fem-tied] [--scenario-seeds 1,2,3]
+        [--corrections fem|fem-rigid] [--scenario-seeds 1,2,3]
         [--walks 3] [--points 60] [--strokes 0.5,0.8] [--seed 1] [--breakaway 2] [--slopes]
         [--slope-grids default,provider] [--curvatures]
         [--trajectory table1=DIR/trajectory.csv ...]
@@ -23,7 +23,7 @@ trajectory.csv) for scenario NAME. Each is evaluated at the scenario's true valu
 by ``flexcal.validation.runs.form_floor.model_form_floor``: RMS per angle and max [urad], and
 the RMS over multi-actuator postures and near a drive's unloading. ``--provider`` is the truth's
 segment stiffness, ``--corrections`` the provider the model's FEM corrections (factors, slopes,
-shortening) are measured on (default: the truth's; ``fem-tied`` with ``--provider fem`` or the
+shortening) are measured on (default: the truth's; ``fem-rigid`` with ``--provider fem`` or the
 other way round shows what a mismatched pair costs, docs/model.md 7 "Session 25");
 ``--scenario-seeds`` draws the scenario's errors with each seed (default: its own draw).
 
@@ -79,8 +79,8 @@ def main(argv=None) -> int:
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--scenario", default="table1")
-    parser.add_argument("--provider", default="fem", choices=("fem", "fem-tied", "analytic"))
-    parser.add_argument("--corrections", default=None, choices=("fem", "fem-tied"),
+    parser.add_argument("--provider", default="fem", choices=("fem", "fem-rigid", "analytic"))
+    parser.add_argument("--corrections", default=None, choices=("fem", "fem-rigid"),
                         help="the provider of the model's FEM corrections (default: --provider's; none for analytic)")
     parser.add_argument("--scenario-seeds", default=None,
                         help="comma-separated seeds of the scenario's drawn errors (default: the scenario's own)")

@@ -1,13 +1,13 @@
 """The FEM compliance factors with their slopes against the as-built chains' own factors.
 
-    .venv/bin/python benchmarks/bench_sloped_factors.py [--provider fem|fem-tied] [--scenario table1]
+    .venv/bin/python benchmarks/bench_sloped_factors.py [--provider fem|fem-rigid] [--scenario table1]
         [--seeds 1,2,3]
 
 For each seed's as-built chains (the scenario's errors drawn with it): the factors the model uses,
 ``f(P0) + sum_k g_k r_k`` (``model_correction.compliance_factors`` and ``compliance_slopes`` at the
 nominal chains, r_k the relative dimension changes), against the provider's own factors of the
 as-built chain; max % of the factor over the chains, per entry group (axial / uy entries / uz
-entries / torsion). Rows: the constant factors, the provider's slopes, and for ``fem-tied`` also
+entries / torsion). Rows: the constant factors, the provider's slopes, and for ``fem`` (cuts tied) also
 the rigidly joined segments' relative slopes times the tied factor (the alternative rejected in
 docs/model.md 7, "Session 25"). Not a test: the figures go into docs/model.md.
 """
@@ -40,7 +40,7 @@ def main(argv=None) -> int:
     from flexcal.validation.runs.model_correction import compliance_factors, compliance_slopes
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--provider", default="fem-tied", choices=("fem", "fem-tied"))
+    parser.add_argument("--provider", default="fem", choices=("fem", "fem-rigid"))
     parser.add_argument("--scenario", default="table1")
     parser.add_argument("--seeds", default="1,2,3")
     args = parser.parse_args(argv)
@@ -49,8 +49,8 @@ def main(argv=None) -> int:
     space = load_scenario(args.scenario).space
     factors, slopes = compliance_factors(space, provider), compliance_slopes(space, provider)
     variants = {"constant factors": lambda c, r: factors[c], "the provider's slopes": lambda c, r: factors[c] + r @ slopes[c]}
-    if args.provider == "fem-tied":
-        rigid = stiffness_provider("fem", progress=False, workers=None)
+    if args.provider == "fem":
+        rigid = stiffness_provider("fem-rigid", progress=False, workers=None)
         rigid_factors, rigid_slopes = compliance_factors(space, rigid), compliance_slopes(space, rigid)
         variants["the rigid cuts' relative slopes"] = lambda c, r: factors[c] * (1 + r @ rigid_slopes[c] / rigid_factors[c])
     print(f"bench_sloped_factors: {args.scenario}, provider {args.provider}; max % of the factor over the chains, "

@@ -17,11 +17,12 @@ from flexcal.validation.runs.form_floor import model_description, model_name
 
 @pytest.fixture
 def closed_form_segments(monkeypatch):
-    """``fem_provider`` -> the analytic segment provider, everywhere ``model_space`` asks for it."""
-    from flexcal.validation.prototype import fem_provider as fem_module
-    from flexcal.validation.prototype.providers import stiffness_provider
+    """Every provider ``model_space`` asks for by name (``providers.stiffness_provider``: "fem", the
+    tied cuts since session 25, or "fem-rigid") -> the analytic segment provider."""
+    from flexcal.validation.prototype import providers
 
-    monkeypatch.setattr(fem_module, "fem_provider", lambda **_: stiffness_provider("analytic", progress=False))
+    analytic = providers.stiffness_provider("analytic")
+    monkeypatch.setattr(providers, "stiffness_provider", lambda kind, **_: analytic)
 
 
 def _space(*options):
@@ -133,8 +134,9 @@ def test_a_bad_model_choice_is_one_line_and_exit_2(tmp_path, capsys, closed_form
     assert not out.exists()
 
 
-def test_model_stiffness_fem_tied_takes_the_tied_providers_chains(monkeypatch):
-    """``--model-stiffness fem-tied`` (issue 26): the corrections from the provider fem-tied, whose
+def test_model_stiffness_fem_takes_the_tied_providers_chains(monkeypatch):
+    """``--model-stiffness fem`` (issue 26, the default since session 25): the corrections from the
+    provider fem (cuts tied), whose
     chains are its ``chain_stiffness`` (here the analytic segments' block diagonal at half the
     stiffness: every factor 2 where the analytic provider's are 1, to their 1e-7 rounding)."""
     import scipy.linalg
@@ -158,8 +160,8 @@ def test_model_stiffness_fem_tied_takes_the_tied_providers_chains(monkeypatch):
         return provider
 
     monkeypatch.setattr(tied_chains, "tied_fem_provider", half_stiff)
-    space = _space("--model", "second-order", "--model-stiffness", "fem-tied")
+    space = _space("--model", "second-order", "--model-stiffness", "fem")
     # the analytic factors' rounding (test_model_correction.py: 1e-7), doubled; 1e-6
     np.testing.assert_allclose(np.array(space.compliance_factors), 2.0, rtol=0, atol=1e-6)
-    args = _parsed("verify", "--model-stiffness", "fem-tied", "--dimension-terms", "quadratic")
+    args = _parsed("verify", "--model-stiffness", "fem", "--dimension-terms", "quadratic")
     assert dimension_terms(args) == "quadratic"  # the tied corrections take the quadratic terms too

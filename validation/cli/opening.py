@@ -88,7 +88,7 @@ def dimension_terms(args: argparse.Namespace) -> str:
     if terms == DEFAULT_DIMENSION_TERMS:
         return "linear"
     raise ValueError(f"--dimension-terms quadratic shapes the consistent model's FEM factors: add --model "
-                     f"consistent --model-stiffness fem or fem-tied (this run: {model}, {stiffness})")
+                     f"consistent --model-stiffness fem or fem-rigid (this run: {model}, {stiffness})")
 
 
 def check_model_options(args: argparse.Namespace) -> None:
@@ -118,7 +118,7 @@ def calibration_model(args: argparse.Namespace, mechanism, *, progress: bool):
     terms = dimension_terms(args)
     space = model_space(args.model_stiffness, args.second_order, progress=progress, mechanism=mechanism,
                         model=model, breakaway_force=force, **executor_options(args))
-    if terms == "quadratic":  # on the provider of the model's own factors (fem or fem-tied)
+    if terms == "quadratic":  # on the provider of the model's own factors (fem or fem-rigid)
         from ..prototype.providers import stiffness_provider
         from ..runs.dimension_terms import curved_space
 

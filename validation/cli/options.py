@@ -232,9 +232,9 @@ def add_model_options(parser: argparse.ArgumentParser) -> None:
                              "--model-stiffness closed-form = --model paper)")
     parser.add_argument("--model-stiffness", choices=MODEL_STIFFNESS,
                         help="the chain compliance of --model second-order and consistent: closed-form (the paper's "
-                             "Eq. 1) or corrected by the FEM at the nominal design, its segments joined rigidly at "
-                             "the cuts (fem, as the prototype of --provider fem) or through the cut fields "
-                             "(fem-tied, as --provider fem-tied: use it with that truth) (docs/model.md 7; default "
+                             "Eq. 1) or corrected by the FEM at the nominal design, its segments joined through the "
+                             "cut fields (fem, as the prototype of --provider fem) or rigidly at the cuts "
+                             "(fem-rigid, as --provider fem-rigid: use it with that truth) (docs/model.md 7; default "
                              "%(default)s)")
     parser.add_argument("--breakaway-force", type=float, metavar="N", default=None,
                         help=f"--model consistent's breakaway force of the drives' friction [N] (the clearance's "

@@ -79,7 +79,8 @@ def run(args: argparse.Namespace) -> int:
     budget = error_budget_option(args, space, measurement.inputs, progress=not args.quiet)
     result = run_verify(measurement, space, settings, presets=opening.presets, truth=opening.truth,
                         progress=not args.quiet, budget=budget)
-    tied = " (its segments joined through the cut fields: fem-tied)" if args.model_stiffness == "fem-tied" else ""
+    tied = {"fem": " (its segments joined through the cut fields)",
+            "fem-rigid": " (its segments joined rigidly at the cuts: fem-rigid)"}.get(args.model_stiffness, "")
     result.report["model_stiffness"] = (f"closed-form chains scaled by FEM factors at the nominal design{tied} "
                                         "(docs/model.md 7)" if space.compliance_factors else "closed-form (paper Eq. 1)")
     result.report["model_second_order"] = bool(space.second_order)

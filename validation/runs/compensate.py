@@ -125,8 +125,9 @@ def _provider_from_description(description: str, progress: bool, workers: int | 
                                scheduler: str | None = None):
     from ..prototype.providers import stiffness_provider
 
-    if description.startswith("FEM"):
-        return stiffness_provider("fem", progress=progress, workers=workers, scheduler=scheduler)
+    if description.startswith("FEM"):  # tied cuts say so in their description (tied_fem_provider)
+        kind = "fem" if "cuts tied" in description else "fem-rigid"
+        return stiffness_provider(kind, progress=progress, workers=workers, scheduler=scheduler)
     if description.startswith("analytic"):
         return stiffness_provider("analytic")
     raise ValueError(f"the sidecar's provider {description!r} is neither FEM nor analytic; cannot rebuild the prototype")

@@ -28,7 +28,7 @@ difference of the same probe on the slopes' moved chains (their segments cached:
 
 Measured once at the nominal chains, like the factors and slopes; ``model/`` only receives the
 numbers (``ParameterSpace.compliance_curvatures``, ``ParameterSpace.shortening_slopes``). A tied
-provider (``chain_stiffness``, ``--model-stiffness fem-tied``) is asked for each moved chain whole
+provider (``chain_stiffness``, ``--model-stiffness fem``) is asked for each moved chain whole
 (its segments joined through the cut fields; nothing shared): 60 tied chains for the reference
 mount's curvatures, 20 of them the slopes' (the shortening slopes ask for those 20 only).
 """

@@ -12,7 +12,7 @@ compliance entries by the ratio measured once at the nominal design:
 where the provider is the same segment stiffness the virtual prototype is built from
 (``flexcal.validation.prototype.segments``), composed along the chain as the prototype's frame
 joins it (``twist_end_compliance``): rigidly at the cuts (Eq. 1), or for the tied provider
-(``--provider fem-tied``) through the cut fields, from its K_chain on the five segments' twists.
+(``--provider fem``, the default since session 25) through the cut fields, from its K_chain on the five segments' twists.
 With the analytic provider the factors are 1 (to the beam-theory rounding); with the FEM provider
 they carry the FEM's verdict into every model evaluation at no run-time cost. The corrections
 must come from the truth's own provider: the tied chains are 19-23 % softer axially than the
@@ -485,10 +485,10 @@ def model_space(stiffness: str = "fem", second_order: bool = True, *, progress: 
 
     model (``MODELS``): "paper" is Eq. 1-8 as written (closed-form chains, no second-order
     terms; ``stiffness`` and ``second_order`` are not read); "second-order" takes ``stiffness``
-    (``MODEL_STIFFNESS``) "fem" or "fem-tied" (FEM-informed chain compliance from the provider of
+    (``MODEL_STIFFNESS``) "fem" or "fem-rigid" (FEM-informed chain compliance from the provider of
     that name, FEM solves cached) or "closed-form" (the paper's Eq. 1) and ``second_order`` (the
     geometric second-order terms, ``flexcal.model.second_order``); "consistent" (``second_order``
-    True only) with ``stiffness`` "fem" or "fem-tied" is ``chain_kinematics.consistent_space``
+    True only) with ``stiffness`` "fem" or "fem-rigid" is ``chain_kinematics.consistent_space``
     over that provider's factors with their slopes, with "closed-form" the same model on Eq. 1's
     chains with the chains' own shortening form (no measured correction); both with the
     clearance's play state at ``breakaway_force`` (None: ``DEFAULT_BREAKAWAY_N``). The quadratic

@@ -14,12 +14,13 @@ from ``model_correction`` so that the command line reads them without importing 
 __all__ = ["MODELS", "MODEL_STIFFNESS", "FEM_STIFFNESS", "DEFAULT_BREAKAWAY_N"]
 
 MODELS = ("paper", "second-order", "consistent")
-# The chain compliance of "second-order" and "consistent" (``--model-stiffness``): corrected by the
-# virtual prototype's FEM segments joined rigidly at the cuts ("fem", the provider fem's), or
-# joined through the cut fields ("fem-tied", the provider fem-tied's: the corrections of the tied
-# truth, docs/model.md 7 "Session 25"), or Eq. 1's closed form ("closed-form")
-MODEL_STIFFNESS = ("fem", "fem-tied", "closed-form")
-FEM_STIFFNESS = ("fem", "fem-tied")  # the ones with FEM factors (and their slopes and dimension terms)
+# The chain compliance of "second-order" and "consistent" (``--model-stiffness``, the names of the
+# providers they come from, ``prototype.providers.PROVIDERS``): corrected by the virtual
+# prototype's FEM segments joined through the cut fields ("fem", the default truth's since
+# session 25; docs/model.md 7 "Session 25"), or joined rigidly at the cuts ("fem-rigid", the
+# provider fem-rigid's, the truth until session 24), or Eq. 1's closed form ("closed-form")
+MODEL_STIFFNESS = ("fem", "fem-rigid", "closed-form")
+FEM_STIFFNESS = ("fem", "fem-rigid")  # the ones with FEM factors (and their slopes and dimension terms)
 # [N] the consistent model's breakaway force when none is given: the virtual prototype's
 # default (validation.prototype.scenario, [transmission] breakaway_force_n). Given, not
 # identified; the form error moves by <= 0.01 urad between 0.5, 2 and 5 N (docs/model.md 9)
