@@ -239,14 +239,14 @@ def test_dimension_terms_option_selects_the_curved_space(monkeypatch):
     numbers, is under test)."""
     import argparse
 
-    import flexcal.validation.prototype.fem_provider as fem_provider_module
+    import flexcal.validation.prototype.providers as providers_module
     import flexcal.validation.runs.dimension_terms as dimension_terms
     import flexcal.validation.runs.model_correction as model_correction
     from flexcal.validation.cli.opening import calibration_model
 
     built, curved = [], []
     monkeypatch.setattr(model_correction, "model_space", lambda *a, **k: built.append(k["model"]) or "space")
-    monkeypatch.setattr(fem_provider_module, "fem_provider", lambda **kwargs: "provider")
+    monkeypatch.setattr(providers_module, "stiffness_provider", lambda kind, **kwargs: "provider")
     monkeypatch.setattr(dimension_terms, "curved_space", lambda space, provider: curved.append((space, provider))
                         or "curved")
 
