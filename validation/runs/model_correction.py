@@ -99,9 +99,10 @@ def compliance_factors(space: ParameterSpace, provider: StiffnessProvider) -> np
     as ``provider_chain_compliance`` composes it (a tied provider's: through its cut fields)."""
     mech = space.mechanism
     rows, done = [], {}
-    prepare_chains(provider, [p.chain for p in mech.chains])  # parallel FEM builds
-    for placement in mech.chains:
-        key = placement.chain
+    # one design, one FEM solve (``same_design``: L2 is 1 ulp longer than L1 and L3), as the slopes
+    chains = [mech.chains[first].chain for first in same_design(mech.chains)]
+    prepare_chains(provider, chains)  # parallel FEM builds
+    for key in chains:
         if key not in done:  # identical chains (L1-L3, D1-D3) share their FEM solve
             richer = provider_chain_compliance(key, provider)
             closed = chain_compliance_matrix(key, mech.material)
