@@ -29,6 +29,7 @@ rigid-body transfer from the start node.
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Callable
 
 import numpy as np
@@ -37,6 +38,7 @@ from flexcal.geometry.params import STEEL, FlexureChain, Material
 
 __all__ = [
     "StiffnessProvider",
+    "same_design",
     "section_nodes",
     "rigid_transfer",
     "expand_end_stiffness",
@@ -92,6 +94,22 @@ def prepare_chains(provider: StiffnessProvider, chains) -> None:
             tied(list(dict.fromkeys(chains)))
         return
     prepare_provider(provider, chain_slices(chains))
+
+
+def same_design(chains) -> np.ndarray:
+    """(n,) for each ``ChainPlacement``: the index of the first chain of the same design, its
+    geometry equal but for a length within 1 pm (the reference mount's L2 is 1 ulp longer than
+    L1 and L3: 4.4721359549995790e-01 against ...787e-01 m, from its mount points), so the
+    model's corrections (factors, slopes, shortening) build one design once (docs/model.md 7)."""
+    out = np.arange(len(chains))
+    for c, placement in enumerate(chains):
+        for first in range(c):
+            other = chains[first].chain
+            if (abs(placement.chain.length - other.length) <= 1e-12
+                    and dataclasses.replace(placement.chain, length=other.length) == other):
+                out[c] = first
+                break
+    return out
 
 
 def rigid_transfer(length: float | np.ndarray) -> np.ndarray:

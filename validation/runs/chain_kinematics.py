@@ -29,7 +29,7 @@ from flexcal.model.parameters import ParameterSpace
 
 from ..prototype.equilibrium import Loads, SolverSettings, build_assembly, solve_equilibrium
 from ..prototype.kinematics import pose, se3_exp, translation_pose
-from ..prototype.segments import StiffnessProvider, end_stiffness, prepare_chains, section_nodes
+from ..prototype.segments import StiffnessProvider, end_stiffness, prepare_chains, same_design, section_nodes
 from ..prototype.superelement import CoupledStiffness
 
 __all__ = ["chain_shortening", "chain_frame_stiffness", "shortening_corrections", "consistent_space"]
@@ -105,10 +105,10 @@ def shortening_corrections(space: ParameterSpace, provider: StiffnessProvider) -
     """(n_chains, 6, 6): measured S minus the model's own shortening form
     (``flexcal.model.shortening.chain_shortening_form``) at the nominal chains of ``space``."""
     mech = space.mechanism
-    prepare_chains(provider, [p.chain for p in mech.chains])
+    chains = [mech.chains[first].chain for first in same_design(mech.chains)]  # one probe per design
+    prepare_chains(provider, chains)
     done, rows = {}, []
-    for placement in mech.chains:
-        key = placement.chain
+    for key in chains:
         if key not in done:  # identical chains share their probe
             measured, _ = chain_shortening(key, provider)
             done[key] = measured - chain_shortening_form(

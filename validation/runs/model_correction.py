@@ -33,7 +33,7 @@ from flexcal.model.hinge import ENTRY_INDEX
 from flexcal.model.parameters import ParameterSpace
 
 from ..prototype.segments import (StiffnessProvider, chain_slices, end_stiffness, prepare_chains, prepare_provider,
-                                  section_nodes)
+                                  same_design, section_nodes)
 from .model_names import DEFAULT_BREAKAWAY_N, MODEL_STIFFNESS, MODELS
 
 __all__ = ["provider_chain_compliance", "twist_end_compliance", "compliance_factors", "compliance_slopes", "slope_provider", "unchanged_slices", "same_design", "corrected_space",
@@ -154,22 +154,6 @@ def unchanged_slices(nominal: FlexureChain, moved: FlexureChain) -> set[tuple[fl
     return {(float(x0), float(x1)) for x0, x1 in zip(nodes[:-1], nodes[1:])
             if pieces(ChainSegment(chain=moved, x_start=float(x0), x_end=float(x1)))
             == pieces(ChainSegment(chain=nominal, x_start=float(x0), x_end=float(x1)))}
-
-
-def same_design(chains) -> np.ndarray:
-    """(n,) for each ``ChainPlacement``: the index of the first chain of the same design, its
-    geometry equal but for a length within 1 pm (the reference mount's L2 is 1 ulp longer than
-    L1 and L3: 4.4721359549995790e-01 against ...787e-01 m, from its mount points), so the
-    slopes build one design once (docs/model.md 7)."""
-    out = np.arange(len(chains))
-    for c, placement in enumerate(chains):
-        for first in range(c):
-            other = chains[first].chain
-            if (abs(placement.chain.length - other.length) <= 1e-12
-                    and dataclasses.replace(placement.chain, length=other.length) == other):
-                out[c] = first
-                break
-    return out
 
 
 def compliance_slopes(space: ParameterSpace, provider: StiffnessProvider,
