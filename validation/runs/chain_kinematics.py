@@ -29,7 +29,7 @@ from flexcal.model.parameters import ParameterSpace
 
 from ..prototype.equilibrium import Loads, SolverSettings, build_assembly, solve_equilibrium
 from ..prototype.kinematics import pose, se3_exp, translation_pose
-from ..prototype.segments import StiffnessProvider, end_stiffness, prepare_chains, same_design, section_nodes
+from ..prototype.segments import StiffnessProvider, end_stiffness, prepare_chains, section_nodes
 from ..prototype.superelement import CoupledStiffness
 
 __all__ = ["chain_shortening", "chain_frame_stiffness", "shortening_corrections", "consistent_space"]
@@ -105,10 +105,13 @@ def shortening_corrections(space: ParameterSpace, provider: StiffnessProvider) -
     """(n_chains, 6, 6): measured S minus the model's own shortening form
     (``flexcal.model.shortening.chain_shortening_form``) at the nominal chains of ``space``."""
     mech = space.mechanism
-    chains = [mech.chains[first].chain for first in same_design(mech.chains)]  # one probe per design
-    prepare_chains(provider, chains)
+    prepare_chains(provider, [p.chain for p in mech.chains])
     done, rows = {}, []
-    for key in chains:
+    # each chain's own probe (not one per design, ``same_design``): sharing L1's for L2 (1 ulp
+    # longer) moved the noise-free main job's discrepancy fit into another optimum (base z 0.18 ->
+    # 2.27, session 25; docs/calibration.md "Session 25"), for 6 s of a cold main job
+    for placement in mech.chains:
+        key = placement.chain
         if key not in done:  # identical chains share their probe
             measured, _ = chain_shortening(key, provider)
             done[key] = measured - chain_shortening_form(
