@@ -43,7 +43,7 @@ from .kinematics import pose, so3_log, translation_pose
 from ..effects.hooks import EffectContext, PointConditions, PointResult, effect_record, room_temperature
 from .equilibrium import (Assembly, Loads, NonConvergenceError, SolverSettings, build_assembly, solve_equilibrium)
 from .superelement import CoupledStiffness
-from .segments import (StiffnessProvider, chain_slices, end_stiffness, prepare_provider, rigid_mode_defect, section_nodes)
+from .segments import StiffnessProvider, end_stiffness, prepare_chains, rigid_mode_defect, section_nodes
 from .transmission import ActuatorTransmission, nut_offset, point_class
 
 __all__ = [
@@ -177,11 +177,7 @@ def _segment_stiffness(mechanism: MechanismParams, provider: StiffnessProvider):
     asked: dict = {}  # equal chains (L1-L3, D1-D3 by default) ask the provider once
     by_chain = getattr(provider, "chain_segments", None)
     chain_matrices: dict = {}  # a chain's five 12 x 12 read once, not once per segment
-    if callable(by_chain):
-        prepare_chains = getattr(provider, "prepare_chains", lambda chains: None)
-        prepare_chains(list(dict.fromkeys(p.chain for p in mechanism.chains)))  # parallel FEM builds
-    else:
-        prepare_provider(provider, chain_slices(p.chain for p in mechanism.chains))  # parallel FEM builds
+    prepare_chains(provider, [p.chain for p in mechanism.chains])  # parallel FEM builds (tied chains or segments)
     for c, placement in enumerate(mechanism.chains):
         xs[c] = section_nodes(placement.chain)
         for s in range(N_SEGMENTS):

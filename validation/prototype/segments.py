@@ -49,6 +49,7 @@ __all__ = [
     "chain_slices",
     "prepare_provider",
     "prepare_chains",
+    "is_tied",
 ]
 
 StiffnessProvider = Callable[[FlexureChain, float, float], np.ndarray]
@@ -83,15 +84,23 @@ def prepare_provider(provider: StiffnessProvider, slices: list[tuple[FlexureChai
         prepare(slices)
 
 
+def is_tied(provider: StiffnessProvider) -> bool:
+    """Whether ``provider`` joins a chain's segments through section fields at its cuts (it has
+    ``chain_stiffness(chain)``, the K_chain on the five segments' twists: ``tied_chains.
+    tied_fem_provider``, the provider fem) instead of rigidly."""
+    return callable(getattr(provider, "chain_stiffness", None))
+
+
 def prepare_chains(provider: StiffnessProvider, chains) -> None:
-    """Let ``provider`` build at once what a chain's compliance or shortening
-    (``runs.model_correction``, ``runs.chain_kinematics``) will ask it for about ``chains``:
+    """Let ``provider`` build at once what the prototype (``mechanism.build_prototype``) or a
+    chain's compliance or shortening (``runs.model_correction``, ``runs.chain_kinematics``) will
+    ask it for about ``chains``:
     the tied chains (its ``prepare_chains``) of a provider with ``chain_stiffness``, the
     segments (``prepare_provider``) of any other."""
-    tied = getattr(provider, "prepare_chains", None)
-    if callable(getattr(provider, "chain_stiffness", None)):
-        if callable(tied):
-            tied(list(dict.fromkeys(chains)))
+    if is_tied(provider):
+        build = getattr(provider, "prepare_chains", None)
+        if callable(build):
+            build(list(dict.fromkeys(chains)))
         return
     prepare_provider(provider, chain_slices(chains))
 

@@ -29,7 +29,7 @@ from flexcal.model.parameters import ParameterSpace
 
 from ..prototype.equilibrium import Loads, SolverSettings, build_assembly, solve_equilibrium
 from ..prototype.kinematics import pose, se3_exp, translation_pose
-from ..prototype.segments import StiffnessProvider, end_stiffness, prepare_chains, section_nodes
+from ..prototype.segments import StiffnessProvider, end_stiffness, is_tied, prepare_chains, section_nodes
 from ..prototype.superelement import CoupledStiffness
 
 __all__ = ["chain_shortening", "chain_frame_stiffness", "shortening_corrections", "consistent_space"]
@@ -65,9 +65,9 @@ def chain_frame_stiffness(chain: FlexureChain, provider: StiffnessProvider):
     (the tied one, ``tied_chains.tied_fem_provider``) a one-chain ``CoupledStiffness`` of its
     K_chain (30, 30) on the five segments' twists; for any other its five segments' K_jj (5, 6, 6)
     [SI], symmetrized (rigid cuts)."""
-    tied = getattr(provider, "chain_stiffness", None)
-    if callable(tied):
-        return CoupledStiffness(blocks=np.asarray(tied(chain), dtype=float)[None], segments=np.arange(5)[None])
+    if is_tied(provider):
+        return CoupledStiffness(blocks=np.asarray(provider.chain_stiffness(chain), dtype=float)[None],
+                                segments=np.arange(5)[None])
     xs = section_nodes(chain)
     kjj = np.array([end_stiffness(np.asarray(provider(chain, float(xs[s]), float(xs[s + 1]))))
                     for s in range(5)])

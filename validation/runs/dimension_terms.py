@@ -45,7 +45,7 @@ from flexcal.model.chain import chain_compliance_matrix
 from flexcal.model.hinge import ENTRY_INDEX
 from flexcal.model.parameters import DIMENSION_SYMBOLS, ParameterSpace
 
-from ..prototype.segments import StiffnessProvider, chain_slices, prepare_chains, prepare_provider
+from ..prototype.segments import StiffnessProvider, chain_slices, is_tied, prepare_chains, prepare_provider
 from .chain_kinematics import chain_shortening
 from .model_correction import (SLOPE_STEPS, compliance_factors, provider_chain_compliance, same_design,
                                unchanged_slices)
@@ -72,16 +72,11 @@ def slice_owners(chain: FlexureChain, alike) -> dict[tuple[float, float], Flexur
     return owners
 
 
-def _tied(provider: StiffnessProvider) -> bool:
-    """Whether ``provider`` joins a chain's segments through its cut fields (``chain_stiffness``)."""
-    return callable(getattr(provider, "chain_stiffness", None))
-
-
 def _shared(alike, chain: FlexureChain, provider: StiffnessProvider) -> StiffnessProvider:
     """``provider`` asking for a slice ``chain`` shares with a chain of ``alike`` (a sequence of
     chains; ``slice_owners``) as that chain's (the same segment, built once); a tied provider
     itself (its chains are condensed whole: no segment to share, docs/model.md 7 "Session 25")."""
-    if _tied(provider):
+    if is_tied(provider):
         return provider
     owners = slice_owners(chain, alike)
 
@@ -125,13 +120,13 @@ def compliance_curvatures(space: ParameterSpace, provider: StiffnessProvider,
     alike = {key: [mech.chains[key[0]].chain] + ([chains[key[0], key[1], key[1], key[3]],
                                                  chains[key[0], key[2], key[2], key[3]]] if key[1] != key[2] else [])
              for key in chains}
-    slices = []
-    for key, chain in chains.items():
-        owners = slice_owners(chain, alike[key])
-        slices += [(owners.get((x0, x1), chain), x0, x1) for _, x0, x1 in chain_slices([chain])]
-    if _tied(provider):  # parallel FEM builds
+    if is_tied(provider):  # parallel FEM builds: the moved chains whole
         prepare_chains(provider, list(dict.fromkeys(chains.values())))
-    else:
+    else:  # parallel FEM builds: the moved chains' own slices, each shared one once
+        slices = []
+        for key, chain in chains.items():
+            owners = slice_owners(chain, alike[key])
+            slices += [(owners.get((x0, x1), chain), x0, x1) for _, x0, x1 in chain_slices([chain])]
         prepare_provider(provider, list(dict.fromkeys(slices)))
     ratio = {key: moved_factors(alike[key][0], chain, provider, mech.material, alike[key][1:])
              for key, chain in chains.items()}

@@ -33,7 +33,7 @@ from flexcal.model.hinge import ENTRY_INDEX
 from flexcal.model.parameters import ParameterSpace
 
 from ..prototype.segments import (StiffnessProvider, chain_slices, end_stiffness, prepare_chains, prepare_provider,
-                                  same_design, section_nodes)
+                                  is_tied, same_design, section_nodes)
 from .model_names import DEFAULT_BREAKAWAY_N, MODEL_STIFFNESS, MODELS
 
 __all__ = ["provider_chain_compliance", "twist_end_compliance", "compliance_factors", "compliance_slopes", "slope_provider", "unchanged_slices", "same_design", "corrected_space",
@@ -48,9 +48,8 @@ def provider_chain_compliance(chain: FlexureChain, provider: StiffnessProvider) 
     ``tied_chains.tied_fem_provider``: the five segments joined through section fields at the
     cuts) on its K_chain (30, 30); any other on the block diagonal of its five segments' K_jj
     (rigid cuts), which is Eq. 1's sum of each segment's end compliance moved to B."""
-    tied = getattr(provider, "chain_stiffness", None)
-    if callable(tied):
-        return twist_end_compliance(np.asarray(tied(chain), dtype=float), section_nodes(chain))
+    if is_tied(provider):
+        return twist_end_compliance(np.asarray(provider.chain_stiffness(chain), dtype=float), section_nodes(chain))
     nodes = section_nodes(chain)
     return _composed_compliance(chain, [provider(chain, float(start), float(end))
                                         for start, end in zip(nodes[:-1], nodes[1:])])
@@ -178,7 +177,7 @@ def compliance_slopes(space: ParameterSpace, provider: StiffnessProvider,
     method = SLOPE_METHOD if method is None else method
     if method not in SLOPE_METHODS:
         raise ValueError(f"slope method {method!r} must be one of {', '.join(SLOPE_METHODS)}")
-    if callable(getattr(provider, "chain_stiffness", None)) and (method != "builds" or elements_through is not None):
+    if is_tied(provider) and (method != "builds" or elements_through is not None):
         raise ValueError(f"a tied provider's slopes are the builds of its own chains on its own grid (method 'builds', "
                          f"elements_through None), not {method!r} on {elements_through}: the rigidly joined "
                          "segments' (relative) slopes miss the tied chains' (docs/model.md 7, 'Session 25')")
@@ -233,7 +232,7 @@ def _slopes_by_builds(space: ParameterSpace, provider: StiffnessProvider,
     # a tied provider on its own grid: each moved chain condensed whole through its cut fields
     # (``tied_chains``; no segment of it is shared), since the rigid cuts' slopes miss how the cuts'
     # axial compliance follows the dimensions (docs/model.md 7, "Session 25")
-    tied = provider is fine and callable(getattr(fine, "chain_stiffness", None))
+    tied = provider is fine and is_tied(fine)
     if tied:
         prepare_chains(fine, list(dict.fromkeys(moved.values())))  # parallel FEM builds
     else:
