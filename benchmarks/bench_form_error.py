@@ -167,9 +167,9 @@ def _table(scenario_name, provider, corrections, args, strokes, force, trajector
         trajectories.append((f"{trajectory_file} ({len(designed)} points)", designed, leg))
     for stroke in strokes:
         for k in range(args.walks):
-            seed = [args.seed, k, round(100 * stroke)]
-            inputs = random_walk(amplitudes, args.points, stroke, seed)
-            trajectories.append((f"walk {k + 1}, stroke {stroke:g}, seed {seed}", inputs,
+            walk_seed = [args.seed, k, round(100 * stroke)]
+            inputs = random_walk(amplitudes, args.points, stroke, walk_seed)
+            trajectories.append((f"walk {k + 1}, stroke {stroke:g}, seed {walk_seed}", inputs,
                                  np.ones(args.points, dtype=int)))
     print(f"\nbench_form_error: scenario {scenario_name}"
           + ("" if seed is None else f" (errors drawn with seed {seed})")
