@@ -94,7 +94,8 @@ def test_a_moved_chain_shares_exactly_the_unchanged_slices_segment_entries():
     """The tied chains' segment entries (``tied_segment_keys``, keyed on the pieces) of a chain
     moved as the slopes move it (``SLOPE_STEPS``) are the nominal chain's exactly for the slices
     ``unchanged_slices`` names (the rigid provider's rule), on table1's two designs; every other
-    entry is a key of its own, and a segment with another cut field or on another grid has its own."""
+    entry is a key of its own, and a segment with another cut field, on another grid or of a chain
+    of another length has its own."""
     import dataclasses
 
     from flexcal.model.parameters import parameter_space
@@ -119,6 +120,12 @@ def test_a_moved_chain_shares_exactly_the_unchanged_slices_segment_entries():
         d8 = tc.tied_segment_keys(nominal, "d12/d8", elements_through_thickness=through)
         assert [key in keys.values() for key in d8.values()] == [True, False, False]
         assert not set(keys.values()) & set(tc.tied_segment_keys(nominal, elements_through_thickness=through - 1).values())
+    # L2 is 1 ulp longer than L1, the same pieces: kept apart, as unchanged_slices keeps it (its
+    # own chain for the shortening probe, docs/calibration.md "Session 25")
+    l1, l2 = (placement.chain for placement in parameter_space().mechanism.chains[:2])
+    assert l1.length != l2.length and not unchanged_slices(l1, l2)
+    assert not set(tc.tied_segment_keys(l1, elements_through_thickness=through).values()) & set(
+        tc.tied_segment_keys(l2, elements_through_thickness=through).values())
 
 
 def test_a_moved_chain_built_on_the_nominal_chains_segments_is_the_one_built_alone_to_the_bit(tmp_path, monkeypatch):

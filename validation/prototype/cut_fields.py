@@ -197,15 +197,20 @@ def interface_condensation_parts(segment, starts_at_cut: bool, ends_at_cut: bool
                                  elements_through: float, options: dict) -> dict:
     """The FEM cache key's parts of one condensation of ``interface_condensed`` (``cache``):
     the meshed ``segment``'s solid as its pieces (``flexcal.geometry.exact.pieces``: all its
-    mapped mesh and end faces are made of, so a slice a dimension leaves as it was has the key of
-    the nominal chain's, ``runs.model_correction.unchanged_slices``; the chain's other dimensions
-    are not in it), which ends are cuts, their ``labels``, the fields' ``scale`` [m], the grid
-    (``elements_through``, ``options``: the mirror part of the mapped grid) and the material
-    (STEEL, ``interface_segment_stiffness``'s)."""
+    mapped mesh and end faces are made of) and its chain's length, so that a slice a dimension
+    leaves as it was has the key of the nominal chain's exactly where
+    ``runs.model_correction.unchanged_slices`` shares it (same length, same nodes, same pieces;
+    the chain's other dimensions are not in it); which ends are cuts, their ``labels``, the
+    fields' ``scale`` [m], the grid (``elements_through``, ``options``: the mirror part of the
+    mapped grid) and the material (STEEL, ``interface_segment_stiffness``'s). The length keeps
+    apart the reference mount's L2, 1 ulp longer than L1 and the same pieces: its own chain is
+    built for the consistent model's shortening probe, whose round-off moves the noise-free
+    discrepancy fit (docs/calibration.md, "Session 25"; docs/scale.md, "Issue 26, session 26")."""
     from flexcal.geometry.exact import pieces
     from flexcal.geometry.params import STEEL
 
-    return {"kind": "interface_segment_stiffness", "pieces": pieces(segment), "material": STEEL,
+    return {"kind": "interface_segment_stiffness", "pieces": pieces(segment), "chain_length": segment.chain.length,
+            "material": STEEL,
             "cut_ends": [bool(starts_at_cut), bool(ends_at_cut)], "labels": list(labels), "scale": float(scale),
             "mesh": {"mesher": "mapped", "elements_through_thickness": float(elements_through), "options": options,
                      "mirrored": True}}

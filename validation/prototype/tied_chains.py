@@ -10,8 +10,11 @@ into ``TIED_STRUT_REFINEMENT``^3 so its 2 x 2-cell section can carry them), the 
 into the section bodies' rigid motions and the cuts' warping, the warping condensed
 (``flexcal.fem.cut_warping``): K_chain (30, 30), cached per chain under a key with the ties,
 together with the segments' 12 x 12 from the same condensations (the fields held rigid), so the
-tied prototype needs no rigidly tied segment. The missing chains are built on the executor's
-job threads (``build_tied_chains``; docs/meshing.md, "Cost, session 24 (cost26)").
+tied prototype needs no rigidly tied segment. Each segment's condensation is cached too, keyed
+on its solid (its pieces, the chain's length) and ties, so a chain that shares a segment with one
+built before (the slopes' moved chains) condenses only the rest (session 26, docs/scale.md). The
+missing chains are built on the executor's job threads (``build_tied_chains``; docs/meshing.md,
+"Cost, session 24 (cost26)").
 """
 
 from __future__ import annotations
@@ -79,9 +82,9 @@ def tied_chain_matrices(chain: FlexureChain, ties: str = DEFAULT_TIES, material:
     (``PROTOTYPE_CHAIN_OPTIONS``, ``elements_through_thickness`` asked for; the strut segment refined).
 
     Each of the chain's three distinct condensations is a cache entry of its own too
-    (``cut_fields.interface_condensed`` with ``cache``, keyed on the segment's pieces, cut ends,
-    labels, field scale, grid and material: ``interface_condensation_parts``), so a chain that
-    shares a segment with one built before reads it: the slopes' moved chains share the nominal
+    (``cut_fields.interface_condensed`` with ``cache``, keyed on the segment's pieces, its chain's
+    length, cut ends, labels, field scale, grid and material: ``interface_condensation_parts``),
+    so a chain that shares a segment with one built before reads it: the slopes' moved chains share the nominal
     chain's strut when w, a, t1 or t2 move, its [m1, s0] when t1 moves and its [0, m1] when t2
     moves (L1 and D1 of table1; ``runs.model_correction.unchanged_slices``), the same bits as
     condensed again (tests/test_tied_chain_builds.py). Two job threads that need one segment at

@@ -208,8 +208,9 @@ def _slopes_by_builds(space: ParameterSpace, provider: StiffnessProvider,
     mount), since the rigidly joined segments' slopes miss how the cuts' axial compliance follows
     the dimensions (docs/model.md 7, "Session 25"); the nominal chains are built first (the
     factors then read them) and a moved chain reads each segment condensation the dimension leaves
-    as it was (``unchanged_slices``' rule, through the segments' cache key): 46 condensations
-    where 60 were (20 chains x 3) for the reference mount's two designs, the same bits
+    as it was (``unchanged_slices``' rule, through the segments' cache key): 42 segment
+    condensations (6 of them the nominal chains') where 66 were (20 moved chains x 3, then the
+    factors' 2 nominal chains x 3) for the reference mount's two designs, the same bits
     (docs/scale.md, "Issue 26, session 26").
     elements_through: the FEM grid of those builds (``slope_provider``; None, the default
     ``SLOPE_ELEMENTS_THROUGH``: ``provider``'s own); the segments' cache keys carry it. On
