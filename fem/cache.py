@@ -95,6 +95,10 @@ _LOG = logging.getLogger("flexcal.fem.cache")
 _LOCK = threading.Lock()  # the FEM segment builds run on threads of this process
 _WRITABLE: dict[str, bool] = {}  # folder -> can a file be written there (checked once per process)
 _MEMORY: OrderedDict[tuple[str, str], dict[str, np.ndarray]] = OrderedDict()  # (folder, key) -> arrays
+# (folder, key) -> the lock a thread holds while it computes that entry (``cached``): a second
+# thread asking for it meanwhile waits and reads the first one's result (the tied chains' shared
+# segments, session 26); dropped when the entry is written
+_COMPUTING: dict[tuple[str, str], threading.RLock] = {}
 
 
 def arrays_digest(arrays: Mapping[str, np.ndarray]) -> str:
@@ -298,12 +302,30 @@ def cached(
     """Arrays for ``parts`` from the cache, or ``compute()`` them and store them (also
     when the stored file is damaged or stale, see ``load_cached``). The folder is checked
     before ``compute`` runs: one that cannot be written is warned about then, and the
-    result is returned all the same (``keep_cached``)."""
+    result is returned all the same (``keep_cached``).
+
+    One computation per entry at a time in this process: a thread that asks for an entry another
+    thread is computing waits for it and reads its result (two job threads building tied chains
+    that share a segment, ``validation.prototype.tied_chains``; a computation that asks for other
+    entries nests, as the keys it asks for never ask back). Other processes (Dask workers) may
+    compute the same entry at once: the same bits, each written whole (``store_cached``)."""
     key = cache_key(parts)
     cache_is_writable(directory)  # up front: the warning comes before the FEM work, not after it
     found = load_cached(key, directory)
     if found is not None:
         return found
-    arrays = {name: np.asarray(a) for name, a in compute().items()}
-    keep_cached(key, arrays, directory)
+    entry = (str(cache_dir(directory)), key)
+    with _LOCK:
+        lock = _COMPUTING.setdefault(entry, threading.RLock())
+    with lock:
+        found = load_cached(key, directory)  # computed by the thread this one waited for
+        if found is not None:
+            return found
+        try:
+            arrays = {name: np.asarray(a) for name, a in compute().items()}
+            keep_cached(key, arrays, directory)
+        finally:
+            with _LOCK:
+                if _COMPUTING.get(entry) is lock:  # not a later thread's, after a failed computation
+                    del _COMPUTING[entry]
     return arrays

@@ -323,3 +323,55 @@ def test_yield_strength_stays_out_of_the_key():
     denser = dict(PARTS, material=dataclasses.replace(STEEL, density=8000.0))
     stiffer_nu = dict(PARTS, material=dataclasses.replace(STEEL, poisson_ratio=0.3))
     assert len({cache.cache_key(p) for p in (PARTS, denser, stiffer_nu)}) == 3
+
+
+def test_two_threads_asking_for_one_entry_compute_it_once(tmp_path, monkeypatch):
+    """``cached`` on job threads (the tied chains' shared segments, session 26): a thread asking
+    for an entry another thread is computing waits and reads that one's result; a different
+    entry is computed meanwhile, not after."""
+    import threading
+    import time
+
+    started, release, calls, missed = threading.Event(), threading.Event(), [], threading.Event()
+    load = cache.load_cached
+
+    def watched(key, directory=None):
+        found = load(key, directory)
+        if threading.current_thread().name == "second" and found is None:
+            missed.set()  # the second thread found no entry: it computes or waits from here
+        return found
+
+    monkeypatch.setattr(cache, "load_cached", watched)
+
+    def slow():
+        calls.append("slow")
+        started.set()
+        assert release.wait(10.0)  # 10 s: the test's threads hold nothing else
+        return {"value": np.arange(3.0)}
+
+    first = threading.Thread(target=cache.cached, args=(PARTS, slow, tmp_path))
+    first.start()
+    assert started.wait(10.0)
+    results = []
+    second = threading.Thread(target=lambda: results.append(cache.cached(PARTS, slow, tmp_path)), name="second")
+    second.start()
+    assert missed.wait(10.0)
+    time.sleep(0.2)  # time enough for a second computation to start, were there one
+    other = cache.cached(dict(PARTS, kind="other"), lambda: {"value": np.ones(2)}, tmp_path)  # not blocked
+    np.testing.assert_array_equal(other["value"], np.ones(2))
+    release.set()
+    first.join(10.0)
+    second.join(10.0)
+    assert calls == ["slow"] and len(results) == 1
+    np.testing.assert_array_equal(results[0]["value"], np.arange(3.0))
+    assert not cache._COMPUTING  # the locks go with the entries written
+
+
+def test_a_failed_computation_lets_the_next_thread_compute(tmp_path):
+    def fails():
+        raise RuntimeError("no")
+
+    with pytest.raises(RuntimeError):
+        cache.cached(PARTS, fails, tmp_path)
+    assert not cache._COMPUTING
+    np.testing.assert_array_equal(cache.cached(PARTS, lambda: {"value": np.ones(1)}, tmp_path)["value"], np.ones(1))

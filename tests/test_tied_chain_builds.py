@@ -88,3 +88,92 @@ def test_a_tied_chain_built_on_a_job_thread_is_the_one_built_here_to_the_bit(tmp
                                    cache_directory=tmp_path / "thread")  # a cache hit: the job thread's
     for name in ("stiffness", "segments"):
         np.testing.assert_array_equal(there[name], here[name])
+
+
+def test_a_moved_chain_shares_exactly_the_unchanged_slices_segment_entries():
+    """The tied chains' segment entries (``tied_segment_keys``, keyed on the pieces) of a chain
+    moved as the slopes move it (``SLOPE_STEPS``) are the nominal chain's exactly for the slices
+    ``unchanged_slices`` names (the rigid provider's rule), on table1's two designs; every other
+    entry is a key of its own, and a segment with another cut field, on another grid or of a chain
+    of another length has its own."""
+    import dataclasses
+
+    from flexcal.model.parameters import parameter_space
+    from flexcal.validation.runs.model_correction import SLOPE_STEPS, _FIELDS, unchanged_slices
+
+    through = fp.DEFAULT_ELEMENTS_THROUGH
+    for c in (0, 3):  # L1, D1
+        nominal = parameter_space().mechanism.chains[c].chain
+        keys = tc.tied_segment_keys(nominal, elements_through_thickness=through)
+        assert len(keys) == len(set(keys.values())) == 3
+        for symbol, field in _FIELDS.items():
+            for sign in (1, -1):
+                moved = dataclasses.replace(nominal, **{field: getattr(nominal, field) * (1 + sign * SLOPE_STEPS[symbol])})
+                shared = {plan[:2] for plan, key in tc.tied_segment_keys(moved, elements_through_thickness=through).items()
+                          if key in keys.values()}
+                half = {(round(x0, 12), round(x1, 12)) for x0, x1 in unchanged_slices(nominal, moved)
+                        if x0 < 0.5 * nominal.length}
+                assert shared == half, (c, symbol, sign)
+                assert len(shared) == {"w": 1, "a": 1, "l": 0, "t1": 2, "t2": 2}[symbol]
+        # the ties "d12/d8" have the d12 cut at m1 too: [0, m1] (its other end rigid) is the same
+        # condensation; [m1, s0] and the strut (d8 at s0, s1) are not
+        d8 = tc.tied_segment_keys(nominal, "d12/d8", elements_through_thickness=through)
+        assert [key in keys.values() for key in d8.values()] == [True, False, False]
+        assert not set(keys.values()) & set(tc.tied_segment_keys(nominal, elements_through_thickness=through - 1).values())
+    # L2 is 1 ulp longer than L1, the same pieces: kept apart, as unchanged_slices keeps it (its
+    # own chain for the shortening probe, docs/calibration.md "Session 25")
+    l1, l2 = (placement.chain for placement in parameter_space().mechanism.chains[:2])
+    assert l1.length != l2.length and not unchanged_slices(l1, l2)
+    assert not set(tc.tied_segment_keys(l1, elements_through_thickness=through).values()) & set(
+        tc.tied_segment_keys(l2, elements_through_thickness=through).values())
+
+
+def test_a_moved_chain_built_on_the_nominal_chains_segments_is_the_one_built_alone_to_the_bit(tmp_path, monkeypatch):
+    """Built after the nominal chain, a chain with t1 moved condenses only its [0, m1] (its
+    [m1, s0] and strut are the nominal's entries) and is the same chain, to the bit, as built
+    in a cache of its own (D1 on 2 cells through, to be quick)."""
+    import dataclasses
+
+    import flexcal.validation.prototype.cut_fields as cf
+
+    nominal = reference_mechanism().chains[3].chain
+    moved = dataclasses.replace(nominal, thickness_1=nominal.thickness_1 * 1.03)
+    condense, calls = cf.interface_segment_stiffness, []
+
+    def counted(segment, *args):
+        calls.append((segment.x_start, segment.x_end))
+        return condense(segment, *args)
+
+    monkeypatch.setattr(cf, "interface_segment_stiffness", counted)
+    tc.tied_chain_matrices(nominal, elements_through_thickness=2, cache_directory=tmp_path / "shared")
+    assert len(calls) == 3
+    shared = tc.tied_chain_matrices(moved, elements_through_thickness=2, cache_directory=tmp_path / "shared")
+    assert len(calls) == 4 and calls[-1] == (0.0, round(float(section_nodes(moved)[1]), 12))
+    alone = tc.tied_chain_matrices(moved, elements_through_thickness=2, cache_directory=tmp_path / "alone")
+    assert len(calls) == 7
+    for name in ("stiffness", "segments"):
+        np.testing.assert_array_equal(shared[name], alone[name])
+    assert not np.array_equal(shared["stiffness"],
+                              tc.tied_chain_matrices(nominal, elements_through_thickness=2,
+                                                     cache_directory=tmp_path / "shared")["stiffness"])
+
+
+def test_the_slopes_hand_out_the_nominal_chains_first(monkeypatch, tmp_path):
+    """The tied slopes' builds start with the two nominal designs (L1, D1), so that the moved
+    chains on the other job thread find the segments they share with them."""
+    from flexcal.model.parameters import parameter_space
+    from flexcal.validation.runs.model_correction import compliance_slopes
+
+    submitted = []
+
+    def record(items, job, on_done, **kw):
+        submitted.extend(items)
+        return {}
+
+    monkeypatch.setattr(executor, "run_jobs", record)
+    monkeypatch.setattr(executor, "usable_cores", lambda: 2)
+    monkeypatch.setattr(tc, "tied_chain_matrices", _fake_matrices([]))  # the chains as the loop then asks for them
+    space = parameter_space()
+    compliance_slopes(space, tc.tied_fem_provider(progress=False, workers=None, cache_directory=tmp_path))
+    assert submitted[:2] == [space.mechanism.chains[0].chain, space.mechanism.chains[3].chain]
+    assert len(submitted) == 22 == len(set(submitted))  # and the 2 x 5 x 2 moved ones

@@ -18,7 +18,7 @@ import numpy as np
 __all__ = ["INTERFACES", "mirror_part", "cut_coupling", "interface_segment_stiffness", "interface_order",
            "interface_segments", "interface_condensations", "step_interfaces", "plan_key", "chain_order_matrices",
            "cut_orders", "joined_through_interface", "twist_stiffness_through_interface", "interface_scale",
-           "interface_condensed"]
+           "interface_condensation_parts", "interface_condensed"]
 
 
 def mirror_part(part, elements_through: float, options: dict, refinement: int = 1):
@@ -193,15 +193,54 @@ def interface_scale(chain, n_segments: int, nodes=None) -> float:
     return float(bounding_box(part)[1][1])
 
 
+def interface_condensation_parts(segment, starts_at_cut: bool, ends_at_cut: bool, labels: tuple, scale: float,
+                                 elements_through: float, options: dict) -> dict:
+    """The FEM cache key's parts of one condensation of ``interface_condensed`` (``cache``):
+    the meshed ``segment``'s solid as its pieces (``flexcal.geometry.exact.pieces``: all its
+    mapped mesh and end faces are made of) and its chain's length, so that a slice a dimension
+    leaves as it was has the key of the nominal chain's exactly where
+    ``runs.model_correction.unchanged_slices`` shares it (same length, same nodes, same pieces;
+    the chain's other dimensions are not in it); which ends are cuts, their ``labels``, the
+    fields' ``scale`` [m], the grid (``elements_through``, ``options``: the mirror part of the
+    mapped grid) and the material (STEEL, ``interface_segment_stiffness``'s). The length keeps
+    apart the reference mount's L2, 1 ulp longer than L1 and the same pieces: its own chain is
+    built for the consistent model's shortening probe, whose round-off moves the noise-free
+    discrepancy fit (docs/calibration.md, "Session 25"; docs/scale.md, "Issue 26, session 26")."""
+    from flexcal.geometry.exact import pieces
+    from flexcal.geometry.params import STEEL
+
+    return {"kind": "interface_segment_stiffness", "pieces": pieces(segment), "chain_length": segment.chain.length,
+            "material": STEEL,
+            "cut_ends": [bool(starts_at_cut), bool(ends_at_cut)], "labels": list(labels), "scale": float(scale),
+            "mesh": {"mesher": "mapped", "elements_through_thickness": float(elements_through), "options": options,
+                     "mirrored": True}}
+
+
 def interface_condensed(plan, interface, elements_through: float, options: dict, meshes=None,
-                        scale: float = 1.0) -> dict:
+                        scale: float = 1.0, *, cache: bool = False, cache_directory=None) -> dict:
     """{``plan_key``: matrix}: the distinct condensations (``interface_condensations``) of
     ``plan``'s meshed segments (``interface_segment_stiffness``, fields' length ``scale``
     [m]), each on its mesh in ``meshes`` ({(x_start, x_end) rounded to 1 pm: mirror part};
-    one missing is meshed on ``options`` with ``elements_through`` asked for)."""
+    one missing is meshed on ``options`` with ``elements_through`` asked for).
+
+    cache: each condensation from the FEM cache (``flexcal.fem.cache.cached`` in
+    ``cache_directory``) under ``interface_condensation_parts``, computed and stored if missing,
+    so another chain with the same segment (the slopes' moved chains, ``tied_chains``) reads it;
+    only with ``meshes`` None (the key names the grid they are meshed on)."""
+    from flexcal.fem.cache import cached
+
+    if cache and meshes:
+        raise ValueError("cached condensations are meshed on options: pass meshes=None with cache=True")
     meshes = {} if meshes is None else meshes
     condensed = {}
     for key, (segment, starts, ends, labels) in interface_condensations(plan, interface).items():
-        mesh = meshes.get(key[:2]) or mirror_part(segment, elements_through, options)
-        condensed[key] = interface_segment_stiffness(segment, mesh, starts, ends, labels, scale)
+        def compute(segment=segment, starts=starts, ends=ends, labels=labels, key=key):
+            mesh = meshes.get(key[:2]) or mirror_part(segment, elements_through, options)
+            return {"stiffness": interface_segment_stiffness(segment, mesh, starts, ends, labels, scale)}
+
+        if cache:
+            parts = interface_condensation_parts(segment, starts, ends, labels, scale, elements_through, options)
+            condensed[key] = cached(parts, compute, cache_directory)["stiffness"]
+        else:
+            condensed[key] = compute()["stiffness"]
     return condensed

@@ -10,8 +10,11 @@ into ``TIED_STRUT_REFINEMENT``^3 so its 2 x 2-cell section can carry them), the 
 into the section bodies' rigid motions and the cuts' warping, the warping condensed
 (``flexcal.fem.cut_warping``): K_chain (30, 30), cached per chain under a key with the ties,
 together with the segments' 12 x 12 from the same condensations (the fields held rigid), so the
-tied prototype needs no rigidly tied segment. The missing chains are built on the executor's
-job threads (``build_tied_chains``; docs/meshing.md, "Cost, session 24 (cost26)").
+tied prototype needs no rigidly tied segment. Each segment's condensation is cached too, keyed
+on its solid (its pieces, the chain's length) and ties, so a chain that shares a segment with one
+built before (the slopes' moved chains) condenses only the rest (session 26, docs/scale.md). The
+missing chains are built on the executor's job threads (``build_tied_chains``; docs/meshing.md,
+"Cost, session 24 (cost26)").
 """
 
 from __future__ import annotations
@@ -25,8 +28,8 @@ import numpy as np
 from flexcal.geometry.params import STEEL, FlexureChain, Material
 
 __all__ = ["TIES", "DEFAULT_TIES", "TIED_STRUT_REFINEMENT", "cut_interfaces", "tied_chain_key",
-           "tied_chain_matrices", "tied_chain_stiffness", "build_tied_chain_job", "build_tied_chains",
-           "tied_fem_provider"]
+           "tied_chain_matrices", "tied_segment_keys", "tied_chain_stiffness", "build_tied_chain_job",
+           "build_tied_chains", "tied_fem_provider"]
 
 # "m/s": the interface at the mid-connector cuts m1, m2, then at the strut cuts s0, s1
 # (chain_cuts.cut_coupling's labels; "d12": all four). d12/p8 and d12/d8 brought the whole
@@ -76,30 +79,64 @@ def tied_chain_matrices(chain: FlexureChain, ties: str = DEFAULT_TIES, material:
     docstring) and each segment's 12 x 12 on its end sections' rigid motions with the cuts' fields
     held rigid (``flexcal.fem.cut_warping.rigid_part_stiffness``; chain order, chain frame, as
     the provider's ``(chain, x_start, x_end)`` gives them). Each segment on the prototype's grid
-    (``PROTOTYPE_CHAIN_OPTIONS``, ``elements_through_thickness`` asked for; the strut segment refined)."""
-    from flexcal.fem.cache import cached
-    from flexcal.fem.mesh_mapped_chain import PROTOTYPE_CHAIN_OPTIONS
+    (``PROTOTYPE_CHAIN_OPTIONS``, ``elements_through_thickness`` asked for; the strut segment refined).
 
-    interfaces = cut_interfaces(ties)
+    Each of the chain's three distinct condensations is a cache entry of its own too
+    (``cut_fields.interface_condensed`` with ``cache``, keyed on the segment's pieces, its chain's
+    length, cut ends, labels, field scale, grid and material: ``interface_condensation_parts``),
+    so a chain that shares a segment with one built before reads it: the slopes' moved chains share the nominal
+    chain's strut when w, a, t1 or t2 move, its [m1, s0] when t1 moves and its [0, m1] when t2
+    moves (L1 and D1 of table1; ``runs.model_correction.unchanged_slices``), the same bits as
+    condensed again (tests/test_tied_chain_builds.py). Two job threads that need one segment at
+    once compute it once (``flexcal.fem.cache.cached``)."""
+    from flexcal.fem.cache import cached
+
     parts = _tied_chain_parts(chain, ties, material, elements_through_thickness)
 
     def compute() -> dict[str, np.ndarray]:
         from flexcal.fem.cut_warping import chain_twist_stiffness, rigid_part_stiffness
 
-        from .cut_fields import chain_order_matrices, cut_orders, interface_condensed, interface_scale, interface_segments
+        from .cut_fields import chain_order_matrices, cut_orders, interface_condensed
 
-        plan = interface_segments(chain, 5)
-        # the grid's own strut knob (it splits only the leafless strut segment's cells), at least
-        # TIED_STRUT_REFINEMENT: one knob, not a refinement on top of the grid's
-        options = {**PROTOTYPE_CHAIN_OPTIONS,
-                   "strut_refinement": max(PROTOTYPE_CHAIN_OPTIONS.get("strut_refinement", 1), TIED_STRUT_REFINEMENT)}
-        scale = interface_scale(chain, 5)
-        condensed = interface_condensed(plan, interfaces, elements_through_thickness, options, None, scale)
+        plan, interfaces, options, scale = _tied_plan(chain, ties)
+        # each segment's condensation its own cache entry: a moved chain's slice that the dimension
+        # leaves as it was reads the nominal chain's (docs/scale.md, "Issue 26, session 26")
+        condensed = interface_condensed(plan, interfaces, elements_through_thickness, options, None, scale,
+                                        cache=True, cache_directory=cache_directory)
         matrices, orders = chain_order_matrices(plan, condensed, interfaces), cut_orders(plan, interfaces)
         return {"stiffness": chain_twist_stiffness(matrices, orders, scale),
                 "segments": rigid_part_stiffness(matrices, orders, scale)}
 
     return cached(parts, compute, cache_directory)
+
+
+def _tied_plan(chain: FlexureChain, ties: str) -> tuple[list, tuple, dict, float]:
+    """(plan, cut labels, grid options, field scale [m]) of ``tied_chain_matrices``: the chain's
+    five segments (``cut_fields.interface_segments``), ``cut_interfaces(ties)``, the prototype's
+    grid with the strut refined, ``interface_scale``."""
+    from flexcal.fem.mesh_mapped_chain import PROTOTYPE_CHAIN_OPTIONS
+
+    from .cut_fields import interface_scale, interface_segments
+
+    # the grid's own strut knob (it splits only the leafless strut segment's cells), at least
+    # TIED_STRUT_REFINEMENT: one knob, not a refinement on top of the grid's
+    options = {**PROTOTYPE_CHAIN_OPTIONS,
+               "strut_refinement": max(PROTOTYPE_CHAIN_OPTIONS.get("strut_refinement", 1), TIED_STRUT_REFINEMENT)}
+    return interface_segments(chain, 5), cut_interfaces(ties), options, interface_scale(chain, 5)
+
+
+def tied_segment_keys(chain: FlexureChain, ties: str = DEFAULT_TIES, *, elements_through_thickness: float) -> dict:
+    """{``cut_fields.plan_key``: FEM cache key}: the cache entries of ``chain``'s distinct segment
+    condensations in ``tied_chain_matrices`` (``cut_fields.interface_condensation_parts``), in
+    chain order ([0, m1], [m1, s0], [s0, s1]); two chains share an entry where the keys are equal."""
+    from flexcal.fem.cache import cache_key
+
+    from .cut_fields import interface_condensation_parts, interface_condensations
+
+    plan, interfaces, options, scale = _tied_plan(chain, ties)
+    return {key: cache_key(interface_condensation_parts(segment, starts, ends, labels, scale,
+                                                        elements_through_thickness, options))
+            for key, (segment, starts, ends, labels) in interface_condensations(plan, interfaces).items()}
 
 
 def tied_chain_stiffness(chain: FlexureChain, ties: str = DEFAULT_TIES, material: Material = STEEL, *,

@@ -143,7 +143,11 @@ def unchanged_slices(nominal: FlexureChain, moved: FlexureChain) -> set[tuple[fl
     """The slices (x_start, x_end) [m] between the section nodes of ``moved`` whose solid is
     that of the same slice of ``nominal`` (same nodes, same pieces: ``flexcal.geometry.exact.pieces``,
     which is all a segment's mesh and end faces are made from), so the segment of ``nominal``
-    stands for it, bit for bit (tested)."""
+    stands for it, bit for bit (tested). On table1's L1 and D1 at ``SLOPE_STEPS``: the strut when
+    w, a, t1 or t2 move, leaf 2's [m1, s0] when t1 moves, leaf 1's [0, m1] when t2 moves (and
+    their mirror twins), none when l moves (the nodes move). The tied chains share by the same
+    rule through their segments' cache key (``cut_fields.interface_condensation_parts``: the
+    pieces), tested to give these slices."""
     from flexcal.geometry.exact import pieces
     from flexcal.geometry.params import ChainSegment
 
@@ -201,8 +205,13 @@ def _slopes_by_builds(space: ParameterSpace, provider: StiffnessProvider,
     forward difference's slope is that of the secant to one side.
     A tied provider (``chain_stiffness``) on its own grid: each moved chain is condensed whole
     through its cut fields (``tied_chains.tied_chain_matrices``, 20 chains for the reference
-    mount; none of its segments is shared), since the rigidly joined segments' slopes miss how the
-    cuts' axial compliance follows the dimensions (docs/model.md 7, "Session 25").
+    mount), since the rigidly joined segments' slopes miss how the cuts' axial compliance follows
+    the dimensions (docs/model.md 7, "Session 25"); the nominal chains are built first (the
+    factors then read them) and a moved chain reads each segment condensation the dimension leaves
+    as it was (``unchanged_slices``' rule, through the segments' cache key): 42 segment
+    condensations (6 of them the nominal chains') where 66 were (20 moved chains x 3, then the
+    factors' 2 nominal chains x 3) for the reference mount's two designs, the same bits
+    (docs/scale.md, "Issue 26, session 26").
     elements_through: the FEM grid of those builds (``slope_provider``; None, the default
     ``SLOPE_ELEMENTS_THROUGH``: ``provider``'s own); the segments' cache keys carry it. On
     another grid than ``provider``'s the slopes are that grid's relative change of each factor,
@@ -220,8 +229,9 @@ def _slopes_by_builds(space: ParameterSpace, provider: StiffnessProvider,
     moved = {(c, symbol, sign): dataclasses.replace(p.chain, **{fields[symbol]: getattr(p.chain, fields[symbol])
                                                                  * (1.0 + sign * steps[symbol])})
              for c, p in enumerate(mech.chains) if design[c] == c for symbol in DIMENSION_SYMBOLS for sign in (1, -1)}
-    # a slice a dimension leaves as it was (leaf 2's segment when t1 moves, the strut when w, a,
-    # t1 or t2 move) is the nominal chain's own segment: asked for as that, it is built once
+    # a slice a dimension leaves as it was (leaf 2's segment when t1 moves, leaf 1's when t2 moves,
+    # the strut when w, a, t1 or t2 move) is the nominal chain's own segment: asked for as that,
+    # it is built once
     shared = {(c, symbol, sign): unchanged_slices(mech.chains[c].chain, chain)
               for (c, symbol, sign), chain in moved.items()}
 
@@ -230,11 +240,13 @@ def _slopes_by_builds(space: ParameterSpace, provider: StiffnessProvider,
         return [(nominal if (x0, x1) in shared[key] else chain, x0, x1) for _, x0, x1 in chain_slices([chain])]
 
     # a tied provider on its own grid: each moved chain condensed whole through its cut fields
-    # (``tied_chains``; no segment of it is shared), since the rigid cuts' slopes miss how the cuts'
-    # axial compliance follows the dimensions (docs/model.md 7, "Session 25")
+    # (``tied_chains``), since the rigid cuts' slopes miss how the cuts' axial compliance follows
+    # the dimensions (docs/model.md 7, "Session 25"); the nominal chains first, so that the moved
+    # ones read the segment condensations a dimension leaves as they were from the cache
     tied = provider is fine and is_tied(fine)
     if tied:
-        prepare_chains(fine, list(dict.fromkeys(moved.values())))  # parallel FEM builds
+        nominals = [p.chain for c, p in enumerate(mech.chains) if design[c] == c]
+        prepare_chains(fine, list(dict.fromkeys([*nominals, *moved.values()])))  # parallel FEM builds
     else:
         prepare_provider(provider, list(dict.fromkeys(s for key in moved for s in slices_of(key))))
     done, out = {}, np.zeros((len(mech.chains), len(DIMENSION_SYMBOLS), 8))
