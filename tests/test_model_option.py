@@ -62,26 +62,26 @@ def test_second_order_is_selectable_unchanged(closed_form_segments):
     assert not space.chain_shortening and not space.compliance_slopes and space.breakaway_force is None
 
 
-def test_quadratic_dimension_terms_by_default_would_leave_the_other_models_runnable(monkeypatch):
-    """Making the quadratic terms the default is one constant (``DEFAULT_DIMENSION_TERMS``, read
-    by every calibration command's defaults): with it flipped, the parser's default becomes
-    "quadratic" (simulated by giving it), the consistent model takes it, and the models without
-    FEM factors that follow the dimensions run without it instead of being refused; an explicit
-    non-default choice a model cannot take is still refused."""
+def test_quadratic_dimension_terms_by_default_leave_the_other_models_runnable(monkeypatch):
+    """The quadratic terms are the default since session 26 (one constant,
+    ``DEFAULT_DIMENSION_TERMS``, read by every calibration command's defaults): the consistent
+    model takes them, and the models without FEM factors that follow the dimensions run without
+    them instead of being refused. With the constant at "linear" (as before) an explicit
+    "quadratic" a model cannot take is refused."""
     from flexcal.validation.cli import options
     from flexcal.validation.cli.opening import dimension_terms
 
+    assert options.DEFAULT_DIMENSION_TERMS == "quadratic"
     for command in ("verify", "identify", "sensitivity", "design", "compensate", "diagnose"):
         assert _parsed(command).config["dimension_terms"] == options.DEFAULT_DIMENSION_TERMS, command
+    assert dimension_terms(_parsed("verify")) == "quadratic"
+    assert dimension_terms(_parsed("verify", "--model", "second-order")) == "linear"
+    assert dimension_terms(_parsed("diagnose")) == "linear"
+    assert dimension_terms(_parsed("verify", "--model-stiffness", "closed-form")) == "linear"
+    assert dimension_terms(_parsed("verify", "--model", "paper", "--dimension-terms", "linear")) == "linear"
+    monkeypatch.setattr(options, "DEFAULT_DIMENSION_TERMS", "linear")
     with pytest.raises(ValueError, match="--model consistent --model-stiffness fem"):
         dimension_terms(_parsed("verify", "--model", "second-order", "--dimension-terms", "quadratic"))
-    monkeypatch.setattr(options, "DEFAULT_DIMENSION_TERMS", "quadratic")
-    flipped = ("--dimension-terms", "quadratic")
-    assert dimension_terms(_parsed("verify", *flipped)) == "quadratic"
-    assert dimension_terms(_parsed("verify", "--model", "second-order", *flipped)) == "linear"
-    assert dimension_terms(_parsed("diagnose", *flipped)) == "linear"
-    assert dimension_terms(_parsed("verify", "--model-stiffness", "closed-form", *flipped)) == "linear"
-    assert dimension_terms(_parsed("verify", "--model", "paper", "--dimension-terms", "linear")) == "linear"
 
 
 def test_paper_is_the_papers_model(closed_form_segments):
