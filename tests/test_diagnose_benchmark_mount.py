@@ -93,3 +93,29 @@ def test_benchmark_effect_sizes_are_scaled_on_the_given_mount(monkeypatch, effec
         assert 1.5 < achieved < 4.5  # whole steps, the event moved along the path to come closest (3.3 here)
     else:
         assert achieved == pytest.approx(3.0, rel=0.011)  # make_injector's secant stops within 1 %
+
+
+def test_fem_benchmark_builds_the_tied_chains_its_truths_ask_for(monkeypatch):
+    """With ``--provider fem`` (tied cuts since session 25) the grid's as-built chains are built
+    first through ``segments.prepare_chains`` on the tied provider, not as rigidly joined
+    segments the truths never read (the pre-build of sessions 16-25, found in session 26)."""
+    import flexcal.validation.prototype.segments as segments
+    from flexcal.validation.cli.diagnose_benchmark import run_benchmark
+
+    asked = []
+
+    class Prepared(Exception):
+        pass
+
+    def record(provider, chains):
+        asked.append((provider, list(chains)))
+        raise Prepared  # stop before the cases run: only the pre-build is under test
+
+    monkeypatch.setattr(segments, "prepare_chains", record)
+    with pytest.raises(Prepared):
+        run_benchmark(["none"], "tiny", noise_urad=0.5, cycles=2, seed=0, progress=False, provider_name="fem",
+                      workers=0)
+    (provider, chains), = asked
+    assert segments.is_tied(provider)
+    assert len(chains) % 6 == 0 and chains  # six chains per case's as-built mount
+    assert all(type(c).__name__ == "FlexureChain" for c in chains)

@@ -13,7 +13,7 @@ resumes where it stopped; a case that raises is listed in the report and the com
 exits 1 after writing the figures of the others. The cases run one after the other in
 this process by default, in parallel on the shared executor with ``--workers N`` (local
 worker processes) or ``--scheduler ADDRESS`` (docs/scale.md); with ``--provider fem`` the
-as-built mounts' segments are built first, by default on one thread per core. With
+as-built mounts' chains are built first (tied, or their segments for a rigid provider), by default on one thread per core. With
 ``--trajectory FILE`` (``flexcal design``'s trajectory.csv) every case is measured along
 that trajectory, ``--cycles`` times, instead of the standard one; the report names it
 (file and content hash), and the case ids include its hash. With ``--mount FILE`` the
@@ -76,7 +76,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
     add_mount(parser, what="the reference mount (the table1 errors are drawn on it)")
 
-    add_executor_options(parser, what="the cases (and, with --provider fem, the FEM segment builds)")
+    add_executor_options(parser, what="the cases (and, with --provider fem, the FEM chain builds)")
     add_out(parser, what="report.json, report.md, answers.json, diagnosis_*.png, cases/",
             when="each finished case is kept at once in DIR/cases/ and running the same command again resumes; the "
                  "report is written at the end, also when some cases failed (they are listed, exit status 1)")
@@ -162,10 +162,10 @@ def case_record(spec: dict, *, space=None, trajectory=None, null=None) -> dict:
     return {"id": design_id(spec), "spec": spec, "row": row, "answer": case.answer}
 
 
-def case_slices(specs) -> list:
-    """Every FEM segment slice the as-built mounts of ``specs`` ask for (``chain_slices``)."""
+def case_chains(specs) -> list:
+    """Every chain of the as-built mounts of ``specs``, in order (the chains their truths ask the
+    FEM provider for)."""
     from ..prototype.scenario import load_scenario
-    from ..prototype.segments import chain_slices
     from ..prototype.truth import as_built
 
     chains = []
@@ -174,7 +174,7 @@ def case_slices(specs) -> list:
         scenario = load_scenario("table1", seed=scenario_seed, mount=spec_mechanism(spec))
         mechanism, _, _ = as_built(scenario.space, scenario.values)
         chains += [p.chain for p in mechanism.chains]
-    return chain_slices(chains)
+    return chains
 
 
 def benchmark_null(*, provider_name, noise_urad, cycles, seed, space=None, trajectory=None, path=None, log=None,
@@ -229,9 +229,9 @@ def run_benchmark(ids, grid, *, noise_urad, cycles, seed, progress, scenario_see
     failures: {case label: error text} of the cases that raised (one bad case must not
     sink a two-hour grid). workers / scheduler: the shared executor
     (``flexcal.validation.executor``; 0 or None without a scheduler: one case after the
-    other here; None builds the FEM segments on one thread per core, ``build_segments``).
-    With the FEM provider the as-built mounts' missing segments are built first, all at
-    once on the same executor, then the cases run on cached segments."""
+    other here; None builds the FEM chains on one thread per core, ``segments.prepare_chains``).
+    With the FEM provider the as-built mounts' missing chains are built first, all at
+    once on the same executor, then the cases run on cached chains."""
     from ..progress import progress_bar
     from ..diagnosis.benchmark import trajectory_digest
     from ..executor import resolve_workers, run_jobs, where
@@ -254,10 +254,12 @@ def run_benchmark(ids, grid, *, noise_urad, cycles, seed, progress, scenario_see
     if pending:
         log(f"diagnose-benchmark: {len(labels)} cases, {len(labels) - len(pending)} already done, {len(pending)} to "
             f"run on {where(n_workers, scheduler)}")
-    if pending and provider_name == "fem":
-        from ..prototype.fem_provider import build_segments
+    if pending and provider_name == "fem":  # what the truths will ask for: tied chains (segments.prepare_chains)
+        from ..prototype.providers import stiffness_provider
+        from ..prototype.segments import prepare_chains
 
-        build_segments(case_slices(pending), workers=workers, scheduler=scheduler, progress=progress)
+        prepare_chains(stiffness_provider(provider_name, progress=progress, workers=workers, scheduler=scheduler),
+                       case_chains(pending))
     failures = {}
     with progress_bar(len(specs), "diagnose-benchmark", enabled=progress, unit="case") as bar:
         bar.update(len(specs) - len(pending))
