@@ -258,10 +258,18 @@ def test_dimension_terms_option_selects_the_curved_space(monkeypatch):
     assert curved == []
     assert calibration_model(args("consistent", "fem", "quadratic"), None, progress=False) == "curved"
     assert curved == [("space", "provider")]
+    # "quadratic" is the default since session 26: a model that cannot take it runs without it
+    for model, stiffness in (("second-order", "fem"), ("paper", "fem"), ("consistent", "closed-form")):
+        assert calibration_model(args(model, stiffness, "quadratic"), None, progress=False) == "space"
+    assert len(curved) == 1 and built == ["consistent", "consistent", "second-order", "paper", "consistent"]
+    # with the default at "linear" an explicit "quadratic" such a model cannot take is refused
+    import flexcal.validation.cli.options as options
+
+    monkeypatch.setattr(options, "DEFAULT_DIMENSION_TERMS", "linear")
     for model, stiffness in (("second-order", "fem"), ("paper", "fem"), ("consistent", "closed-form")):
         with pytest.raises(ValueError, match="dimension-terms quadratic"):
             calibration_model(args(model, stiffness, "quadratic"), None, progress=False)
-    assert built == ["consistent", "consistent"]  # the refused ones built nothing
+    assert len(built) == 5  # the refused ones built nothing
 
 
 def test_verify_refuses_quadratic_terms_for_another_model_before_the_truth(tmp_path, monkeypatch):
@@ -274,6 +282,9 @@ def test_verify_refuses_quadratic_terms_for_another_model_before_the_truth(tmp_p
         raise AssertionError("the truth was made before the model options were checked")
 
     monkeypatch.setattr(options, "load_source_with_truth", no_truth)
+    # an explicit "quadratic" is refused while it is not the default (it is since session 26, and a
+    # model that cannot take the default runs without it: test_model_option)
+    monkeypatch.setattr(options, "DEFAULT_DIMENSION_TERMS", "linear")
     assert cli.main(["verify", "--scenario", "table1", "--provider", "analytic", "--model", "second-order",
                      "--dimension-terms", "quadratic", "--out", str(tmp_path / "run"), "-q"]) == 2
     assert not (tmp_path / "run").exists()
