@@ -62,9 +62,9 @@ __all__ = ["Discrepancy", "fit_discrepancy", "discrepancy_covariance", "sandwich
 # the Matern part became near singular, and the likelihood turned rugged: on the README's main
 # job, inputs moved by 1e-9 relative gave log-likelihoods 5340-5445 at hyperparameters a factor
 # 10-40 apart, and the base-parameter z RMS went 0.07-2.27 with where L-BFGS-B stopped. At 0.1
-# the same perturbations move the fit by <= 1 % and the log-likelihood by 1e-3. On the 15+
-# noisy fits of the z-score study (0.5 urad) the noise came out at 0.97-1.06 x the residual and
-# the fit is the same to the bit (docs/calibration.md, "Session 26").
+# the same perturbations move the fit by <= 1.4 % and the log-likelihood by 1e-3. On all 30
+# noisy fits of the z-score study (0.5 urad) the noise came out at 0.971-1.057 x the residual
+# and the fit is the same to the bit (docs/calibration.md, "Session 26").
 NOISE_FLOOR = 0.1
 LENGTH_BOUNDS = (0.03, 10.0)  # [workspace units] 3 % of a half-width (shorter is indistinguishable from
 # noise at 77 postures: neighbours are ~0.1 apart) to 10 (longer is a constant, which the offsets absorb)

@@ -250,7 +250,7 @@ def test_fit_discrepancy_finds_a_small_process_beside_sensitive_sources():
 
     found = _sensitive_problem(module)
     assert np.all((found.amplitude > 4e-9 / 3.0) & (found.amplitude < 4e-9 * 3.0)), found.amplitude  # factor 3: above
-    assert found.noise < 4e-10  # a tenth of the process: the data hold no white part above 1e-12 (bound: 1e-3 scale)
+    assert found.noise < 4e-10  # a tenth of the process: the data hold no white part above 1e-12 (floor: NOISE_FLOOR x the residual RMS)
 
 
 
