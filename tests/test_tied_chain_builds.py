@@ -17,7 +17,7 @@ from flexcal.validation.prototype.transmission import ActuatorTransmission
 def _fake_matrices(calls):
     """tied_chain_matrices from the analytic segments: the 12 x 12 as they are, K_chain their end
     blocks side by side (what rigid ties give, test_chain_twist_stiffness.py)."""
-    def matrices(chain, ties, material, *, elements_through_thickness, cache_directory=None):
+    def matrices(chain, ties, material, *, elements_through_thickness, cache_directory=None, keep_segments=False):
         calls.append(chain)
         nodes = section_nodes(chain)
         segments = np.array([analytic_provider()(chain, float(a), float(b)) for a, b in zip(nodes[:-1], nodes[1:])])
@@ -58,7 +58,8 @@ def test_the_tied_chains_go_to_job_threads_once_each(monkeypatch, tmp_path):
 
     def record(items, job, on_done, **kw):
         submitted.extend(items)
-        plans.append((job, kw["workers"], kw["in_threads"], kw["job_options"]["solver_threads"]))
+        plans.append((job, kw["workers"], kw["in_threads"], kw["job_options"]["solver_threads"],
+                      kw["job_options"]["keep_segments"]))
         return {}
 
     monkeypatch.setattr(executor, "run_jobs", record)
@@ -68,7 +69,8 @@ def test_the_tied_chains_go_to_job_threads_once_each(monkeypatch, tmp_path):
     provider.prepare_chains(list(dict.fromkeys(p.chain for p in mechanism.chains)))
     # the nominal mount's six chains are three designs: each built once, on two threads of one core each
     assert submitted == list(dict.fromkeys(p.chain for p in mechanism.chains)) and len(submitted) == 3
-    assert plans == [(tc.build_tied_chain_job, 2, True, 1)]
+    # and the prototype's chains keep no segment entries (they share none; docs/scale.md, session 27)
+    assert plans == [(tc.build_tied_chain_job, 2, True, 1, False)]
 
 
 @pytest.mark.slow
@@ -129,9 +131,10 @@ def test_a_moved_chain_shares_exactly_the_unchanged_slices_segment_entries():
 
 
 def test_a_moved_chain_built_on_the_nominal_chains_segments_is_the_one_built_alone_to_the_bit(tmp_path, monkeypatch):
-    """Built after the nominal chain, a chain with t1 moved condenses only its [0, m1] (its
-    [m1, s0] and strut are the nominal's entries) and is the same chain, to the bit, as built
-    in a cache of its own (D1 on 2 cells through, to be quick)."""
+    """Built after the nominal chain with ``keep_segments``, a chain with t1 moved condenses only
+    its [0, m1] (its [m1, s0] and strut are the nominal's entries) and is the same chain, to the
+    bit, as built in a cache of its own without them, which holds the chain's entry alone (D1 on
+    2 cells through, to be quick)."""
     import dataclasses
 
     import flexcal.validation.prototype.cut_fields as cf
@@ -145,14 +148,20 @@ def test_a_moved_chain_built_on_the_nominal_chains_segments_is_the_one_built_alo
         return condense(segment, *args)
 
     monkeypatch.setattr(cf, "interface_segment_stiffness", counted)
-    tc.tied_chain_matrices(nominal, elements_through_thickness=2, cache_directory=tmp_path / "shared")
+    tc.tied_chain_matrices(nominal, elements_through_thickness=2, cache_directory=tmp_path / "shared",
+                           keep_segments=True)
     assert len(calls) == 3
-    shared = tc.tied_chain_matrices(moved, elements_through_thickness=2, cache_directory=tmp_path / "shared")
+    shared = tc.tied_chain_matrices(moved, elements_through_thickness=2, cache_directory=tmp_path / "shared",
+                                    keep_segments=True)
     assert len(calls) == 4 and calls[-1] == (0.0, round(float(section_nodes(moved)[1]), 12))
     alone = tc.tied_chain_matrices(moved, elements_through_thickness=2, cache_directory=tmp_path / "alone")
     assert len(calls) == 7
     for name in ("stiffness", "segments"):
         np.testing.assert_array_equal(shared[name], alone[name])
+    # two chains and their 3 + 1 segment entries kept; without keep_segments the chain's entry alone
+    assert len(list((tmp_path / "shared").glob("*.npz"))) == 6
+    assert [f.name for f in (tmp_path / "alone").glob("*.npz")] == [
+        tc.tied_chain_key(moved, elements_through_thickness=2) + ".npz"]
     assert not np.array_equal(shared["stiffness"],
                               tc.tied_chain_matrices(nominal, elements_through_thickness=2,
                                                      cache_directory=tmp_path / "shared")["stiffness"])
@@ -164,10 +173,11 @@ def test_the_slopes_hand_out_the_nominal_chains_first(monkeypatch, tmp_path):
     from flexcal.model.parameters import parameter_space
     from flexcal.validation.runs.model_correction import compliance_slopes
 
-    submitted = []
+    submitted, keep = [], []
 
     def record(items, job, on_done, **kw):
         submitted.extend(items)
+        keep.append(kw["job_options"]["keep_segments"])
         return {}
 
     monkeypatch.setattr(executor, "run_jobs", record)
@@ -177,3 +187,26 @@ def test_the_slopes_hand_out_the_nominal_chains_first(monkeypatch, tmp_path):
     compliance_slopes(space, tc.tied_fem_provider(progress=False, workers=None, cache_directory=tmp_path))
     assert submitted[:2] == [space.mechanism.chains[0].chain, space.mechanism.chains[3].chain]
     assert len(submitted) == 22 == len(set(submitted))  # and the 2 x 5 x 2 moved ones
+    assert keep == [True]  # their segment entries kept, for each other to share
+
+
+def test_the_curvatures_moved_chains_keep_their_segments(monkeypatch, tmp_path):
+    """The curvatures' moved chains (a pair's chain shares segments with the pair's single moves
+    and the nominal chain) are built keeping their segment entries, as the slopes' are."""
+    from flexcal.model.parameters import parameter_space
+    from flexcal.validation.runs.dimension_terms import compliance_curvatures
+
+    keep = []
+
+    def record(items, job, on_done, **kw):
+        keep.append((len(items), kw["job_options"]["keep_segments"]))
+        return {}
+
+    monkeypatch.setattr(executor, "run_jobs", record)
+    monkeypatch.setattr(executor, "usable_cores", lambda: 2)
+    monkeypatch.setattr(tc, "tied_chain_matrices", _fake_matrices([]))
+    compliance_curvatures(parameter_space(), tc.tied_fem_provider(progress=False, workers=None,
+                                                                   cache_directory=tmp_path))
+    # the 2 designs' single and pair moves at +-step (then the nominal chains for the factors,
+    # which this fake executor never stored)
+    assert keep[0] == (2 * (5 * 2 + 10 * 2), True)

@@ -38,6 +38,7 @@ from flexcal.geometry.params import STEEL, FlexureChain, Material
 
 __all__ = [
     "StiffnessProvider",
+    "sharing_segments",
     "same_design",
     "section_nodes",
     "rigid_transfer",
@@ -89,6 +90,16 @@ def is_tied(provider: StiffnessProvider) -> bool:
     ``chain_stiffness(chain)``, the K_chain on the five segments' twists: ``tied_chains.
     tied_fem_provider``, the provider fem) instead of rigidly."""
     return callable(getattr(provider, "chain_stiffness", None))
+
+
+def sharing_segments(provider: StiffnessProvider) -> StiffnessProvider:
+    """``provider`` for chains that share segments with each other (the model's slopes and
+    curvatures: moved chains that keep some of the nominal chain's segments): a tied provider's
+    ``keeping_segments()``, whose chains keep each segment condensation as a cache entry of its
+    own (``tied_chains.tied_chain_matrices``, the same matrices to the bit); any other provider
+    (its segments are its cache entries already) itself."""
+    keeping = getattr(provider, "keeping_segments", None)
+    return keeping() if callable(keeping) else provider
 
 
 def prepare_chains(provider: StiffnessProvider, chains) -> None:

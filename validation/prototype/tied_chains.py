@@ -10,9 +10,11 @@ into ``TIED_STRUT_REFINEMENT``^3 so its 2 x 2-cell section can carry them), the 
 into the section bodies' rigid motions and the cuts' warping, the warping condensed
 (``flexcal.fem.cut_warping``): K_chain (30, 30), cached per chain under a key with the ties,
 together with the segments' 12 x 12 from the same condensations (the fields held rigid), so the
-tied prototype needs no rigidly tied segment. Each segment's condensation is cached too, keyed
+tied prototype needs no rigidly tied segment. With ``keep_segments`` (the model's corrections:
+``stiffness_provider(..., keep_segments=True)``) each segment's condensation is cached too, keyed
 on its solid (its pieces, the chain's length) and ties, so a chain that shares a segment with one
-built before (the slopes' moved chains) condenses only the rest (session 26, docs/scale.md). The
+built before (the slopes' moved chains) condenses only the rest (session 26, docs/scale.md); the
+prototype's own chains (truth, budget, sweeps) share none and leave them out (session 27). The
 missing chains are built on the executor's job threads (``build_tied_chains``; docs/meshing.md,
 "Cost, session 24 (cost26)").
 """
@@ -73,7 +75,8 @@ def tied_chain_key(chain: FlexureChain, ties: str = DEFAULT_TIES, material: Mate
 
 
 def tied_chain_matrices(chain: FlexureChain, ties: str = DEFAULT_TIES, material: Material = STEEL, *,
-                        elements_through_thickness: float, cache_directory=None) -> dict[str, np.ndarray]:
+                        elements_through_thickness: float, cache_directory=None,
+                        keep_segments: bool = False) -> dict[str, np.ndarray]:
     """{"stiffness": K_chain (30, 30), "segments": (5, 12, 12)} [SI] of ``chain`` from one set of
     condensations, cached (``flexcal.fem.cache``): K_chain on its five segments' twists (module
     docstring) and each segment's 12 x 12 on its end sections' rigid motions with the cuts' fields
@@ -81,12 +84,14 @@ def tied_chain_matrices(chain: FlexureChain, ties: str = DEFAULT_TIES, material:
     the provider's ``(chain, x_start, x_end)`` gives them). Each segment on the prototype's grid
     (``PROTOTYPE_CHAIN_OPTIONS``, ``elements_through_thickness`` asked for; the strut segment refined).
 
-    Each of the chain's three distinct condensations is a cache entry of its own too
-    (``cut_fields.interface_condensed`` with ``cache``, keyed on the segment's pieces, its chain's
-    length, cut ends, labels, field scale, grid and material: ``interface_condensation_parts``),
-    so a chain that shares a segment with one built before reads it: the slopes' moved chains share the nominal
-    chain's strut when w, a, t1 or t2 move, its [m1, s0] when t1 moves and its [0, m1] when t2
-    moves (L1 and D1 of table1; ``runs.model_correction.unchanged_slices``), the same bits as
+    keep_segments: each of the chain's three distinct condensations is read from and kept in the
+    cache as an entry of its own too (``cut_fields.interface_condensed`` with ``cache``, keyed on
+    the segment's pieces, its chain's length, cut ends, labels, field scale, grid and material:
+    ``interface_condensation_parts``), so a chain that shares a segment with one built before
+    reads it (the matrices are the same to the bit either way; without, the 2.5 MB of segment
+    entries of a chain that shares none is not written: docs/scale.md, "Issue 26, session 27"):
+    the slopes' moved chains share the nominal chain's strut when w, a, t1 or t2 move, its
+    [m1, s0] when t1 moves and its [0, m1] when t2 moves (L1 and D1 of table1; ``runs.model_correction.unchanged_slices``), the same bits as
     condensed again (tests/test_tied_chain_builds.py). Two job threads that need one segment at
     once compute it once (``flexcal.fem.cache.cached``)."""
     from flexcal.fem.cache import cached
@@ -99,10 +104,11 @@ def tied_chain_matrices(chain: FlexureChain, ties: str = DEFAULT_TIES, material:
         from .cut_fields import chain_order_matrices, cut_orders, interface_condensed
 
         plan, interfaces, options, scale = _tied_plan(chain, ties)
-        # each segment's condensation its own cache entry: a moved chain's slice that the dimension
-        # leaves as it was reads the nominal chain's (docs/scale.md, "Issue 26, session 26")
+        # keep_segments: each segment's condensation its own cache entry, so a moved chain's slice
+        # that the dimension leaves as it was reads the nominal chain's (docs/scale.md, "Issue 26,
+        # session 26")
         condensed = interface_condensed(plan, interfaces, elements_through_thickness, options, None, scale,
-                                        cache=True, cache_directory=cache_directory)
+                                        cache=keep_segments, cache_directory=cache_directory)
         matrices, orders = chain_order_matrices(plan, condensed, interfaces), cut_orders(plan, interfaces)
         return {"stiffness": chain_twist_stiffness(matrices, orders, scale),
                 "segments": rigid_part_stiffness(matrices, orders, scale)}
@@ -147,7 +153,8 @@ def tied_chain_stiffness(chain: FlexureChain, ties: str = DEFAULT_TIES, material
 
 
 def build_tied_chain_job(chain: FlexureChain, *, ties: str, material: Material, elements_through_thickness: float,
-                         cache_directory=None, mesher_threads: int = 0, solver_threads: int = 0) -> dict[str, Any]:
+                         cache_directory=None, keep_segments: bool = False, mesher_threads: int = 0,
+                         solver_threads: int = 0) -> dict[str, Any]:
     """One chain's ``tied_chain_matrices`` on a job thread or worker: {"key": its cache key
     there, the matrices, "wall_s": [s]}; its cache gets the entry too; PARDISO on
     ``solver_threads`` MKL threads of the calling thread (0: all cores;
@@ -160,15 +167,15 @@ def build_tied_chain_job(chain: FlexureChain, *, ties: str, material: Material, 
     start = time.perf_counter()
     with mkl_threads(solver_threads) if solver_threads else contextlib.nullcontext():
         matrices = tied_chain_matrices(chain, ties, material, elements_through_thickness=elements_through_thickness,
-                                       cache_directory=cache_directory)
+                                       cache_directory=cache_directory, keep_segments=keep_segments)
     return {"key": tied_chain_key(chain, ties, material, elements_through_thickness=elements_through_thickness),
             **matrices, "wall_s": time.perf_counter() - start}
 
 
 def build_tied_chains(chains: Iterable[FlexureChain], ties: str = DEFAULT_TIES, material: Material = STEEL, *,
-                      elements_through_thickness: float, cache_directory=None, workers: int | None = None,
-                      scheduler: str | None = None, progress: bool = True) -> int:
-    """Build the ``tied_chain_matrices`` of ``chains`` that the cache lacks, on the shared
+                      elements_through_thickness: float, cache_directory=None, keep_segments: bool = False,
+                      workers: int | None = None, scheduler: str | None = None, progress: bool = True) -> int:
+    """Build the ``tied_chain_matrices`` (with ``keep_segments``) of ``chains`` that the cache lacks, on the shared
     executor (``fem_provider.build_missing``), into the cache; returns how many were built.
     workers: local job threads (``plan_local_builds``; 0: this process, one after the other);
     scheduler: a Dask scheduler address. Threads, as today's segments: ~70 % of a chain is
@@ -182,14 +189,15 @@ def build_tied_chains(chains: Iterable[FlexureChain], ties: str = DEFAULT_TIES, 
     missing = {tied_chain_key(chain, ties, material, elements_through_thickness=elements_through_thickness): chain
                for chain in chains}
     options = {"ties": ties, "material": material, "elements_through_thickness": float(elements_through_thickness),
-               "cache_directory": None if cache_directory is None else str(cache_directory)}
+               "cache_directory": None if cache_directory is None else str(cache_directory),
+               "keep_segments": bool(keep_segments)}
     return build_missing(missing, build_tied_chain_job, options, ("stiffness", "segments"),
                          lambda chain: f"tied chain ({ties}) of a {chain.length * 1e3:.1f} mm chain",
                          workers=workers, scheduler=scheduler, progress=progress, cache_directory=cache_directory,
                          in_threads=True, task_prefix="fem-tied-chain", what="tied chains")
 
 
-def tied_fem_provider(ties: str = DEFAULT_TIES, **fem_options):
+def tied_fem_provider(ties: str = DEFAULT_TIES, *, keep_segments: bool = False, **fem_options):
     """``fem_provider(**fem_options)`` (the mapped mesher: its ``(chain, x_start, x_end)`` and
     ``prepare`` stay the rigidly tied segments', for the model's corrections and anything else
     that asks for a slice) that also gives, per chain, from one set of condensations
@@ -199,7 +207,11 @@ def tied_fem_provider(ties: str = DEFAULT_TIES, **fem_options):
     rigid (``rigid_part_stiffness``), which ``build_prototype`` stores as the K_jj instead of
     building the rigid segments too. ``provider.prepare_chains(chains)`` builds the missing
     chains on the executor (``build_tied_chains``; ``workers=0``: none, each chain is built at
-    its first call)."""
+    its first call). keep_segments: the chains' segment condensations kept as cache entries of
+    their own (``tied_chain_matrices``), for the model's corrections, whose moved chains share
+    them (``segments.sharing_segments``: ``provider.keeping_segments()``, the same provider with
+    keep_segments); the prototype's chains (truth, the error budget, sweeps) share none and
+    leave them out."""
     from .fem_provider import DEFAULT_ELEMENTS_THROUGH, fem_provider
 
     cut_interfaces(ties)  # refused here if unknown
@@ -213,7 +225,7 @@ def tied_fem_provider(ties: str = DEFAULT_TIES, **fem_options):
     def matrices(chain: FlexureChain) -> dict[str, np.ndarray]:
         start = time.perf_counter()
         out = tied_chain_matrices(chain, ties, material, elements_through_thickness=through,
-                                  cache_directory=cache_directory)
+                                  cache_directory=cache_directory, keep_segments=keep_segments)
         if progress and time.perf_counter() - start > 0.5:
             print(f"  FEM tied chain ({ties}) of a {chain.length * 1e3:.1f} mm chain: "
                   f"{time.perf_counter() - start:.1f} s", file=sys.stderr)
@@ -223,10 +235,13 @@ def tied_fem_provider(ties: str = DEFAULT_TIES, **fem_options):
         if provider.scheduler is None and provider.workers == 0:
             return 0  # built lazily, in order, by the calls that follow
         return build_tied_chains(chains, ties, material, elements_through_thickness=through,
-                                 cache_directory=cache_directory, workers=provider.workers,
+                                 cache_directory=cache_directory, keep_segments=keep_segments, workers=provider.workers,
                                  scheduler=provider.scheduler, progress=progress)
 
-    provider.prepare_chains, provider.ties = prepare_chains, ties
+    def keeping_segments():
+        return provider if keep_segments else tied_fem_provider(ties, keep_segments=True, **fem_options)
+
+    provider.prepare_chains, provider.ties, provider.keeping_segments = prepare_chains, ties, keeping_segments
     provider.chain_stiffness = lambda chain: matrices(chain)["stiffness"]
     provider.chain_segments = lambda chain: matrices(chain)["segments"]
     provider.description = provider.description[:-1] + f", cuts tied through {ties} fields)"

@@ -45,7 +45,8 @@ from flexcal.model.chain import chain_compliance_matrix
 from flexcal.model.hinge import ENTRY_INDEX
 from flexcal.model.parameters import DIMENSION_SYMBOLS, ParameterSpace
 
-from ..prototype.segments import StiffnessProvider, chain_slices, is_tied, prepare_chains, prepare_provider
+from ..prototype.segments import (StiffnessProvider, chain_slices, is_tied, prepare_chains, prepare_provider,
+                                  sharing_segments)
 from .chain_kinematics import chain_shortening
 from .model_correction import (SLOPE_STEPS, compliance_factors, provider_chain_compliance, same_design,
                                unchanged_slices)
@@ -120,7 +121,8 @@ def compliance_curvatures(space: ParameterSpace, provider: StiffnessProvider,
     alike = {key: [mech.chains[key[0]].chain] + ([chains[key[0], key[1], key[1], key[3]],
                                                  chains[key[0], key[2], key[2], key[3]]] if key[1] != key[2] else [])
              for key in chains}
-    if is_tied(provider):  # parallel FEM builds: the moved chains whole
+    if is_tied(provider):  # parallel FEM builds: the moved chains whole, sharing their segments
+        provider = sharing_segments(provider)
         prepare_chains(provider, list(dict.fromkeys(chains.values())))
     else:  # parallel FEM builds: the moved chains' own slices, each shared one once
         slices = []

@@ -33,7 +33,7 @@ from flexcal.model.hinge import ENTRY_INDEX
 from flexcal.model.parameters import ParameterSpace
 
 from ..prototype.segments import (StiffnessProvider, chain_slices, end_stiffness, prepare_chains, prepare_provider,
-                                  is_tied, same_design, section_nodes)
+                                  is_tied, same_design, section_nodes, sharing_segments)
 from .model_names import DEFAULT_BREAKAWAY_N, MODEL_STIFFNESS, MODELS
 
 __all__ = ["provider_chain_compliance", "twist_end_compliance", "compliance_factors", "compliance_slopes", "slope_provider", "unchanged_slices", "same_design", "corrected_space",
@@ -244,9 +244,10 @@ def _slopes_by_builds(space: ParameterSpace, provider: StiffnessProvider,
     # the dimensions (docs/model.md 7, "Session 25"); the nominal chains first, so that the moved
     # ones read the segment condensations a dimension leaves as they were from the cache
     tied = provider is fine and is_tied(fine)
-    if tied:
+    if tied:  # the chains keep their segment condensations, which the moved ones share
         nominals = [p.chain for c, p in enumerate(mech.chains) if design[c] == c]
-        prepare_chains(fine, list(dict.fromkeys([*nominals, *moved.values()])))  # parallel FEM builds
+        sharing = sharing_segments(fine)
+        prepare_chains(sharing, list(dict.fromkeys([*nominals, *moved.values()])))  # parallel FEM builds
     else:
         prepare_provider(provider, list(dict.fromkeys(s for key in moved for s in slices_of(key))))
     done, out = {}, np.zeros((len(mech.chains), len(DIMENSION_SYMBOLS), 8))
@@ -258,7 +259,7 @@ def _slopes_by_builds(space: ParameterSpace, provider: StiffnessProvider,
             def asked(at, x0, x1, nominal=nominal, same=same):
                 return provider(nominal if (x0, x1) in same else at, x0, x1)
 
-            richer = provider_chain_compliance(chain, fine if tied else asked)
+            richer = provider_chain_compliance(chain, sharing if tied else asked)
             closed = chain_compliance_matrix(chain, mech.material)
             done[chain] = np.array([richer[i, j] / closed[i, j] for i, j in ENTRY_INDEX.values()])
         out[c, DIMENSION_SYMBOLS.index(symbol)] += sign * done[chain] / (2.0 * steps[symbol])
