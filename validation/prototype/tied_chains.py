@@ -10,8 +10,8 @@ into ``TIED_STRUT_REFINEMENT``^3 so its 2 x 2-cell section can carry them), the 
 into the section bodies' rigid motions and the cuts' warping, the warping condensed
 (``flexcal.fem.cut_warping``): K_chain (30, 30), cached per chain under a key with the ties,
 together with the segments' 12 x 12 from the same condensations (the fields held rigid), so the
-tied prototype needs no rigidly tied segment. With ``keep_segments`` (the model's corrections:
-``stiffness_provider(..., keep_segments=True)``) each segment's condensation is cached too, keyed
+tied prototype needs no rigidly tied segment. With ``keep_segments`` (the model's slopes and
+curvatures: ``segments.sharing_segments``) each segment's condensation is cached too, keyed
 on its solid (its pieces, the chain's length) and ties, so a chain that shares a segment with one
 built before (the slopes' moved chains) condenses only the rest (session 26, docs/scale.md); the
 prototype's own chains (truth, budget, sweeps) share none and leave them out (session 27). The
@@ -91,9 +91,10 @@ def tied_chain_matrices(chain: FlexureChain, ties: str = DEFAULT_TIES, material:
     reads it (the matrices are the same to the bit either way; without, the 2.5 MB of segment
     entries of a chain that shares none is not written: docs/scale.md, "Issue 26, session 27"):
     the slopes' moved chains share the nominal chain's strut when w, a, t1 or t2 move, its
-    [m1, s0] when t1 moves and its [0, m1] when t2 moves (L1 and D1 of table1; ``runs.model_correction.unchanged_slices``), the same bits as
-    condensed again (tests/test_tied_chain_builds.py). Two job threads that need one segment at
-    once compute it once (``flexcal.fem.cache.cached``)."""
+    [m1, s0] when t1 moves and its [0, m1] when t2 moves (L1 and D1 of table1;
+    ``runs.model_correction.unchanged_slices``), the same bits as condensed again
+    (tests/test_tied_chain_builds.py). Two job threads that need one segment at once compute it
+    once (``flexcal.fem.cache.cached``)."""
     from flexcal.fem.cache import cached
 
     parts = _tied_chain_parts(chain, ties, material, elements_through_thickness)
