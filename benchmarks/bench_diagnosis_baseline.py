@@ -31,6 +31,7 @@ def main() -> None:
     parser.add_argument("--provider", default="fem", help="the prototype's stiffness provider (fem: the tied truth)")
     args = parser.parse_args()
 
+    from flexcal.validation.cli.diagnose_benchmark import baseline_stiffness
     from flexcal.validation.diagnosis.baseline import calibrate_baseline
     from flexcal.validation.diagnosis.benchmark import benchmark_measurement
     from flexcal.validation.diagnosis.diagnose import run_diagnosis
@@ -40,7 +41,7 @@ def main() -> None:
     from flexcal.validation.runs.model_correction import model_space
 
     trajectory = read_trajectory(args.trajectory)
-    stiffness = "closed-form" if args.provider == "analytic" else "fem"
+    stiffness = baseline_stiffness(args.provider)  # the chains' stiffness of diagnose-benchmark's baseline
     provider = stiffness_provider(args.provider, progress=False, workers=None)
     start = time.perf_counter()
     baselines = {"second-order (diagnose-benchmark's)": model_space(stiffness, True, workers=None)}

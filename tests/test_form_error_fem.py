@@ -6,6 +6,7 @@ Slow (15 s warm): the FEM segments of the as-built chains and of the nominal cha
 (the slopes) are cached in ~/.cache/flexcal; cold, they are ~100 segment builds."""
 
 import dataclasses
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -59,7 +60,7 @@ def test_the_consistent_model_with_slopes_meets_the_goal_on_the_fem_prototype(ta
     assert np.any(constant > 0.25), constant  # the same bound fails with the constant factors
 
 
-DESIGN = __import__("pathlib").Path(__file__).parent / "data" / "table1_design_k41_drives.csv"
+DESIGN = Path(__file__).parent / "data" / "table1_design_k41_drives.csv"
 
 
 @pytest.fixture(scope="module")
