@@ -14,9 +14,9 @@ postures are measured in no other leg (one pass of a designed trajectory), the h
 scores extrapolate the baseline: the command warns and the report says how many
 (``heldout.share_not_repeated``); measure the trajectory twice (docs/diagnosis.md).
 
-The baseline model is ``--model second-order`` by default, not the consistent model the other
-calibration commands default to: the diagnosis's benchmark figures and nulls were measured with
-that baseline (``DIAGNOSIS_MODEL``).
+The baseline model is the calibration commands' default (the consistent model with quadratic
+dimension terms) since session 28; ``--model second-order`` gives the baseline of the earlier
+figures. A ``--null`` file must have been measured with the same model (its ``baseline``).
 """
 
 from __future__ import annotations
@@ -31,14 +31,10 @@ from .options import MODEL_DEFAULTS
 __all__ = ["configure", "run", "EXAMPLES", "DEFAULT_CONFIG"]
 
 _BASELINE = BaselineSettings()
-# The baseline calibration stays on --model second-order, not the calibration commands' default
-# (the consistent model since session 20): every figure of docs/diagnosis.md (detection rates,
-# false alarms, the trajectories' nulls) was measured with that baseline, diagnose-benchmark builds
-# it (cli.diagnose_benchmark), and a --null JSON holds the gains of that baseline's terms. Another
-# baseline would need those measured again; --model consistent selects it
-DIAGNOSIS_MODEL = "second-order"
-DEFAULT_CONFIG = {**MODEL_DEFAULTS, "model": DIAGNOSIS_MODEL, "particles": _BASELINE.particles,
-                  "iterations": _BASELINE.iterations}
+# The baseline is the calibration commands' model (MODEL_DEFAULTS) since session 28: the
+# second-order model it was before leaves its own form error at a design's postures, which a
+# diagnosis reads as an effect (docs/diagnosis.md, "Issue 28 results (session 27)")
+DEFAULT_CONFIG = {**MODEL_DEFAULTS, "particles": _BASELINE.particles, "iterations": _BASELINE.iterations}
 
 EXAMPLES = ("flexcal diagnose curves.csv --out runs/diagnosis",
             "flexcal diagnose --data runs/t/curves.csv --out runs/d",
@@ -110,9 +106,13 @@ def run(args: argparse.Namespace) -> int:
 
     if args.particles < 2 or args.iterations < 1:
         raise ValueError("--particles must be >= 2 and --iterations >= 1")
-    from ..diagnosis.null import read_null
+    from ..diagnosis.null import check_null_baseline, read_null
+    from .opening import check_model_options, model_key
 
+    check_model_options(args)
     null = read_null(args.null) if args.null else None
+    if null is not None:
+        check_null_baseline(null, model_key(args), f"--null {args.null}")
     # the measurement checked before the model's FEM correction (~30 s cold)
     opening = open_calibration(args, progress=show_progress(args), data_path=data_path(args), check=check_measurement)
     measurement, space = opening.measurement, opening.space

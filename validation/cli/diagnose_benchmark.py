@@ -72,34 +72,39 @@ def configure(parser: argparse.ArgumentParser) -> None:
                              "before issue 28); by default `none` files of scenario seeds 1100-1102 along the same "
                              "trajectory are diagnosed first and each term must gain 3x its gain there "
                              "(DIR/null.json)")
-    from .options import add_executor_options, add_mount
+    from .options import MODEL_DEFAULTS, add_model_options, add_mount
 
     add_mount(parser, what="the reference mount (the table1 errors are drawn on it)")
-
-    add_executor_options(parser, what="the cases (and, with --provider fem, the FEM chain builds)")
+    # the baseline's model: the calibration commands' (and flexcal diagnose's) options and
+    # defaults, its chains' stiffness the provider's own unless given (baseline_stiffness)
+    add_model_options(parser, stiffness_default="closed-form with --provider analytic, fem with --provider fem")
+    parser.set_defaults(**{**MODEL_DEFAULTS, "model_stiffness": None})
     add_out(parser, what="report.json, report.md, answers.json, diagnosis_*.png, cases/",
             when="each finished case is kept at once in DIR/cases/ and running the same command again resumes; the "
                  "report is written at the end, also when some cases failed (they are listed, exit status 1)")
 
 
 def baseline_stiffness(provider_name: str) -> str:
-    """The chain stiffness of the diagnosis baseline's (second-order) model for a prototype
-    provider: the one the prototype's segments have (closed form for ``analytic``,
-    FEM-informed for ``fem``). What is withheld from the diagnosis is the effect, not the
-    mechanism's stiffness model; a user calibrates with the best model of their mount."""
+    """The chain stiffness of the diagnosis baseline's model for a prototype provider (when
+    ``--model-stiffness`` does not say): the one the prototype's segments have (closed form for
+    ``analytic``, FEM-informed for ``fem``). What is withheld from the diagnosis is the effect,
+    not the mechanism's stiffness model; a user calibrates with the best model of their mount."""
     return "closed-form" if provider_name == "analytic" else "fem"
 
 
 def case_spec(effect_id, magnitude, case_seed, *, provider_name, noise_urad, cycles, seed, scenario_seed,
-              trajectory: str | None = None, null: bool = False, mount: dict | None = None) -> dict:
+              trajectory: str | None = None, null: bool = False, mount: dict | None = None,
+              baseline: dict | None = None) -> dict:
     """Everything that decides one case's row: its id (``design_id`` of this) keys the
-    case store, so a rerun with other settings never reuses a row. trajectory: the
+    case store, so a rerun with other settings never reuses a row. baseline: the baseline
+    model's options (``cli.opening.model_key``; None: the second-order model with the
+    provider's stiffness, as before session 28). trajectory: the
     ``trajectory_digest`` of a trajectory file, None for the standard trajectory (no key:
     the ids of standard-trajectory cases stay those of earlier runs); mount: the mount file's
     table (``mount_table``) of ``--mount``, None for the reference mount (no key, likewise)."""
     spec = {"effect": effect_id, "magnitude_noise": float(magnitude), "seed": int(case_seed),
-            "provider": provider_name, "baseline_model": {"stiffness": baseline_stiffness(provider_name),
-                                                          "second_order": True},
+            "provider": provider_name,
+            "baseline_model": baseline or {"stiffness": baseline_stiffness(provider_name), "second_order": True},
             "noise_urad": float(noise_urad), "cycles": int(cycles), "baseline_seed": int(seed),
             "scenario_seed": scenario_seed}
     if trajectory is not None:
@@ -178,19 +183,20 @@ def case_chains(specs) -> list:
 
 
 def benchmark_null(*, provider_name, noise_urad, cycles, seed, space=None, trajectory=None, path=None, log=None,
-                   mount: dict | None = None):
+                   mount: dict | None = None, baseline: dict | None = None):
     """The ``NullModel`` of the benchmark's trajectory: `none` files of ``NULL_SEEDS`` (scenario
     seeds 1100-1102, apart from every grid's cases) diagnosed without a null; read from / kept
     in ``path`` (DIR/null.json) so that a resumed grid uses the same one; mount: the mount
-    file's table (None: the reference mount). A null.json of another trajectory or mount is
-    refused."""
+    file's table (None: the reference mount); baseline: the options of ``space``'s model
+    (``cli.opening.model_key``), kept in the null. A null.json of another trajectory, mount or
+    baseline model is refused."""
     from functools import partial
     from pathlib import Path
 
     from ..diagnosis.baseline import calibrate_baseline
     from ..diagnosis.benchmark import benchmark_measurement, trajectory_digest
     from ..diagnosis.diagnose import run_diagnosis
-    from ..diagnosis.null import measure_null, read_null, write_null
+    from ..diagnosis.null import check_null_baseline, measure_null, read_null, write_null
     from ..effects.library import NONE
     from ..prototype.providers import stiffness_provider
 
@@ -211,7 +217,7 @@ def benchmark_null(*, provider_name, noise_urad, cycles, seed, space=None, traje
     null = measure_null(lambda s: benchmark_measurement(NONE, 0.0, s, provider, cycles=cycles, noise_urad=noise_urad,
                                                         trajectory=trajectory, mechanism=mechanism).measurement,
                         lambda m: run_diagnosis(m, rng=seed, baseline=partial(calibrate_baseline, space=space)),
-                        NULL_SEEDS, label)
+                        NULL_SEEDS, label, baseline)
     if path is not None:
         write_null(path, null)
     return null
@@ -219,9 +225,10 @@ def benchmark_null(*, provider_name, noise_urad, cycles, seed, space=None, traje
 
 def run_benchmark(ids, grid, *, noise_urad, cycles, seed, progress, scenario_seed=None, space=None,
                   provider_name="analytic", store=None, log=None, workers: int | None = 0, scheduler=None,
-                  trajectory=None, null=None, mount: dict | None = None):
+                  trajectory=None, null=None, mount: dict | None = None, baseline: dict | None = None):
     """(rows, answers, failures) of every case of the grid, rows in grid order; space: the
-    baseline's model (default: the baseline's own default); trajectory: (inputs (k, 3) [m],
+    baseline's model (default: the baseline's own default), baseline: its options (``case_spec``,
+    None: the second-order model); trajectory: (inputs (k, 3) [m],
     leg (k,)) of one cycle every case is measured along (None: the standard trajectory);
     mount: the mount file's table the cases are drawn on (None: the reference mount);
     store: a ``DesignStore`` of
@@ -243,7 +250,7 @@ def run_benchmark(ids, grid, *, noise_urad, cycles, seed, progress, scenario_see
     for effect_id, magnitude, case_seed in grid_cases(ids, grid):
         spec = case_spec(effect_id, magnitude, case_seed, provider_name=provider_name, noise_urad=noise_urad,
                          cycles=cycles, seed=seed, scenario_seed=scenario_seed, trajectory=digest,
-                         null=null is not None, mount=mount)
+                         null=null is not None, mount=mount, baseline=baseline)
         specs.append(spec)
         labels[design_id(spec)] = f"{effect_id} {magnitude:g}x seed {case_seed}"
     records = {} if store is None else {i: r for i in labels if (r := store.load(i)) is not None}
@@ -303,7 +310,6 @@ def run(args: argparse.Namespace) -> int:
     from ..diagnosis.plots import plot_benchmark
     from ..reports.diagnose_benchmark import benchmark_markdown
     from ..effects.library import EFFECT_IDS, LIBRARY, NONE, OUT_OF_LIBRARY_IDS
-    from ..runs.model_correction import model_space
     from ..output import out_folder, staged_output, write_json, write_report
     from ..sweep.run import DesignStore
 
@@ -311,6 +317,10 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError(f"--noise-urad={args.noise_urad} must be > 0 (magnitudes are multiples of it)")
     if args.cycles < 2:
         raise ValueError(f"--cycles={args.cycles} must be >= 2 so that every leg's motion repeats in another cycle")
+    from .opening import calibration_model, check_model_options, model_key
+
+    args.model_stiffness = args.model_stiffness or baseline_stiffness(args.provider)
+    check_model_options(args)  # before a folder is made
     trajectory, trajectory_report = _trajectory(args)
     ids = list(EFFECT_IDS) + [NONE] + list(OUT_OF_LIBRARY_IDS)
     if args.effects:
@@ -328,16 +338,15 @@ def run(args: argparse.Namespace) -> int:
 
     mechanism = mount_option(args)
     mount = None if mechanism is None else mount_table(mechanism)  # the physics only: the id is not the path
-    space = model_space(baseline_stiffness(args.provider), second_order=True, progress=progress,
-                        mechanism=mechanism, **executor)
+    space, baseline = calibration_model(args, mechanism, progress=progress), model_key(args)
     try:
         null = None if args.no_null else benchmark_null(
             provider_name=args.provider, noise_urad=args.noise_urad, cycles=args.cycles, seed=args.seed, space=space,
-            trajectory=trajectory, path=store.folder.parent / "null.json", log=log, mount=mount)
+            trajectory=trajectory, path=store.folder.parent / "null.json", log=log, mount=mount, baseline=baseline)
         rows, answers, failures = run_benchmark(
             ids, args.grid, noise_urad=args.noise_urad, cycles=args.cycles, seed=args.seed,
             progress=progress, scenario_seed=args.scenario_seed, provider_name=args.provider, store=store, log=log,
-            space=space, trajectory=trajectory, null=null, mount=mount, **executor)
+            space=space, trajectory=trajectory, null=null, mount=mount, baseline=baseline, **executor)
     except KeyboardInterrupt:
         log(f"diagnose-benchmark: interrupted; finished cases are kept in {store.folder}, run the same command "
             f"again to resume")
@@ -346,7 +355,7 @@ def run(args: argparse.Namespace) -> int:
         raise RuntimeError(f"every case failed, e.g. {next(iter(failures.values()))}")
     summary = summarize(rows)
     report = {"grid": args.grid, "provider": args.provider, "scenario_seed": args.scenario_seed,
-              "baseline_model": {"stiffness": baseline_stiffness(args.provider), "second_order": True},
+              "baseline_model": baseline,
               "noise_urad": args.noise_urad, "cycles": args.cycles, "trajectory": trajectory_report,
               "mount": args.mount,
               "out_of_library": list(OUT_OF_LIBRARY_IDS), "null": None if null is None else null.as_dict(),

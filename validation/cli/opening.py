@@ -21,7 +21,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-__all__ = ["DataOpening", "Opening", "open_data", "model_option", "dimension_terms", "check_model_options",
+__all__ = ["DataOpening", "Opening", "open_data", "model_option", "dimension_terms", "model_key", "check_model_options",
            "calibration_model", "open_calibration"]
 
 
@@ -102,6 +102,21 @@ def check_model_options(args: argparse.Namespace) -> None:
         raise ValueError("the consistent model (the calibration default) is second-order by "
                          "construction: drop --no-second-order, or use --model second-order --no-second-order")
     dimension_terms(args)
+
+
+def model_key(args: argparse.Namespace) -> dict:
+    """The model options of a parsed command line as a JSON table: what a diagnosis baseline is
+    named by in diagnose-benchmark's case ids, its null.json and the ``--null`` check of
+    ``flexcal diagnose``. ``--model second-order`` gives {stiffness, second_order} alone (the
+    key of every case before session 28, whose ids it keeps)."""
+    key = {"stiffness": args.model_stiffness, "second_order": bool(getattr(args, "second_order", True))}
+    model = model_option(args)
+    if model == "second-order":
+        return key
+    key |= {"model": model, "dimension_terms": dimension_terms(args)}
+    if getattr(args, "breakaway_force", None) is not None:
+        key["breakaway_force"] = float(args.breakaway_force)
+    return key
 
 
 def calibration_model(args: argparse.Namespace, mechanism, *, progress: bool):

@@ -179,8 +179,9 @@ def executor_options(args: argparse.Namespace) -> dict[str, Any]:
 # (calibration.staged_start), measured on the README's main job: fit 0.0016 urad RMS (max 0.008)
 # against the second-order model's 0.286 (1.55), x0 <= 0.63 um, base z RMS 0.83 over 20; with 0.5
 # urad noise on seeds 1-3 of both mounts the fit is 0.95-1.06x the noise (second-order: 1.14-1.23x
-# table1, 2.5-2.7x paper) and the z RMS 0.52-1.42 (docs/model.md "Session 21"). diagnose and
-# compensate keep "second-order" (their figures were measured with it).
+# table1, 2.5-2.7x paper) and the z RMS 0.52-1.42 (docs/model.md "Session 21"). compensate keeps
+# "second-order" (its figures were measured with it); diagnose and diagnose-benchmark take this
+# one since session 28 (docs/diagnosis.md, "Issue 28 results (session 28)").
 DEFAULT_MODEL = "consistent"
 # --model consistent's FEM factors as functions of the chain dimensions: "linear" (the slopes) or
 # "quadratic" (docs/model.md, "Session 18"); flipping it is this one line. The default applies
@@ -218,9 +219,11 @@ def calibration_defaults(*names: str, **overrides: Any) -> dict[str, Any]:
     return {**{name: CALIBRATION_DEFAULTS[name] for name in names}, **overrides}
 
 
-def add_model_options(parser: argparse.ArgumentParser) -> None:
+def add_model_options(parser: argparse.ArgumentParser, *, stiffness_default: str = "%(default)s") -> None:
     """Which model the calibration uses (``verify``, ``sensitivity``, ``identify``,
-    ``compensate``); defaults from the command's DEFAULT_CONFIG (``MODEL_DEFAULTS``)."""
+    ``compensate``, ``diagnose``, ``diagnose-benchmark``); defaults from the command's
+    DEFAULT_CONFIG (``MODEL_DEFAULTS``); stiffness_default: what --model-stiffness's help says
+    its default is (a command whose default depends on another option says which)."""
     from ..runs.model_names import DEFAULT_BREAKAWAY_N, MODEL_STIFFNESS, MODELS
 
     parser.add_argument("--model", choices=MODELS,
@@ -239,7 +242,7 @@ def add_model_options(parser: argparse.ArgumentParser) -> None:
                              "Eq. 1) or corrected by the FEM at the nominal design, its segments joined through the "
                              "cut fields (fem, as the prototype of --provider fem) or rigidly at the cuts "
                              "(fem-rigid, as --provider fem-rigid: use it with that truth) (docs/model.md 7; default "
-                             "%(default)s)")
+                             f"{stiffness_default})")
     parser.add_argument("--breakaway-force", type=float, metavar="N", default=None,
                         help=f"--model consistent's breakaway force of the drives' friction [N] (the clearance's "
                              f"play state, given, not identified; default {DEFAULT_BREAKAWAY_N:g}, the virtual "

@@ -20,7 +20,8 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-__all__ = ["NullModel", "null_from_reports", "NULL_FACTOR", "NULL_SEEDS", "read_null", "write_null"]
+__all__ = ["NullModel", "null_from_reports", "NULL_FACTOR", "NULL_SEEDS", "read_null", "write_null",
+           "check_null_baseline"]
 
 # the standard trajectory's threshold of 1 noise variance was 3.3x the largest null gain seen
 # there (docs/diagnosis.md, Scores and significance): the same factor over each term's null
@@ -32,13 +33,16 @@ NULL_SEEDS = (100, 101, 102)  # `none` files of the null: scenario seeds 1100-11
 class NullModel:
     """gain {term id: largest held-out gain [noise variances] on the null files};
     closure {term id: largest held-out closure [-]}; n_files; trajectory: its digest
-    (``benchmark.trajectory_digest``) or "standard"; factor: NULL_FACTOR."""
+    (``benchmark.trajectory_digest``) or "standard"; factor: NULL_FACTOR; baseline: the
+    baseline model's options (``cli.opening.model_key``) the gains were measured with, None when
+    the file does not say (null files before session 28: the second-order baseline)."""
 
     gain: dict = field(default_factory=dict)
     closure: dict = field(default_factory=dict)
     n_files: int = 0
     trajectory: str = "standard"
     factor: float = NULL_FACTOR
+    baseline: dict | None = None
 
     def min_gain(self, term_id: str, floor: float) -> float:
         """The gain [noise variances] a term needs: ``floor`` or factor x its null gain."""
@@ -46,10 +50,10 @@ class NullModel:
 
     def as_dict(self) -> dict[str, Any]:
         return {"gain": dict(self.gain), "closure": dict(self.closure), "n_files": self.n_files,
-                "trajectory": self.trajectory, "factor": self.factor}
+                "trajectory": self.trajectory, "factor": self.factor, "baseline": self.baseline}
 
 
-def null_from_reports(reports: Sequence[dict], trajectory: str = "standard") -> NullModel:
+def null_from_reports(reports: Sequence[dict], trajectory: str = "standard", baseline: dict | None = None) -> NullModel:
     """A ``NullModel`` from diagnosis reports of `none` files (their first-stage ranking)."""
     if not reports:
         raise ValueError("the null needs at least one diagnosis of a file with nothing injected")
@@ -59,19 +63,38 @@ def null_from_reports(reports: Sequence[dict], trajectory: str = "standard") -> 
         for row in report["ranking"]:
             gain[row["effect"]] = max(gain.get(row["effect"], -np.inf), float(row["gain_noise_variances"]))
             closure[row["effect"]] = max(closure.get(row["effect"], -np.inf), float(row["closure"]))
-    return NullModel(gain=gain, closure=closure, n_files=len(reports), trajectory=trajectory)
+    return NullModel(gain=gain, closure=closure, n_files=len(reports), trajectory=trajectory, baseline=baseline)
 
 
 def measure_null(make_none: Callable[[int], Any], diagnose: Callable[[Any], Any], seeds: Sequence[int] = NULL_SEEDS,
-                 trajectory: str = "standard") -> NullModel:
+                 trajectory: str = "standard", baseline: dict | None = None) -> NullModel:
     """Diagnose the `none` measurement ``make_none(seed)`` of each seed (without a null) and
-    collect the terms' gains."""
-    return null_from_reports([diagnose(make_none(s)).report for s in seeds], trajectory)
+    collect the terms' gains; baseline: the model ``diagnose`` calibrates (``NullModel``)."""
+    return null_from_reports([diagnose(make_none(s)).report for s in seeds], trajectory, baseline)
 
 
 def write_null(path: str | Path, null: NullModel) -> None:
     Path(path).parent.mkdir(parents=True, exist_ok=True)  # a new --out folder (the cases come later)
     Path(path).write_text(json.dumps(null.as_dict(), indent=1, sort_keys=True) + "\n")
+
+
+def _baseline(value) -> dict | None:
+    if value is not None and not isinstance(value, dict):
+        raise ValueError(f"baseline {value!r} is not a table of model options")
+    return value
+
+
+def check_null_baseline(null: NullModel, baseline: dict, path: str = "the null") -> None:
+    """Refuse (ValueError) a null measured with another baseline model than ``baseline`` (the
+    run's ``cli.opening.model_key``): its gains are that model's form error, not this one's. A
+    null without a baseline (before session 28) was measured with the second-order model."""
+    if null.baseline is None and "model" not in baseline:
+        return
+    if null.baseline != baseline:
+        made = null.baseline or "the second-order baseline (a null file from before session 28)"
+        raise ValueError(f"{path} was measured with the baseline model {made}, this run's is {baseline}: measure the "
+                         f"null again with this model (flexcal diagnose-benchmark --trajectory ... with the same model "
+                         f"options) or give the null's model options")
 
 
 def read_null(path: str | Path) -> NullModel:
@@ -81,7 +104,7 @@ def read_null(path: str | Path) -> NullModel:
         return NullModel(gain={str(k): float(v) for k, v in data["gain"].items()},
                          closure={str(k): float(v) for k, v in data.get("closure", {}).items()},
                          n_files=int(data["n_files"]), trajectory=str(data.get("trajectory", "standard")),
-                         factor=float(data.get("factor", NULL_FACTOR)))
+                         factor=float(data.get("factor", NULL_FACTOR)), baseline=_baseline(data.get("baseline")))
     except (OSError, ValueError, KeyError, TypeError, AttributeError) as error:
         raise ValueError(f"cannot read the null file {path}: {error} (write it with flexcal diagnose-benchmark: "
                          f"DIR/null.json)") from None

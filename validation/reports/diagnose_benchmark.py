@@ -19,14 +19,21 @@ def _trajectory_text(trajectory: dict) -> str:
             f"sha256 {trajectory['sha256']})")
 
 
+def _baseline_text(baseline: dict) -> str:
+    """The diagnosis baseline's model in words (``cli.opening.model_key``'s table)."""
+    model = baseline.get("model", "second-order")
+    terms = f", {baseline['dimension_terms']} dimension terms" if model == "consistent" else ""
+    return f"{model} model, {baseline['stiffness']} chain stiffness{terms}"
+
+
 def benchmark_markdown(report) -> str:
     """report.md of a benchmark ``report`` (report.json's data)."""
     from .safe_markdown import md_text
 
     s = report["summary"]
     lines = ["# Blind benchmark of the gap diagnosis", "",
-             f"Grid `{report['grid']}`, prototype provider `{report['provider']}` (diagnosis baseline: second-order model, "
-             f"{report['baseline_model']['stiffness']} chain stiffness), noise {report['noise_urad']} urad, "
+             f"Grid `{report['grid']}`, prototype provider `{report['provider']}` (diagnosis baseline: "
+             f"{_baseline_text(report['baseline_model'])}), noise {report['noise_urad']} urad, "
              f"{_trajectory_text(report['trajectory'])} x{report['cycles']}"
              f"{'' if report.get('mount') is None else ', mount ' + md_text(report['mount'])}; "
              f"{len(report['rows'])} cases. "
