@@ -5,12 +5,12 @@ results (session 27)").
 
 `none` files (no effect injected; table1 errors of scenario seed 1000 + seed, 0.5 urad, the
 trajectory measured twice, as ``diagnose-benchmark`` makes them) diagnosed without a null by the
-benchmark's baseline (the second-order model, ``DIAGNOSIS_MODEL``) and by the calibration commands'
-default model (consistent, quadratic dimension terms), baseline optimizer seed 0. Prints, per file
-and baseline, the answer, its confidence, the three largest held-out gains [noise variances] and
-the wall time of the diagnosis: the second-order baseline's form error shows as gains of several
-noise variances where the other leaves ~0. Not a test (cold, the consistent model's FEM terms take
-~10 min on 2 cores).
+benchmark's baseline until session 27 (the second-order model) and by the calibration commands'
+default model (consistent, quadratic dimension terms; the diagnosis baseline since session 28),
+baseline optimizer seed 0. Prints, per file and baseline, the answer, its confidence, the three
+largest held-out gains [noise variances] and the wall time of the diagnosis: the second-order
+baseline's form error shows as gains of several noise variances where the other leaves ~0. Not a
+test (cold, the consistent model's FEM terms take ~10 min on 2 cores).
 """
 
 from __future__ import annotations
@@ -44,11 +44,11 @@ def main() -> None:
     stiffness = baseline_stiffness(args.provider)  # the chains' stiffness of diagnose-benchmark's baseline
     provider = stiffness_provider(args.provider, progress=False, workers=None)
     start = time.perf_counter()
-    baselines = {"second-order (diagnose-benchmark's)": model_space(stiffness, True, workers=None)}
+    baselines = {"second-order (diagnose-benchmark's until session 27)": model_space(stiffness, True, workers=None)}
     consistent = model_space(stiffness, True, workers=None, model="consistent")
     if stiffness == "fem":
         consistent = curved_space(consistent, stiffness_provider("fem", progress=False, workers=None))
-    baselines["consistent + quadratic (verify's)"] = consistent
+    baselines["consistent + quadratic (verify's; the diagnosis's since session 28)"] = consistent
     print(f"models ready in {time.perf_counter() - start:.0f} s")
     print("| none file | baseline | answer | confidence | three largest held-out gains [noise variances] | wall [s] |")
     print("|---|---|---|---|---|---:|")

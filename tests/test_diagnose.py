@@ -86,6 +86,7 @@ def test_diagnose_command_writes_report_and_rejects_bad_file(tmp_path, none_case
     assert cli.main(["diagnose", str(data), "--out", str(out), "--quiet", "--model-stiffness", "closed-form"]) == 0
     report = json.loads((out / "report.json").read_text())
     assert REQUIRED_KEYS <= set(report)
+    assert report["baseline"]["model"] == "consistent"  # the calibration commands' default since session 28
     assert report["top_effect"] in {"none", *[r["effect"] for r in report["ranking"]]}
     # the benchmark's blind file has no sidecar presets: the model-form floor says so
     assert report["model_form_floor"]["reason"].startswith("not available: no true values")
@@ -121,8 +122,10 @@ def test_benchmark_command_tiny_grid_survives_a_failed_case_and_resumes(tmp_path
     # --workers 0: the cases run in this process, where the monkeypatched failure applies
     # (the executor's worker processes are tested in tests/test_scale.py)
     # --no-null: the trajectory's null (three more `none` diagnoses first) is tested in test_diagnose_chain
+    # --model second-order: the baseline's model is not this test's subject and the default (the
+    # consistent model) takes ~2x as long per case (the default's diagnosis: test_diagnose_command_*)
     command = ["diagnose-benchmark", "--grid", "tiny", "--effects", "drift,none,sensor_interpolation", "--out",
-               str(out), "--quiet", "--workers", "0", "--no-null"]
+               str(out), "--quiet", "--workers", "0", "--no-null", "--model", "second-order"]
     measure = bench.benchmark_measurement
 
     def none_runs_out_of_memory(effect_id, *args, **kwargs):

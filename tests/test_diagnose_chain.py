@@ -158,7 +158,7 @@ def test_lookalike_out_of_the_library_is_not_claimed_with_high_confidence(provid
     assert report["separation"] is not None and not report["separation"]["separated"]
 
 
-def test_benchmark_command_measures_the_null_first_and_keeps_it(tmp_path, monkeypatch):
+def test_benchmark_command_measures_the_null_first_and_keeps_it(tmp_path, monkeypatch, capsys):
     """diagnose-benchmark diagnoses the null's `none` files (seeds 100-102) before the cases,
     keeps DIR/null.json, passes the null to every case's diagnosis and reuses the file on a
     rerun. The diagnosis is a stub here (the real one: the designed-trajectory test above)."""
@@ -192,3 +192,9 @@ def test_benchmark_command_measures_the_null_first_and_keeps_it(tmp_path, monkey
     assert json.loads((out / "report.json").read_text())["null"]["gain"] == {"large_deflection": 3.0}
     (out / "cases").rename(tmp_path / "old-cases")  # rerun the case: the null is read, not measured again
     assert cli.main(command) == 0 and len(calls) == 5 and calls[4].gain == {"large_deflection": 3.0}
+    # the null keeps the baseline model it was measured with (the calibration default since
+    # session 28; closed-form chains as the analytic prototype's), and another model refuses it
+    assert null["baseline"] == {"stiffness": "closed-form", "second_order": True, "model": "consistent",
+                                "dimension_terms": "linear"}
+    assert cli.main([*command, "--model", "second-order"]) == 2 and len(calls) == 5
+    assert "measured with the baseline model" in capsys.readouterr().err

@@ -36,11 +36,11 @@ def _parsed(command, *options):
     return cli.build_parser(only=command).parse_args([command, *source, "--out", "o", *options])
 
 
-@pytest.mark.parametrize("command", ["verify", "identify", "sensitivity", "design"])
+@pytest.mark.parametrize("command", ["verify", "identify", "sensitivity", "design", "diagnose"])
 def test_the_calibration_default_is_the_consistent_model(command):
     """Session 20 (issue 24): verify, identify, sensitivity and design calibrate with the
     consistent model unless told otherwise, with the dimension terms of ``DEFAULT_DIMENSION_TERMS``
-    (linear today: the quadratic terms' cold FEM builds, docs/model.md "Session 20")."""
+    (quadratic since session 26); diagnose's baseline since session 28 (docs/diagnosis.md)."""
     from flexcal.validation.cli.opening import dimension_terms, model_option
 
     args = _parsed(command)
@@ -49,10 +49,9 @@ def test_the_calibration_default_is_the_consistent_model(command):
     assert args.dimension_terms == DEFAULT_DIMENSION_TERMS and dimension_terms(args) == DEFAULT_DIMENSION_TERMS
 
 
-@pytest.mark.parametrize("command", ["diagnose", "compensate"])
-def test_diagnose_and_compensate_keep_the_second_order_model(command):
-    # their benchmark figures and Tables 2-3 were measured with it (their modules say so)
-    args = _parsed(command)
+def test_compensate_keeps_the_second_order_model():
+    # its Tables 2-3 figures were measured with it (its module says so)
+    args = _parsed("compensate")
     assert args.model == "second-order" and args.dimension_terms == DEFAULT_DIMENSION_TERMS
 
 
@@ -76,7 +75,7 @@ def test_quadratic_dimension_terms_by_default_leave_the_other_models_runnable(mo
         assert _parsed(command).config["dimension_terms"] == options.DEFAULT_DIMENSION_TERMS, command
     assert dimension_terms(_parsed("verify")) == "quadratic"
     assert dimension_terms(_parsed("verify", "--model", "second-order")) == "linear"
-    assert dimension_terms(_parsed("diagnose")) == "linear"
+    assert dimension_terms(_parsed("diagnose")) == "quadratic"  # the calibration default since session 28
     assert dimension_terms(_parsed("verify", "--model-stiffness", "closed-form")) == "linear"
     assert dimension_terms(_parsed("verify", "--model", "paper", "--dimension-terms", "linear")) == "linear"
     monkeypatch.setattr(options, "DEFAULT_DIMENSION_TERMS", "linear")

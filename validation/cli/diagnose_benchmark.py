@@ -210,6 +210,8 @@ def benchmark_null(*, provider_name, noise_urad, cycles, seed, space=None, traje
         if null.trajectory != label:
             raise ValueError(f"{path} is the null of trajectory {null.trajectory!r}, this run's is {label!r}: give a "
                              f"new --out for another trajectory or mount")
+        if baseline is not None:
+            check_null_baseline(null, baseline, str(path))
         return null
     (log or (lambda text: None))(f"diagnose-benchmark: the null of the trajectory ({len(NULL_SEEDS)} none files)")
     provider = stiffness_provider(provider_name, progress=False)
