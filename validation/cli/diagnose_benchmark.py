@@ -77,7 +77,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
     add_mount(parser, what="the reference mount (the table1 errors are drawn on it)")
     # the baseline's model: the calibration commands' (and flexcal diagnose's) options and
     # defaults, its chains' stiffness the provider's own unless given (baseline_stiffness)
-    add_model_options(parser, stiffness_default="closed-form with --provider analytic, fem with --provider fem")
+    add_model_options(parser, stiffness_default="closed-form with --provider analytic, fem with --provider fem",
+                      executor_what="the cases (and, with --provider fem, the FEM chain builds)")
     parser.set_defaults(**{**MODEL_DEFAULTS, "model_stiffness": None})
     add_out(parser, what="report.json, report.md, answers.json, diagnosis_*.png, cases/",
             when="each finished case is kept at once in DIR/cases/ and running the same command again resumes; the "

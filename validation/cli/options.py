@@ -219,11 +219,13 @@ def calibration_defaults(*names: str, **overrides: Any) -> dict[str, Any]:
     return {**{name: CALIBRATION_DEFAULTS[name] for name in names}, **overrides}
 
 
-def add_model_options(parser: argparse.ArgumentParser, *, stiffness_default: str = "%(default)s") -> None:
+def add_model_options(parser: argparse.ArgumentParser, *, stiffness_default: str = "%(default)s",
+                      executor_what: str = "the FEM segment builds (cold cache only)") -> None:
     """Which model the calibration uses (``verify``, ``sensitivity``, ``identify``,
     ``compensate``, ``diagnose``, ``diagnose-benchmark``); defaults from the command's
     DEFAULT_CONFIG (``MODEL_DEFAULTS``); stiffness_default: what --model-stiffness's help says
-    its default is (a command whose default depends on another option says which)."""
+    its default is (a command whose default depends on another option says which);
+    executor_what: what --workers / --scheduler run (``add_executor_options``)."""
     from ..runs.model_names import DEFAULT_BREAKAWAY_N, MODEL_STIFFNESS, MODELS
 
     parser.add_argument("--model", choices=MODELS,
@@ -254,7 +256,7 @@ def add_model_options(parser: argparse.ArgumentParser, *, stiffness_default: str
                              "factors, the shortening's slopes: the form error on designed trajectories 0.29-0.44 -> "
                              "0.05-0.21 urad theta_y, at ~40 more chain builds on a cold cache; docs/model.md, "
                              "session 18) (default %(default)s, for --model consistent with FEM chains)")
-    add_executor_options(parser, what="the FEM segment builds (cold cache only)")
+    add_executor_options(parser, what=executor_what)
 
 
 def add_identification_options(parser: argparse.ArgumentParser) -> None:
