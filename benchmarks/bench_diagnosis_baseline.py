@@ -37,18 +37,21 @@ def main() -> None:
     from flexcal.validation.diagnosis.diagnose import run_diagnosis
     from flexcal.validation.prototype.providers import stiffness_provider
     from flexcal.validation.prototype.scenario import read_trajectory
-    from flexcal.validation.runs.dimension_terms import curved_space
-    from flexcal.validation.runs.model_correction import model_space
+    from flexcal.validation import cli
+    from flexcal.validation.cli.opening import calibration_model
 
     trajectory = read_trajectory(args.trajectory)
     stiffness = baseline_stiffness(args.provider)  # the chains' stiffness of diagnose-benchmark's baseline
     provider = stiffness_provider(args.provider, progress=False, workers=None)
     start = time.perf_counter()
-    baselines = {"second-order (diagnose-benchmark's until session 27)": model_space(stiffness, True, workers=None)}
-    consistent = model_space(stiffness, True, workers=None, model="consistent")
-    if stiffness == "fem":
-        consistent = curved_space(consistent, stiffness_provider("fem", progress=False, workers=None))
-    baselines["consistent + quadratic (verify's; the diagnosis's since session 28)"] = consistent
+
+    def baseline_model(*options):  # the model diagnose-benchmark builds with these options
+        parsed = cli.build_parser(only="diagnose-benchmark").parse_args(
+            ["diagnose-benchmark", "--out", "unused", "--model-stiffness", stiffness, *options])
+        return calibration_model(parsed, None, progress=False)
+
+    baselines = {"second-order (diagnose-benchmark's until session 27)": baseline_model("--model", "second-order"),
+                 "consistent + quadratic (verify's; the diagnosis's since session 28)": baseline_model()}
     print(f"models ready in {time.perf_counter() - start:.0f} s")
     print("| none file | baseline | answer | confidence | three largest held-out gains [noise variances] | wall [s] |")
     print("|---|---|---|---|---|---:|")
