@@ -75,7 +75,10 @@ class ModelTerm:
     """A model term: ``evaluate(params (k,), data) -> (n, 3) [rad]``, zero at zero params.
 
     scale (k,): typical magnitude of each parameter (x_scale of a fit); requires: extras
-    columns the term needs (the diagnosis skips it when one is missing).
+    columns the term needs (the diagnosis skips it when one is missing); starts: None, or
+    ``starts(data) -> (s, k)`` [units of scale] candidate starting points of a nonlinear fit
+    (the diagnosis refines the lowest-cost few: ``which.fit_terms``), for a term whose cost
+    has many local minima (a step's place along the path).
     """
 
     id: str
@@ -84,6 +87,7 @@ class ModelTerm:
     scale: np.ndarray
     evaluate: Callable[[np.ndarray, TermData], np.ndarray]
     requires: tuple[str, ...] = ()
+    starts: Callable[[TermData], np.ndarray] | None = None
 
     def __post_init__(self) -> None:
         k = len(self.parameter_names)
@@ -280,7 +284,26 @@ def _step_loss(p, data):  # lost motion a_i [m] (3); place c_i = 0.5 + p_{3+i} [
     return _to_angles(p[:3] * np.clip((fraction - (0.5 + p[3:6])) / move, 0.0, 1.0), data)
 
 
-def _term(effect_id, names, units, scale, evaluate, requires=()):
+def _step_loss_starts(data):
+    """(s, 6) [units of scale]: a step of +-1 scale (5 um) in one drive, placed right after
+    each distinct point of its path (all three places there). The cost over a place has a
+    local minimum at nearly every move (the ramp is one move wide), so a fit started at a
+    fixed place often stops at the wrong one: measured on the README design (FEM, step_loss
+    3x seed 0), leaving leg 5 out, the five fixed starts reached a training chi2 of 808 and a
+    held-out one of 2283 where the place of least cost gives 354 and 26 (docs/diagnosis.md)."""
+    fraction, _ = data.inputs_path_fraction
+    rows = []
+    for drive in range(3):
+        for place in np.unique(fraction[:, drive])[:-1]:
+            for sign in (1.0, -1.0):
+                row = np.zeros(6)
+                row[drive] = sign
+                row[3:] = (place - 0.5) / 0.25  # place c_i = 0.5 + p_{3+i}, scale 0.25
+                rows.append(row)
+    return np.array(rows).reshape(-1, 6)
+
+
+def _term(effect_id, names, units, scale, evaluate, requires=(), starts=None):
     def checked(params, data, _n=len(names), _f=evaluate, _id=effect_id):
         params = np.asarray(params, dtype=float)
         if params.shape != (_n,):
@@ -288,7 +311,8 @@ def _term(effect_id, names, units, scale, evaluate, requires=()):
         return _f(params, data)
 
     return ModelTerm(id=effect_id, parameter_names=tuple(names), parameter_units=tuple(units),
-                     scale=np.asarray(scale, dtype=float), evaluate=checked, requires=tuple(requires))
+                     scale=np.asarray(scale, dtype=float), evaluate=checked, requires=tuple(requires),
+                     starts=starts)
 
 
 _XYZ, _D = ("x", "y", "z"), ("D1", "D2", "D3")
@@ -314,5 +338,5 @@ TERMS: dict[str, ModelTerm] = {t.id: t for t in (
           [1e-6] * 3 + [1.0], _creep),
     # lost motion at the 5 um motor step; place at +-1 scale (the fit's extra starts) 0.25 and 0.75 of the path
     _term("step_loss", [f"lost_{d}" for d in _D] + [f"place_{d}" for d in _D], ["m"] * 3 + ["-"] * 3,
-          [5e-6] * 3 + [0.25] * 3, _step_loss),
+          [5e-6] * 3 + [0.25] * 3, _step_loss, starts=_step_loss_starts),
 )}
