@@ -287,6 +287,23 @@ def test_full_benchmark_grid_on_the_fem_prototype(tmp_path):
                                f"< {floor:.3f}: the recorded {p:.3f} minus two binomial standard errors")
 
 
+@pytest.mark.slow  # a 153-point truth and a diagnosis with step_loss's ~900 starts per fit
+def test_step_loss_placed_on_the_readme_design(provider):
+    """Blind case step_loss 3x seed 0 on the README design measured twice (analytic prototype;
+    the FEM grid's case on the same design, docs/diagnosis.md "Issue 28 results (session 29)"):
+    from the five fixed starts alone a fold's fit stopped at a wrong place of the step, and creep
+    won (held-out closure 0.36 against step_loss's 0.30, measured 2026-11-29). The term's own
+    starts (``ModelTerm.starts``) find it."""
+    from pathlib import Path
+
+    from flexcal.validation.prototype.scenario import read_trajectory
+
+    design = read_trajectory(Path(__file__).parent / "data" / "table1_design_k41_drives.csv")
+    case = benchmark_measurement("step_loss", 3.0, 0, provider, trajectory=design)
+    report = run_diagnosis(case.measurement, rng=0).report
+    assert "step_loss" in (report["top_group"] or [report["top_effect"]]), report["ranking"][:3]
+
+
 def test_step_loss_found_when_its_leg_is_held_out(provider):
     """Blind case step_loss 3x seed 2 (analytic prototype): the lost step falls in a leg that
     one fold holds out; before the weak prior on the nonlinear terms' parameters the fit
