@@ -253,7 +253,8 @@ def test_diagnose_reads_a_measurement_on_a_designed_trajectory(tmp_path, capsys)
 
 
 # Detection at >= 3x noise that the full FEM grid reached with the consistent baseline (the
-# default since session 28; docs/diagnosis.md "Issue 28 results (session 28)"): 72 of its 78 cases
+# default since session 28; docs/diagnosis.md "Issue 28 results (session 28)"; again 72 in session 29
+# with step_loss's own starts): 72 of its 78 cases
 # (0.923, the goal 0.90 met by 0.023; the second-order baseline in sessions 22 and 27: 71; session
 # 4's grid without the measurement chain's effects: 59 of 66). A rerun can flip marginal cases
 # (another BLAS build moves a baseline fit), so the test allows two binomial standard errors of a
