@@ -284,6 +284,9 @@ def _step_loss(p, data):  # lost motion a_i [m] (3); place c_i = 0.5 + p_{3+i} [
     return _to_angles(p[:3] * np.clip((fraction - (0.5 + p[3:6])) / move, 0.0, 1.0), data)
 
 
+STEP_PLACE_SCALE = 0.25  # [path fraction] the scale of step_loss's place parameters
+
+
 def _step_loss_starts(data):
     """(s, 6) [units of scale]: a step of +-1 scale (5 um) in one drive, placed right after
     each distinct point of its path (all three places there). The cost over a place has a
@@ -292,15 +295,14 @@ def _step_loss_starts(data):
     3x seed 0), leaving leg 5 out, the five fixed starts reached a training chi2 of 808 and a
     held-out one of 2283 where the place of least cost gives 354 and 26 (docs/diagnosis.md)."""
     fraction, _ = data.inputs_path_fraction
-    rows = []
+    blocks = []
     for drive in range(3):
-        for place in np.unique(fraction[:, drive])[:-1]:
-            for sign in (1.0, -1.0):
-                row = np.zeros(6)
-                row[drive] = sign
-                row[3:] = (place - 0.5) / 0.25  # place c_i = 0.5 + p_{3+i}, scale 0.25
-                rows.append(row)
-    return np.array(rows).reshape(-1, 6)
+        places = np.unique(fraction[:, drive])[:-1]
+        block = np.zeros((2 * places.size, 6))
+        block[:, drive] = np.tile([1.0, -1.0], places.size)
+        block[:, 3:] = np.repeat((places - 0.5) / STEP_PLACE_SCALE, 2)[:, None]  # place c_i = 0.5 + p_{3+i}
+        blocks.append(block)
+    return np.concatenate(blocks)
 
 
 def _term(effect_id, names, units, scale, evaluate, requires=(), starts=None):
@@ -338,5 +340,5 @@ TERMS: dict[str, ModelTerm] = {t.id: t for t in (
           [1e-6] * 3 + [1.0], _creep),
     # lost motion at the 5 um motor step; place at +-1 scale (the fit's extra starts) 0.25 and 0.75 of the path
     _term("step_loss", [f"lost_{d}" for d in _D] + [f"place_{d}" for d in _D], ["m"] * 3 + ["-"] * 3,
-          [5e-6] * 3 + [0.25] * 3, _step_loss, starts=_step_loss_starts),
+          [5e-6] * 3 + [STEP_PLACE_SCALE] * 3, _step_loss, starts=_step_loss_starts),
 )}
