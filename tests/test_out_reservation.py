@@ -390,3 +390,24 @@ def test_ctrl_c_after_the_results_are_written(tmp_path, delay_s):
         assert not any("interrupted" in line for line in lines), lines
     assert sorted(p.name for p in (tmp_path / "out").iterdir()) == TRUTH_FILES
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]
+
+
+def test_an_interrupt_that_got_ahead_of_a_release_leaves_no_lock(tmp_path, monkeypatch):
+    # a Ctrl-C that lands between a reserved block's end and its release (CI, session 29: the
+    # lock beside out/ was left): here the block is entered and never left, then Ctrl-C
+    out = tmp_path / "out"
+    never_left = []  # kept alive: a dropped generator would release its lock when collected
+
+    def interrupted_main(argv, command):
+        never_left.append(reserved(out, command="truth"))
+        never_left[-1].__enter__()
+        out.mkdir()
+        raise KeyboardInterrupt
+
+    outer = tmp_path / "outer"
+    with reserved(outer, command="sweep"):  # one the process held before: not this command's to release
+        monkeypatch.setattr(cli, "_main", interrupted_main)
+        assert cli._run(["truth"], "truth") == 130
+        assert read_holder(lock_paths(outer.resolve())[1]) is not None
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]
+    assert list(out.iterdir()) == []

@@ -40,7 +40,8 @@ from flexcal.fem.owners import OWNER_TAG, host_hash, owner_alive, owner_tag
 
 from .interrupts import interrupts_deferred
 
-__all__ = ["LOCK_NAME", "OutInUse", "Holder", "lock_paths", "read_holder", "reserved", "reserved_out", "held_command"]
+__all__ = ["LOCK_NAME", "OutInUse", "Holder", "lock_paths", "read_holder", "reserved", "reserved_out", "held_command",
+           "held_folders", "release_left"]
 
 LOCK_NAME = ".flexcal-lock"
 # a lock with no readable owner is taken to be one being written (O_EXCL fallback) for
@@ -205,6 +206,25 @@ def held_command(out_dir: str | os.PathLike) -> str | None:
     return None if reservation is None else reservation.command
 
 
+def held_folders() -> frozenset[Path]:
+    """The folders this process holds reserved right now."""
+    return frozenset(_held)
+
+
+def release_left(before: frozenset[Path]) -> None:
+    """Release every reservation taken since ``before`` (``held_folders()`` then) that this
+    process still holds, whatever its count: the command line's last step after a Ctrl-C or
+    SIGTERM. A signal can land in the few bytecodes between a ``reserved`` block's end and
+    its release's deferral (CI, session 29: ``.out.flexcal-lock`` was left after a Ctrl-C
+    right after a run's last line); then no block is left to let go of the lock."""
+    with interrupts_deferred(), _held_guard:
+        for out in [out for out in _held if out not in before]:
+            reservation = _held.pop(out)
+            _release(reservation.lock, reservation.text)
+            if not out.exists():
+                _remove_empty(reservation.made)
+
+
 def _make_parents(folder: Path) -> list[Path]:
     missing = []
     while not folder.exists():
@@ -278,14 +298,14 @@ def _let_go(out: Path, reservation: _Reservation) -> None:
     for _attempt in range(3):  # a signal before the deferral, one more delivered after it
         try:
             with interrupts_deferred(), _held_guard:
-                if not done:
-                    done = True
+                if not done and _held.get(out) is reservation:  # else released already (release_left)
                     reservation.count -= 1
                     if reservation.count == 0:
                         del _held[out]
                         _release(reservation.lock, reservation.text)
                         if not out.exists():
                             _remove_empty(reservation.made)
+                done = True
             break
         except BaseException as stop:  # noqa: BLE001 - only the signals' exceptions are held
             if isinstance(stop, Exception):

@@ -153,11 +153,13 @@ def _pass_on_signal() -> None:
 
 
 def _run(argv: list[str], command: str | None, *, hold_back: bool = False) -> int:
+    from ..out_lock import held_folders, release_left
     from ..output import written_folders
     from .signals import termination_raises
 
     debug = "--debug" in argv
     n_written_before = len(written_folders())
+    held_before = held_folders()
     try:
         with termination_raises():
             status = _main(argv, command)
@@ -171,6 +173,7 @@ def _run(argv: list[str], command: str | None, *, hold_back: bool = False) -> in
             os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error at exit
         return 0
     except KeyboardInterrupt as interrupt:  # Ctrl-C, or SIGTERM (signals.Terminated)
+        release_left(held_before)  # a lock whose block's release the signal got ahead of
         return _interrupted(command, interrupt, debug, written_folders()[n_written_before:])
     except Exception as error:  # noqa: BLE001 - the one place that turns errors into exit codes
         from .common import error_line, is_user_error
@@ -178,6 +181,7 @@ def _run(argv: list[str], command: str | None, *, hold_back: bool = False) -> in
 
         interrupt = interrupt_behind(error)  # e.g. ImportError('initialization failed') from Ctrl-C
         if interrupt is not None:
+            release_left(held_before)
             return _interrupted(command, interrupt, debug, written_folders()[n_written_before:])
         if debug:
             traceback.print_exc()
