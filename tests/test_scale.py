@@ -137,6 +137,34 @@ def test_local_builds_default_to_one_thread_per_core_within_memory():
         plan_local_builds(-1, 18, cores=2, available_bytes=plenty)
 
 
+def _blas_threads_seen(item, **options):
+    from threadpoolctl import threadpool_info
+
+    return {"key": item, "threads": sorted({pool["num_threads"] for pool in threadpool_info()
+                                            if pool["user_api"] == "blas"}), "wall_s": 0.0}
+
+
+def test_threaded_builds_keep_the_dense_blas_to_each_jobs_share(tmp_path, monkeypatch):
+    # two job threads on 2 cores each ran OpenBLAS on both cores for the condensations' dense
+    # products: a cold table1 truth took 33.7 s where one BLAS thread each gave 26.6 s (session 30)
+    import numpy as np
+    from threadpoolctl import threadpool_info
+
+    from flexcal.validation.prototype import fem_provider
+
+    np.ones((4, 4)) @ np.ones((4, 4))  # OpenBLAS loaded
+    before = [pool["num_threads"] for pool in threadpool_info()]
+    seen = {}
+    monkeypatch.setattr("flexcal.validation.executor.usable_cores", lambda: 2)
+    monkeypatch.setattr("flexcal.fem.cache.keep_cached", lambda key, arrays, directory=None: seen.update({key: arrays}))
+    keys = ["a" * 64, "b" * 64]  # cache keys: SHA-256 digests
+    built = fem_provider.build_missing({key: key for key in keys}, _blas_threads_seen, {}, ("threads",), str, workers=2,
+                                       scheduler=None, progress=False, cache_directory=tmp_path, in_threads=True,
+                                       task_prefix="t", what="test jobs")
+    assert built == 2 and [seen[k]["threads"] for k in keys] == [[1], [1]]  # 2 cores // 2 job threads
+    assert [pool["num_threads"] for pool in threadpool_info()] == before  # given back when the jobs end
+
+
 def test_prepare_gets_exactly_the_slices_the_prototype_asks_for():
     """``build_prototype`` announces its slices before asking: the parallel build then
     covers every call (none left for the sequential path) and builds nothing unused."""

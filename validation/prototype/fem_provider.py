@@ -189,6 +189,25 @@ def segment_build_cost(segment: ChainSegment) -> float:
 BUILD_MEMORY_BYTES = 1.5e9
 
 
+def _blas_share(cores_each: int):
+    """The dense BLAS (OpenBLAS's and MKL's global pools) on ``cores_each`` threads while
+    job threads of this process build side by side (0: left as it is). PARDISO already
+    runs on each job's own share (``solver_threads``), but the dense products beside it
+    (a condensation's Y^T Y, 37k x ~100, the cut fields' least squares) ran on every core
+    from every job thread: two job threads on 2 cores put four BLAS threads on them.
+    Measured, cold ``flexcal truth --scenario table1`` idle, with the thread variables set to
+    1 instead: 33.7 -> 26.6 s wall, 62 -> 48 s CPU (docs/scale.md, "Session 30"). The
+    limits are the process's (threadpoolctl), held while the main thread waits for the
+    jobs."""
+    import contextlib
+
+    if not cores_each:
+        return contextlib.nullcontext()
+    from threadpoolctl import threadpool_limits
+
+    return threadpool_limits(cores_each, user_api="blas")
+
+
 def plan_local_builds(workers: int | None, n_missing: int, *, cores: int, available_bytes: float) -> tuple[int, int]:
     """(job threads, cores each) for ``n_missing`` segment builds on this machine.
 
@@ -304,10 +323,11 @@ def build_missing(missing: dict[str, Any], job: Callable[..., dict[str, Any]], o
             f"{time.perf_counter() - start:.0f} s elapsed)")
 
     # the jobs write into the same folder when it is shared (threads of this process: always)
-    failures = run_jobs(list(missing.values()), job, on_done, key=lambda item: keys[id(item)][:16],
-                        workers=n_workers, scheduler=scheduler,
-                        job_options={**options, "mesher_threads": cores_each, "solver_threads": cores_each},
-                        task_prefix=task_prefix, in_threads=in_threads)
+    with _blas_share(cores_each if in_threads and n_workers > 1 else 0):
+        failures = run_jobs(list(missing.values()), job, on_done, key=lambda item: keys[id(item)][:16],
+                            workers=n_workers, scheduler=scheduler,
+                            job_options={**options, "mesher_threads": cores_each, "solver_threads": cores_each},
+                            task_prefix=task_prefix, in_threads=in_threads)
     if failures:
         key, text = next(iter(failures.items()))
         raise RuntimeError(f"{len(failures)} FEM build(s) of {what} failed, e.g. {text}; the {len(built)} finished "
