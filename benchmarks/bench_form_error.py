@@ -3,7 +3,7 @@
     .venv/bin/python benchmarks/bench_form_error.py [--scenario table1[,paper]] [--provider fem]
         [--corrections fem|fem-rigid] [--scenario-seeds 1,2,3]
         [--walks 3] [--points 60] [--strokes 0.5,0.8] [--seed 1] [--breakaway 2] [--slopes]
-        [--slope-grids default,provider] [--curvatures]
+        [--slope-grids default,provider] [--curvatures] [--curvature-pairs central,one-sided]
         [--trajectory table1=DIR/trajectory.csv ...]
 
 Truth: the scenario's as-built virtual prototype (FEM segment stiffness by default, noise-free
@@ -100,6 +100,9 @@ def main(argv=None) -> int:
                         help="with --slopes: add the consistent model whose factors follow the dimensions to second "
                              "order and whose shortening correction follows them (dimension_terms.curved_space, "
                              "docs/model.md 11 session 18; 20 cold FEM chain builds per chain design the first time)")
+    parser.add_argument("--curvature-pairs", default="one-sided",
+                        help="with --curvatures: the mixed entries' differences, comma-separated rows "
+                             "(dimension_terms.PAIR_DIFFERENCES: central, one-sided; the default's one-sided)")
     parser.add_argument("--trajectory", action="append", default=[], metavar="SCENARIO=FILE",
                         help="a trajectory file (columns xa1_mm, xa2_mm, xa3_mm) to add for that scenario")
     args = parser.parse_args(argv)
@@ -157,9 +160,10 @@ def _table(scenario_name, provider, corrections, args, strokes, force, trajector
             from flexcal.validation.runs.dimension_terms import curved_space
 
             sloped = models[-1][1]
-            models += (("+ the factors to second order and the shortening correction following the dimensions "
-                        "(curvatures, shortening slopes at nominal)",
-                        curved_space(sloped, corrections)),)
+            for pairs in args.curvature_pairs.split(","):
+                models += ((f"+ the factors to second order ({pairs} pairs) and the shortening correction following "
+                            "the dimensions (curvatures, shortening slopes at nominal)",
+                            curved_space(sloped, corrections, pairs=pairs)),)
     amplitudes = standard_trajectory(scenario.space.mechanism).amplitudes
     trajectories = [("standard (77 points)", scenario.inputs, scenario.leg)]
     if trajectory_file:

@@ -26,6 +26,40 @@ def test_the_analytic_provider_gives_zero_curvatures():
     np.testing.assert_allclose(curvatures, 0.0, rtol=0, atol=2e-4)
 
 
+def test_the_mixed_entries_one_sided_carry_the_third_derivative_central_ones_do_not(monkeypatch):
+    """Segments scaled so that every factor is f(r) = 1 + c r_w r_l + d r_w^2 r_l exactly (the
+    analytic segments are the closed form to ~1e-8; each chain's slices its own, as the scaling
+    is the whole chain's): the central pair differences give H_wl = c (a cubic cancels between
+    (+s, +s) and (-s, -s)), the one-sided ones c + d s_w, their O(s) term; every other entry 0."""
+    from flexcal.validation.runs import dimension_terms
+    from flexcal.validation.runs.dimension_terms import compliance_curvatures
+    from flexcal.validation.runs.model_correction import SLOPE_STEPS
+
+    space = parameter_space()
+    nominal = {round(p.chain.length, 9): p.chain for p in space.mechanism.chains}
+    c, d = 0.4, 2.0
+    analytic = analytic_provider()
+
+    def provider(chain, x0, x1):
+        at = nominal[round(chain.length, 9)]
+        r_w, r_l = chain.width / at.width - 1.0, chain.hinge_length / at.hinge_length - 1.0
+        return analytic(chain, x0, x1) / (1.0 + c * r_w * r_l + d * r_w ** 2 * r_l)
+
+    monkeypatch.setattr(dimension_terms, "slice_owners", lambda chain, alike: {})
+    w, l = DIMENSION_SYMBOLS.index("w"), DIMENSION_SYMBOLS.index("l")
+    expected = {"central": c, "one-sided": c + d * SLOPE_STEPS["w"]}
+    for pairs, value in expected.items():
+        curvatures = compliance_curvatures(space, provider, pairs=pairs)
+        np.testing.assert_array_equal(curvatures, np.swapaxes(curvatures, 1, 2))
+        # 2e-4: the factors' ~1e-8 rounding over the steps' products (the analytic test above)
+        np.testing.assert_allclose(curvatures[:, w, l], value, rtol=0, atol=2e-4)
+        others = np.ones(curvatures.shape[1:3], bool)
+        others[w, l] = others[l, w] = False
+        np.testing.assert_allclose(curvatures[:, others], 0.0, rtol=0, atol=2e-4)
+    with pytest.raises(ValueError, match="pairs='forward' must be one of central, one-sided"):
+        compliance_curvatures(space, provider, pairs="forward")
+
+
 def _recorded(provider):
     """``provider`` that notes each canonical segment it is asked for (what an FEM provider builds)."""
     from flexcal.validation.prototype.fem_provider import canonical_segment
@@ -68,11 +102,26 @@ def test_a_pairs_slice_is_built_only_where_both_its_dimensions_reach_it(monkeypa
         compliance_factors(space, provider)
         compliance_slopes(space, provider, method="builds")
         before = set(provider.asked)
-        curvatures[label] = compliance_curvatures(space, provider)
+        curvatures[label] = compliance_curvatures(space, provider, pairs="central")
         counts[label] = len(provider.asked - before)
     assert counts == {"shared": 48, "nominal only": 96}, counts
     # the same slices' numbers in the same order: equal to the last bit
     np.testing.assert_array_equal(curvatures["shared"], curvatures["nominal only"])
+
+
+def test_one_sided_pairs_build_half_the_pair_slices():
+    """The one-sided mixed entries (the default) ask for the (+s_k, +s_m) moves only: 24 segments
+    beyond the factors' and slopes' where the central ones ask for 48."""
+    from flexcal.validation.runs.dimension_terms import compliance_curvatures
+    from flexcal.validation.runs.model_correction import compliance_factors, compliance_slopes
+
+    space = parameter_space()
+    provider = _recorded(analytic_provider())
+    compliance_factors(space, provider)
+    compliance_slopes(space, provider, method="builds")
+    before = set(provider.asked)
+    compliance_curvatures(space, provider)
+    assert len(provider.asked - before) == 24
 
 
 @pytest.mark.slow

@@ -68,7 +68,7 @@ def table1_design():
     """`table1` along a `flexcal design` trajectory (tests/data/table1_design_k41_drives.csv:
     the 41 standard postures + 36 of `--criterion drives`, designed at a seed-1 estimate in
     session 26), its consistent space with linear and with quadratic dimension terms, and the
-    FEM prototype's curves along it at 2 and 5 N. Cold: ~60 tied chains for the model's terms."""
+    FEM prototype's curves along it at 2 and 5 N. Cold: ~40 tied chains for the model's terms."""
     from flexcal.validation.prototype.providers import stiffness_provider
     from flexcal.validation.prototype.scenario import load_scenario, read_trajectory
     from flexcal.validation.prototype.truth import make_truth

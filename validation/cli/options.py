@@ -190,7 +190,8 @@ DEFAULT_MODEL = "consistent"
 # "quadratic" since session 26: on the tied truth (session 25) the linear terms leave 0.37-1.07
 # urad RMS in θy on `flexcal design` trajectories and up to 0.27 on random walks (issue 24's goal
 # 0.25), the quadratic ones <= 0.14 on every trajectory, mount and breakaway force measured
-# (docs/model.md 11, "Session 26"), at 40 more tied chains cold (the mixed curvatures).
+# (docs/model.md 11, "Session 26"), at 20 more tied chains cold (the mixed curvatures, one-sided
+# since session 30: 40 central).
 DEFAULT_DIMENSION_TERMS = "quadratic"
 MODEL_DEFAULTS = {"model": DEFAULT_MODEL, "model_stiffness": "fem", "second_order": True,
                   "dimension_terms": DEFAULT_DIMENSION_TERMS}
@@ -254,7 +255,7 @@ def add_model_options(parser: argparse.ArgumentParser, *, stiffness_default: str
                         help="--model consistent's FEM factors and chain shortening as functions of the chain "
                              "dimensions: linear (slopes) or quadratic (second-order terms and cross terms of the "
                              "factors, the shortening's slopes: the form error on designed trajectories 0.29-0.44 -> "
-                             "0.05-0.21 urad theta_y, at ~40 more chain builds on a cold cache; docs/model.md, "
+                             "0.05-0.21 urad theta_y, at ~20 more chain builds on a cold cache; docs/model.md, "
                              "session 18) (default %(default)s, for --model consistent with FEM chains)")
     add_executor_options(parser, what=executor_what)
 

@@ -13,13 +13,16 @@ error. The curvatures H (n_chains, 5, 5, 8) give the factors' second-order term 
 
 - diagonal: ``(f(+s_k) + f(-s_k) - 2 f0) / s_k^2`` from the slopes' own builds at +-``SLOPE_STEPS``
   (no new FEM build: their segments are in the cache) and the nominal factors;
-- mixed: ``(f(+s_k, +s_m) + f(-s_k, -s_m) - 2 f0 - s_k^2 H_kk - s_m^2 H_mm) / (2 s_k s_m)``, two
-  moved chains per pair of dimensions (20 per chain design, ``same_design`` as the slopes),
-  accurate to O(s^2) like the slopes. Only the slices both dimensions of the pair reach are
+- mixed, by default (``DEFAULT_PAIR_DIFFERENCES``, session 30): ``(f(+s_k, +s_m) - f(+s_k) -
+  f(+s_m) + f0) / (s_k s_m)``, one moved chain per pair of dimensions (10 per chain design,
+  ``same_design`` as the slopes), accurate to O(s); ``pairs="central"``: ``(f(+s_k, +s_m) +
+  f(-s_k, -s_m) - 2 f0 - s_k^2 H_kk - s_m^2 H_mm) / (2 s_k s_m)``, two per pair, O(s^2) like the
+  slopes (the default of sessions 18-29). Only the slices both dimensions of the pair reach are
   built (``slice_owners``): t1 reaches leaf 1's slice only, t2 leaf 2's, w and a both leaves', l
   all three (it moves the section nodes), and a slice one of them leaves as it was is the other
-  one's single-move segment (or the nominal one), the same solid and so the same numbers: 48
-  segment builds for the reference mount where 96 were (session 20, docs/model.md 11).
+  one's single-move segment (or the nominal one), the same solid and so the same numbers: 24
+  segment builds for the reference mount one-sided, 48 central, where 96 were (session 20,
+  docs/model.md 11).
 
 The shortening correction ``S_measured(P0) - S_elements(P0)`` (``chain_kinematics``, docs/model.md
 10) is 0.3-0.4 % of the driving chains' S_zz off at the true dimensions; with the factors right
@@ -29,8 +32,9 @@ difference of the same probe on the slopes' moved chains (their segments cached:
 Measured once at the nominal chains, like the factors and slopes; ``model/`` only receives the
 numbers (``ParameterSpace.compliance_curvatures``, ``ParameterSpace.shortening_slopes``). A tied
 provider (``chain_stiffness``, ``--model-stiffness fem``) is asked for each moved chain whole
-(its segments joined through the cut fields; nothing shared): 60 tied chains for the reference
-mount's curvatures, 20 of them the slopes' (the shortening slopes ask for those 20 only).
+(its segments joined through the cut fields; the segments it shares with the nominal chain and
+the single moves read from the cache): 40 tied chains for the reference mount's curvatures (60
+central), 20 of them the slopes' (the shortening slopes ask for those 20 only).
 """
 
 from __future__ import annotations
@@ -51,7 +55,7 @@ from .chain_kinematics import chain_shortening
 from .model_correction import (SLOPE_STEPS, compliance_factors, provider_chain_compliance, same_design,
                                unchanged_slices)
 
-__all__ = ["compliance_curvatures", "shortening_slopes", "curved_space", "moved_chain", "moved_factors", "slice_owners"]
+__all__ = ["PAIR_DIFFERENCES", "DEFAULT_PAIR_DIFFERENCES", "compliance_curvatures", "shortening_slopes", "curved_space", "moved_chain", "moved_factors", "slice_owners"]
 
 _FIELDS = {"w": "width", "a": "fillet", "l": "hinge_length", "t1": "thickness_1", "t2": "thickness_2"}
 
@@ -96,11 +100,27 @@ def moved_factors(nominal: FlexureChain, chain: FlexureChain, provider: Stiffnes
     return np.array([richer[i, j] / closed[i, j] for i, j in ENTRY_INDEX.values()])
 
 
+PAIR_DIFFERENCES = ("central", "one-sided")
+# The mixed entries by default from the (+s_k, +s_m) moves alone (session 30): 20 tied chains of
+# the reference mount where the central differences build 40 (the curvatures' cold wall 92 -> ~46
+# s, idle). Their O(s) term moves the form error at the true values by -0.03 to +0.02 urad RMS per
+# angle against the central ones, <= 0.11 everywhere measured (table1 and paper, scenario seeds
+# 1-3, standard, design and six walks, breakaway 0.5 / 2 / 5 N; docs/model.md 11, "Session 30")
+DEFAULT_PAIR_DIFFERENCES = "one-sided"
+
+
 def compliance_curvatures(space: ParameterSpace, provider: StiffnessProvider,
-                          steps: dict[str, float] | None = None) -> np.ndarray:
+                          steps: dict[str, float] | None = None, *,
+                          pairs: str = DEFAULT_PAIR_DIFFERENCES) -> np.ndarray:
     """(n_chains, 5, 5, 8): the second derivative of each factor of ``compliance_factors`` per
     relative change of two chain dimensions (``DIMENSION_SYMBOLS``: w, a, l, t1, t2) at the
-    nominal chains of ``space`` [-] (module docstring), symmetric in the two dimensions."""
+    nominal chains of ``space`` [-] (module docstring), symmetric in the two dimensions.
+
+    pairs (``PAIR_DIFFERENCES``): the mixed entries from both pair moves, (+s_k, +s_m) and
+    (-s_k, -s_m) ("central", O(s^2)), or from (+s_k, +s_m) alone ("one-sided":
+    ``(f(+s_k, +s_m) - f(+s_k) - f(+s_m) + f0) / (s_k s_m)``, O(s), half the pair builds)."""
+    if pairs not in PAIR_DIFFERENCES:
+        raise ValueError(f"pairs={pairs!r} must be one of {', '.join(PAIR_DIFFERENCES)}")
     steps = SLOPE_STEPS if steps is None else steps
     mech = space.mechanism
     design = same_design(mech.chains)
@@ -111,7 +131,7 @@ def compliance_curvatures(space: ParameterSpace, provider: StiffnessProvider,
             for sign in (1, -1):
                 moves[c, k, k, sign] = {symbol: sign * steps[symbol]}
         for k, m in itertools.combinations(range(len(DIMENSION_SYMBOLS)), 2):
-            for sign in (1, -1):
+            for sign in ((1, -1) if pairs == "central" else (1,)):
                 moves[c, k, m, sign] = {DIMENSION_SYMBOLS[k]: sign * steps[DIMENSION_SYMBOLS[k]],
                                         DIMENSION_SYMBOLS[m]: sign * steps[DIMENSION_SYMBOLS[m]]}
     chains = {key: moved_chain(mech.chains[key[0]].chain, relative) for key, relative in moves.items()}
@@ -136,13 +156,15 @@ def compliance_curvatures(space: ParameterSpace, provider: StiffnessProvider,
     h = np.array([steps[s] for s in DIMENSION_SYMBOLS])
     out = np.zeros((len(mech.chains), len(DIMENSION_SYMBOLS), len(DIMENSION_SYMBOLS), 8))
     for c in first:
-        both = {(k, m): ratio[c, k, m, 1] + ratio[c, k, m, -1] - 2.0 * nominal[c] for k, m in
-                itertools.combinations_with_replacement(range(len(DIMENSION_SYMBOLS)), 2)}
         for k in range(len(DIMENSION_SYMBOLS)):
-            out[c, k, k] = both[k, k] / h[k] ** 2
+            out[c, k, k] = (ratio[c, k, k, 1] + ratio[c, k, k, -1] - 2.0 * nominal[c]) / h[k] ** 2
         for k, m in itertools.combinations(range(len(DIMENSION_SYMBOLS)), 2):
-            out[c, k, m] = out[c, m, k] = ((both[k, m] - h[k] ** 2 * out[c, k, k] - h[m] ** 2 * out[c, m, m])
-                                           / (2.0 * h[k] * h[m]))
+            if pairs == "central":
+                both = ratio[c, k, m, 1] + ratio[c, k, m, -1] - 2.0 * nominal[c]
+                mixed = (both - h[k] ** 2 * out[c, k, k] - h[m] ** 2 * out[c, m, m]) / (2.0 * h[k] * h[m])
+            else:
+                mixed = (ratio[c, k, m, 1] - ratio[c, k, k, 1] - ratio[c, m, m, 1] + nominal[c]) / (h[k] * h[m])
+            out[c, k, m] = out[c, m, k] = mixed
     return out[design]
 
 
@@ -171,13 +193,14 @@ def shortening_slopes(space: ParameterSpace, provider: StiffnessProvider,
     return out[design]
 
 
-def curved_space(space: ParameterSpace, provider: StiffnessProvider) -> ParameterSpace:
+def curved_space(space: ParameterSpace, provider: StiffnessProvider, *,
+                 pairs: str = DEFAULT_PAIR_DIFFERENCES) -> ParameterSpace:
     """``space`` (a consistent space with ``compliance_slopes``) whose factors follow the
     dimensions to second order and whose shortening correction follows them:
-    ``compliance_curvatures`` and ``shortening_slopes`` of ``space`` and ``provider``."""
+    ``compliance_curvatures`` (``pairs``) and ``shortening_slopes`` of ``space`` and ``provider``."""
     if not (space.compliance_slopes and space.chain_shortening):
         raise ValueError("curved_space needs a consistent space with compliance slopes "
                          "(chain_kinematics.consistent_space over corrected_space(..., slopes=True))")
     return dataclasses.replace(
-        space, compliance_curvatures=tuple(float(v) for v in compliance_curvatures(space, provider).ravel()),
+        space, compliance_curvatures=tuple(float(v) for v in compliance_curvatures(space, provider, pairs=pairs).ravel()),
         shortening_slopes=tuple(float(v) for v in shortening_slopes(space, provider).ravel()))
