@@ -58,7 +58,7 @@ def _point_pypardiso_at_mkl() -> None:
 def _let_mkl_threads_sleep() -> None:
     """MKL's OpenMP threads sleep as soon as a parallel region ends (``KMP_BLOCKTIME=0``),
     unless the user set it: Intel OpenMP's default keeps them spinning for 200 ms after each,
-    and PARDISO's phases end many regions. Measured (docs/scale.md, "Session 30"): the six
+    and PARDISO's phases end many regions. Measured (docs/scale.md, "Issue 26, session 30"): the six
     as-built chains of a table1 truth built one after the other in one thread on one MKL thread
     took 43.1 s of CPU for 31.4 s of wall (the spinning threads' CPU), 30.0 for 30.0 with it
     set; a cold ``flexcal truth --scenario table1`` (two job threads, each spinning beside the

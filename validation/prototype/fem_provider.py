@@ -196,7 +196,7 @@ def _blas_share(cores_each: int):
     (a condensation's Y^T Y, 37k x ~100, the cut fields' least squares) ran on every core
     from every job thread: two job threads on 2 cores put four BLAS threads on them.
     Measured, cold ``flexcal truth --scenario table1`` idle, with the thread variables set to
-    1 instead: 33.7 -> 26.6 s wall, 62 -> 48 s CPU (docs/scale.md, "Session 30"). The
+    1 instead: 33.7 -> 26.6 s wall, 62 -> 48 s CPU (docs/scale.md, "Issue 26, session 30"). The
     limits are the process's (threadpoolctl), held while the main thread waits for the
     jobs."""
     import contextlib

@@ -102,7 +102,7 @@ def moved_factors(nominal: FlexureChain, chain: FlexureChain, provider: Stiffnes
 
 PAIR_DIFFERENCES = ("central", "one-sided")
 # The mixed entries by default from the (+s_k, +s_m) moves alone (session 30): 20 tied chains of
-# the reference mount where the central differences build 40 (the curvatures' cold wall 92 -> ~46
+# the reference mount where the central differences build 40 (the curvatures' cold wall 92 -> 43
 # s, idle). Their O(s) term moves the form error at the true values by -0.02 to +0.02 urad RMS per
 # angle against the central ones, <= 0.11 everywhere measured (table1 and paper, scenario seeds
 # 1-3, standard, design and six walks, breakaway 0.5 / 2 / 5 N; docs/model.md 11, "Session 30")
