@@ -55,7 +55,8 @@ from .chain_kinematics import chain_shortening
 from .model_correction import (SLOPE_STEPS, compliance_factors, provider_chain_compliance, same_design,
                                unchanged_slices)
 
-__all__ = ["PAIR_DIFFERENCES", "DEFAULT_PAIR_DIFFERENCES", "compliance_curvatures", "shortening_slopes", "curved_space", "moved_chain", "moved_factors", "slice_owners"]
+__all__ = ["PAIR_DIFFERENCES", "DEFAULT_PAIR_DIFFERENCES", "compliance_curvatures", "shortening_slopes", "curved_space",
+           "moved_chain", "moved_factors", "slice_owners"]
 
 _FIELDS = {"w": "width", "a": "fillet", "l": "hinge_length", "t1": "thickness_1", "t2": "thickness_2"}
 
