@@ -55,20 +55,6 @@ def _point_pypardiso_at_mkl() -> None:
         os.environ["PYPARDISO_MKL_RT"] = found[0]
 
 
-def _let_mkl_threads_sleep() -> None:
-    """MKL's OpenMP threads sleep as soon as a parallel region ends (``KMP_BLOCKTIME=0``),
-    unless the user set it: Intel OpenMP's default keeps them spinning for 200 ms after each,
-    and PARDISO's phases end many regions. Measured (docs/scale.md, "Issue 26, session 30"): the six
-    as-built chains of a table1 truth built one after the other in one thread on one MKL thread
-    took 43.1 s of CPU for 31.4 s of wall (the spinning threads' CPU), 30.0 for 30.0 with it
-    set; a cold ``flexcal truth --scenario table1`` (two job threads, each spinning beside the
-    other's work) 0.93x the wall and 0.90x the CPU (medians of 5, A B A B). One chain on two MKL
-    threads: no slower (4.5-5.2 against 4.7-5.5 s). Numba's OpenMP layer here is GNU's
-    (libgomp), which this variable does not touch. Read when MKL's OpenMP runtime starts, so
-    this runs before pypardiso loads MKL."""
-    os.environ.setdefault("KMP_BLOCKTIME", "0")
-
-
 def _ask_mkl_for_reproducible_results() -> None:
     """MKL's conditional numerical reproducibility (``MKL_CBWR=AUTO``), unless the user
     chose a mode: PARDISO's threaded factorization otherwise sums in an order that
@@ -129,7 +115,6 @@ def _new_pardiso_solver():
     one thread against two 3.8e-14 (docs/scale.md, session 17)."""
     _point_pypardiso_at_mkl()
     _ask_mkl_for_reproducible_results()
-    _let_mkl_threads_sleep()
     import pypardiso
 
     solver = pypardiso.PyPardisoSolver(mtype=2)

@@ -55,6 +55,7 @@ def test_the_mixed_entries_one_sided_carry_the_third_derivative_central_ones_do_
         np.testing.assert_allclose(curvatures[:, w, l], value, rtol=0, atol=2e-4)
         others = np.ones(curvatures.shape[1:3], bool)
         others[w, l] = others[l, w] = False
+        # 2e-4: the same rounding as above, on the entries the factor does not curve
         np.testing.assert_allclose(curvatures[:, others], 0.0, rtol=0, atol=2e-4)
     with pytest.raises(ValueError, match="pairs='forward' must be one of central, one-sided"):
         compliance_curvatures(space, provider, pairs="forward")

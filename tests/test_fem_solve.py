@@ -33,28 +33,6 @@ def test_pardiso_gives_the_same_bits_twice():
     assert np.array_equal(first, solve_spd(K, rhs, method="pardiso"))
 
 
-def test_mkl_threads_sleep_after_their_regions_unless_the_user_chose():
-    """KMP_BLOCKTIME=0 before MKL starts (its OpenMP threads spun 200 ms after every PARDISO
-    region: 43 s of CPU for 31 s of wall over a truth's six chains, docs/scale.md "Session
-    30"); a value the user set is kept. Fresh processes: MKL reads it once, at its start."""
-    import os
-    import subprocess
-    import sys
-
-    if not pardiso_available():
-        pytest.skip("pypardiso / MKL not available")
-    probe = ("import os, numpy as np, scipy.sparse as sp; from flexcal.fem.solve import solve_spd; "
-             "solve_spd(sp.identity(4, format='csr') * 2.0, np.ones(4), method='pardiso'); "
-             "print(os.environ['KMP_BLOCKTIME'])")
-    for given, expected in ((None, "0"), ("200", "200")):
-        env = {k: v for k, v in os.environ.items() if k != "KMP_BLOCKTIME"}
-        if given is not None:
-            env["KMP_BLOCKTIME"] = given
-        done = subprocess.run([sys.executable, "-c", probe], env=env, capture_output=True, text=True, timeout=120)
-        assert done.returncode == 0, done.stderr
-        assert done.stdout.strip() == expected
-
-
 def test_solves_in_two_threads_at_once_match_one_at_a_time():
     """Each thread has its own PARDISO handle (no lock since session 9: the FEM segment
     builds run in threads of one process) and, inside ``solver_threads(1)``, one MKL
