@@ -13,11 +13,17 @@ from typing import Iterator
 
 from threadpoolctl import threadpool_limits
 
-__all__ = ["single_blas_thread"]
+__all__ = ["single_blas_thread", "blas_threads"]
 
 
 @contextlib.contextmanager
-def single_blas_thread() -> Iterator[None]:
-    """Limit the loaded BLAS libraries to one thread inside the ``with`` block."""
-    with threadpool_limits(1, user_api="blas"):
+def blas_threads(n_threads: int) -> Iterator[None]:
+    """Limit the loaded BLAS libraries' global pools to ``n_threads`` inside the ``with``
+    block (the process's: threadpoolctl)."""
+    with threadpool_limits(n_threads, user_api="blas"):
         yield
+
+
+def single_blas_thread():
+    """Limit the loaded BLAS libraries to one thread inside the ``with`` block."""
+    return blas_threads(1)

@@ -219,10 +219,15 @@ def release_left(before: frozenset[Path]) -> None:
     right after a run's last line); then no block is left to let go of the lock."""
     with interrupts_deferred(), _held_guard:
         for out in [out for out in _held if out not in before]:
-            reservation = _held.pop(out)
-            _release(reservation.lock, reservation.text)
-            if not out.exists():
-                _remove_empty(reservation.made)
+            _drop(out)
+
+
+def _drop(out: Path) -> None:
+    """``out``'s reservation out of ``_held`` and its lock released (``_held_guard`` held)."""
+    reservation = _held.pop(out)
+    _release(reservation.lock, reservation.text)
+    if not out.exists():
+        _remove_empty(reservation.made)
 
 
 def _make_parents(folder: Path) -> list[Path]:
@@ -301,10 +306,7 @@ def _let_go(out: Path, reservation: _Reservation) -> None:
                 if not done and _held.get(out) is reservation:  # else released already (release_left)
                     reservation.count -= 1
                     if reservation.count == 0:
-                        del _held[out]
-                        _release(reservation.lock, reservation.text)
-                        if not out.exists():
-                            _remove_empty(reservation.made)
+                        _drop(out)
                 done = True
             break
         except BaseException as stop:  # noqa: BLE001 - only the signals' exceptions are held

@@ -21,6 +21,7 @@ cheap strut segments), and a local job thread meshes and solves on its share of 
 
 from __future__ import annotations
 
+import contextlib
 import sys
 import threading
 import time
@@ -189,25 +190,6 @@ def segment_build_cost(segment: ChainSegment) -> float:
 BUILD_MEMORY_BYTES = 1.5e9
 
 
-def _blas_share(cores_each: int):
-    """The dense BLAS (OpenBLAS's and MKL's global pools) on ``cores_each`` threads while
-    job threads of this process build side by side (0: left as it is). PARDISO already
-    runs on each job's own share (``solver_threads``), but the dense products beside it
-    (a condensation's Y^T Y, 37k x ~100, the cut fields' least squares) ran on every core
-    from every job thread: two job threads on 2 cores put four BLAS threads on them.
-    Measured, cold ``flexcal truth --scenario table1`` idle, with the thread variables set to
-    1 instead: 33.7 -> 26.6 s wall, 62 -> 48 s CPU (docs/scale.md, "Issue 26, session 30"). The
-    limits are the process's (threadpoolctl), held while the main thread waits for the
-    jobs."""
-    import contextlib
-
-    if not cores_each:
-        return contextlib.nullcontext()
-    from threadpoolctl import threadpool_limits
-
-    return threadpool_limits(cores_each, user_api="blas")
-
-
 def plan_local_builds(workers: int | None, n_missing: int, *, cores: int, available_bytes: float) -> tuple[int, int]:
     """(job threads, cores each) for ``n_missing`` segment builds on this machine.
 
@@ -230,8 +212,6 @@ def build_segment_job(segment: ChainSegment, *, material: Material, elements_thr
     "wall_s": [s]}; the worker's cache gets the entry too (``segment_stiffness_fem``);
     fTetWild on ``mesher_threads`` threads and PARDISO on ``solver_threads`` MKL threads
     of the calling thread (0: all cores; ``flexcal.fem.solve.solver_threads``)."""
-    import contextlib
-
     from flexcal.fem.solve import solver_threads as mkl_threads
 
     start = time.perf_counter()
@@ -292,6 +272,7 @@ def build_missing(missing: dict[str, Any], job: Callable[..., dict[str, Any]], o
     version's."""
     from flexcal.fem.cache import cache_is_writable, keep_cached, load_cached
 
+    from ..blas_threads import blas_threads
     from ..executor import run_jobs, usable_cores, where
 
     cache_is_writable(cache_directory)  # up front: an unwritable cache warns once, before any FEM work
@@ -322,8 +303,14 @@ def build_missing(missing: dict[str, Any], job: Callable[..., dict[str, Any]], o
         log(f"  FEM {describe(item)}: {result['wall_s']:.1f} s ({len(built)}/{len(missing)}, "
             f"{time.perf_counter() - start:.0f} s elapsed)")
 
-    # the jobs write into the same folder when it is shared (threads of this process: always)
-    with _blas_share(cores_each if in_threads and n_workers > 1 else 0):
+    # the jobs write into the same folder when it is shared (threads of this process: always).
+    # Job threads side by side hold the dense BLAS (OpenBLAS's pools) to their share of the cores:
+    # PARDISO runs on each job's own (solver_threads), but the products beside it (a condensation's
+    # Y^T Y, the cut fields' least squares) ran on every core from every job thread, four BLAS
+    # threads on 2 cores. Cold table1 truth 32.5 -> 25.6 s wall, 61.7 -> 48.1 s CPU (docs/scale.md,
+    # "Issue 26, session 30"). The pools are the process's, held while this thread waits.
+    shared = in_threads and n_workers > 1
+    with blas_threads(cores_each) if shared else contextlib.nullcontext():
         failures = run_jobs(list(missing.values()), job, on_done, key=lambda item: keys[id(item)][:16],
                             workers=n_workers, scheduler=scheduler,
                             job_options={**options, "mesher_threads": cores_each, "solver_threads": cores_each},
