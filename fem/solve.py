@@ -81,9 +81,24 @@ def solver_threads(n_threads: int) -> Iterator[None]:
     previous = getattr(_PER_THREAD, "mkl_threads", 0)
     _PER_THREAD.mkl_threads = n_threads
     try:
-        yield
+        with _openmp_threads(n_threads):
+            yield
     finally:
         _PER_THREAD.mkl_threads = previous
+
+
+def _openmp_threads(n_threads: int):
+    """This thread's OpenMP teams held at ``n_threads`` inside the block (``omp_set_num_threads``
+    through threadpoolctl: OpenMP's count is the calling thread's own), with MKL's runtime
+    loaded first so that its OpenMP library is among those limited. PARDISO's factorization
+    opens teams of OpenMP's count, not of ``MKL_Set_Num_Threads_Local``'s: inside
+    ``solver_threads(1)`` a second thread ran beside it and then spun for OpenMP's block time
+    (KMP_BLOCKTIME, 200 ms) after every region, 1.6x the CPU for the same wall alone and the
+    other job's core taken in threaded builds (docs/scale.md, "Issue 26, session 31")."""
+    from threadpoolctl import threadpool_limits
+
+    pardiso_available()  # loads MKL and its OpenMP runtime, if there is one
+    return threadpool_limits(n_threads, user_api="openmp")
 
 
 def _pardiso_solver():

@@ -70,6 +70,51 @@ def test_solves_in_two_threads_at_once_match_one_at_a_time():
             pass
 
 
+def test_a_solve_on_one_solver_thread_opens_no_second_openmp_thread():
+    """PARDISO's factorization opens OpenMP teams of OpenMP's own count, whatever
+    ``MKL_Set_Num_Threads_Local`` says: inside ``solver_threads(1)`` a second thread worked
+    beside it and spun for KMP_BLOCKTIME after every region (the factorization of a chain's
+    segment class took 1.7x its wall in CPU). ``solver_threads`` holds the calling thread's
+    OpenMP count too, and gives it back after. Run on a fresh thread, as the FEM build jobs
+    are, with that thread's OpenMP count set to 2 first (so the check means the same on a
+    one-core machine)."""
+    if not pardiso_available():
+        pytest.skip("pypardiso / MKL not available")
+    import threading
+    import time
+
+    from threadpoolctl import threadpool_info, threadpool_limits
+
+    from flexcal.fem.solve import solver_threads
+
+    def openmp_counts() -> set[int]:
+        return {info["num_threads"] for info in threadpool_info() if info["user_api"] == "openmp"}
+
+    K = _laplacian_3d(40)  # 64k unknowns: ~1 s of factorization on one core
+    rhs = np.random.default_rng(3).standard_normal((K.shape[0], 2))
+    found = {}
+
+    def work() -> None:
+        with threadpool_limits(2, user_api="openmp"):
+            solve_spd(K[:8, :8], rhs[:8], method="pardiso")  # loads MKL and its OpenMP runtime
+            with solver_threads(1):
+                found["inside"] = openmp_counts()
+                wall, cpu = time.perf_counter(), time.process_time()
+                solve_spd(K, rhs, method="pardiso")
+                found["cpu_over_wall"] = (time.process_time() - cpu) / (time.perf_counter() - wall)
+            found["after"] = openmp_counts()
+
+    thread = threading.Thread(target=work)
+    thread.start()
+    thread.join()
+    if not found["after"]:
+        pytest.skip("MKL runs without an OpenMP runtime here")
+    assert found["inside"] == {1} and found["after"] == {2}
+    # one thread works: CPU <= wall, plus 15 % for the rest of this process (pytest, the
+    # interpreter's own threads); the second thread's spin made it 1.6-1.7 alone (measured)
+    assert found["cpu_over_wall"] < 1.15
+
+
 @pytest.mark.parametrize("method", ["auto", "pardiso", "splu", "spsolve", "amg"])
 def test_methods_solve_several_right_hand_sides(method):
     if method == "pardiso" and not pardiso_available():
