@@ -186,3 +186,35 @@ def test_the_tied_fem_corrections_are_the_softer_chains():
     # S, a quadratic over k, keeps its lateral and bending terms: measured within 0.3 % of the rigid
     # cuts' (the coarse chain: 0.2-1.9 %); 1e-2
     np.testing.assert_allclose(np.diag(s_tied)[[1, 2, 4, 5]], np.diag(s_rigid)[[1, 2, 4, 5]], rtol=1e-2)  # 1e-2: above
+
+
+def test_one_batch_builds_every_chain_the_models_corrections_ask_for():
+    """``dimension_terms.prepare_model_chains`` hands the executor, in one batch, every chain the
+    consistent model's corrections then ask a tied provider for (slopes, L2's own shortening probe,
+    curvatures, shortening slopes): asked phase by phase, L2's chain was built alone on one of two
+    cores. A recording tied provider on analytic segments: every chain asked for afterwards, by
+    ``chain_stiffness`` or by a phase's ``prepare_chains``, is one of the batch's."""
+    from flexcal.validation.runs.chain_kinematics import consistent_space
+    from flexcal.validation.runs.dimension_terms import curved_space, prepare_model_chains
+    from flexcal.validation.runs.model_correction import corrected_space
+
+    space = parameter_space()
+    batches, asked = [], []
+
+    def stiffness(chain):
+        asked.append(chain)
+        return _rigid_twist_stiffness(chain)
+
+    provider = _tied(analytic_provider(), stiffness)
+    provider.prepare_chains = lambda chains: batches.append(list(chains))
+    prepare_model_chains(space, provider)
+    assert len(batches) == 1
+    batch = set(batches[0])
+    # the nominal designs D and L1 (= L3), L2 (1 ulp longer: its own probe), 2 x 10 single moves,
+    # 2 x 10 one-sided pairs
+    assert len(batches[0]) == len(batch) == 3 + 20 + 20
+    assert {p.chain for p in space.mechanism.chains} <= batch
+    curved_space(consistent_space(corrected_space(space, provider, slopes=True), provider), provider)
+    assert len(batches) > 1 and all(set(b) <= batch for b in batches[1:])
+    assert asked and set(asked) <= batch
+    assert set(asked) | {c for b in batches[1:] for c in b} == batch  # the batch builds nothing unasked

@@ -53,10 +53,10 @@ from ..prototype.segments import (StiffnessProvider, chain_slices, is_tied, prep
                                   sharing_segments)
 from .chain_kinematics import chain_shortening
 from .model_correction import (SLOPE_STEPS, compliance_factors, provider_chain_compliance, same_design,
-                               unchanged_slices)
+                               slope_moves, unchanged_slices)
 
 __all__ = ["PAIR_DIFFERENCES", "DEFAULT_PAIR_DIFFERENCES", "compliance_curvatures", "shortening_slopes", "curved_space",
-           "moved_chain", "moved_factors", "slice_owners"]
+           "curvature_moves", "prepare_model_chains", "moved_chain", "moved_factors", "slice_owners"]
 
 _FIELDS = {"w": "width", "a": "fillet", "l": "hinge_length", "t1": "thickness_1", "t2": "thickness_2"}
 
@@ -110,6 +110,47 @@ PAIR_DIFFERENCES = ("central", "one-sided")
 DEFAULT_PAIR_DIFFERENCES = "one-sided"
 
 
+def curvature_moves(space: ParameterSpace, steps: dict[str, float] | None = None, *,
+                    pairs: str = DEFAULT_PAIR_DIFFERENCES) -> dict[tuple, FlexureChain]:
+    """{(chain index, k, m, sign): the moved chain} of ``compliance_curvatures``' builds: each
+    chain design's first chain (``same_design``) with dimension k moved by sign step (k == m,
+    the slopes' own chains) or k and m both (``pairs``: sign +1 and -1 "central", +1 alone
+    "one-sided"), in the order the builds ask for them."""
+    if pairs not in PAIR_DIFFERENCES:
+        raise ValueError(f"pairs={pairs!r} must be one of {', '.join(PAIR_DIFFERENCES)}")
+    steps = SLOPE_STEPS if steps is None else steps
+    mech = space.mechanism
+    design = same_design(mech.chains)
+    moves = {}
+    for c in (c for c in range(len(mech.chains)) if design[c] == c):
+        for k, symbol in enumerate(DIMENSION_SYMBOLS):
+            for sign in (1, -1):
+                moves[c, k, k, sign] = {symbol: sign * steps[symbol]}
+        for k, m in itertools.combinations(range(len(DIMENSION_SYMBOLS)), 2):
+            for sign in ((1, -1) if pairs == "central" else (1,)):
+                moves[c, k, m, sign] = {DIMENSION_SYMBOLS[k]: sign * steps[DIMENSION_SYMBOLS[k]],
+                                        DIMENSION_SYMBOLS[m]: sign * steps[DIMENSION_SYMBOLS[m]]}
+    return {key: moved_chain(mech.chains[key[0]].chain, relative) for key, relative in moves.items()}
+
+
+def prepare_model_chains(space: ParameterSpace, provider: StiffnessProvider, *,
+                         pairs: str = DEFAULT_PAIR_DIFFERENCES) -> None:
+    """Build at once, in one batch on the executor, every chain the consistent model's FEM
+    corrections with quadratic dimension terms will ask a tied ``provider`` for: the mount's
+    nominal chains (every placement's: L2, 1 ulp longer than L1, has its own shortening probe,
+    ``chain_kinematics.shortening_corrections``), the slopes' moved chains (``slope_moves``)
+    and the curvatures' (``curvature_moves``), each keeping its segment condensations for the
+    moved chains that share them (``sharing_segments``). The phases then read them from the
+    cache: asked for phase by phase, L2's probe chain was built alone on one of the two cores
+    (6 s) and each batch's end left a core idle (docs/scale.md, "Issue 26, session 31"). Any
+    other provider: nothing (its segments are prepared phase by phase)."""
+    if not is_tied(provider):
+        return
+    chains = [p.chain for p in space.mechanism.chains]
+    chains += [*slope_moves(space).values(), *curvature_moves(space, pairs=pairs).values()]
+    prepare_chains(sharing_segments(provider), list(dict.fromkeys(chains)))
+
+
 def compliance_curvatures(space: ParameterSpace, provider: StiffnessProvider,
                           steps: dict[str, float] | None = None, *,
                           pairs: str = DEFAULT_PAIR_DIFFERENCES) -> np.ndarray:
@@ -120,22 +161,11 @@ def compliance_curvatures(space: ParameterSpace, provider: StiffnessProvider,
     pairs (``PAIR_DIFFERENCES``): the mixed entries from both pair moves, (+s_k, +s_m) and
     (-s_k, -s_m) ("central", O(s^2)), or from (+s_k, +s_m) alone ("one-sided":
     ``(f(+s_k, +s_m) - f(+s_k) - f(+s_m) + f0) / (s_k s_m)``, O(s), half the pair builds)."""
-    if pairs not in PAIR_DIFFERENCES:
-        raise ValueError(f"pairs={pairs!r} must be one of {', '.join(PAIR_DIFFERENCES)}")
     steps = SLOPE_STEPS if steps is None else steps
     mech = space.mechanism
     design = same_design(mech.chains)
     first = [c for c in range(len(mech.chains)) if design[c] == c]
-    moves = {}
-    for c in first:
-        for k, symbol in enumerate(DIMENSION_SYMBOLS):
-            for sign in (1, -1):
-                moves[c, k, k, sign] = {symbol: sign * steps[symbol]}
-        for k, m in itertools.combinations(range(len(DIMENSION_SYMBOLS)), 2):
-            for sign in ((1, -1) if pairs == "central" else (1,)):
-                moves[c, k, m, sign] = {DIMENSION_SYMBOLS[k]: sign * steps[DIMENSION_SYMBOLS[k]],
-                                        DIMENSION_SYMBOLS[m]: sign * steps[DIMENSION_SYMBOLS[m]]}
-    chains = {key: moved_chain(mech.chains[key[0]].chain, relative) for key, relative in moves.items()}
+    chains = curvature_moves(space, steps, pairs=pairs)
     # a slice of a pair's chain that only one of its two dimensions (or neither) reaches is that
     # single move's (or the nominal chain's) segment: t1 reaches leaf 1's slice only, t2 leaf 2's,
     # w and a both leaves', l all three (it moves the nodes); 48 segment builds where 96 were

@@ -30,7 +30,7 @@ import scipy.linalg
 from flexcal.geometry.params import FlexureChain
 from flexcal.model.chain import chain_compliance_matrix
 from flexcal.model.hinge import ENTRY_INDEX
-from flexcal.model.parameters import ParameterSpace
+from flexcal.model.parameters import DIMENSION_SYMBOLS, ParameterSpace
 
 from ..prototype.segments import (StiffnessProvider, chain_slices, end_stiffness, prepare_chains, prepare_provider,
                                   is_tied, same_design, section_nodes, sharing_segments)
@@ -139,6 +139,17 @@ def slope_provider(provider: StiffnessProvider, elements_through: float | None =
     return on_grid(float(elements_through))
 
 
+def slope_moves(space: ParameterSpace, steps: dict[str, float] | None = None) -> dict[tuple, FlexureChain]:
+    """{(chain index, dimension symbol, sign): the moved chain} of ``compliance_slopes``' builds:
+    each chain design's first chain (``same_design``) with one dimension scaled by (1 + sign
+    step) (``SLOPE_STEPS`` by default), in the order the builds ask for them."""
+    steps = SLOPE_STEPS if steps is None else steps
+    mech = space.mechanism
+    design = same_design(mech.chains)
+    return {(c, symbol, sign): _moved(p.chain, symbol, sign * steps[symbol])
+            for c, p in enumerate(mech.chains) if design[c] == c for symbol in DIMENSION_SYMBOLS for sign in (1, -1)}
+
+
 def unchanged_slices(nominal: FlexureChain, moved: FlexureChain) -> set[tuple[float, float]]:
     """The slices (x_start, x_end) [m] between the section nodes of ``moved`` whose solid is
     that of the same slice of ``nominal`` (same nodes, same pieces: ``flexcal.geometry.exact.pieces``,
@@ -219,16 +230,12 @@ def _slopes_by_builds(space: ParameterSpace, provider: StiffnessProvider,
     ``provider``'s grid (``compliance_factors``): the grid's error of the factor itself (up to
     2.8 % at 3 through) cancels, and with it most of the slopes' (the torsion entry's 0.52 ->
     0.12 % of the factor at table1's dimensions; not enough for the form error, docs/model.md 7)."""
-    from flexcal.model.parameters import DIMENSION_SYMBOLS
 
     fine, provider = provider, slope_provider(provider, elements_through)
     steps = SLOPE_STEPS if steps is None else steps
-    fields = {"w": "width", "a": "fillet", "l": "hinge_length", "t1": "thickness_1", "t2": "thickness_2"}
     mech = space.mechanism
     design = same_design(mech.chains)
-    moved = {(c, symbol, sign): dataclasses.replace(p.chain, **{fields[symbol]: getattr(p.chain, fields[symbol])
-                                                                 * (1.0 + sign * steps[symbol])})
-             for c, p in enumerate(mech.chains) if design[c] == c for symbol in DIMENSION_SYMBOLS for sign in (1, -1)}
+    moved = slope_moves(space, steps)
     # a slice a dimension leaves as it was (leaf 2's segment when t1 moves, leaf 1's when t2 moves,
     # the strut when w, a, t1 or t2 move) is the nominal chain's own segment: asked for as that,
     # it is built once
