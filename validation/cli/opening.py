@@ -131,21 +131,15 @@ def calibration_model(args: argparse.Namespace, mechanism, *, progress: bool):
     model = model_option(args)
     force = getattr(args, "breakaway_force", None)
     terms = dimension_terms(args)
-    provider = None
-    if terms == "quadratic":  # on the provider of the model's own factors (fem or fem-rigid)
-        from flexcal.model.parameters import parameter_space
-
-        from ..prototype.providers import stiffness_provider
-        from ..runs.dimension_terms import prepare_model_chains
-
-        provider = stiffness_provider(args.model_stiffness, progress=progress, **executor_options(args))
-        prepare_model_chains(parameter_space(mechanism), provider)  # a tied provider's chains in one batch
     space = model_space(args.model_stiffness, args.second_order, progress=progress, mechanism=mechanism,
-                        model=model, breakaway_force=force, **executor_options(args))
-    if provider is not None:
+                        model=model, breakaway_force=force, quadratic_terms=terms == "quadratic",
+                        **executor_options(args))
+    if terms == "quadratic":  # on the provider of the model's own factors (fem or fem-rigid)
+        from ..prototype.providers import stiffness_provider
         from ..runs.dimension_terms import curved_space
 
-        space = curved_space(space, provider)
+        space = curved_space(space, stiffness_provider(args.model_stiffness, progress=progress,
+                                                       **executor_options(args)))
     return space
 
 

@@ -483,7 +483,7 @@ def corrected_space(space: ParameterSpace, provider: StiffnessProvider, *, slope
 
 def model_space(stiffness: str = "fem", second_order: bool = True, *, progress: bool = False, workers: int | None = 0,
                 scheduler: str | None = None, mechanism=None, breakaway_force: float | None = None,
-                model: str = "second-order") -> ParameterSpace:
+                model: str = "second-order", quadratic_terms: bool = False) -> ParameterSpace:
     """The parameter space of ``mechanism`` (the reference one by default) with the model
     options the calibration commands share.
 
@@ -500,7 +500,9 @@ def model_space(stiffness: str = "fem", second_order: bool = True, *, progress: 
     module's slopes: the command line composes the two, ``cli.opening.calibration_model``).
     breakaway_force [N] for "second-order": the clearance's play state with that breakaway
     force (None: Eq. 7's memoryless clip; docs/model.md 9). workers / scheduler: where missing
-    FEM segments are built (``fem_provider``)."""
+    FEM segments are built (``fem_provider``). quadratic_terms: "consistent" on a tied provider
+    builds the chains the quadratic dimension terms will ask for too, with its own, in one batch
+    (``dimension_terms.prepare_model_chains``), before its slopes."""
     from flexcal.model.parameters import parameter_space
 
     if model not in MODELS:
@@ -522,6 +524,10 @@ def model_space(stiffness: str = "fem", second_order: bool = True, *, progress: 
         from .chain_kinematics import consistent_space
 
         provider = stiffness_provider(stiffness, progress=progress, workers=workers, scheduler=scheduler)
+        if quadratic_terms:  # the curvatures' chains in the same batch as the slopes' (a tied provider)
+            from .dimension_terms import prepare_model_chains
+
+            prepare_model_chains(space, provider)
         space = consistent_space(corrected_space(space, provider, slopes=True), provider)
         return dataclasses.replace(space, breakaway_force=force)
     if stiffness != "closed-form":
