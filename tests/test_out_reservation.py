@@ -330,8 +330,10 @@ def test_sensitivity_and_design_build_the_model_where_the_options_say(tmp_path, 
     assert status == 2 and "stop here" in capsys.readouterr().err
     assert seen["workers"] == 3 and seen["scheduler"] == "tcp://10.0.0.5:8786"
     # the default consistent model with quadratic dimension terms: its chains in one batch
-    # (dimension_terms.prepare_model_chains, inside model_space)
-    assert seen["model"] == "consistent" and seen["quadratic_terms"] is True
+    # (dimension_terms.prepare_model_chains, called inside model_space)
+    from flexcal.validation.runs.dimension_terms import prepare_model_chains
+
+    assert seen["model"] == "consistent" and seen["also_build"] is prepare_model_chains
 
 
 def test_a_folder_given_for_a_file_says_so(tmp_path, truth_run, capsys):

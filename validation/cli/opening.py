@@ -130,13 +130,15 @@ def calibration_model(args: argparse.Namespace, mechanism, *, progress: bool):
     check_model_options(args)
     model = model_option(args)
     force = getattr(args, "breakaway_force", None)
+    from ..runs.dimension_terms import curved_space, prepare_model_chains
+
     terms = dimension_terms(args)
+    # with the quadratic terms, their chains built in the slopes' batch (prepare_model_chains)
     space = model_space(args.model_stiffness, args.second_order, progress=progress, mechanism=mechanism,
-                        model=model, breakaway_force=force, quadratic_terms=terms == "quadratic",
-                        **executor_options(args))
+                        model=model, breakaway_force=force,
+                        also_build=prepare_model_chains if terms == "quadratic" else None, **executor_options(args))
     if terms == "quadratic":  # on the provider of the model's own factors (fem or fem-rigid)
         from ..prototype.providers import stiffness_provider
-        from ..runs.dimension_terms import curved_space
 
         space = curved_space(space, stiffness_provider(args.model_stiffness, progress=progress,
                                                        **executor_options(args)))

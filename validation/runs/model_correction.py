@@ -23,6 +23,7 @@ is 16-18 / 13-15 urad RMS off (theta_x / theta_y, table1 seeds 1-3; docs/model.m
 from __future__ import annotations
 
 import dataclasses
+from typing import Callable
 
 import numpy as np
 import scipy.linalg
@@ -483,7 +484,7 @@ def corrected_space(space: ParameterSpace, provider: StiffnessProvider, *, slope
 
 def model_space(stiffness: str = "fem", second_order: bool = True, *, progress: bool = False, workers: int | None = 0,
                 scheduler: str | None = None, mechanism=None, breakaway_force: float | None = None,
-                model: str = "second-order", quadratic_terms: bool = False) -> ParameterSpace:
+                model: str = "second-order", also_build: Callable | None = None) -> ParameterSpace:
     """The parameter space of ``mechanism`` (the reference one by default) with the model
     options the calibration commands share.
 
@@ -500,9 +501,10 @@ def model_space(stiffness: str = "fem", second_order: bool = True, *, progress: 
     module's slopes: the command line composes the two, ``cli.opening.calibration_model``).
     breakaway_force [N] for "second-order": the clearance's play state with that breakaway
     force (None: Eq. 7's memoryless clip; docs/model.md 9). workers / scheduler: where missing
-    FEM segments are built (``fem_provider``). quadratic_terms: "consistent" on a tied provider
-    builds the chains the quadratic dimension terms will ask for too, with its own, in one batch
-    (``dimension_terms.prepare_model_chains``), before its slopes."""
+    FEM segments are built (``fem_provider``). also_build(space, provider): for "consistent" on
+    FEM chains, called with the provider before the slopes, to build what later terms will ask
+    for in the same batch (``dimension_terms.prepare_model_chains``, which the command line passes
+    for the quadratic dimension terms; a callable, since dimension_terms imports this module)."""
     from flexcal.model.parameters import parameter_space
 
     if model not in MODELS:
@@ -524,10 +526,8 @@ def model_space(stiffness: str = "fem", second_order: bool = True, *, progress: 
         from .chain_kinematics import consistent_space
 
         provider = stiffness_provider(stiffness, progress=progress, workers=workers, scheduler=scheduler)
-        if quadratic_terms:  # the curvatures' chains in the same batch as the slopes' (a tied provider)
-            from .dimension_terms import prepare_model_chains
-
-            prepare_model_chains(space, provider)
+        if also_build is not None:  # e.g. the curvatures' chains in the same batch as the slopes'
+            also_build(space, provider)
         space = consistent_space(corrected_space(space, provider, slopes=True), provider)
         return dataclasses.replace(space, breakaway_force=force)
     if stiffness != "closed-form":
