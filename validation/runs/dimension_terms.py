@@ -52,19 +52,11 @@ from flexcal.model.parameters import DIMENSION_SYMBOLS, ParameterSpace
 from ..prototype.segments import (StiffnessProvider, chain_slices, is_tied, prepare_chains, prepare_provider,
                                   sharing_segments)
 from .chain_kinematics import chain_shortening
-from .model_correction import (SLOPE_STEPS, compliance_factors, provider_chain_compliance, same_design,
-                               slope_moves, unchanged_slices)
+from .model_correction import (SLOPE_STEPS, compliance_factors, moved_chain, provider_chain_compliance,
+                               same_design, slope_moves, unchanged_slices)
 
 __all__ = ["PAIR_DIFFERENCES", "DEFAULT_PAIR_DIFFERENCES", "compliance_curvatures", "shortening_slopes", "curved_space",
            "curvature_moves", "prepare_model_chains", "moved_chain", "moved_factors", "slice_owners"]
-
-_FIELDS = {"w": "width", "a": "fillet", "l": "hinge_length", "t1": "thickness_1", "t2": "thickness_2"}
-
-
-def moved_chain(chain: FlexureChain, relative: dict[str, float]) -> FlexureChain:
-    """``chain`` with each dimension symbol of ``relative`` scaled by (1 + its value)."""
-    return dataclasses.replace(chain, **{_FIELDS[s]: getattr(chain, _FIELDS[s]) * (1.0 + r)
-                                         for s, r in relative.items()})
 
 
 def slice_owners(chain: FlexureChain, alike) -> dict[tuple[float, float], FlexureChain]:

@@ -231,7 +231,6 @@ def _slopes_by_builds(space: ParameterSpace, provider: StiffnessProvider,
     ``provider``'s grid (``compliance_factors``): the grid's error of the factor itself (up to
     2.8 % at 3 through) cancels, and with it most of the slopes' (the torsion entry's 0.52 ->
     0.12 % of the factor at table1's dimensions; not enough for the form error, docs/model.md 7)."""
-
     fine, provider = provider, slope_provider(provider, elements_through)
     steps = SLOPE_STEPS if steps is None else steps
     mech = space.mechanism
@@ -300,8 +299,14 @@ TANGENT_STEP = 1e-4
 _FIELDS = {"w": "width", "a": "fillet", "l": "hinge_length", "t1": "thickness_1", "t2": "thickness_2"}
 
 
+def moved_chain(chain: FlexureChain, relative: dict[str, float]) -> FlexureChain:
+    """``chain`` with each dimension symbol of ``relative`` scaled by (1 + its value)."""
+    return dataclasses.replace(chain, **{_FIELDS[s]: getattr(chain, _FIELDS[s]) * (1.0 + r)
+                                         for s, r in relative.items()})
+
+
 def _moved(chain: FlexureChain, symbol: str, relative: float) -> FlexureChain:
-    return dataclasses.replace(chain, **{_FIELDS[symbol]: getattr(chain, _FIELDS[symbol]) * (1.0 + relative)})
+    return moved_chain(chain, {symbol: relative})
 
 
 def _slice_segment(chain: FlexureChain, index: int):
