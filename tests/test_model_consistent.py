@@ -340,3 +340,34 @@ def test_the_consistent_model_bounds_the_form_error_at_the_workspace_corners(nam
     # 0.05 / 0.08 / 0.02 (paper); without the lateral defect and the load form (the model of
     # session 13) 0.23 / 0.69 / 0.18 and 0.28 / 0.85 / 0.22
     assert np.all(error <= 0.1), error
+
+
+def test_the_shortening_probe_forms_no_tangent_it_does_not_read(monkeypatch):
+    """The probe reads each equilibrium's segment gradients only: ``solve_equilibrium(...,
+    final_tangent=False)`` returns the same poses and gradients, bit for bit, without the tangent
+    at the returned poses (one tangent fewer per solve that took a step: 30 % of the probe)."""
+    from flexcal.geometry.params import reference_mechanism
+    from flexcal.validation.prototype import equilibrium
+    from flexcal.validation.prototype.kinematics import pose, se3_exp
+    from flexcal.validation.prototype.segments import analytic_provider
+    from flexcal.validation.runs.chain_kinematics import _chain_assembly
+
+    assembly, poses0, frame, length = _chain_assembly(reference_mechanism().chains[3].chain, analytic_provider())
+    poses0[5] = pose(se3_exp(np.r_[0.0, 0.0, 0.0, 0.0, 2e-3, -1e-3])[:3, :3], np.array([length, 2e-4, -1e-4]))
+    tangents = []
+    evaluate = equilibrium.evaluate
+
+    def counted(*args, **kwargs):
+        tangents.append(args[4] if len(args) > 4 else kwargs.get("with_tangent", True))
+        return evaluate(*args, **kwargs)
+
+    monkeypatch.setattr(equilibrium, "evaluate", counted)
+    results = {}
+    for final in (True, False):
+        tangents.clear()
+        poses, info = equilibrium.solve_equilibrium(assembly, poses0, frame, equilibrium.Loads(), final_tangent=final)
+        results[final] = (poses, info, sum(tangents))
+    assert results[True][1].iterations >= 1
+    np.testing.assert_array_equal(results[False][0], results[True][0])
+    np.testing.assert_array_equal(results[False][1].segment_gradient, results[True][1].segment_gradient)
+    assert results[False][2] == results[True][2] - 1

@@ -324,14 +324,17 @@ def _solve(factor, rhs: np.ndarray) -> np.ndarray:
 
 def solve_equilibrium(assembly: Assembly, body_poses: np.ndarray, stiffness: np.ndarray, loads: Loads,
                       settings: SolverSettings = SolverSettings(), where: str = "",
-                      tangent: np.ndarray | None = None) -> tuple[np.ndarray, EquilibriumInfo]:
+                      tangent: np.ndarray | None = None,
+                      final_tangent: bool = True) -> tuple[np.ndarray, EquilibriumInfo]:
     """Newton from ``body_poses`` (warm start) to equilibrium; returns (poses, info).
 
     ``tangent`` (optional): a tangent from a nearby state (the previous trajectory point)
     to start with. Steps use the newest tangent as long as each step at least halves the
     scaled residual norm (chord Newton); otherwise the tangent is re-formed at the current
     state, and with a fresh tangent a backtracking line search guards the step. The
-    returned ``info.tangent`` is always formed at the returned poses. Raises
+    returned ``info.tangent`` is formed at the returned poses (``final_tangent=False``: the
+    last one formed on the way, for a caller that only reads the segment gradients; the
+    poses and gradients are the same bits either way). Raises
     ``NonConvergenceError`` (naming ``where``) if the tolerances are not met within
     ``settings.max_iterations`` steps or the residual stalls above them.
     """
@@ -347,7 +350,7 @@ def solve_equilibrium(assembly: Assembly, body_poses: np.ndarray, stiffness: np.
     while True:
         force, moment = _residual_norms(assembly, residual)
         if force <= settings.force_tolerance and moment <= settings.moment_tolerance:
-            if not fresh:
+            if not fresh and final_tangent:
                 _, residual, tangent, seg_grad = evaluate(assembly, poses, stiffness, loads, True, settings.step)
             return poses, EquilibriumInfo(iterations=iteration, force_residual=force, moment_residual=moment,
                                           tangent=tangent, segment_gradient=seg_grad)
