@@ -270,7 +270,7 @@ def _evaluate_coupled(assembly: Assembly, body_poses: np.ndarray, rel: np.ndarra
     diagonal = stiffness.diagonal()
     wrench = stiffness.wrench(xi)
     offset = wrench - np.einsum("sij,sj->si", diagonal, xi)
-    seg_grad = segment_gradient(rel, d, diagonal, offset)
+    seg_grad = segment_gradient(rel, d, diagonal, offset, deformation=xi)
     energy_l, grad_l, hess_l = _load_terms(assembly, body_poses, loads, with_tangent)
     energy = 0.5 * float(np.sum(xi * wrench)) + energy_l
     residual = _gathered_residual(assembly, seg_grad) + grad_l

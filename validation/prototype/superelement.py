@@ -90,11 +90,12 @@ def segment_energy(relative: np.ndarray, reference_inverse: np.ndarray, stiffnes
 
 
 def segment_gradient(relative: np.ndarray, reference_inverse: np.ndarray, stiffness: np.ndarray,
-                     wrench_offset: np.ndarray | None = None) -> np.ndarray:
+                     wrench_offset: np.ndarray | None = None, deformation: np.ndarray | None = None) -> np.ndarray:
     """Energy gradient ``[g_i; g_j]`` (..., 12) of Eq. (3) [N, N m], node body frames.
     wrench_offset (..., 6) [N, N m]: c added to K xi (a coupled segment's share of its group's
-    wrench from the other segments, module docstring); None: none."""
-    xi = segment_deformation(relative, reference_inverse)
+    wrench from the other segments, module docstring); None: none. deformation: xi (...,
+    6) if the caller has it (``segment_deformation`` of the same poses), else computed here."""
+    xi = segment_deformation(relative, reference_inverse) if deformation is None else deformation
     wrench = np.einsum("...ij,...j->...i", stiffness, xi)  # K xi, at the end node
     if wrench_offset is not None:
         wrench = wrench + wrench_offset
