@@ -57,7 +57,9 @@ class IdentificationSettings:
     profile: widen the bars of the base combinations not identified alone by their profile
     likelihood (``calibration.profile_bars``); start: values (45,) [SI] every fit starts from
     (cross-validation folds included; None: the prior mean, or for a consistent space with
-    ``staged`` the second-order model's estimate on the same data, ``calibration.staged_start``)."""
+    ``staged`` the second-order model's estimate on the same data, ``calibration.staged_start``);
+    threads: the model's threads per batch of candidates (``CalibrationProblem.n_threads``; the
+    estimate's bits do not depend on it)."""
 
     method: str = "map"
     prior_scale: float | None = None
@@ -68,6 +70,7 @@ class IdentificationSettings:
     profile: bool = False
     start: np.ndarray | None = None
     staged: bool = True
+    threads: int = 1
 
     def __post_init__(self) -> None:
         if self.method not in ("map", "free"):
@@ -76,6 +79,8 @@ class IdentificationSettings:
             raise ValueError(f"prior scale={self.prior_scale} must be > 0")
         if self.noise is not None and not self.noise > 0:
             raise ValueError(f"noise={self.noise} rad must be > 0")
+        if not (isinstance(self.threads, int) and self.threads >= 1):
+            raise ValueError(f"threads={self.threads!r} must be an integer >= 1")
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -134,7 +139,8 @@ def identify_all(space: ParameterSpace, inputs: np.ndarray, angles: np.ndarray, 
     inputs, angles = np.asarray(inputs, float), np.asarray(angles, float)
     check_determined(inputs.shape[0], space.n_params)
     directions = travel_directions(inputs)
-    problem = CalibrationProblem(space=space, inputs=inputs, angles=angles, directions=directions)
+    problem = CalibrationProblem(space=space, inputs=inputs, angles=angles, directions=directions,
+                                 n_threads=settings.threads)
 
     # every fit runs in the chart's coordinates: the mount offsets in Cartesian components
     # (calibration.offset_chart: polar ones have a singular origin, a cut circle and a minimum
@@ -146,7 +152,7 @@ def identify_all(space: ParameterSpace, inputs: np.ndarray, angles: np.ndarray, 
 
     def residuals_for(points: np.ndarray):
         return in_chart(CalibrationProblem(space=space, inputs=inputs[points], angles=angles[points],
-                                           directions=directions[points]).residuals)
+                                           directions=directions[points], n_threads=settings.threads).residuals)
 
     # where every fit starts: the prior mean, or given values (e.g. an earlier measurement's
     # estimate: on a designed trajectory's large strokes the prior mean's basin can be a local

@@ -42,7 +42,9 @@ class EvaluationLog:
 class CalibrationProblem:
     """space: the parameter space (active = identified); inputs (n, 3) [m] ordered;
     angles (n, 3) [rad] measured; directions (n, 3) default from the inputs;
-    clearance_mode of the model; chunk: candidates per model call (memory)."""
+    clearance_mode of the model; chunk: candidates per model call (memory); n_threads: the
+    model's threads per call (``model.forward``: a batch's compiled solve over them, the same
+    bits at any count)."""
 
     space: ParameterSpace
     inputs: np.ndarray
@@ -50,6 +52,7 @@ class CalibrationProblem:
     directions: np.ndarray | None = None
     clearance_mode: str = "force_only"
     chunk: int = 2048
+    n_threads: int = 1
     log: EvaluationLog = field(default_factory=EvaluationLog)
 
     def __post_init__(self) -> None:
@@ -87,7 +90,7 @@ class CalibrationProblem:
     def _angles_block(self, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         try:
             result = forward(values, self.inputs, self.directions, space=self.space,
-                             clearance_mode=self.clearance_mode)
+                             clearance_mode=self.clearance_mode, n_threads=self.n_threads)
             return result.angles, np.ones(values.shape[0], dtype=bool)
         except ConvergenceError:
             if values.shape[0] == 1:

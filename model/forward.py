@@ -224,11 +224,6 @@ def _candidate_rows(matrices: MechanismMatrices, rows: np.ndarray) -> MechanismM
     return MechanismMatrices(**{f.name: getattr(matrices, f.name)[rows] for f in dataclasses.fields(matrices)})
 
 
-def _concatenate(blocks: list[MechanismMatrices]) -> MechanismMatrices:
-    return MechanismMatrices(**{f.name: np.concatenate([getattr(b, f.name) for b in blocks])
-                                for f in dataclasses.fields(blocks[0])})
-
-
 def _candidate_slice(matrices: MechanismMatrices, start: int, stop: int) -> MechanismMatrices:
     return MechanismMatrices(**{f.name: getattr(matrices, f.name)[start:stop] for f in dataclasses.fields(matrices)})
 
@@ -245,9 +240,12 @@ def forward(space_values, inputs, directions=None, *, space: ParameterSpace | No
     include Eq. 4-5 / Eq. 6-7; clearance_mode "directional" (d_i from the travel direction)
     or "force_only" (d_i = +1: only tension opens the gap). tol [m] on the fixed point.
     engine "auto" (numba if available), "numba" or "numpy" (reference); n_threads > 1 splits
-    the candidates over that many threads (the per-candidate setup in Python threads, the
-    compiled solve on numba threads); chunk_size: candidates per numpy-engine block. The
-    candidate axis is always present in the result.
+    the candidates over that many threads: the compiled solve over numba threads after the
+    setup of the whole batch, whose bits then do not depend on n_threads (each candidate's
+    solve is its own loop; the setup's paths and quadrature follow the batch it is given:
+    ``chain.COMPILED_MIN_CHAINS``, ``hinge.gauss_node_count``); the numpy engine's setup and
+    solve in Python threads over candidate blocks. chunk_size: candidates per numpy-engine
+    block. The candidate axis is always present in the result.
     """
     space = space or parameter_space()
     values = np.atleast_2d(np.asarray(space_values, dtype=float))
@@ -261,9 +259,10 @@ def forward(space_values, inputs, directions=None, *, space: ParameterSpace | No
                    chunk_size=chunk_size)
     if n_threads <= 1 or values.shape[0] < 2:
         out = solve_matrices(mechanism_matrices(values, space), x, d, **options)
+    elif options["engine"] == "numba":  # the whole batch's setup, then numba's threads
+        out = solve_matrices(mechanism_matrices(values, space), x, d, n_threads=n_threads, **options)
     else:
-        # setup (numpy, mostly GIL-free) in threads over candidate blocks; the compiled solve
-        # then runs once on numba's threads, the numpy solve per block in the same threads
+        # the numpy engine: setup and solve in threads over candidate blocks
         bounds = np.linspace(0, values.shape[0], min(int(n_threads), values.shape[0]) + 1).astype(int)
         spans = list(zip(bounds[:-1], bounds[1:]))
 
@@ -274,13 +273,9 @@ def forward(space_values, inputs, directions=None, *, space: ParameterSpace | No
             return solve_matrices(matrices, x, d, candidate_offset=int(span[0]), **options)
 
         with concurrent.futures.ThreadPoolExecutor(max_workers=len(spans)) as pool:
-            blocks = list(pool.map(setup, spans))
-            if options["engine"] == "numba":
-                out = solve_matrices(_concatenate(blocks), x, d, n_threads=n_threads, **options)
-            else:
-                parts = list(pool.map(run, spans, blocks))
-                out = {k: np.concatenate([p[k] for p in parts]) for k in parts[0] if k != "n_iterations"}
-                out["n_iterations"] = max(p["n_iterations"] for p in parts)
+            parts = list(pool.map(run, spans, pool.map(setup, spans)))
+        out = {k: np.concatenate([p[k] for p in parts]) for k in parts[0] if k != "n_iterations"}
+        out["n_iterations"] = max(p["n_iterations"] for p in parts)
     return ForwardResult(pose=out["pose"], axial_loads=out["loads"], clearance=out["clearance"],
                          release=out["release"], parasitic=out["parasitic"], chain_states=out["states"],
                          point_class=out["point_class"], inputs=x, directions=d, n_iterations=out["n_iterations"])

@@ -234,3 +234,23 @@ def test_compiled_assembly_equals_numpy(monkeypatch):
         scale = np.abs(b).max()
         # Cholesky vs LU and another summation order: cond(K_CC) ~ 300 times 1e-16
         np.testing.assert_allclose(a, b, rtol=0, atol=1e-12 * scale, err_msg=field.name)
+
+
+@pytest.mark.skipif(not kernel.available(), reason="the compiled engine needs numba")
+@pytest.mark.parametrize("model", ["second-order", "consistent with the play state"])
+def test_the_compiled_engine_gives_the_same_bits_on_any_thread_count(model):
+    """``forward(..., n_threads=2)`` sets the whole batch up as one thread does and solves each
+    candidate in its own loop on numba's threads: the same bits as one thread, on a Jacobian's
+    batch (a base candidate and each source moved, many chains alike) and on 150 random
+    candidates (where the setup was split over threads before session 32, moving the last bits)."""
+    space = dataclasses.replace(SPACE, second_order=True)
+    if model != "second-order":
+        space = dataclasses.replace(space, breakaway_force=2.0, chain_shortening=tuple(np.zeros(216)))
+    base = random_values(1, 32)[0]
+    jacobian = np.repeat(base[None], 46, axis=0)
+    jacobian[np.arange(1, 46), np.arange(45)] *= 1.0 + 1e-6
+    for values in (jacobian, random_values(150, 33)):
+        one = forward(values, TRAJECTORY.inputs, space=space)
+        two = forward(values, TRAJECTORY.inputs, space=space, n_threads=2)
+        for field in ("pose", "axial_loads", "clearance", "chain_states"):
+            np.testing.assert_array_equal(getattr(two, field), getattr(one, field))

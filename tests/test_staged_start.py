@@ -77,3 +77,37 @@ def test_no_stage_when_told_or_given_a_start_or_not_consistent(monkeypatch, clos
     identify_all(consistent, inputs, angles, leg, dataclasses.replace(quick, start=start))
     given = offset_chart(consistent.names).from_space(np.full(consistent.n_params, 0.25))  # the estimator's coordinates
     assert len(calls) == 1 and np.allclose(calls[0][0], given, atol=1e-12)  # the given start, no stage; round-off
+
+
+def test_the_fits_run_the_model_on_the_threads_asked_and_get_the_same_bits(monkeypatch, closed_form_segments):
+    """``IdentificationSettings.threads`` reaches every model call of the fits (the problem over
+    all points, the cross-validation folds', the second-order stage's), and the estimate is the
+    same to the bit on 1 and 2 threads (the compiled solve is per candidate, ``model.forward``)."""
+    import flexcal.calibration.problem as problem_module
+
+    space = _space("--model", "consistent")
+    inputs, angles, leg = _data(space)
+    _recorded_fits(monkeypatch, space)
+    asked = []
+    real = problem_module.forward
+
+    def recording(*args, **kwargs):
+        asked.append(kwargs.get("n_threads", 1))
+        return real(*args, **kwargs)
+    monkeypatch.setattr(problem_module, "forward", recording)
+    found = {}
+    for threads in (1, 2):
+        asked.clear()
+        found[threads] = identify_all(space, inputs, angles, leg,
+                                      IdentificationSettings(n_folds=2, scales=(1.0,), threads=threads))
+        assert asked and set(asked) == {threads}
+    np.testing.assert_array_equal(found[2].values, found[1].values)
+    np.testing.assert_array_equal(found[2].std, found[1].std)
+
+
+def test_the_threads_are_a_positive_count():
+    import pytest
+
+    for threads in (0, -1, 1.5):
+        with pytest.raises(ValueError, match="threads"):
+            IdentificationSettings(threads=threads)

@@ -1,22 +1,26 @@
 """``flexcal verify``'s estimate runs its dense algebra on one BLAS thread (runs.verify,
 ``single_blas_thread``): on 2 cores the threaded BLAS made the README's warm main job 44 s
-against 30 s (session 21, docs/scale.md "Session 21")."""
+against 30 s (session 21, docs/scale.md "Session 21"); and its model batches on every usable
+core (``IdentificationSettings.threads``; the same bits on any count, session 32)."""
 
 from threadpoolctl import threadpool_info
 
 import flexcal.validation.runs.verify as verify_module
 from flexcal.validation import cli
+from flexcal.validation.executor import usable_cores
 
 
 def test_the_estimate_runs_on_one_blas_thread(tmp_path, monkeypatch):
-    seen = []
+    seen, model_threads = [], []
     real = verify_module.identify_all
 
     def recording(*args, **kwargs):
         seen.append([pool["num_threads"] for pool in threadpool_info() if pool["user_api"] == "blas"])
+        model_threads.append(args[4].threads)
         return real(*args, **kwargs)
     monkeypatch.setattr(verify_module, "identify_all", recording)
     assert cli.main(["verify", "--scenario", "table1", "--provider", "analytic", "--model", "second-order",
                      "--model-stiffness", "closed-form", "--prior-scale", "1", "--no-error-budget",
                      "--out", str(tmp_path / "run"), "-q"]) == 0
     assert seen and all(threads == [1] * len(threads) and threads for threads in seen)
+    assert model_threads == [usable_cores()] * len(seen)

@@ -44,6 +44,7 @@ from flexcal.calibration.sensitivity import select_parameters, sobol_indices
 from flexcal.model.parameters import DRIVE_SOURCE_NAMES, ParameterSpace
 
 from ..blas_threads import single_blas_thread
+from ..executor import usable_cores
 from ..progress import progress_bar, with_progress
 from ..measurements import Measurement
 from .form_floor import TruthCurve, model_form_floor, not_available
@@ -242,7 +243,10 @@ def _estimated_identification(measurement: Measurement, angles: np.ndarray, spac
             return made[-1].samples
     # the fits' dense algebra (46-column Jacobians, 231 x 231 discrepancy kernels) on one BLAS
     # thread: on 2 cores the threaded BLAS made the README's warm main job 44 s against 30 s
-    # (session 21, docs/scale.md); the identified values the same to the bit, the bars to 1e-8
+    # (session 21, docs/scale.md); the identified values the same to the bit, the bars to 1e-8.
+    # The model's batches (a Jacobian's 46 candidates) on every usable core instead: its compiled
+    # solve is per candidate, the same bits at any thread count (``model.forward``); 0.87x the
+    # warm main job's wall (docs/scale.md, "Issue 26, session 32")
     with single_blas_thread(), progress_bar(None, f"{settings.method} estimate", enabled=progress,
                                             unit="fit") as bar:
         def plan(total: int) -> None:
@@ -250,7 +254,8 @@ def _estimated_identification(measurement: Measurement, angles: np.ndarray, spac
         result = identify_all(space, measurement.inputs, angles, measurement.leg,
                               IdentificationSettings(method=settings.method, prior_scale=settings.prior_scale,
                                                      profile=settings.profile,
-                                                     start=None if settings.start is None else np.array(settings.start)),
+                                                     start=None if settings.start is None else np.array(settings.start),
+                                                     threads=usable_cores()),
                               log=log, on_fit=lambda: bar.update(1), on_plan=plan,
                               model_error=model_error)
     fit = result.estimate
