@@ -242,17 +242,18 @@ class SwarmIdentification:
 def identify_swarm(space: ParameterSpace, inputs: np.ndarray, angles: np.ndarray, selected: tuple[str, ...],
                    pso_settings: PSOSettings = PSOSettings(), *, seed: int = 0, sensitivity: np.ndarray | None = None,
                    polish: bool = True, noise: float | None = None,
-                   callback: Callable[[object], None] | None = None) -> SwarmIdentification:
+                   callback: Callable[[object], None] | None = None, threads: int = 1) -> SwarmIdentification:
     """The paper's identification (Sec. 3.2) of the ``selected`` sources, the others fixed as
     ``space`` holds them: the improved multi-subgroup PSO on Eq. 13 (``sensitivity``: their
     total Sobol indices, which seed the subgroups), then (``polish``) the least-squares polish
     of the swarm's distinct good points and an Eq. 13 refinement (IRLS), and the
     identifiability at the solution with ``noise`` [rad] (None: the fit RMS). callback(optimizer) after
-    each PSO iteration (progress)."""
+    each PSO iteration (progress). threads: the model's per batch (``CalibrationProblem.n_threads``;
+    the same bits at any count)."""
     inputs, angles = np.asarray(inputs, float), np.asarray(angles, float)
     check_determined(inputs.shape[0], len(selected))
     sub = space.subset(selected)
-    problem = CalibrationProblem(space=sub, inputs=inputs, angles=angles)
+    problem = CalibrationProblem(space=sub, inputs=inputs, angles=angles, n_threads=threads)
     pso = identify(problem.fitness, sub.n_params, pso_settings, rng=seed, sensitivity=sensitivity, callback=callback)
     x_best, polished = pso.x_best, None
     if polish:

@@ -24,3 +24,23 @@ def test_the_estimate_runs_on_one_blas_thread(tmp_path, monkeypatch):
                      "--out", str(tmp_path / "run"), "-q"]) == 0
     assert seen and all(threads == [1] * len(threads) and threads for threads in seen)
     assert model_threads == [usable_cores()] * len(seen)
+
+
+def test_the_papers_method_runs_its_model_batches_on_every_usable_core(tmp_path, monkeypatch):
+    """The Sobol screening's problem and the swarm's (``identify_swarm(threads=...)``)."""
+    screening, swarm = [], []
+    real_problem, real_swarm = verify_module.CalibrationProblem, verify_module.identify_swarm
+
+    def problem(**kwargs):
+        screening.append(kwargs.get("n_threads", 1))
+        return real_problem(**kwargs)
+
+    def recording(*args, **kwargs):
+        swarm.append(kwargs.get("threads", 1))
+        return real_swarm(*args, **kwargs)
+    monkeypatch.setattr(verify_module, "CalibrationProblem", problem)
+    monkeypatch.setattr(verify_module, "identify_swarm", recording)
+    assert cli.main(["verify", "--scenario", "table1", "--provider", "analytic", "--model", "second-order",
+                     "--model-stiffness", "closed-form", "--method", "paper", "--sobol-n", "8", "--particles", "40",
+                     "--iterations", "3", "--no-error-budget", "--out", str(tmp_path / "run"), "-q"]) == 0
+    assert screening == [usable_cores()] and swarm == [usable_cores()]

@@ -173,6 +173,7 @@ def run(args: argparse.Namespace) -> int:
 
     from .common import show_progress
     from .opening import calibration_model
+    from ..executor import usable_cores
     from ..output import staged_output, write_report
     from ..prototype.scenario import load_scenario
     from ..reports.design import markdown, plot_design
@@ -188,7 +189,8 @@ def run(args: argparse.Namespace) -> int:
     x_design = design_point(args.at, space) if args.at else prior.mean
 
     def jacobian(inputs: np.ndarray) -> np.ndarray:
-        problem = CalibrationProblem(space=space, inputs=inputs, angles=np.zeros_like(inputs))
+        # the 46 candidates of a Jacobian on every usable core (the same bits, ``model.forward``)
+        problem = CalibrationProblem(space=space, inputs=inputs, angles=np.zeros_like(inputs), n_threads=usable_cores())
         return batched_jacobian_fd(problem.residuals, x_design, step=FD_STEP)[0]
 
     gain = mechanism_matrices(space.nominal_full, space).input_gain[0, 3:, 3:]

@@ -46,7 +46,11 @@ def screen(measurement, space, *, n_base: int, seed: int, progress: bool):
     from ..progress import progress_bar, with_progress
     from ..runs.verify import OUTPUTS
 
-    problem = CalibrationProblem(space=space, inputs=measurement.inputs, angles=measurement.angles)
+    from ..executor import usable_cores
+
+    # the model's batches on every usable core (the same bits at any count, ``model.forward``)
+    problem = CalibrationProblem(space=space, inputs=measurement.inputs, angles=measurement.angles,
+                                 n_threads=usable_cores())
     with progress_bar(n_base * (space.n_params + 2), "Sobol", enabled=progress, unit="run") as bar:
         evaluate = with_progress(problem.deviation_from_ideal, bar)
         return sobol_indices(evaluate, [[0.0, 1.0]] * space.n_params, n_base, seed=seed, names=space.names,

@@ -184,7 +184,7 @@ def _paper_identification(measurement: Measurement, angles: np.ndarray, space: P
                           settings: VerifySettings, log, progress: bool) -> dict[str, Any]:
     """The paper's method: Sobol screening (skipped when ``settings.sources`` names the
     sources), then ``identify_swarm``: improved PSO on the selected sources, polish."""
-    screening = CalibrationProblem(space=space, inputs=measurement.inputs, angles=angles)
+    screening = CalibrationProblem(space=space, inputs=measurement.inputs, angles=angles, n_threads=usable_cores())
     sobol, sobol_s, st = None, 0.0, None
     if settings.sources is None:
         start = time.perf_counter()
@@ -205,7 +205,7 @@ def _paper_identification(measurement: Measurement, angles: np.ndarray, space: P
         found = identify_swarm(space, measurement.inputs, angles, selected, settings.pso, seed=settings.seed,
                                sensitivity=st, polish=settings.polish,
                                noise=settings.noise_urad * 1e-6 if settings.noise_urad else None,
-                               callback=lambda _: bar.update(1))
+                               callback=lambda _: bar.update(1), threads=usable_cores())
     pso_s = time.perf_counter() - start
     pso, polish, ident, problem = found.pso, found.polish, found.ident, found.problem
     values, std, fitted, noise, x_best = found.values, found.std, found.fitted_angles, found.noise, found.x_unit
