@@ -31,14 +31,16 @@ import numpy as np
 from flexcal.geometry.params import MechanismParams, reference_mechanism
 
 __all__ = ["Parameter", "ParameterSpace", "parameter_space", "parameter_table_markdown",
-           "DIMENSION_SYMBOLS", "CHAIN_NAMES", "N_CHAINS", "LOAD", "DRIVING"]
+           "DIMENSION_SYMBOLS", "DIMENSION_FIELDS", "CHAIN_NAMES", "N_CHAINS", "LOAD", "DRIVING"]
 
 CHAIN_NAMES = ("L1", "L2", "L3", "D1", "D2", "D3")
 N_CHAINS = len(CHAIN_NAMES)
 LOAD = slice(CHAIN_NAMES.index("L1"), CHAIN_NAMES.index("L3") + 1)  # the load chains on a chain axis
 DRIVING = slice(CHAIN_NAMES.index("D1"), CHAIN_NAMES.index("D3") + 1)  # the driving chains on a chain axis
 DIMENSION_SYMBOLS = ("w", "a", "l", "t1", "t2")
-_DIMENSION_FIELDS = {"w": "width", "a": "fillet", "l": "hinge_length", "t1": "thickness_1", "t2": "thickness_2"}
+# each dimension symbol's ``FlexureChain`` field (the one table: the model's nominal values, the
+# prototype's as-built chains and the corrections' moved chains read it)
+DIMENSION_FIELDS = {"w": "width", "a": "fillet", "l": "hinge_length", "t1": "thickness_1", "t2": "thickness_2"}
 _DESCRIPTIONS = {
     "w": "leaf width", "a": "leaf fillet radius", "l": "leaf segment length",
     "t1": "thickness of leaf 1 (thin in local y)", "t2": "thickness of leaf 2 (thin in local z)",
@@ -87,7 +89,7 @@ def _build_parameters(mech: MechanismParams) -> tuple[Parameter, ...]:
     out = []
     for placement in mech.chains:
         for symbol in DIMENSION_SYMBOLS:
-            p0 = float(getattr(placement.chain, _DIMENSION_FIELDS[symbol]))
+            p0 = float(getattr(placement.chain, DIMENSION_FIELDS[symbol]))
             out.append(Parameter(name=f"{placement.name}.{symbol}", nominal=p0,
                                  lower=p0 * (1.0 - ranges.dimension_tolerance),
                                  upper=p0 * (1.0 + ranges.dimension_tolerance),

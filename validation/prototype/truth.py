@@ -16,7 +16,7 @@ from typing import Any, Callable
 import numpy as np
 
 from flexcal.geometry.params import MechanismParams
-from flexcal.model.parameters import ParameterSpace
+from flexcal.model.parameters import DIMENSION_FIELDS, ParameterSpace
 
 from ..measurements import Measurement
 from .equilibrium import NonConvergenceError
@@ -25,8 +25,6 @@ from ..effects.hooks import room_temperature
 from .scenario import Scenario
 
 __all__ = ["as_built", "make_truth", "TruthResult", "why_no_equilibrium", "heaviest_payload"]
-
-_DIMENSION_FIELDS = {"w": "width", "a": "fillet", "l": "hinge_length", "t1": "thickness_1", "t2": "thickness_2"}
 
 
 def as_built(space: ParameterSpace, values: np.ndarray) -> tuple[MechanismParams, dict[str, tuple[float, float]],
@@ -42,7 +40,7 @@ def as_built(space: ParameterSpace, values: np.ndarray) -> tuple[MechanismParams
     by_name = dict(zip(space.all_names, values))
     chains = []
     for placement in space.mechanism.chains:
-        changes = {field: by_name[f"{placement.name}.{symbol}"] for symbol, field in _DIMENSION_FIELDS.items()}
+        changes = {field: by_name[f"{placement.name}.{symbol}"] for symbol, field in DIMENSION_FIELDS.items()}
         chains.append(dataclasses.replace(placement, chain=dataclasses.replace(placement.chain, **changes)))
     mechanism = dataclasses.replace(space.mechanism, chains=tuple(chains))
     offsets = {name: (by_name[f"{name}.d"], by_name[f"{name}.phi"]) for name in ("L1", "L2", "L3")}

@@ -31,7 +31,7 @@ import scipy.linalg
 from flexcal.geometry.params import FlexureChain
 from flexcal.model.chain import chain_compliance_matrix
 from flexcal.model.hinge import ENTRY_INDEX
-from flexcal.model.parameters import DIMENSION_SYMBOLS, ParameterSpace
+from flexcal.model.parameters import DIMENSION_FIELDS, DIMENSION_SYMBOLS, ParameterSpace
 
 from ..prototype.segments import (StiffnessProvider, chain_slices, end_stiffness, prepare_chains, prepare_provider,
                                   is_tied, same_design, section_nodes, sharing_segments)
@@ -296,12 +296,11 @@ DERIVATIVE_STEP = 1e-4
 # The step of the factors' central difference through the (cheap, closed-form) chain
 # composition with the segments' stiffness linear in the dimension: a tangent, to O(1e-8).
 TANGENT_STEP = 1e-4
-_FIELDS = {"w": "width", "a": "fillet", "l": "hinge_length", "t1": "thickness_1", "t2": "thickness_2"}
 
 
 def moved_chain(chain: FlexureChain, relative: dict[str, float]) -> FlexureChain:
     """``chain`` with each dimension symbol of ``relative`` scaled by (1 + its value)."""
-    return dataclasses.replace(chain, **{_FIELDS[s]: getattr(chain, _FIELDS[s]) * (1.0 + r)
+    return dataclasses.replace(chain, **{DIMENSION_FIELDS[s]: getattr(chain, DIMENSION_FIELDS[s]) * (1.0 + r)
                                          for s, r in relative.items()})
 
 
