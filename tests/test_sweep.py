@@ -266,3 +266,27 @@ def test_chain_design_record(tmp_path):
     assert thick["first_frequency_clamped_hz"] > thin["first_frequency_clamped_hz"] > 0
     assert thick["buckling_load_sway_n"] > thin["buckling_load_sway_n"] > 0
     assert thick["stress_per_m_lateral_y"] > thin["stress_per_m_lateral_y"] > 0
+
+
+def test_the_sweeps_identifications_run_the_model_on_one_thread_each(monkeypatch):
+    """A sweep runs its designs side by side on the cores (its executor), so each design's
+    identification asks the model for one thread (``VerifySettings.model_threads``), not for
+    every usable core as a lone ``flexcal verify`` does."""
+    import flexcal.validation.runs.verify as verify_module
+    from flexcal.geometry.params import LeafHinge
+    from flexcal.validation.sweep.identify import identification_accuracy
+    from flexcal.validation.sweep.space import DEFAULT_CONFIG
+
+    class Stop(Exception):
+        pass
+
+    seen = []
+
+    def stop(measurement, space, settings, **kwargs):
+        seen.append(settings.model_threads)
+        raise Stop
+    monkeypatch.setattr(verify_module, "run_verify", stop)
+    leaf = LeafHinge(length=18e-3, thickness=3.5e-3, width=40e-3, fillet=5e-3, block_length=9e-3)
+    with pytest.raises(Stop):
+        identification_accuracy(leaf, DEFAULT_CONFIG["identification"])
+    assert seen == [1]

@@ -44,3 +44,32 @@ def test_the_papers_method_runs_its_model_batches_on_every_usable_core(tmp_path,
                      "--model-stiffness", "closed-form", "--method", "paper", "--sobol-n", "8", "--particles", "40",
                      "--iterations", "3", "--no-error-budget", "--out", str(tmp_path / "run"), "-q"]) == 0
     assert screening == [usable_cores()] and swarm == [usable_cores()]
+
+
+def test_a_caller_running_identifications_side_by_side_gives_each_one_thread(monkeypatch):
+    """``VerifySettings.model_threads`` (a sweep's designs: 1, ``sweep.identify``) reaches the
+    estimate; None is every usable core; anything but a count >= 1 is refused."""
+    import numpy as np
+    import pytest
+
+    from flexcal.model.parameters import parameter_space
+    from flexcal.validation.runs.settings import VerifySettings
+
+    class Stop(Exception):
+        pass
+
+    seen = []
+
+    def stop(*args, **kwargs):
+        seen.append(args[4].threads)
+        raise Stop
+    monkeypatch.setattr(verify_module, "identify_all", stop)
+    measurement = type("M", (), {"inputs": np.zeros((77, 3)), "leg": np.ones(77, int)})()
+    for threads in (1, None):
+        with pytest.raises(Stop):
+            verify_module._estimated_identification(measurement, np.zeros((77, 3)), parameter_space(),
+                                                    VerifySettings(model_threads=threads), log=lambda _: None)
+    assert seen == [1, usable_cores()]
+    for threads in (0, 2.0):
+        with pytest.raises(ValueError, match="model_threads"):
+            VerifySettings(model_threads=threads)

@@ -24,7 +24,9 @@ class VerifySettings:
     (the others at nominal; with "paper" instead of the Sobol selection; ``flexcal identify``);
     profile: widen the map/free bars of the base combinations not identified alone by their
     profile likelihood (``calibration.profile_bars``); start: values (45,) [SI] every map/free fit
-    starts from (None: the prior mean)."""
+    starts from (None: the prior mean); model_threads: the model's threads per batch of
+    candidates (None: every usable core; 1 where the caller runs identifications side by side,
+    a sweep's designs; the results are the same bits at any count, ``model.forward``)."""
 
     sobol_n: int = 512
     sobol_threshold: float = 0.01
@@ -38,8 +40,11 @@ class VerifySettings:
     sources: tuple[str, ...] | None = None
     profile: bool = False
     start: tuple[float, ...] | None = None
+    model_threads: int | None = None
 
     def __post_init__(self) -> None:
+        if self.model_threads is not None and not (isinstance(self.model_threads, int) and self.model_threads >= 1):
+            raise ValueError(f"model_threads={self.model_threads!r} must be an integer >= 1 (or None: every usable core)")
         if self.method not in ("map", "free", "paper"):
             raise ValueError(f"method={self.method!r} must be 'map', 'free' or 'paper'")
         if self.sources is not None and not self.sources:

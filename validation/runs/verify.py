@@ -180,11 +180,17 @@ def remove_return_offsets(measurement: Measurement) -> np.ndarray:
     return angles
 
 
+def _model_threads(settings: VerifySettings) -> int:
+    """The model's threads per batch (``VerifySettings.model_threads``; None: every usable core)."""
+    return usable_cores() if settings.model_threads is None else settings.model_threads
+
+
 def _paper_identification(measurement: Measurement, angles: np.ndarray, space: ParameterSpace,
                           settings: VerifySettings, log, progress: bool) -> dict[str, Any]:
     """The paper's method: Sobol screening (skipped when ``settings.sources`` names the
     sources), then ``identify_swarm``: improved PSO on the selected sources, polish."""
-    screening = CalibrationProblem(space=space, inputs=measurement.inputs, angles=angles, n_threads=usable_cores())
+    screening = CalibrationProblem(space=space, inputs=measurement.inputs, angles=angles,
+                                   n_threads=_model_threads(settings))
     sobol, sobol_s, st = None, 0.0, None
     if settings.sources is None:
         start = time.perf_counter()
@@ -205,7 +211,7 @@ def _paper_identification(measurement: Measurement, angles: np.ndarray, space: P
         found = identify_swarm(space, measurement.inputs, angles, selected, settings.pso, seed=settings.seed,
                                sensitivity=st, polish=settings.polish,
                                noise=settings.noise_urad * 1e-6 if settings.noise_urad else None,
-                               callback=lambda _: bar.update(1), threads=usable_cores())
+                               callback=lambda _: bar.update(1), threads=_model_threads(settings))
     pso_s = time.perf_counter() - start
     pso, polish, ident, problem = found.pso, found.polish, found.ident, found.problem
     values, std, fitted, noise, x_best = found.values, found.std, found.fitted_angles, found.noise, found.x_unit
@@ -255,7 +261,7 @@ def _estimated_identification(measurement: Measurement, angles: np.ndarray, spac
                               IdentificationSettings(method=settings.method, prior_scale=settings.prior_scale,
                                                      profile=settings.profile,
                                                      start=None if settings.start is None else np.array(settings.start),
-                                                     threads=usable_cores()),
+                                                     threads=_model_threads(settings)),
                               log=log, on_fit=lambda: bar.update(1), on_plan=plan,
                               model_error=model_error)
     fit = result.estimate

@@ -73,7 +73,8 @@ def identification_accuracy(params, settings: dict[str, Any], *, cache_directory
     measurement = made.measurement
     verify_settings = VerifySettings(sobol_n=settings["sobol_n"], seed=settings["seed"],
                                      pso=dataclasses.replace(PSOSettings(), n_particles=settings["particles"],
-                                                             max_iterations=settings["iterations"]))
+                                                             max_iterations=settings["iterations"]),
+                                     model_threads=1)  # the sweep's designs run side by side on the cores
     report = run_verify(measurement, space, verify_settings, presets=scenario.values,
                         truth=truth_from_run(made.run, scenario.values), progress=False).report
     figures = {row["figure"]: row["ours"] for row in report.get("paper_comparison", [])}
