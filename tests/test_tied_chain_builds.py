@@ -100,15 +100,15 @@ def test_a_moved_chain_shares_exactly_the_unchanged_slices_segment_entries():
     of another length has its own."""
     import dataclasses
 
-    from flexcal.model.parameters import parameter_space
-    from flexcal.validation.runs.model_correction import SLOPE_STEPS, _FIELDS, unchanged_slices
+    from flexcal.model.parameters import DIMENSION_FIELDS, parameter_space
+    from flexcal.validation.runs.model_correction import SLOPE_STEPS, unchanged_slices
 
     through = fp.DEFAULT_ELEMENTS_THROUGH
     for c in (0, 3):  # L1, D1
         nominal = parameter_space().mechanism.chains[c].chain
         keys = tc.tied_segment_keys(nominal, elements_through_thickness=through)
         assert len(keys) == len(set(keys.values())) == 3
-        for symbol, field in _FIELDS.items():
+        for symbol, field in DIMENSION_FIELDS.items():
             for sign in (1, -1):
                 moved = dataclasses.replace(nominal, **{field: getattr(nominal, field) * (1 + sign * SLOPE_STEPS[symbol])})
                 shared = {plan[:2] for plan, key in tc.tied_segment_keys(moved, elements_through_thickness=through).items()
