@@ -10,7 +10,8 @@ from flexcal.validation.executor import usable_cores
 from test_cli_common import small_csv  # noqa: F401 (a fixture)
 
 
-def _recorded_threads(monkeypatch) -> list:
+def recorded_model_threads(monkeypatch) -> list:
+    """The thread counts the problems ask ``model.forward`` for, call by call (filled as they run)."""
     asked = []
     real = problem_module.forward
 
@@ -22,14 +23,14 @@ def _recorded_threads(monkeypatch) -> list:
 
 
 def test_the_screening_runs_on_every_usable_core(tmp_path, small_csv, monkeypatch):  # noqa: F811
-    asked = _recorded_threads(monkeypatch)
+    asked = recorded_model_threads(monkeypatch)
     assert cli.main(["sensitivity", "--data", str(small_csv), "--model", "second-order", "--sobol-n", "4",
                      "--out", str(tmp_path / "out"), "-q"]) == 0
     assert asked and set(asked) == {usable_cores()}
 
 
 def test_the_designs_jacobians_run_on_every_usable_core(tmp_path, monkeypatch):
-    asked = _recorded_threads(monkeypatch)
+    asked = recorded_model_threads(monkeypatch)
     assert cli.main(["design", "--model", "second-order", "--points", "41", "--candidates", "200",
                      "--model-stiffness", "closed-form", "--inadequacy", "none", "--out", str(tmp_path / "design"),
                      "-q"]) == 0

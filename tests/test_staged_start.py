@@ -83,18 +83,12 @@ def test_the_fits_run_the_model_on_the_threads_asked_and_get_the_same_bits(monke
     """``IdentificationSettings.threads`` reaches every model call of the fits (the problem over
     all points, the cross-validation folds', the second-order stage's), and the estimate is the
     same to the bit on 1 and 2 threads (the compiled solve is per candidate, ``model.forward``)."""
-    import flexcal.calibration.problem as problem_module
+    from test_model_threads_cli import recorded_model_threads
 
     space = _space("--model", "consistent")
     inputs, angles, leg = _data(space)
     _recorded_fits(monkeypatch, space)
-    asked = []
-    real = problem_module.forward
-
-    def recording(*args, **kwargs):
-        asked.append(kwargs.get("n_threads", 1))
-        return real(*args, **kwargs)
-    monkeypatch.setattr(problem_module, "forward", recording)
+    asked = recorded_model_threads(monkeypatch)
     found = {}
     for threads in (1, 2):
         asked.clear()
