@@ -58,7 +58,7 @@ class IdentificationSettings:
     likelihood (``calibration.profile_bars``); start: values (45,) [SI] every fit starts from
     (cross-validation folds included; None: the prior mean, or for a consistent space with
     ``staged`` the second-order model's estimate on the same data, ``calibration.staged_start``);
-    threads: the model's threads per batch of candidates (``CalibrationProblem.n_threads``; the
+    n_threads: the model's threads per batch of candidates (``CalibrationProblem.n_threads``; the
     estimate's bits do not depend on it)."""
 
     method: str = "map"
@@ -70,7 +70,7 @@ class IdentificationSettings:
     profile: bool = False
     start: np.ndarray | None = None
     staged: bool = True
-    threads: int = 1
+    n_threads: int = 1
 
     def __post_init__(self) -> None:
         if self.method not in ("map", "free"):
@@ -79,8 +79,8 @@ class IdentificationSettings:
             raise ValueError(f"prior scale={self.prior_scale} must be > 0")
         if self.noise is not None and not self.noise > 0:
             raise ValueError(f"noise={self.noise} rad must be > 0")
-        if not (isinstance(self.threads, int) and self.threads >= 1):
-            raise ValueError(f"threads={self.threads!r} must be an integer >= 1")
+        if not (isinstance(self.n_threads, int) and self.n_threads >= 1):
+            raise ValueError(f"n_threads={self.n_threads!r} must be an integer >= 1")
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -140,7 +140,7 @@ def identify_all(space: ParameterSpace, inputs: np.ndarray, angles: np.ndarray, 
     check_determined(inputs.shape[0], space.n_params)
     directions = travel_directions(inputs)
     problem = CalibrationProblem(space=space, inputs=inputs, angles=angles, directions=directions,
-                                 n_threads=settings.threads)
+                                 n_threads=settings.n_threads)
 
     # every fit runs in the chart's coordinates: the mount offsets in Cartesian components
     # (calibration.offset_chart: polar ones have a singular origin, a cut circle and a minimum
@@ -152,7 +152,7 @@ def identify_all(space: ParameterSpace, inputs: np.ndarray, angles: np.ndarray, 
 
     def residuals_for(points: np.ndarray):
         return in_chart(CalibrationProblem(space=space, inputs=inputs[points], angles=angles[points],
-                                           directions=directions[points], n_threads=settings.threads).residuals)
+                                           directions=directions[points], n_threads=settings.n_threads).residuals)
 
     # where every fit starts: the prior mean, or given values (e.g. an earlier measurement's
     # estimate: on a designed trajectory's large strokes the prior mean's basin can be a local
@@ -242,18 +242,18 @@ class SwarmIdentification:
 def identify_swarm(space: ParameterSpace, inputs: np.ndarray, angles: np.ndarray, selected: tuple[str, ...],
                    pso_settings: PSOSettings = PSOSettings(), *, seed: int = 0, sensitivity: np.ndarray | None = None,
                    polish: bool = True, noise: float | None = None,
-                   callback: Callable[[object], None] | None = None, threads: int = 1) -> SwarmIdentification:
+                   callback: Callable[[object], None] | None = None, n_threads: int = 1) -> SwarmIdentification:
     """The paper's identification (Sec. 3.2) of the ``selected`` sources, the others fixed as
     ``space`` holds them: the improved multi-subgroup PSO on Eq. 13 (``sensitivity``: their
     total Sobol indices, which seed the subgroups), then (``polish``) the least-squares polish
     of the swarm's distinct good points and an Eq. 13 refinement (IRLS), and the
     identifiability at the solution with ``noise`` [rad] (None: the fit RMS). callback(optimizer) after
-    each PSO iteration (progress). threads: the model's per batch (``CalibrationProblem.n_threads``;
+    each PSO iteration (progress). n_threads: the model's per batch (``CalibrationProblem.n_threads``;
     the same bits at any count)."""
     inputs, angles = np.asarray(inputs, float), np.asarray(angles, float)
     check_determined(inputs.shape[0], len(selected))
     sub = space.subset(selected)
-    problem = CalibrationProblem(space=sub, inputs=inputs, angles=angles, n_threads=threads)
+    problem = CalibrationProblem(space=sub, inputs=inputs, angles=angles, n_threads=n_threads)
     pso = identify(problem.fitness, sub.n_params, pso_settings, rng=seed, sensitivity=sensitivity, callback=callback)
     x_best, polished = pso.x_best, None
     if polish:

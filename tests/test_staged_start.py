@@ -80,7 +80,7 @@ def test_no_stage_when_told_or_given_a_start_or_not_consistent(monkeypatch, clos
 
 
 def test_the_fits_run_the_model_on_the_threads_asked_and_get_the_same_bits(monkeypatch, closed_form_segments):
-    """``IdentificationSettings.threads`` reaches every model call of the fits (the problem over
+    """``IdentificationSettings.n_threads`` reaches every model call of the fits (the problem over
     all points, the cross-validation folds', the second-order stage's), and the estimate is the
     same to the bit on 1 and 2 threads (the compiled solve is per candidate, ``model.forward``)."""
     from test_model_threads_cli import recorded_model_threads
@@ -93,7 +93,7 @@ def test_the_fits_run_the_model_on_the_threads_asked_and_get_the_same_bits(monke
     for threads in (1, 2):
         asked.clear()
         found[threads] = identify_all(space, inputs, angles, leg,
-                                      IdentificationSettings(n_folds=2, scales=(1.0,), threads=threads))
+                                      IdentificationSettings(n_folds=2, scales=(1.0,), n_threads=threads))
         assert asked and set(asked) == {threads}
     np.testing.assert_array_equal(found[2].values, found[1].values)
     np.testing.assert_array_equal(found[2].std, found[1].std)
@@ -103,5 +103,5 @@ def test_the_threads_are_a_positive_count():
     import pytest
 
     for threads in (0, -1, 1.5):
-        with pytest.raises(ValueError, match="threads"):
-            IdentificationSettings(threads=threads)
+        with pytest.raises(ValueError, match="n_threads"):
+            IdentificationSettings(n_threads=threads)

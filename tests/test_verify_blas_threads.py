@@ -1,7 +1,7 @@
 """``flexcal verify``'s estimate runs its dense algebra on one BLAS thread (runs.verify,
 ``single_blas_thread``): on 2 cores the threaded BLAS made the README's warm main job 44 s
 against 30 s (session 21, docs/scale.md "Session 21"); and its model batches on every usable
-core (``IdentificationSettings.threads``; the same bits on any count, session 32)."""
+core (``IdentificationSettings.n_threads``; the same bits on any count, session 32)."""
 
 from threadpoolctl import threadpool_info
 
@@ -16,7 +16,7 @@ def test_the_estimate_runs_on_one_blas_thread(tmp_path, monkeypatch):
 
     def recording(*args, **kwargs):
         seen.append([pool["num_threads"] for pool in threadpool_info() if pool["user_api"] == "blas"])
-        model_threads.append(args[4].threads)
+        model_threads.append(args[4].n_threads)
         return real(*args, **kwargs)
     monkeypatch.setattr(verify_module, "identify_all", recording)
     assert cli.main(["verify", "--scenario", "table1", "--provider", "analytic", "--model", "second-order",
@@ -27,7 +27,7 @@ def test_the_estimate_runs_on_one_blas_thread(tmp_path, monkeypatch):
 
 
 def test_the_papers_method_runs_its_model_batches_on_every_usable_core(tmp_path, monkeypatch):
-    """The Sobol screening's problem and the swarm's (``identify_swarm(threads=...)``)."""
+    """The Sobol screening's problem and the swarm's (``identify_swarm(n_threads=...)``)."""
     screening, swarm = [], []
     real_problem, real_swarm = verify_module.CalibrationProblem, verify_module.identify_swarm
 
@@ -36,7 +36,7 @@ def test_the_papers_method_runs_its_model_batches_on_every_usable_core(tmp_path,
         return real_problem(**kwargs)
 
     def recording(*args, **kwargs):
-        swarm.append(kwargs.get("threads", 1))
+        swarm.append(kwargs.get("n_threads", 1))
         return real_swarm(*args, **kwargs)
     monkeypatch.setattr(verify_module, "CalibrationProblem", problem)
     monkeypatch.setattr(verify_module, "identify_swarm", recording)
@@ -61,7 +61,7 @@ def test_a_caller_running_identifications_side_by_side_gives_each_one_thread(mon
     seen = []
 
     def stop(*args, **kwargs):
-        seen.append(args[4].threads)
+        seen.append(args[4].n_threads)
         raise Stop
     monkeypatch.setattr(verify_module, "identify_all", stop)
     measurement = type("M", (), {"inputs": np.zeros((77, 3)), "leg": np.ones(77, int)})()

@@ -188,9 +188,10 @@ def run(args: argparse.Namespace) -> int:
     prior = uniform_prior(space.n_params, args.prior_scale)
     x_design = design_point(args.at, space) if args.at else prior.mean
 
+    cores = usable_cores()  # a Jacobian's 46 candidates on every usable core (the same bits, ``model.forward``)
+
     def jacobian(inputs: np.ndarray) -> np.ndarray:
-        # the 46 candidates of a Jacobian on every usable core (the same bits, ``model.forward``)
-        problem = CalibrationProblem(space=space, inputs=inputs, angles=np.zeros_like(inputs), n_threads=usable_cores())
+        problem = CalibrationProblem(space=space, inputs=inputs, angles=np.zeros_like(inputs), n_threads=cores)
         return batched_jacobian_fd(problem.residuals, x_design, step=FD_STEP)[0]
 
     gain = mechanism_matrices(space.nominal_full, space).input_gain[0, 3:, 3:]

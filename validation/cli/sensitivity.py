@@ -43,10 +43,9 @@ def screen(measurement, space, *, n_base: int, seed: int, progress: bool):
     from flexcal.calibration.problem import CalibrationProblem
     from flexcal.calibration.sensitivity import sobol_indices
 
+    from ..executor import usable_cores
     from ..progress import progress_bar, with_progress
     from ..runs.verify import OUTPUTS
-
-    from ..executor import usable_cores
 
     # the model's batches on every usable core (the same bits at any count, ``model.forward``)
     problem = CalibrationProblem(space=space, inputs=measurement.inputs, angles=measurement.angles,

@@ -211,7 +211,7 @@ def _paper_identification(measurement: Measurement, angles: np.ndarray, space: P
         found = identify_swarm(space, measurement.inputs, angles, selected, settings.pso, seed=settings.seed,
                                sensitivity=st, polish=settings.polish,
                                noise=settings.noise_urad * 1e-6 if settings.noise_urad else None,
-                               callback=lambda _: bar.update(1), threads=_model_threads(settings))
+                               callback=lambda _: bar.update(1), n_threads=_model_threads(settings))
     pso_s = time.perf_counter() - start
     pso, polish, ident, problem = found.pso, found.polish, found.ident, found.problem
     values, std, fitted, noise, x_best = found.values, found.std, found.fitted_angles, found.noise, found.x_unit
@@ -261,7 +261,7 @@ def _estimated_identification(measurement: Measurement, angles: np.ndarray, spac
                               IdentificationSettings(method=settings.method, prior_scale=settings.prior_scale,
                                                      profile=settings.profile,
                                                      start=None if settings.start is None else np.array(settings.start),
-                                                     threads=_model_threads(settings)),
+                                                     n_threads=_model_threads(settings)),
                               log=log, on_fit=lambda: bar.update(1), on_plan=plan,
                               model_error=model_error)
     fit = result.estimate
