@@ -5,7 +5,8 @@ depends on: the geometry parameters, the mesh settings, the material, the load/c
 description the caller adds, and the code version (the package version plus a hash of
 the sources of ``flexcal.fem`` except output and cache modules and of
 ``flexcal.geometry``, so a change of the numerics, the mesher or the solids never serves
-a stale matrix).
+a stale matrix; an entry that other code computes names that code's modules in its parts,
+``sources_digest``, e.g. the prototype's tied chains in ``flexcal.validation``).
 A repeated run finds the file and costs one ``np.load``.
 
 Location: ``$FLEXCAL_CACHE_DIR`` if set, else ``~/.cache/flexcal``. Files are written
@@ -60,6 +61,7 @@ __all__ = [
     "CACHE_ENV",
     "cache_dir",
     "code_version",
+    "sources_digest",
     "canonical",
     "cache_key",
     "load_cached",
@@ -158,6 +160,28 @@ def _sources_version() -> str:
         digest.update(name.encode())
         digest.update(source.read_bytes())
     return f"{package}+{digest.hexdigest()[:16]}"
+
+
+@functools.cache
+def sources_digest(*modules: str) -> str:
+    """SHA-256 (first 16 hex) of the source files of ``modules`` (importable names, e.g.
+    ``"flexcal.validation.prototype.cut_fields"``), for the key of an entry that code outside
+    ``flexcal.fem`` and ``flexcal.geometry`` computes (``code_version`` covers those two only): an
+    edit of one of them is then a new key, not a stale entry. Read once per process, like
+    ``code_version``."""
+    return _modules_digest(modules)
+
+
+def _modules_digest(modules: tuple[str, ...]) -> str:
+    """``sources_digest`` computed afresh from the files on disk."""
+    digest = hashlib.sha256()
+    for name in modules:
+        spec = importlib.util.find_spec(name)
+        if spec is None or not spec.origin or not spec.origin.endswith(".py"):
+            raise ValueError(f"no Python source for the module {name!r} to key a cache entry on")
+        digest.update(name.encode())
+        digest.update(Path(spec.origin).read_bytes())
+    return digest.hexdigest()[:16]
 
 
 def canonical(value: Any) -> Any:

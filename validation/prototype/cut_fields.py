@@ -193,6 +193,12 @@ def interface_scale(chain, n_segments: int, nodes=None) -> float:
     return float(bounding_box(part)[1][1])
 
 
+# the modules of flexcal.validation whose code computes an interface condensation's cache entry
+# (its key's "code", as ``fem_provider.SEGMENT_CODE``)
+CONDENSATION_CODE = ("flexcal.validation.prototype.cut_fields", "flexcal.validation.prototype.fem_provider",
+                     "flexcal.validation.prototype.segments")
+
+
 def interface_condensation_parts(segment, starts_at_cut: bool, ends_at_cut: bool, labels: tuple, scale: float,
                                  elements_through: float, options: dict) -> dict:
     """The FEM cache key's parts of one condensation of ``interface_condensed`` (``cache``):
@@ -206,11 +212,12 @@ def interface_condensation_parts(segment, starts_at_cut: bool, ends_at_cut: bool
     apart the reference mount's L2, 1 ulp longer than L1 and the same pieces: its own chain is
     built for the consistent model's shortening probe, whose round-off moves the noise-free
     discrepancy fit (docs/calibration.md, "Session 25"; docs/scale.md, "Issue 26, session 26")."""
+    from flexcal.fem.cache import sources_digest
     from flexcal.geometry.exact import pieces
     from flexcal.geometry.params import STEEL
 
-    return {"kind": "interface_segment_stiffness", "pieces": pieces(segment), "chain_length": segment.chain.length,
-            "material": STEEL,
+    return {"kind": "interface_segment_stiffness", "code": sources_digest(*CONDENSATION_CODE),
+            "pieces": pieces(segment), "chain_length": segment.chain.length, "material": STEEL,
             "cut_ends": [bool(starts_at_cut), bool(ends_at_cut)], "labels": list(labels), "scale": float(scale),
             "mesh": {"mesher": "mapped", "elements_through_thickness": float(elements_through), "options": options,
                      "mirrored": True}}

@@ -58,6 +58,10 @@ TETWILD_ELEMENTS_THROUGH = 3
 # only through the compiled seed, fem/_entropy.c).
 MESHERS = ("mapped", "tetwild")
 DEFAULT_MESHER = "mapped"
+# the modules of flexcal.validation whose code computes a segment's cache entry: their sources are
+# in its key (``flexcal.fem.cache.sources_digest``; flexcal.fem and flexcal.geometry are in every
+# key already), so an edit of them is a new key, never a stale matrix
+SEGMENT_CODE = ("flexcal.validation.prototype.fem_provider",)
 _TURN_Z = np.diag([-1.0, -1.0, 1.0])  # rotation by pi about local z
 
 
@@ -71,11 +75,13 @@ def mirror_segment_stiffness(stiffness: np.ndarray) -> np.ndarray:
 
 def _segment_parts(segment: ChainSegment, material: Material, elements_through_thickness: float,
                    mesher: str = DEFAULT_MESHER) -> dict:
+    from flexcal.fem.cache import sources_digest
     from flexcal.fem.mesh_mapped_chain import PROTOTYPE_CHAIN_OPTIONS
 
     if mesher not in MESHERS:
         raise ValueError(f"mesher={mesher!r} must be one of {', '.join(MESHERS)}")
-    return {"kind": "chain_segment_stiffness", "segment": segment, "material": material,
+    return {"kind": "chain_segment_stiffness", "code": sources_digest(*SEGMENT_CODE), "segment": segment,
+            "material": material,
             "mesh": {"mesher": mesher, "elements_through_thickness": float(elements_through_thickness),
                      **({"options": PROTOTYPE_CHAIN_OPTIONS, "mirrored": True} if mesher == "mapped" else {})}}
 

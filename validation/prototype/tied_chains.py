@@ -52,15 +52,23 @@ def cut_interfaces(ties: str) -> tuple[str, str, str, str]:
     return (middle, strut, strut, middle)
 
 
+# the modules of flexcal.validation whose code computes a tied chain's cache entry (its key's "code",
+# as ``fem_provider.SEGMENT_CODE``): this one and the condensations' (``cut_fields.CONDENSATION_CODE``)
+TIED_CHAIN_CODE = ("flexcal.validation.prototype.tied_chains", "flexcal.validation.prototype.cut_fields",
+                   "flexcal.validation.prototype.fem_provider", "flexcal.validation.prototype.segments")
+
+
 def _tied_chain_parts(chain: FlexureChain, ties: str, material: Material, elements_through_thickness: float) -> dict:
     """The cache key's parts of ``tied_chain_matrices``."""
+    from flexcal.fem.cache import sources_digest
     from flexcal.fem.mesh_mapped_chain import PROTOTYPE_CHAIN_OPTIONS
 
     if material != STEEL:
         raise ValueError("tied chains are condensed in STEEL only (cut_fields' condensations); use the provider fem")
     # "tied_chain_matrices": K_chain and the segments' 12 x 12 (session 24's "tied_chain_stiffness"
     # entries held K_chain alone)
-    return {"kind": "tied_chain_matrices", "chain": chain, "material": material, "ties": list(cut_interfaces(ties)),
+    return {"kind": "tied_chain_matrices", "code": sources_digest(*TIED_CHAIN_CODE), "chain": chain,
+            "material": material, "ties": list(cut_interfaces(ties)),
             "mesh": {"mesher": "mapped", "elements_through_thickness": float(elements_through_thickness),
                      "options": PROTOTYPE_CHAIN_OPTIONS, "strut_refinement": TIED_STRUT_REFINEMENT,
                      "mirrored": True}}

@@ -36,6 +36,11 @@ __all__ = ["chain_shortening", "chain_frame_stiffness", "shortening_corrections"
 
 TRANSLATION_STEP = 2e-4  # [m] lateral probe: S D^2 ~ 10 nm of shortening, 1e-4 of the 1e-5 N force tolerance's noise
 ROTATION_STEP = 2e-3  # [rad] about 0.4x the workspace's largest rotation
+# the modules of flexcal.validation whose code computes a probe: their sources are in its cache
+# key (``flexcal.fem.cache.sources_digest``), beside the chain's stiffness as numbers
+PROBE_CODE = ("flexcal.validation.runs.chain_kinematics", "flexcal.validation.prototype.equilibrium",
+              "flexcal.validation.prototype.superelement", "flexcal.validation.prototype.kinematics",
+              "flexcal.validation.prototype.segments")
 
 
 def _chain_assembly(chain: FlexureChain, provider: StiffnessProvider):
@@ -77,9 +82,26 @@ def chain_frame_stiffness(chain: FlexureChain, provider: StiffnessProvider):
 def chain_shortening(chain: FlexureChain, provider: StiffnessProvider) -> tuple[np.ndarray, float]:
     """(S (6, 6) [1/m, 1, m], k [N/m]) of one chain (module docstring), chain frame at B; the
     chain as the prototype's frame holds it (``chain_frame_stiffness``: a tied provider's
-    segments joined through its cut fields)."""
+    segments joined through its cut fields).
+
+    Cached (``flexcal.fem.cache``, in the provider's cache folder): a probe is 53 equilibria of
+    small-matrix Python, ~0.17 s, and the consistent model asks for 23 of them at each start of a
+    command (~4 s of a warm ``flexcal verify``). The key holds what the probe reads: the chain,
+    the stiffness the provider gives it (the numbers, so any provider), the steps, the solver's
+    settings and the sources of ``PROBE_CODE``; a cached probe is the computed one to the bit."""
+    from flexcal.fem.cache import cached, sources_digest
+
     assembly, poses0, frame, length = _chain_assembly(chain, provider)
     settings = SolverSettings()
+    parts = {"kind": "chain_shortening_probe", "code": sources_digest(*PROBE_CODE), "chain": chain, "frame": frame,
+             "steps": [TRANSLATION_STEP, ROTATION_STEP], "settings": settings}
+    found = cached(parts, lambda: _probe(assembly, poses0, frame, length, settings),
+                   getattr(provider, "cache_directory", None))
+    return found["shortening"], float(found["stiffness"])
+
+
+def _probe(assembly, poses0, frame, length: float, settings: SolverSettings) -> dict[str, np.ndarray]:
+    """{"shortening": S (6, 6), "stiffness": k} of ``chain_shortening``, computed."""
     steps = np.array([TRANSLATION_STEP] * 3 + [ROTATION_STEP] * 3)
 
     def tension(d: np.ndarray) -> float:
@@ -99,7 +121,7 @@ def chain_shortening(chain: FlexureChain, provider: StiffnessProvider) -> tuple[
             both, cross = unit[a] + unit[b], unit[a] - unit[b]
             quadratic[a, b] = quadratic[b, a] = (tension(both) + tension(-both) - tension(cross) - tension(-cross)) / (
                 8.0 * steps[a] * steps[b])
-    return quadratic / stiffness, stiffness
+    return {"shortening": quadratic / stiffness, "stiffness": np.array(stiffness)}
 
 
 def shortening_corrections(space: ParameterSpace, provider: StiffnessProvider) -> np.ndarray:

@@ -105,16 +105,24 @@ def _compute(segment: ChainSegment, material: Material, elements_through: float,
             "total_mass": np.array(reduced.total_mass), "wall_s": np.array(time.perf_counter() - start)}
 
 
+# the modules of flexcal.validation whose code computes a structure segment's cache entry (its key's
+# "code", as ``prototype.fem_provider.SEGMENT_CODE``; fem_provider lends fTetWild's CAD lock)
+STRUCTURE_SEGMENT_CODE = ("flexcal.validation.structure.fem_segments", "flexcal.validation.prototype.fem_provider")
+
+
 def _parts(segment: ChainSegment, material: Material, elements_through: float, mesher: str) -> dict[str, Any]:
     """The cache key's parts. "layout" 2: the entries hold the mesh nodes too (where a peak
     stress sits); tetwild keeps the key it had before the mapped mesher came (no "mesher"
     entry), so its cached segments stay valid."""
+    from flexcal.fem.cache import sources_digest
+
     mesh: dict[str, Any] = {"elements_through_thickness": float(elements_through)}
     if mesher != "tetwild":
         from flexcal.fem.mesh_mapped_chain import FAST_CHAIN_OPTIONS
 
         mesh = {"mesher": mesher, **mesh, "options": FAST_CHAIN_OPTIONS}
-    return {"kind": "structure_segment", "layout": 2, "segment": segment, "material": material, "mesh": mesh}
+    return {"kind": "structure_segment", "code": sources_digest(*STRUCTURE_SEGMENT_CODE), "layout": 2,
+            "segment": segment, "material": material, "mesh": mesh}
 
 
 def _canonical(chain: FlexureChain, x_start: float, x_end: float) -> tuple[ChainSegment, bool]:

@@ -75,18 +75,31 @@ def _chain_fem(chain, material, elements_through: float) -> dict[str, np.ndarray
             "n_nodes": np.array(len(mesh.nodes)), **chain_structure(mesh, material, part, chain, solution, K)}
 
 
+# the modules of flexcal.validation whose code computes a sweep design's FEM cache entry (its key's
+# "code", as ``prototype.fem_provider.SEGMENT_CODE``)
+SUMMARY_CODE = ("flexcal.validation.sweep.job", "flexcal.validation.sweep.chain_structure")
+
+
 def fem_summary(params, material, elements_through: float, cache_directory=None) -> dict[str, np.ndarray]:
     """FEM compliance (6, 6) [SI], peak von Mises stress under Mz = 1 N m [Pa] and node
     count of a hinge or chain, from the cache or computed and stored."""
     from flexcal.fem.cache import cached
     from flexcal.geometry.params import FlexureChain
 
-    is_chain = isinstance(params, FlexureChain)
-    solve = _chain_fem if is_chain else _hinge_fem
+    solve = _chain_fem if isinstance(params, FlexureChain) else _hinge_fem
+    return cached(summary_parts(params, material, elements_through), lambda: solve(params, material, elements_through),
+                  cache_directory)
+
+
+def summary_parts(params, material, elements_through: float) -> dict:
+    """The cache key's parts of ``fem_summary``."""
+    from flexcal.fem.cache import sources_digest
+    from flexcal.geometry.params import FlexureChain
+
     # a chain's entry holds its structural figures too (sweep.chain_structure): its own kind
-    parts = {"kind": "sweep_chain_summary" if is_chain else "sweep_fem_summary", "part": params, "material": material,
-             "mesh": {"elements_through_thickness": float(elements_through), "num_threads": 1}}
-    return cached(parts, lambda: solve(params, material, elements_through), cache_directory)
+    return {"kind": "sweep_chain_summary" if isinstance(params, FlexureChain) else "sweep_fem_summary",
+            "code": sources_digest(*SUMMARY_CODE), "part": params, "material": material,
+            "mesh": {"elements_through_thickness": float(elements_through), "num_threads": 1}}
 
 
 def _closed_form(params, material) -> tuple[np.ndarray, tuple[float, float]]:
