@@ -99,6 +99,7 @@ def run(args: argparse.Namespace) -> int:
     from .common import show_progress
     from ..diagnosis.diagnose import check_measurement, run_diagnosis
     from ..diagnosis.baseline import BaselineSettings, calibrate_baseline
+    from ..executor import usable_cores
     from ..diagnosis.plots import plot_heldout, plot_residual, plot_strata
     from ..output import staged_output, write_report
     from ..reports.diagnose import fmt3, markdown
@@ -116,7 +117,8 @@ def run(args: argparse.Namespace) -> int:
     # the measurement checked before the model's FEM correction (~30 s cold)
     opening = open_calibration(args, progress=show_progress(args), data_path=data_path(args), check=check_measurement)
     measurement, space = opening.measurement, opening.space
-    baseline = partial(calibrate_baseline, space=space,
+    # the baseline's swarm and polish run the model on every usable core (the same bits at any count)
+    baseline = partial(calibrate_baseline, space=space, n_threads=usable_cores(),
                        settings=BaselineSettings(particles=args.particles, iterations=args.iterations))
     diagnosis = run_diagnosis(measurement, baseline=baseline, rng=args.seed, progress=show_progress(args), null=null)
     report = diagnosis.report

@@ -83,11 +83,14 @@ def input_jacobian(values: np.ndarray, inputs: np.ndarray, directions: np.ndarra
 
 def calibrate_baseline(measurement: Measurement, rng=None, progress: bool = False,
                        settings: BaselineSettings = BaselineSettings(),
-                       space: ParameterSpace | None = None) -> BaselineFit:
+                       space: ParameterSpace | None = None, n_threads: int = 1) -> BaselineFit:
     """The default baseline (module docstring). rng seeds the PSO; space: the model (default
     the closed-form chains with the second-order terms, docs/model.md 8; ``flexcal diagnose``
-    passes the FEM-informed one like ``verify``). Runs on one BLAS thread (small SVDs are
-    ~100x slower multi-threaded on a loaded machine, see blas_threads)."""
+    passes the FEM-informed one like ``verify``); n_threads: the model's threads per batch of
+    candidates (``CalibrationProblem.n_threads``: the same bits at any count; ``flexcal diagnose``
+    asks for every usable core, the benchmark's cases, which run side by side, for one each).
+    Runs on one BLAS thread (small SVDs are ~100x slower multi-threaded on a loaded machine, see
+    blas_threads)."""
     import scipy.linalg  # noqa: F401  (loaded before the limit, which only reaches loaded libraries)
     import scipy.optimize  # noqa: F401
 
@@ -97,11 +100,14 @@ def calibrate_baseline(measurement: Measurement, rng=None, progress: bool = Fals
         from ..runs.model_correction import model_space
 
         space = model_space("closed-form", second_order=True)
+    if not (isinstance(n_threads, int) and n_threads >= 1):
+        raise ValueError(f"n_threads={n_threads!r} must be an integer >= 1")
     with single_blas_thread():
-        return _calibrate(measurement, rng, settings, space)
+        return _calibrate(measurement, rng, settings, space, n_threads)
 
 
-def _calibrate(measurement: Measurement, rng, settings: BaselineSettings, space: ParameterSpace) -> BaselineFit:
+def _calibrate(measurement: Measurement, rng, settings: BaselineSettings, space: ParameterSpace,
+               n_threads: int) -> BaselineFit:
     from flexcal.calibration.pipeline import identify_swarm
     from flexcal.calibration.polish import batched_jacobian_fd, least_squares_polish
     from flexcal.calibration.problem import CalibrationProblem
@@ -122,13 +128,14 @@ def _calibrate(measurement: Measurement, rng, settings: BaselineSettings, space:
         pipeline's PSO on the nine drive sources (``identify_swarm``, without its polish),
         a tight least-squares polish on the nine, then (polish_all) over all 45 from there."""
         found = identify_swarm(space, measurement.inputs, measurement.angles, DRIVE_SOURCE_NAMES, pso_settings,
-                               seed=seed, polish=False)
+                               seed=seed, polish=False, n_threads=n_threads)
         drives = found.problem.space
         x = least_squares_polish(found.problem.residuals, found.x_unit, max_evaluations=POLISH_BUDGET, ftol=1e-10,
                                  xtol=1e-10, gtol=1e-10).x
         values = drives.full_values(drives.from_unit(x))
         broad = space.subset(names, fixed=dict(zip(space.all_names, values)))
-        wide = CalibrationProblem(space=broad, inputs=measurement.inputs, angles=measurement.angles)
+        wide = CalibrationProblem(space=broad, inputs=measurement.inputs, angles=measurement.angles,
+                                  n_threads=n_threads)
         eta = broad.to_unit(values[broad.active_indices])
         if settings.polish_all:
             eta = least_squares_polish(wide.residuals, eta, max_evaluations=WIDE_BUDGET, ftol=1e-10, xtol=1e-10,
