@@ -1,8 +1,10 @@
 """The commands whose model batches are many candidates (a Jacobian's 46, a Sobol sample's
 chunks) run them on every usable core: ``flexcal sensitivity``'s screening and ``flexcal
-design``'s Jacobians, as verify's estimate (tests/test_verify_blas_threads.py). The bits do not
+design``'s Jacobians and ``flexcal diagnose``'s baseline, as verify's estimate (tests/test_verify_blas_threads.py). The bits do not
 depend on the count (``model.forward``, tests/test_model_forward.py); measured, session 32:
 sensitivity 27.8 -> 19.0 s, design 34.5 -> 32.2 s on table1 (docs/scale.md)."""
+
+import pytest
 
 import flexcal.calibration.problem as problem_module
 from flexcal.validation import cli
@@ -35,3 +37,27 @@ def test_the_designs_jacobians_run_on_every_usable_core(tmp_path, monkeypatch):
                      "--model-stiffness", "closed-form", "--inadequacy", "none", "--out", str(tmp_path / "design"),
                      "-q"]) == 0
     assert asked and set(asked) == {usable_cores()}
+
+
+def test_the_diagnosis_baseline_runs_on_every_usable_core(tmp_path, monkeypatch):
+    """The baseline's swarm and polish (session 33: table1's noise-free diagnosis 27.9 -> 20.8 s);
+    the same bits at any count (tests/test_model_forward.py). Blind data of the analytic prototype
+    (tests/test_diagnose.py's)."""
+    from flexcal.validation.diagnosis.benchmark import benchmark_measurement
+    from flexcal.validation.measurements import write_measurement
+    from flexcal.validation.prototype.segments import analytic_provider
+
+    data = tmp_path / "curves.csv"
+    write_measurement(data, benchmark_measurement("none", 0.0, 0, analytic_provider()).measurement)
+    asked = recorded_model_threads(monkeypatch)
+    assert cli.main(["diagnose", str(data), "--model", "second-order", "--model-stiffness", "closed-form",
+                     "--particles", "40", "--iterations", "2", "--out", str(tmp_path / "diagnosis"), "-q"]) == 0
+    assert asked and set(asked) == {usable_cores()}
+
+
+def test_the_baseline_refuses_a_thread_count_below_one():
+    from flexcal.validation.diagnosis.baseline import calibrate_baseline
+
+    for bad in (0, 1.5):
+        with pytest.raises(ValueError, match="n_threads"):
+            calibrate_baseline(None, n_threads=bad)
