@@ -61,3 +61,25 @@ def test_the_baseline_refuses_a_thread_count_below_one():
     for bad in (0, 1.5):
         with pytest.raises(ValueError, match="n_threads"):
             calibrate_baseline(None, n_threads=bad)
+
+
+def test_the_benchmarks_null_runs_its_baselines_on_every_usable_core(monkeypatch):
+    """The null's `none` files are diagnosed in this process one after the other (its cases, on
+    parallel workers, keep one thread each). Small baselines: the count is what is checked."""
+    import flexcal.validation.diagnosis.baseline as baseline_module
+    from flexcal.validation.cli.diagnose_benchmark import benchmark_null
+    from flexcal.validation.runs.model_correction import model_space
+    from flexcal.validation.runs.settings import BaselineSettings
+
+    seen = []
+    real = baseline_module.calibrate_baseline
+
+    def small(measurement, rng=None, progress=False, settings=None, space=None, n_threads=1):
+        seen.append(n_threads)
+        return real(measurement, rng, progress, BaselineSettings(particles=40, iterations=2, starts=1), space,
+                    n_threads)
+
+    monkeypatch.setattr(baseline_module, "calibrate_baseline", small)
+    null = benchmark_null(provider_name="analytic", noise_urad=0.5, cycles=1, seed=0,
+                          space=model_space("closed-form", second_order=True))
+    assert null.n_files == len(seen) == 3 and set(seen) == {usable_cores()}

@@ -199,6 +199,7 @@ def benchmark_null(*, provider_name, noise_urad, cycles, seed, space=None, traje
     from ..diagnosis.diagnose import run_diagnosis
     from ..diagnosis.null import check_null_baseline, measure_null, read_null, write_null
     from ..effects.library import NONE
+    from ..executor import usable_cores
     from ..prototype.providers import stiffness_provider
 
     from ..sweep.space import design_id
@@ -219,7 +220,9 @@ def benchmark_null(*, provider_name, noise_urad, cycles, seed, space=None, traje
     mechanism = spec_mechanism({"mount": mount})
     null = measure_null(lambda s: benchmark_measurement(NONE, 0.0, s, provider, cycles=cycles, noise_urad=noise_urad,
                                                         trajectory=trajectory, mechanism=mechanism).measurement,
-                        lambda m: run_diagnosis(m, rng=seed, baseline=partial(calibrate_baseline, space=space)),
+                        # in this process, one file after the other: the model on every usable core
+                        lambda m: run_diagnosis(m, rng=seed, baseline=partial(calibrate_baseline, space=space,
+                                                                              n_threads=usable_cores())),
                         NULL_SEEDS, label, baseline)
     if path is not None:
         write_null(path, null)
