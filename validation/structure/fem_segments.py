@@ -112,8 +112,8 @@ STRUCTURE_SEGMENT_CODE = ("flexcal.validation.structure.fem_segments", "flexcal.
 
 def _parts(segment: ChainSegment, material: Material, elements_through: float, mesher: str) -> dict[str, Any]:
     """The cache key's parts. "layout" 2: the entries hold the mesh nodes too (where a peak
-    stress sits); tetwild keeps the key it had before the mapped mesher came (no "mesher"
-    entry), so its cached segments stay valid."""
+    stress sits); "code": the sources of ``STRUCTURE_SEGMENT_CODE``; tetwild's mesh entry has
+    no "mesher" (as before the mapped mesher came)."""
     from flexcal.fem.cache import sources_digest
 
     mesh: dict[str, Any] = {"elements_through_thickness": float(elements_through)}
