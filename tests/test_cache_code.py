@@ -150,3 +150,25 @@ def test_an_fem_entrys_list_holds_every_module_its_computation_runs(tmp_path, ki
     ran = _validation_modules_run(lambda: compute(tmp_path / "traced"))
     assert ran, "the tracing saw no module of flexcal.validation run"
     assert ran <= set(modules), ran - set(modules)
+
+
+def test_a_reference_studys_level_of_other_code_is_computed_again(monkeypatch, tmp_path):
+    """The convergence studies' levels (``reports.hinge_reference._cached``, the benchmarks'
+    ``--dir``): reused while the code that computed them is this one, computed again after an edit
+    of ``LEVEL_CODE`` (a resumed study never mixes levels of two codes)."""
+    import flexcal.validation.reports.hinge_reference as reference
+
+    calls = []
+
+    def compute():
+        calls.append(1)
+        return np.arange(4.0) * len(calls), 10
+
+    first = reference._cached(tmp_path, "level", compute)
+    np.testing.assert_array_equal(reference._cached(tmp_path, "level", compute), first)
+    assert len(calls) == 1
+    _edited(monkeypatch, "flexcal.validation.reports.chain_reference")
+    again = reference._cached(tmp_path, "level", compute)
+    assert len(calls) == 2 and again[1] == 2.0  # computed again, and kept under the new version
+    np.testing.assert_array_equal(reference._cached(tmp_path, "level", compute), again)
+    assert len(calls) == 2 and sorted(p.name for p in tmp_path.iterdir()) == ["level.npz"]

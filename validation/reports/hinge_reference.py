@@ -116,18 +116,43 @@ def reference_limit(levels, values) -> tuple[np.ndarray, np.ndarray, np.ndarray,
     return fine.rate, fine.limit, spread, spread
 
 
+# the modules of flexcal.validation whose code computes a level of these studies (this one's,
+# ``chain_reference``'s and the prototype's segments they compare): with flexcal.fem and
+# flexcal.geometry (``flexcal.fem.cache.code_version``) the version each stored level keeps
+LEVEL_CODE = ("flexcal.validation.reports.hinge_reference", "flexcal.validation.reports.chain_reference",
+              "flexcal.validation.reports.chain_cuts", "flexcal.validation.prototype.tied_chains",
+              "flexcal.validation.prototype.cut_fields", "flexcal.validation.prototype.fem_provider",
+              "flexcal.validation.prototype.segments")
+
+
+def _level_version() -> str:
+    from flexcal.fem.cache import code_version, sources_digest
+
+    return f"{code_version()}+{sources_digest(*LEVEL_CODE)}"
+
+
 def _cached(folder: Path | None, tag: str, compute) -> np.ndarray:
-    """compute() -> (array, DOF), stored as folder/<tag>.npy and reused (no folder: computed)."""
+    """compute() -> (array, DOF), stored as folder/<tag>.npz with the code version that computed it
+    (``_level_version``) and reused while that is this code's; a level of other code (a study
+    resumed in the same folder after an edit) is computed again, not mixed in. No folder: computed."""
+    from flexcal.geometry.atomic import atomic_path
+
     if folder is None:
         return compute()[0]
-    path = folder / f"{tag}.npy"
-    if not path.exists():
-        cpu, wall = time.process_time(), time.perf_counter()
-        c, dof = compute()
-        np.save(path, c)
-        print(f"{tag}: {dof} DOF, {time.process_time() - cpu:.1f} s CPU, {time.perf_counter() - wall:.1f} s wall "
-              f"(load {os.getloadavg()[0]:.1f})", flush=True)
-    return np.load(path)
+    path, version = folder / f"{tag}.npz", _level_version()
+    if path.exists():
+        with np.load(path) as stored:
+            if str(stored["code_version"]) == version:
+                return stored["value"]
+        print(f"{tag}: stored by other code ({path.name}), computed again", flush=True)
+    cpu, wall = time.process_time(), time.perf_counter()
+    c, dof = compute()
+    with atomic_path(path) as temporary:
+        with open(temporary, "wb") as handle:
+            np.savez(handle, value=c, code_version=np.array(version))
+    print(f"{tag}: {dof} DOF, {time.process_time() - cpu:.1f} s CPU, {time.perf_counter() - wall:.1f} s wall "
+          f"(load {os.getloadavg()[0]:.1f})", flush=True)
+    return np.asarray(c)
 
 
 def compare(thickness_mm: float, folder: Path | None, mapped_base: int, mapped_levels, ref_base: int, ref_levels,
