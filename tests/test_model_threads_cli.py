@@ -83,3 +83,26 @@ def test_the_benchmarks_null_runs_its_baselines_on_every_usable_core(monkeypatch
     null = benchmark_null(provider_name="analytic", noise_urad=0.5, cycles=1, seed=0,
                           space=model_space("closed-form", second_order=True))
     assert null.n_files == len(seen) == 3 and set(seen) == {usable_cores()}
+
+
+def test_the_benchmarks_cases_here_run_the_baseline_on_every_core_and_on_workers_on_one(tmp_path, monkeypatch):
+    """Cases one after the other in this process (``--workers 0``, the default) hand the baseline
+    every usable core; cases on parallel workers or a cluster one thread each. The diagnosis is a
+    stub (the real one: test_diagnose)."""
+    import flexcal.validation.diagnosis.diagnose as diagnose
+    import flexcal.validation.executor as executor
+    from flexcal.validation.cli.diagnose_benchmark import run_benchmark
+    from test_diagnose_benchmark_mount import Stub
+
+    baselines = []
+    monkeypatch.setattr(diagnose, "run_diagnosis", lambda m, **options: baselines.append(options["baseline"]) or Stub())
+    assert cli.main(["diagnose-benchmark", "--grid", "tiny", "--effects", "none", "--workers", "0", "--no-null", "-q",
+                     "--out", str(tmp_path / "bench")]) == 0
+    assert baselines and {b.keywords["n_threads"] for b in baselines} == {usable_cores()}
+    asked = []
+    monkeypatch.setattr(executor, "run_jobs", lambda items, job, on_done, **kw: asked.append(
+        (kw["workers"], kw["scheduler"], kw["job_options"]["model_threads"])) or {})
+    for workers, scheduler in ((0, None), (2, None), (0, "tcp://127.0.0.1:1")):
+        run_benchmark(["none"], "tiny", noise_urad=0.5, cycles=2, seed=0, progress=False, workers=workers,
+                      scheduler=scheduler)
+    assert [threads for *_, threads in asked] == [usable_cores(), 1, 1]

@@ -139,11 +139,12 @@ def grid_cases(ids, grid) -> list[tuple[str, float, int]]:
     return cases
 
 
-def case_record(spec: dict, *, space=None, trajectory=None, null=None) -> dict:
+def case_record(spec: dict, *, space=None, trajectory=None, null=None, model_threads: int = 1) -> dict:
     """One case of ``case_spec`` run and scored (a pure function, run on a worker): the
     record {"id", "spec", "row", "answer"} the case store keeps; space: the baseline's model;
     trajectory: (inputs (k, 3) [m], leg (k,)) of one cycle, the one whose digest the spec
-    names (None: the standard trajectory)."""
+    names (None: the standard trajectory); model_threads: the baseline's model threads
+    (``calibrate_baseline``'s n_threads: the same bits at any count)."""
     from functools import partial
 
     from ..prototype.providers import stiffness_provider
@@ -163,7 +164,8 @@ def case_record(spec: dict, *, space=None, trajectory=None, null=None) -> dict:
                                  scenario_seed=spec["scenario_seed"], trajectory=trajectory,
                                  mechanism=spec_mechanism(spec))
     row = run_case(case, lambda m: run_diagnosis(m, rng=spec["baseline_seed"], null=null,
-                                                 baseline=partial(calibrate_baseline, space=space)))
+                                                 baseline=partial(calibrate_baseline, space=space,
+                                                                  n_threads=model_threads)))
     row["wall_s"] = time.perf_counter() - start
     return {"id": design_id(spec), "spec": spec, "row": row, "answer": case.answer}
 
@@ -247,7 +249,7 @@ def run_benchmark(ids, grid, *, noise_urad, cycles, seed, progress, scenario_see
     once on the same executor, then the cases run on cached chains."""
     from ..progress import progress_bar
     from ..diagnosis.benchmark import trajectory_digest
-    from ..executor import resolve_workers, run_jobs, where
+    from ..executor import resolve_workers, run_jobs, usable_cores, where
     from ..sweep.space import design_id
 
     log = log or (lambda text: None)
@@ -274,6 +276,10 @@ def run_benchmark(ids, grid, *, noise_urad, cycles, seed, progress, scenario_see
         prepare_chains(stiffness_provider(provider_name, progress=progress, workers=workers, scheduler=scheduler),
                        case_chains(pending))
     failures = {}
+    # the cases one after the other here: the baseline's model on every usable core; on parallel
+    # workers one thread each (the same bits either way)
+    options = {"space": space, "trajectory": trajectory, "null": null,
+               "model_threads": usable_cores() if n_workers == 0 and scheduler is None else 1}
     with progress_bar(len(specs), "diagnose-benchmark", enabled=progress, unit="case") as bar:
         bar.update(len(specs) - len(pending))
         def on_done(_spec, record):
@@ -283,8 +289,7 @@ def run_benchmark(ids, grid, *, noise_urad, cycles, seed, progress, scenario_see
             bar.update(1)
 
         for identifier, text in run_jobs(pending, case_record, on_done, key=design_id, workers=n_workers,
-                                         scheduler=scheduler, job_options={"space": space, "trajectory": trajectory, "null": null},
-                                         task_prefix="case").items():
+                                         scheduler=scheduler, job_options=options, task_prefix="case").items():
             failures[labels[identifier]] = text
             log(f"diagnose-benchmark: case {labels[identifier]} failed: {text}")
     done = [records[design_id(s)] for s in specs if design_id(s) in records]
