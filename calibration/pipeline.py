@@ -31,7 +31,7 @@ from flexcal.calibration.estimation import (PRIOR_SCALES, CrossValidation, Estim
 from flexcal.calibration.identifiability import IdentifiabilityReport, identifiability
 from flexcal.calibration.offset_chart import OffsetChart, offset_chart
 from flexcal.calibration.polish import PolishResult, norm_sum_polish, polish_candidates
-from flexcal.calibration.problem import CalibrationProblem
+from flexcal.calibration.problem import CalibrationProblem, check_thread_count
 from flexcal.calibration.profile_bars import with_profile_bars
 from flexcal.calibration.pso import identify
 from flexcal.calibration.pso_settings import PSOResult, PSOSettings
@@ -79,8 +79,7 @@ class IdentificationSettings:
             raise ValueError(f"prior scale={self.prior_scale} must be > 0")
         if self.noise is not None and not self.noise > 0:
             raise ValueError(f"noise={self.noise} rad must be > 0")
-        if not (isinstance(self.n_threads, int) and self.n_threads >= 1):
-            raise ValueError(f"n_threads={self.n_threads!r} must be an integer >= 1")
+        check_thread_count(self.n_threads)
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)

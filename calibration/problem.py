@@ -24,7 +24,14 @@ from flexcal.model.forward import ConvergenceError, forward, ideal_angles
 from flexcal.model.parameters import ParameterSpace
 from flexcal.model.trajectory import travel_directions
 
-__all__ = ["CalibrationProblem", "EvaluationLog"]
+__all__ = ["CalibrationProblem", "EvaluationLog", "check_thread_count"]
+
+
+def check_thread_count(value, name: str = "n_threads") -> None:
+    """The model's thread count per batch (``model.forward``'s n_threads), as every setting that
+    carries one takes it: an integer >= 1, else ValueError naming ``name``."""
+    if not (isinstance(value, int) and not isinstance(value, bool) and value >= 1):
+        raise ValueError(f"{name}={value!r} must be an integer >= 1")
 
 FAILURE_PENALTY = 1.0  # [rad] fitness of a candidate whose model did not converge (~1000x any real misfit)
 
@@ -56,6 +63,7 @@ class CalibrationProblem:
     log: EvaluationLog = field(default_factory=EvaluationLog)
 
     def __post_init__(self) -> None:
+        check_thread_count(self.n_threads)
         inputs = np.asarray(self.inputs, dtype=float)
         angles = np.asarray(self.angles, dtype=float)
         if inputs.ndim != 2 or inputs.shape[1] != 3 or angles.shape != inputs.shape:

@@ -55,12 +55,20 @@ def test_the_diagnosis_baseline_runs_on_every_usable_core(tmp_path, monkeypatch)
     assert asked and set(asked) == {usable_cores()}
 
 
-def test_the_baseline_refuses_a_thread_count_below_one():
+def test_the_baseline_and_the_problem_refuse_a_thread_count_below_one():
+    """One rule (``calibration.problem.check_thread_count``) for every holder of a thread count."""
+    import numpy as np
+
+    from flexcal.calibration.problem import CalibrationProblem
+    from flexcal.model.parameters import parameter_space
     from flexcal.validation.diagnosis.baseline import calibrate_baseline
 
-    for bad in (0, 1.5):
+    for bad in (0, 1.5, True):
         with pytest.raises(ValueError, match="n_threads"):
             calibrate_baseline(None, n_threads=bad)
+        with pytest.raises(ValueError, match="n_threads"):
+            CalibrationProblem(space=parameter_space(), inputs=np.zeros((4, 3)), angles=np.zeros((4, 3)),
+                               n_threads=bad)
 
 
 def test_the_benchmarks_null_runs_its_baselines_on_every_usable_core(monkeypatch):

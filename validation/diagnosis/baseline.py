@@ -100,8 +100,9 @@ def calibrate_baseline(measurement: Measurement, rng=None, progress: bool = Fals
         from ..runs.model_correction import model_space
 
         space = model_space("closed-form", second_order=True)
-    if not (isinstance(n_threads, int) and n_threads >= 1):
-        raise ValueError(f"n_threads={n_threads!r} must be an integer >= 1")
+    from flexcal.calibration.problem import check_thread_count
+
+    check_thread_count(n_threads)  # here, before any fit
     with single_blas_thread():
         return _calibrate(measurement, rng, settings, space, n_threads)
 

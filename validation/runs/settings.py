@@ -43,8 +43,10 @@ class VerifySettings:
     model_threads: int | None = None
 
     def __post_init__(self) -> None:
-        if self.model_threads is not None and not (isinstance(self.model_threads, int) and self.model_threads >= 1):
-            raise ValueError(f"model_threads={self.model_threads!r} must be an integer >= 1 (or None: every usable core)")
+        if self.model_threads is not None:  # None: every usable core
+            from flexcal.calibration.problem import check_thread_count  # (the model: not at start-up)
+
+            check_thread_count(self.model_threads, "model_threads")
         if self.method not in ("map", "free", "paper"):
             raise ValueError(f"method={self.method!r} must be 'map', 'free' or 'paper'")
         if self.sources is not None and not self.sources:
