@@ -45,9 +45,9 @@ from typing import Callable, Sequence
 import numpy as np
 
 from flexcal.calibration.discrepancy import Discrepancy, fit_discrepancy, sandwich_covariance
-from flexcal.calibration.polish import batched_jacobian_fd, least_squares_polish
+from flexcal.calibration.polish import BUDGET_STATUS, batched_jacobian_fd, least_squares_polish
 
-__all__ = ["Prior", "uniform_prior", "Estimate", "estimate", "map_objective_rows", "fit_evaluations", "with_model_error", "posterior", "residual_autocorrelation", "choose_prior_scale", "CrossValidation",
+__all__ = ["Prior", "uniform_prior", "Estimate", "estimate", "map_objective_rows", "fit_evaluations", "with_model_error", "with_discrepancy_bars", "posterior", "residual_autocorrelation", "choose_prior_scale", "CrossValidation",
            "held_out_folds", "PRIOR_SCALES", "one_standard_error_choice"]
 
 Residuals = Callable[[np.ndarray], np.ndarray]
@@ -108,7 +108,9 @@ class Estimate:
     discrepancy the error bars carry (None: white misfit assumed, ``covariance`` is the
     Gauss-Newton one); gauss_newton_covariance (d, d): the white-misfit covariance at the same
     weighting, kept for comparison (None when it is ``covariance``); profile_bars: the
-    profile-likelihood widening added to ``covariance`` (``calibration.profile_bars``), or None."""
+    profile-likelihood widening added to ``covariance`` (``calibration.profile_bars``), or None;
+    stopped_at_budget: the last fit ended at its evaluation budget, not at a minimum (after
+    ``estimate``'s ``budget_restarts``)."""
 
     x: np.ndarray
     std: np.ndarray
@@ -128,6 +130,7 @@ class Estimate:
     discrepancy: Discrepancy | None = None
     gauss_newton_covariance: np.ndarray | None = None
     profile_bars: object | None = None  # calibration.profile_bars.ProfileBars (which imports this module)
+    stopped_at_budget: bool = False
 
     @property
     def rms(self) -> float:
@@ -200,7 +203,7 @@ def fit_evaluations(n_params: int) -> int:
 def estimate(residuals: Residuals, prior: Prior, *, noise: float | None = None, x0: np.ndarray | None = None,
              max_noise_rounds: int = 4, noise_rtol: float = 0.05, max_evaluations: int | None = None,
              point_size: int = 3, correlated: bool = True, coordinates: np.ndarray | None = None,
-             model_error: np.ndarray | None = None) -> Estimate:
+             model_error: np.ndarray | None = None, budget_restarts: int = 0) -> Estimate:
     """MAP (or free least squares when ``prior.is_free``) estimate on the unit box.
 
     residuals: ``r(X (n, d)) -> (n, m)`` [residual units, e.g. rad]; noise: sigma in those
@@ -217,7 +220,10 @@ def estimate(residuals: Residuals, prior: Prior, *, noise: float | None = None, 
     [residual units]: samples of the model's error on these rows (prototype - model at the
     nominal mount and prior draws: a model-error budget computed outside the calibration
     model, ``validation.runs.error_budget``), carried by the discrepancy error bars
-    (``calibration.discrepancy.model_error_factor``); needs coordinates.
+    (``calibration.discrepancy.model_error_factor``); needs coordinates. budget_restarts: a fit
+    that ends at its budget starts again from its best point with a fresh budget (and a fresh
+    trust region), up to this many times; ``stopped_at_budget`` says whether the last one still
+    did.
     """
     d = prior.mean.size
     x = np.clip(prior.mean if x0 is None else np.asarray(x0, float), 0.0, 1.0)
@@ -236,9 +242,13 @@ def estimate(residuals: Residuals, prior: Prior, *, noise: float | None = None, 
         # resolves; the budget keeps a kinked residual (a clearance opening inside a step) from
         # making trf crawl: 100 Jacobians' worth of rows, where smooth fits take 10-40
         budget = max_evaluations if max_evaluations is not None else fit_evaluations(d)
-        fit = least_squares_polish(augmented, x, fd_step=FD_STEP, ftol=1e-8, xtol=1e-8, gtol=1e-8,
-                                   max_evaluations=budget)
-        n_evaluations += fit.n_evaluations
+        for _ in range(1 + max(int(budget_restarts), 0)):
+            fit = least_squares_polish(augmented, x, fd_step=FD_STEP, ftol=1e-8, xtol=1e-8, gtol=1e-8,
+                                       max_evaluations=budget)
+            n_evaluations += fit.n_evaluations
+            x = fit.x
+            if fit.status != BUDGET_STATUS:
+                break
         x = fit.x
         J, r = batched_jacobian_fd(residuals, x, step=FD_STEP)
         n_evaluations += d + 1
@@ -255,24 +265,42 @@ def estimate(residuals: Residuals, prior: Prior, *, noise: float | None = None, 
     sigma_matrix, p_eff, std = posterior(J, sigma, prior)
     rho = 0.0 if given or not correlated else residual_autocorrelation(r, point_size)
     at_bound = (x <= 1e-9) | (x >= 1.0 - 1e-9)
-    discrepancy, gauss_newton = None, None
     if model_error is not None and coordinates is None:
         raise ValueError("a model-error budget enters the discrepancy error bars: give the postures' coordinates too")
-    if coordinates is not None:
-        if point_size != 3:
-            raise ValueError(f"discrepancy error bars need 3 angles a point, got point_size={point_size}")
-        discrepancy = fit_discrepancy(r, J, x, prior.mean, prior.std, coordinates, noise=noise,
-                                      model_error=model_error)
-        gauss_newton = sigma_matrix
-        sigma_matrix = sandwich_covariance(sigma_matrix, J, sigma, prior.precision, discrepancy.covariance)
-        std = np.where(np.isfinite(std), np.sqrt(np.maximum(np.diag(sigma_matrix), 0.0)), np.inf)
-    return Estimate(x=x, std=std, covariance=sigma_matrix, noise=sigma, discrepancy=discrepancy,
-                    gauss_newton_covariance=gauss_newton,
-                    noise_source="given" if given else "estimated from the residual (RSS / (m - p_eff)) x AR(1) "
+    fitted = Estimate(x=x, std=std, covariance=sigma_matrix, noise=sigma, stopped_at_budget=fit.status == BUDGET_STATUS,
+                      noise_source=GIVEN if given else "estimated from the residual (RSS / (m - p_eff)) x AR(1) "
                                                        "inflation (1 + rho) / (1 - rho)",
-                    autocorrelation=rho, inflation=(1.0 + rho) / (1.0 - rho),
-                    n_observations=m, p_eff=p_eff, residual=r, jacobian=J, rss=rss, at_bound=at_bound,
-                    n_evaluations=n_evaluations, prior=prior)
+                      autocorrelation=rho, inflation=(1.0 + rho) / (1.0 - rho),
+                      n_observations=m, p_eff=p_eff, residual=r, jacobian=J, rss=rss, at_bound=at_bound,
+                      n_evaluations=n_evaluations, prior=prior)
+    if coordinates is None:
+        return fitted
+    return with_discrepancy_bars(fitted, coordinates, model_error=model_error, point_size=point_size)
+
+
+GIVEN = "given"  # Estimate.noise_source of a given noise
+
+
+def with_discrepancy_bars(fit: Estimate, coordinates: np.ndarray, *, model_error: np.ndarray | None = None,
+                          point_size: int = 3) -> Estimate:
+    """``fit`` (Gauss-Newton error bars, as ``estimate`` without coordinates gives it) with the
+    error bars ``estimate`` gives with ``coordinates`` and ``model_error``: the model
+    discrepancy fitted to its residual (``calibration.discrepancy``), the sandwich covariance.
+    The same x and noise: a fit made once serves both (``pipeline.identify_all`` takes the
+    cross-validation's reference fit this way when the chosen scale is its scale)."""
+    import dataclasses
+
+    if fit.discrepancy is not None:
+        raise ValueError("the fit carries discrepancy error bars already")
+    if point_size != 3:
+        raise ValueError(f"discrepancy error bars need 3 angles a point, got point_size={point_size}")
+    discrepancy = fit_discrepancy(fit.residual, fit.jacobian, fit.x, fit.prior.mean, fit.prior.std, coordinates,
+                                  noise=fit.noise if fit.noise_source == GIVEN else None, model_error=model_error)
+    covariance = sandwich_covariance(fit.covariance, fit.jacobian, fit.noise, fit.prior.precision,
+                                     discrepancy.covariance)
+    std = np.where(np.isfinite(fit.std), np.sqrt(np.maximum(np.diag(covariance), 0.0)), np.inf)
+    return dataclasses.replace(fit, covariance=covariance, std=std, discrepancy=discrepancy,
+                               gauss_newton_covariance=fit.covariance)
 
 
 def with_model_error(fit: Estimate, coordinates: np.ndarray, model_error: np.ndarray) -> Estimate:
@@ -310,18 +338,22 @@ def held_out_folds(leg: Sequence[int], n_folds: int = 5) -> list[np.ndarray]:
 class CrossValidation:
     """scales tried; held_out_rms (n_scales,) [residual units] RMS of the held-out residuals
     over all folds; best: the chosen scale (the narrowest within one standard error of the
-    lowest held-out RMS, ``one_standard_error_choice``); n_folds."""
+    lowest held-out RMS, ``one_standard_error_choice``); n_folds; reference: the fit on all
+    points at reference_scale that set the folds' noise (None when the noise was given)."""
 
     scales: tuple[float, ...]
     held_out_rms: np.ndarray
     best: float
     n_folds: int
+    reference: Estimate | None = None
+    reference_scale: float = 1.0
 
 
 def choose_prior_scale(residuals_for: Callable[[np.ndarray], Residuals], n_params: int, folds: Sequence[np.ndarray],
                        n_points: int, *, scales: Sequence[float] = PRIOR_SCALES, noise: float | None = None,
                        point_size: int = 3, reference_scale: float = 1.0,
-                       on_fit: Callable[[], None] = lambda: None, x0: np.ndarray | None = None) -> CrossValidation:
+                       on_fit: Callable[[], None] = lambda: None, x0: np.ndarray | None = None,
+                       budget_restarts: int = 0) -> CrossValidation:
     """The prior scale by held-out RMS: the narrowest within one standard error of the lowest.
 
     residuals_for(points (k,) int) -> batched residuals on those points only, (n, k *
@@ -332,12 +364,16 @@ def choose_prior_scale(residuals_for: Callable[[np.ndarray], Residuals], n_param
     noise sets the data's weight against the prior, the quantity the scale trades against,
     so every scale is scored at the same noise); each fold fit gets 50 Jacobians' worth of
     rows (a score needs the basin, not the last digit). on_fit() after each fit (progress).
+    budget_restarts: the reference fit's (``estimate``), which is then the fit on all points at
+    that scale (``CrossValidation.reference``).
     """
     all_points = np.arange(n_points)
     scales = tuple(sorted(scales))  # narrowest first: the one-standard-error rule prefers it
+    reference = None
     if noise is None:
-        noise = estimate(residuals_for(all_points), uniform_prior(n_params, reference_scale),
-                         point_size=point_size, x0=x0).noise
+        reference = estimate(residuals_for(all_points), uniform_prior(n_params, reference_scale),
+                             point_size=point_size, x0=x0, budget_restarts=budget_restarts)
+        noise = reference.noise
         on_fit()
     scores, errors = [], []
     for scale in scales:
@@ -355,7 +391,8 @@ def choose_prior_scale(residuals_for: Callable[[np.ndarray], Residuals], n_param
         errors.append(error)
     scores = np.array(scores)
     return CrossValidation(scales=tuple(scales), held_out_rms=scores,
-                           best=float(scales[one_standard_error_choice(scores, np.array(errors))]), n_folds=len(folds))
+                           best=float(scales[one_standard_error_choice(scores, np.array(errors))]), n_folds=len(folds),
+                           reference=reference, reference_scale=float(reference_scale))
 
 
 def _held_out_rms_and_error(fold_squares: np.ndarray, fold_counts: np.ndarray) -> tuple[float, float]:

@@ -20,7 +20,9 @@ from typing import Callable
 import numpy as np
 
 __all__ = ["PolishResult", "least_squares_polish", "polish_candidates", "norm_sum_polish", "batched_jacobian_fd",
-           "EvaluationCounter"]
+           "EvaluationCounter", "BUDGET_STATUS"]
+
+BUDGET_STATUS = -10  # PolishResult.status of a fit stopped by its evaluation budget
 
 Residuals = Callable[[np.ndarray], np.ndarray]
 
@@ -170,7 +172,7 @@ def least_squares_polish(residuals: Residuals, x0_unit: np.ndarray, *, lower: np
         status, message, nfev, njev = res.status, res.message, res.nfev, res.njev or 0
     except BudgetExhausted:
         x, cost = best["x"], best["cost"]
-        status, message, nfev, njev = -10, "evaluation budget exhausted", 0, 0
+        status, message, nfev, njev = BUDGET_STATUS, "evaluation budget exhausted", 0, 0
     m = r_start.size
     return PolishResult(x=x, cost=cost, rms=float(np.sqrt(2.0 * cost / m)), x0=x0, cost0=cost0,
                         n_evaluations=counter.n_evaluations, nfev=int(nfev), njev=int(njev), status=int(status),

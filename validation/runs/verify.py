@@ -281,6 +281,7 @@ def _estimated_identification(measurement: Measurement, angles: np.ndarray, spac
                 "cross_validation": None if cv is None else {
                     "scales": list(cv.scales), "held_out_rms_urad": (cv.held_out_rms * 1e6).tolist(),
                     "n_folds": cv.n_folds, "folds": "whole legs held out"},
+                "stopped_at_budget": fit.stopped_at_budget,
                 "noise_urad": fit.noise * 1e6, "noise_source": fit.noise_source,
                 "residual_autocorrelation": fit.autocorrelation, "noise_variance_inflation": fit.inflation,
                 "discrepancy": None if fit.discrepancy is None else {
