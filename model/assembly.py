@@ -32,7 +32,7 @@ from flexcal.geometry.frames import chain_rotation, frame_to_point_transform
 from flexcal.geometry.params import MechanismParams
 
 from . import kernel
-from .chain import chain_compliance_entries, stiffness_from_entries
+from .chain import chain_compliance_entries, chain_entries_and_elements, stiffness_from_entries
 from .consistent import shortening_matrices
 from .second_order import preload_geometric_stiffness
 from .parameters import CHAIN_NAMES, DIMENSION_SYMBOLS, DRIVING, LOAD, N_CHAINS, ParameterSpace
@@ -176,8 +176,13 @@ def mechanism_matrices(values, space: ParameterSpace, *, candidate_offset: int =
     """Per-candidate matrices for parameter vectors ``values`` (n_c, 45) or (45,) [SI].
 
     ``space`` supplies the nominal mechanism (points, material, payload, actuators).
-    Raises ``ValueError`` naming the candidate (index + ``candidate_offset``) and parameter
-    for invalid values, or a chain whose dimensions leave no strut.
+    The chain and frame formulas run compiled from ``chain.COMPILED_MIN_CHAINS`` and
+    ``COMPILED_MIN_CANDIDATES`` on, numpy below; the consistent model's
+    (``space.chain_shortening``, whose solve runs compiled only) at every batch size: a
+    least-squares residual's single candidate spent ~3/4 of its call in numpy's per-call
+    overhead (docs/model.md 10, "Session 34"). Raises ``ValueError`` naming the candidate
+    (index + ``candidate_offset``) and parameter for invalid values, or a chain whose
+    dimensions leave no strut.
     """
     values = np.atleast_2d(np.asarray(values, dtype=float))
     if values.ndim != 2 or values.shape[1] != len(space.parameters):
@@ -203,8 +208,17 @@ def mechanism_matrices(values, space: ParameterSpace, *, candidate_offset: int =
         cand, chain = np.argwhere(strut <= 0)[0]
         raise ValueError(f"candidate {cand + candidate_offset}: chain {CHAIN_NAMES[chain]} has no strut left (hinge length "
                          f"l={l[cand, chain] * 1e3:.4g} mm too long for the chain length {length[cand, chain] * 1e3:.4g} mm)")
-    compliance = chain_compliance_entries(length, l, w, a, t1, t2, section=section, connector_length=connector,
-                                          end_block_length=end_block, material=mech.material)
+    # the consistent model runs compiled (its play state and solve), so its set-up does too:
+    # one kernel pass gives the chains' entries and the shortening's elements
+    consistent = bool(space.chain_shortening) and kernel.available()
+    elements = None
+    if consistent:
+        compliance, *elements = chain_entries_and_elements(length, l, w, a, t1, t2, section=section,
+                                                           connector_length=connector, end_block_length=end_block,
+                                                           material=mech.material)
+    else:
+        compliance = chain_compliance_entries(length, l, w, a, t1, t2, section=section, connector_length=connector,
+                                              end_block_length=end_block, material=mech.material)
     if space.compliance_factors:  # measured correction of the closed-form chains (docs/model.md 7)
         factors = np.asarray(space.compliance_factors, dtype=float)
         if space.compliance_slopes:  # the factors follow the dimensions (slopes measured at nominal)
@@ -227,7 +241,7 @@ def mechanism_matrices(values, space: ParameterSpace, *, candidate_offset: int =
     # replaced below by the per-direction pivots)
     centre_distance = end_block + l + 0.5 * connector
     centre = point_b - centre_distance[..., None] * rotation[..., :, 0]
-    if n_c >= COMPILED_MIN_CANDIDATES and kernel.available():
+    if consistent or (n_c >= COMPILED_MIN_CANDIDATES and kernel.available()):
         linear = kernel.assemble_compiled(stiffness, rotation, point_b, centre, fixed["wrench"])
         if not np.all(np.isfinite(linear["gravity_pose"])):
             cand = int(np.argwhere(~np.all(np.isfinite(linear["gravity_pose"]), axis=1))[0, 0])
@@ -283,7 +297,7 @@ def mechanism_matrices(values, space: ParameterSpace, *, candidate_offset: int =
                 "cjk,jkab->cjab", relative, np.reshape(space.shortening_slopes, (N_CHAINS, len(DIMENSION_SYMBOLS), 6, 6)))
         shortening, lateral_defect, load_shortening = shortening_matrices(
             correction, length, l, w, a, t1, t2, section=section,
-            connector_length=connector, end_block_length=end_block, material=mech.material)
+            connector_length=connector, end_block_length=end_block, material=mech.material, elements=elements)
     else:
         shortening, load_shortening = np.zeros((n_c, N_CHAINS, 6, 6)), np.zeros((n_c, N_CHAINS, 6, 6))
         lateral_defect = np.zeros((n_c, N_CHAINS, 5, 6, 6))

@@ -35,6 +35,7 @@ __all__ = [
     "chain_stiffness_matrix",
     "invert_axial_compliance",
     "chain_compliance_entries",
+    "chain_entries_and_elements",
     "stiffness_from_entries",
     "LEAF2_ROTATION",
 ]
@@ -131,8 +132,7 @@ def chain_compliance_entries(length, hinge_length, width, fillet, thickness_1, t
     if np.any(a < 0) or np.any(2.0 * a > l * (1.0 + 1e-12)):
         raise ValueError("leaf fillet a must satisfy 0 <= a <= l/2 (both fillets must fit the segment)")
     if length.size >= COMPILED_MIN_CHAINS and kernel.available():
-        tau = np.sqrt(np.stack([t1, t2]) / (np.stack([t1, t2]) + 4.0 * a))
-        nodes, weights = _gauss_legendre(gauss_node_count(1.0 / tau[np.broadcast_to(a, tau.shape) > 0]))
+        nodes, weights = _chain_quadrature(a, t1, t2)
         actuator = 0.0 if actuator_stiffness is None else 1.0 / np.asarray(actuator_stiffness, dtype=float)
         out = kernel.chain_entries_compiled(length, l, w, a, t1, t2, section, connector_length, end_block_length,
                                             actuator, material, shear_coefficient(material.poisson_ratio), nodes,
@@ -161,6 +161,33 @@ def chain_compliance_entries(length, hinge_length, width, fillet, thickness_1, t
         # an axial spring at A: T = [[I, [r]x], [0, I]] with r along x leaves only C_xx
         total[0] = total[0] + flat(1.0 / np.asarray(actuator_stiffness, dtype=float))
     return {key: total[i].reshape(shape) for i, key in enumerate(_KEYS)}
+
+
+def _chain_quadrature(a, t1, t2) -> tuple[np.ndarray, np.ndarray]:
+    """Gauss-Legendre nodes and weights of the compiled chain kernels for a batch of leaves
+    (fillets a, thicknesses t1, t2 [m]): enough for its worst arc (``gauss_node_count``)."""
+    tau = np.sqrt(np.stack([t1, t2]) / (np.stack([t1, t2]) + 4.0 * a))
+    return _gauss_legendre(gauss_node_count(1.0 / tau[np.broadcast_to(a, tau.shape) > 0]))
+
+
+def chain_entries_and_elements(length, hinge_length, width, fillet, thickness_1, thickness_2, *, section,
+                               connector_length, end_block_length, material: Material
+                               ) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray]:
+    """``chain_compliance_entries`` (no actuator) and ``shortening``'s element entries of the same
+    chains from one pass of the compiled kernel (``_numba_kernels.chain_entries_elements``): the
+    entries {key: (...)}, the elements' entries (..., 9, 8) at their loaded ends in the chain's
+    axes (A -> B: block, leaf 1, connector, leaf 2 turned, strut, ...; ``hinge.ENTRY_INDEX``
+    order) and their offsets (..., 9) [m] (loaded end minus B along x). Needs numba: the
+    consistent model's set-up, which runs compiled at every batch size (``assembly``)."""
+    length, l, w, a, t1, t2, _ = _dimensions(length, hinge_length, width, fillet, thickness_1, thickness_2,
+                                             end_block_length, connector_length)
+    if np.any(a < 0) or np.any(2.0 * a > l * (1.0 + 1e-12)):
+        raise ValueError("leaf fillet a must satisfy 0 <= a <= l/2 (both fillets must fit the segment)")
+    nodes, weights = _chain_quadrature(a, t1, t2)
+    out, elements, offsets = kernel.chain_entries_elements_compiled(
+        length, l, w, a, t1, t2, section, connector_length, end_block_length, material,
+        shear_coefficient(material.poisson_ratio), nodes, weights)
+    return {key: out[..., i] for i, key in enumerate(_KEYS)}, elements, offsets
 
 
 def chain_compliance_matrix(chain: FlexureChain, material: Material, actuator_stiffness: float | None = None) -> np.ndarray:

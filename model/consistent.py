@@ -40,6 +40,8 @@ come from one S.
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 __all__ = ["pivot_shortening", "shortening_matrices", "defect_terms", "solve_points_consistent"]
@@ -62,15 +64,21 @@ def pivot_shortening(end_block, hinge_length, connector, length) -> np.ndarray:
 
 
 def shortening_matrices(correction, length, hinge_length, width, fillet, thickness_1, thickness_2, *, section,
-                        connector_length, end_block_length, material) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                        connector_length, end_block_length, material, elements=None
+                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(S_j (n_c, 6, 6, 6), L_j (n_c, 6, 5, 6, 6), T_j (n_c, 6, 6, 6)): each candidate's chains' own
     shortening form plus the measured correction (6, 6, 6) (or per candidate (n_c, 6, 6, 6)), their lateral defect forms and their
-    load forms (``shortening.chain_second_order_forms``; dimensions (n_c, 6) [m])."""
-    from .shortening import chain_second_order_forms
+    load forms (``shortening.chain_second_order_forms``; dimensions (n_c, 6) [m]). elements: the
+    chains' (element entries, offsets) when the caller has them (``chain.chain_entries_and_elements``;
+    the forms then come from them, ``shortening.forms_from_elements``)."""
+    from .shortening import chain_second_order_forms, forms_from_elements
 
-    own, lateral, load = chain_second_order_forms(length, hinge_length, width, fillet, thickness_1, thickness_2,
-                                            section=section, connector_length=connector_length,
-                                            end_block_length=end_block_length, material=material)
+    if elements is not None:
+        own, lateral, load = forms_from_elements(*elements)
+    else:
+        own, lateral, load = chain_second_order_forms(length, hinge_length, width, fillet, thickness_1, thickness_2,
+                                                      section=section, connector_length=connector_length,
+                                                      end_block_length=end_block_length, material=material)
     return own + np.asarray(correction, dtype=float), lateral, load
 
 
@@ -118,8 +126,7 @@ def pack_chains(m) -> np.ndarray:
     pack[:, :, nc.K_COL:nc.K_COL + 6, :6] = swap(k)
     pack[:, :, nc.T_COL:nc.T_COL + 6, :6] = swap(t)
     pack[:, :, nc.J_ROW:nc.J_ROW + 6, :6] = m.frame_transform
-    to_wrench = np.einsum("cjba,cjbk,cjlk->cjal", m.frame_transform, k[..., :3], m.rotation,
-                          optimize=True)  # J^T K[:, :3] R^T (n_c, 6 chains, 6, 3)
+    to_wrench = swap(m.frame_transform) @ k[..., :3] @ swap(m.rotation)  # J^T K[:, :3] R^T (n_c, 6 chains, 6, 3)
     pack[:, :, nc.W_COL:nc.W_COL + 3, :6] = swap(to_wrench)
     pack[:, :, nc.GAIN, :6] = swap(m.axial_gain)
     pack[:, :, nc.AXIAL_ROW, :3] = k[:, :, 0, :3]
@@ -129,12 +136,20 @@ def pack_chains(m) -> np.ndarray:
 
 def revisits(inputs: np.ndarray) -> np.ndarray:
     """(n_p,) int64: for each point the latest earlier point with the very same command (-1 if
-    none); the kernel starts there when the nut offsets are the same too (a leg's way back)."""
-    inputs = np.asarray(inputs, dtype=float)
-    out = np.full(inputs.shape[0], -1, dtype=np.int64)
+    none); the kernel starts there when the nut offsets are the same too (a leg's way back).
+    Remembered for the last few trajectories (a calibration calls the model on one trajectory
+    thousands of times)."""
+    inputs = np.ascontiguousarray(inputs, dtype=float)
+    return _revisits(inputs.tobytes(), inputs.shape).copy()
+
+
+@functools.lru_cache(maxsize=8)
+def _revisits(data: bytes, shape: tuple[int, ...]) -> np.ndarray:
+    inputs = np.frombuffer(data, dtype=float).reshape(shape)
+    out = np.full(shape[0], -1, dtype=np.int64)
     last: dict[bytes, int] = {}
     for p, row in enumerate(inputs):
-        key = np.ascontiguousarray(row).tobytes()
+        key = row.tobytes()
         out[p] = last.get(key, -1)
         last[key] = p
     return out

@@ -25,7 +25,8 @@ import functools
 
 import numpy as np
 
-__all__ = ["available", "solve_points_compiled", "arc_quadrature_compiled", "chain_entries_compiled", "assemble_compiled"]
+__all__ = ["available", "solve_points_compiled", "arc_quadrature_compiled", "chain_entries_compiled",
+           "chain_entries_elements_compiled", "assemble_compiled"]
 
 _FACES = np.array([[i, j, k] for i in range(3) for j in range(3) for k in range(3)], dtype=np.int64)
 
@@ -77,12 +78,31 @@ def chain_entries_compiled(length, hinge_length, width, fillet, thickness_1, thi
         length, hinge_length, width, fillet, thickness_1, thickness_2, section, connector, end_block,
         actuator_compliance)))
     shape = arrays[0].shape
-    flat = [np.ascontiguousarray(v).reshape(-1) for v in arrays]
+    flat = [np.array(v, dtype=float).reshape(-1) for v in arrays]  # copies: numba warns on a broadcast view
     out = np.empty((flat[0].size, 8))
     _kernels()[2](*flat, float(material.youngs_modulus), float(material.shear_modulus),
                   float(shear_coefficient), np.asarray(nodes, float),
                   np.asarray(weights, float), out)
     return out.reshape(shape + (8,))
+
+
+def chain_entries_elements_compiled(length, hinge_length, width, fillet, thickness_1, thickness_2, section, connector,
+                                    end_block, material, shear_coefficient, nodes, weights
+                                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Compiled ``chain.chain_entries_and_elements``: broadcast inputs -> entries (..., 8), element
+    entries (..., 9, 8) and offsets (..., 9) [m]."""
+    from . import _numba_kernels
+
+    arrays = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (
+        length, hinge_length, width, fillet, thickness_1, thickness_2, section, connector, end_block)))
+    shape = arrays[0].shape
+    flat = [np.array(v, dtype=float).reshape(-1) for v in arrays]  # copies: numba warns on a broadcast view
+    n = flat[0].size
+    out, elements, offsets = np.empty((n, 8)), np.empty((n, 9, 8)), np.empty((n, 9))
+    _numba_kernels.chain_entries_elements(*flat, float(material.youngs_modulus), float(material.shear_modulus),
+                                          float(shear_coefficient), np.asarray(nodes, float),
+                                          np.asarray(weights, float), out, elements, offsets)
+    return out.reshape(shape + (8,)), elements.reshape(shape + (9, 8)), offsets.reshape(shape + (9,))
 
 
 def arc_quadrature_compiled(radius, thickness, width, nodes, weights) -> np.ndarray:

@@ -39,7 +39,8 @@ from .chain import _dimensions, _uniform_entries, chain_elements
 from .hinge import ENTRY_INDEX, segment_entries
 from .serial import quarter_turn
 
-__all__ = ["twist_bracket_tensor", "chain_defect_tensor", "chain_shortening_form", "chain_second_order_forms"]
+__all__ = ["twist_bracket_tensor", "chain_defect_tensor", "chain_shortening_form", "chain_second_order_forms",
+           "forms_from_elements"]
 
 
 def _levi_civita() -> np.ndarray:
@@ -208,11 +209,19 @@ def _shortening(m: np.ndarray, stiffness: np.ndarray) -> np.ndarray:
 def _compiled_forms(length, hinge_length, width, fillet, thickness_1, thickness_2, *, section, connector_length,
                     end_block_length, material) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``chain_second_order_forms`` by ``_numba_shortening.shortening_forms``."""
-    from . import _numba_shortening
-
     entries, offsets = _element_entries(length, hinge_length, width, fillet, thickness_1, thickness_2,
                                         section=section, connector_length=connector_length,
                                         end_block_length=end_block_length, material=material)
+    return forms_from_elements(entries, offsets)
+
+
+def forms_from_elements(entries: np.ndarray, offsets: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``chain_second_order_forms`` (S, L, T) of chains given by their elements: entries (..., 9, 8)
+    at each element's loaded end in the chain's axes (``hinge.ENTRY_INDEX`` order, leaf 2 turned),
+    offsets (..., 9) [m] that end's x minus B's (``chain.chain_entries_and_elements``). Compiled
+    (``_numba_shortening.shortening_forms``)."""
+    from . import _numba_shortening
+
     shape = offsets.shape[:-1]
     flat = np.ascontiguousarray(entries.reshape((-1,) + entries.shape[-2:]))
     n = flat.shape[0]

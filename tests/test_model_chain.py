@@ -156,3 +156,29 @@ def test_eq1_is_written_once():
     got = serial.serial_entries_along_axis(np.array(serial.quarter_turn(entries))[None], np.array([0.1]), 0.35)
     want = np.array([turned[i, j] for i, j in hinge.ENTRY_INDEX.values()])
     np.testing.assert_allclose(got, want, rtol=1e-13, atol=0)  # same algebra, rounding only
+
+
+def test_one_compiled_pass_gives_the_entries_and_the_elements(monkeypatch):
+    """``chain_entries_and_elements`` (the consistent model's set-up, compiled at every batch
+    size): its entries are ``chain_compliance_entries``' and its elements those
+    ``shortening._element_entries`` lays out, both from the numpy formulas to rounding, on a
+    batch of 12 chains (below COMPILED_MIN_CHAINS: numpy there)."""
+    pytest.importorskip("numba")
+    from flexcal.model import kernel, shortening
+
+    rng = np.random.default_rng(5)
+    shape = (2, 6)
+    args = (rng.uniform(0.14, 0.5, shape), rng.uniform(18e-3, 22e-3, shape), rng.uniform(36e-3, 44e-3, shape),
+            rng.uniform(0.0, 6.6e-3, shape), rng.uniform(2.7e-3, 4.4e-3, shape), rng.uniform(2.7e-3, 4.4e-3, shape))
+    options = dict(section=np.full(6, 0.05), connector_length=np.full(6, 0.01), end_block_length=np.full(6, 0.01),
+                   material=STEEL)
+    entries, elements, offsets = chain.chain_entries_and_elements(*args, **options)
+    assert elements.shape == shape + (9, 8) and offsets.shape == shape + (9,)
+    monkeypatch.setattr(kernel, "available", lambda: False)
+    plain = chain.chain_compliance_entries(*args, **options)
+    plain_elements, plain_offsets = shortening._element_entries(*args, **options)
+    for key in plain:
+        np.testing.assert_allclose(entries[key], plain[key], rtol=1e-14, atol=0)  # same formulas, other order
+    # each element's entries of its own size: the same formulas, one at a time against batched
+    np.testing.assert_allclose(elements, plain_elements, rtol=1e-14, atol=0)
+    np.testing.assert_allclose(offsets, plain_offsets, rtol=0, atol=1e-15)  # [m] the same sums of lengths

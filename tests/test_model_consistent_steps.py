@@ -69,8 +69,13 @@ def test_a_revisited_command_starts_from_its_earlier_equilibrium():
     session 16). Where every nut stays on its flank that start is the fixed point itself: one
     evaluation of the map confirms it (4.2 on average from the drift-extrapolated start). The
     results are those of the solve without it, to the iteration's own tolerance."""
-    assert consistent.revisits(np.array([[0.0, 0, 0], [1, 0, 0], [0, 0, 0], [1, 0, 0], [0, 0, 1]])).tolist() == [
-        -1, -1, 0, 1, -1]
+    commands = np.array([[0.0, 0, 0], [1, 0, 0], [0, 0, 0], [1, 0, 0], [0, 0, 1]])
+    first = consistent.revisits(commands)
+    assert first.tolist() == [-1, -1, 0, 1, -1]
+    first[:] = 7  # remembered per trajectory: a caller's copy, not the memory
+    assert consistent.revisits(commands).tolist() == [-1, -1, 0, 1, -1]
+    assert consistent.revisits(commands[:, ::-1]).tolist() == [-1, -1, 0, 1, -1]  # a strided view, read as values
+    assert consistent.revisits(commands[[0, 2, 1]]).tolist() == [-1, 0, -1]  # another trajectory
     matrices, inputs = _forty_candidates(), standard_trajectory().inputs
     runs = [_solve(matrices, inputs, revisit=revisit) for revisit in (True, False)]
     assert all(np.all(run["codes"] == 0) for run in runs)

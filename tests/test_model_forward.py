@@ -254,3 +254,45 @@ def test_the_compiled_engine_gives_the_same_bits_on_any_thread_count(model):
         two = forward(values, TRAJECTORY.inputs, space=space, n_threads=2)
         for field in ("pose", "axial_loads", "clearance", "chain_states"):
             np.testing.assert_array_equal(getattr(two, field), getattr(one, field))
+
+
+def _consistent(space):
+    return dataclasses.replace(space, second_order=True, breakaway_force=2.0, chain_shortening=tuple(np.zeros(216)))
+
+
+@pytest.mark.skipif(not kernel.available(), reason="the compiled engine needs numba")
+def test_a_consistent_candidate_alone_gives_the_bits_it_gives_in_a_batch():
+    """The consistent model's set-up runs compiled at every batch size (``mechanism_matrices``):
+    a candidate evaluated alone, as a least-squares residual is, gives the same bits as in a
+    Jacobian's batch of 46 (before, the single candidate's set-up ran numpy's formulas and the
+    batch's the compiled ones, 1e-18 rad apart)."""
+    space = _consistent(SPACE)
+    base = random_values(1, 34)[0]
+    jacobian = np.repeat(base[None], 46, axis=0)
+    jacobian[np.arange(1, 46), np.arange(45)] *= 1.0 - 1e-6
+    alone = forward(base, TRAJECTORY.inputs, space=space)
+    batch = forward(jacobian, TRAJECTORY.inputs, space=space)
+    for field in ("pose", "axial_loads", "clearance", "chain_states"):
+        np.testing.assert_array_equal(getattr(alone, field)[0], getattr(batch, field)[0])
+
+
+@pytest.mark.skipif(not kernel.available(), reason="the compiled engine needs numba")
+def test_the_consistent_set_up_of_one_candidate_equals_numpys(monkeypatch):
+    """The consistent model's compiled set-up of one candidate (one kernel pass for the chains'
+    entries and the shortening's elements, the compiled frame algebra) against the numpy route
+    (``chain_compliance_entries``, the dense forms, numpy's frame algebra)."""
+    space = _consistent(SPACE)
+    values = random_values(1, 35)
+    compiled = mechanism_matrices(values, space)
+    monkeypatch.setattr(kernel, "available", lambda: False)
+    plain = mechanism_matrices(values, space)
+    for field in dataclasses.fields(plain):
+        a, b = getattr(compiled, field.name), getattr(plain, field.name)
+        scale = np.abs(b).max()
+        if scale == 0:
+            np.testing.assert_array_equal(a, b, err_msg=field.name)
+            continue
+        # 1e-10 of the field's largest entry: test_compiled_assembly_equals_numpy's 1e-12 (Cholesky
+        # vs LU, cond(K_CC) ~ 300 times 1e-16) and the dense load form T's 4e-12 of its largest
+        # entry (test_shortening_fast: K (C1 K C1 - C2) K subtracts terms ~1e2 x T)
+        np.testing.assert_allclose(a, b, rtol=0, atol=1e-10 * scale, err_msg=field.name)
