@@ -403,6 +403,24 @@ _moved_along_axis = njit(inline="always", cache=True, nogil=True, fastmath=_FAST
 _quarter_turn = njit(inline="always", cache=True, nogil=True, fastmath=_FAST)(serial.quarter_turn)
 
 
+@njit(cache=True, nogil=True, fastmath=_FAST, inline="always")
+def _chain_parts(length, hinge, width, fillet, thick1, thick2, section, connector, end_block, e, g, kappa, nodes,
+                 weights, parts):
+    """A chain's five kinds of element into parts (5, 8) (block, leaf 1, connector, leaf 2
+    turned, strut: each at its loaded end, chain axes) and their lengths [m]."""
+    strut = length - 2.0 * end_block - 4.0 * hinge - 2.0 * connector
+    flat_leaf = max(0.5 * hinge - fillet, 0.0)
+    _segment_entries(0.5 * end_block, 0.0, section, section, e, g, kappa, nodes, weights, parts[0])
+    _segment_entries(flat_leaf, fillet, thick1, width, e, g, kappa, nodes, weights, parts[1])
+    _segment_entries(0.5 * connector, 0.0, section, section, e, g, kappa, nodes, weights, parts[2])
+    _segment_entries(flat_leaf, fillet, thick2, width, e, g, kappa, nodes, weights, parts[3])
+    _segment_entries(0.5 * strut, 0.0, section, section, e, g, kappa, nodes, weights, parts[4])
+    turned = _quarter_turn(parts[3])  # leaf 2 is leaf 1 turned +90 deg about x
+    for i in range(8):
+        parts[3, i] = turned[i]
+    return end_block, hinge, connector, hinge, strut
+
+
 @njit(cache=True, nogil=True, fastmath=_FAST)
 def chain_entries_elements(length, hinge, width, fillet, thick1, thick2, section, connector, end_block, e, g, kappa,
                            nodes, weights, out, elements, offsets):
@@ -414,17 +432,8 @@ def chain_entries_elements(length, hinge, width, fillet, thick1, thick2, section
     kinds = (0, 1, 2, 3, 4, 3, 2, 1, 0)  # A -> B
     parts = np.zeros((5, 8))  # block, leaf1, connector, leaf2 (turned), strut
     for k in range(length.shape[0]):
-        strut = length[k] - 2.0 * end_block[k] - 4.0 * hinge[k] - 2.0 * connector[k]
-        flat_leaf = max(0.5 * hinge[k] - fillet[k], 0.0)
-        _segment_entries(0.5 * end_block[k], 0.0, section[k], section[k], e, g, kappa, nodes, weights, parts[0])
-        _segment_entries(flat_leaf, fillet[k], thick1[k], width[k], e, g, kappa, nodes, weights, parts[1])
-        _segment_entries(0.5 * connector[k], 0.0, section[k], section[k], e, g, kappa, nodes, weights, parts[2])
-        _segment_entries(flat_leaf, fillet[k], thick2[k], width[k], e, g, kappa, nodes, weights, parts[3])
-        _segment_entries(0.5 * strut, 0.0, section[k], section[k], e, g, kappa, nodes, weights, parts[4])
-        turned = _quarter_turn(parts[3])  # leaf 2 is leaf 1 turned +90 deg about x
-        for i in range(8):
-            parts[3, i] = turned[i]
-        sizes = (end_block[k], hinge[k], connector[k], hinge[k], strut)
+        sizes = _chain_parts(length[k], hinge[k], width[k], fillet[k], thick1[k], thick2[k], section[k], connector[k],
+                             end_block[k], e, g, kappa, nodes, weights, parts)
         for i in range(8):
             out[k, i] = 0.0
         end = 0.0
@@ -447,17 +456,8 @@ def chain_entries(length, hinge, width, fillet, thick1, thick2, section, connect
     kinds = (0, 1, 2, 3, 4, 3, 2, 1, 0)  # A -> B
     for k in prange(length.shape[0]):
         parts = np.zeros((5, 8))  # block, leaf1, connector, leaf2 (turned), strut
-        strut = length[k] - 2.0 * end_block[k] - 4.0 * hinge[k] - 2.0 * connector[k]
-        flat_leaf = max(0.5 * hinge[k] - fillet[k], 0.0)
-        _segment_entries(0.5 * end_block[k], 0.0, section[k], section[k], e, g, kappa, nodes, weights, parts[0])
-        _segment_entries(flat_leaf, fillet[k], thick1[k], width[k], e, g, kappa, nodes, weights, parts[1])
-        _segment_entries(0.5 * connector[k], 0.0, section[k], section[k], e, g, kappa, nodes, weights, parts[2])
-        _segment_entries(flat_leaf, fillet[k], thick2[k], width[k], e, g, kappa, nodes, weights, parts[3])
-        _segment_entries(0.5 * strut, 0.0, section[k], section[k], e, g, kappa, nodes, weights, parts[4])
-        turned = _quarter_turn(parts[3])  # leaf 2 is leaf 1 turned +90 deg about x
-        for i in range(8):
-            parts[3, i] = turned[i]
-        sizes = (end_block[k], hinge[k], connector[k], hinge[k], strut)
+        sizes = _chain_parts(length[k], hinge[k], width[k], fillet[k], thick1[k], thick2[k], section[k], connector[k],
+                             end_block[k], e, g, kappa, nodes, weights, parts)
         for i in range(8):
             out[k, i] = 0.0
         end = 0.0

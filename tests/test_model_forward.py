@@ -228,12 +228,16 @@ def test_compiled_assembly_equals_numpy(monkeypatch):
     values = random_values(40, 12)  # >= COMPILED_MIN_CANDIDATES: compiled linear algebra
     compiled = mechanism_matrices(values, SPACE)
     monkeypatch.setattr(kernel, "available", lambda: False)
-    plain = mechanism_matrices(values, SPACE)
-    for field in dataclasses.fields(plain):
-        a, b = getattr(compiled, field.name), getattr(plain, field.name)
-        scale = np.abs(b).max()
-        # Cholesky vs LU and another summation order: cond(K_CC) ~ 300 times 1e-16
-        np.testing.assert_allclose(a, b, rtol=0, atol=1e-12 * scale, err_msg=field.name)
+    # Cholesky vs LU and another summation order: cond(K_CC) ~ 300 times 1e-16
+    _assert_fields_close(compiled, mechanism_matrices(values, SPACE), 1e-12)
+
+
+def _assert_fields_close(got, want, relative: float) -> None:
+    """Every field of two ``MechanismMatrices`` within ``relative`` of the field's largest entry."""
+    for field in dataclasses.fields(want):
+        a, b = getattr(got, field.name), getattr(want, field.name)
+        # relative: the caller's, with its reason there
+        np.testing.assert_allclose(a, b, rtol=0, atol=relative * np.abs(b).max(), err_msg=field.name)
 
 
 @pytest.mark.skipif(not kernel.available(), reason="the compiled engine needs numba")
@@ -285,14 +289,7 @@ def test_the_consistent_set_up_of_one_candidate_equals_numpys(monkeypatch):
     values = random_values(1, 35)
     compiled = mechanism_matrices(values, space)
     monkeypatch.setattr(kernel, "available", lambda: False)
-    plain = mechanism_matrices(values, space)
-    for field in dataclasses.fields(plain):
-        a, b = getattr(compiled, field.name), getattr(plain, field.name)
-        scale = np.abs(b).max()
-        if scale == 0:
-            np.testing.assert_array_equal(a, b, err_msg=field.name)
-            continue
-        # 1e-10 of the field's largest entry: test_compiled_assembly_equals_numpy's 1e-12 (Cholesky
-        # vs LU, cond(K_CC) ~ 300 times 1e-16) and the dense load form T's 4e-12 of its largest
-        # entry (test_shortening_fast: K (C1 K C1 - C2) K subtracts terms ~1e2 x T)
-        np.testing.assert_allclose(a, b, rtol=0, atol=1e-10 * scale, err_msg=field.name)
+    # 1e-10 of the field's largest entry: test_compiled_assembly_equals_numpy's 1e-12 (Cholesky
+    # vs LU, cond(K_CC) ~ 300 times 1e-16) and the dense load form T's 4e-12 of its largest
+    # entry (test_shortening_fast: K (C1 K C1 - C2) K subtracts terms ~1e2 x T); a zero field exactly
+    _assert_fields_close(compiled, mechanism_matrices(values, space), 1e-10)
