@@ -38,6 +38,7 @@ calibration.md). Each fold fits from the prior mean, never from the full-data so
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from typing import Callable, Sequence
@@ -51,6 +52,7 @@ __all__ = ["Prior", "uniform_prior", "Estimate", "estimate", "map_objective_rows
            "held_out_folds", "PRIOR_SCALES", "one_standard_error_choice"]
 
 Residuals = Callable[[np.ndarray], np.ndarray]
+GIVEN = "given"  # Estimate.noise_source of a given noise
 UNIFORM_STD = 1.0 / math.sqrt(12.0)  # [fraction of range] standard deviation of a uniform distribution
 PRIOR_SCALES = (1.0, 2.0, 4.0)  # cross-validation grid [x the range's own spread]. Never below 1: the
 # paper's ranges (Eq. 9) are what is known; a narrower prior claims more and, when the sources
@@ -249,7 +251,6 @@ def estimate(residuals: Residuals, prior: Prior, *, noise: float | None = None, 
             x = fit.x
             if fit.status != BUDGET_STATUS:
                 break
-        x = fit.x
         J, r = batched_jacobian_fd(residuals, x, step=FD_STEP)
         n_evaluations += d + 1
         rss = float(r @ r)
@@ -278,9 +279,6 @@ def estimate(residuals: Residuals, prior: Prior, *, noise: float | None = None, 
     return with_discrepancy_bars(fitted, coordinates, model_error=model_error, point_size=point_size)
 
 
-GIVEN = "given"  # Estimate.noise_source of a given noise
-
-
 def with_discrepancy_bars(fit: Estimate, coordinates: np.ndarray, *, model_error: np.ndarray | None = None,
                           point_size: int = 3) -> Estimate:
     """``fit`` (Gauss-Newton error bars, as ``estimate`` without coordinates gives it) with the
@@ -288,8 +286,6 @@ def with_discrepancy_bars(fit: Estimate, coordinates: np.ndarray, *, model_error
     discrepancy fitted to its residual (``calibration.discrepancy``), the sandwich covariance.
     The same x and noise: a fit made once serves both (``pipeline.identify_all`` takes the
     cross-validation's reference fit this way when the chosen scale is its scale)."""
-    import dataclasses
-
     if fit.discrepancy is not None:
         raise ValueError("the fit carries discrepancy error bars already")
     if point_size != 3:
@@ -308,17 +304,11 @@ def with_model_error(fit: Estimate, coordinates: np.ndarray, model_error: np.nda
     units] (``estimate``'s ``model_error``; for a budget that needs the estimate first, e.g. the
     prototype run at it): the same x, the discrepancy refitted with the budget as a known
     covariance, the sandwich on the same weighting."""
-    import dataclasses
-
     if fit.gauss_newton_covariance is None:
         raise ValueError("the fit has Gauss-Newton error bars; estimate it with coordinates first")
-    found = fit_discrepancy(fit.residual, fit.jacobian, fit.x, fit.prior.mean, fit.prior.std, coordinates,
-                            noise=fit.noise if fit.discrepancy is not None and fit.discrepancy.noise_given else None,
-                            model_error=model_error)
-    covariance = sandwich_covariance(fit.gauss_newton_covariance, fit.jacobian, fit.noise, fit.prior.precision,
-                                     found.covariance)
-    std = np.where(np.isfinite(fit.std), np.sqrt(np.maximum(np.diag(covariance), 0.0)), np.inf)
-    return dataclasses.replace(fit, covariance=covariance, std=std, discrepancy=found)
+    white = dataclasses.replace(fit, covariance=fit.gauss_newton_covariance, discrepancy=None,
+                                gauss_newton_covariance=None)
+    return with_discrepancy_bars(white, coordinates, model_error=model_error)
 
 
 def held_out_folds(leg: Sequence[int], n_folds: int = 5) -> list[np.ndarray]:

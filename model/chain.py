@@ -48,9 +48,11 @@ _KINDS = ("block", "leaf1", "connector", "leaf2", "strut", "leaf2", "connector",
 def _dimensions(length, hinge_length, width, fillet, thickness_1, thickness_2, end_block_length,
                 connector_length):
     """The chain's dimensions broadcast to one batch shape, and its strut length [m];
-    ``ValueError`` when the hinges and blocks leave no strut."""
+    ``ValueError`` when a leaf's fillets do not fit it or the hinges and blocks leave no strut."""
     length, l, w, a, t1, t2 = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in
                                                     (length, hinge_length, width, fillet, thickness_1, thickness_2)))
+    if np.any(a < 0) or np.any(2.0 * a > l * (1.0 + 1e-12)):
+        raise ValueError("leaf fillet a must satisfy 0 <= a <= l/2 (both fillets must fit the segment)")
     strut = length - 2.0 * end_block_length - 4.0 * l - 2.0 * connector_length
     if np.any(strut <= 0):
         raise ValueError("chain length must exceed 2*end_block + 4*hinge_length + 2*connector "
@@ -129,8 +131,6 @@ def chain_compliance_entries(length, hinge_length, width, fillet, thickness_1, t
     """
     length, l, w, a, t1, t2, strut = _dimensions(length, hinge_length, width, fillet, thickness_1, thickness_2,
                                                  end_block_length, connector_length)
-    if np.any(a < 0) or np.any(2.0 * a > l * (1.0 + 1e-12)):
-        raise ValueError("leaf fillet a must satisfy 0 <= a <= l/2 (both fillets must fit the segment)")
     if length.size >= COMPILED_MIN_CHAINS and kernel.available():
         nodes, weights = _chain_quadrature(a, t1, t2)
         actuator = 0.0 if actuator_stiffness is None else 1.0 / np.asarray(actuator_stiffness, dtype=float)
@@ -181,8 +181,6 @@ def chain_entries_and_elements(length, hinge_length, width, fillet, thickness_1,
     consistent model's set-up, which runs compiled at every batch size (``assembly``)."""
     length, l, w, a, t1, t2, _ = _dimensions(length, hinge_length, width, fillet, thickness_1, thickness_2,
                                              end_block_length, connector_length)
-    if np.any(a < 0) or np.any(2.0 * a > l * (1.0 + 1e-12)):
-        raise ValueError("leaf fillet a must satisfy 0 <= a <= l/2 (both fillets must fit the segment)")
     nodes, weights = _chain_quadrature(a, t1, t2)
     out, elements, offsets = kernel.chain_entries_elements_compiled(
         length, l, w, a, t1, t2, section, connector_length, end_block_length, material,

@@ -68,17 +68,21 @@ def assemble_compiled(stiffness, rotation, point_b, centre, wrench) -> dict[str,
     return out
 
 
+def _flat_batch(*values) -> tuple[tuple[int, ...], list[np.ndarray]]:
+    """The values broadcast to one batch shape, and each as its own flat float copy (numba warns
+    on a broadcast view)."""
+    arrays = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in values))
+    return arrays[0].shape, [np.array(v, dtype=float).reshape(-1) for v in arrays]
+
+
 def chain_entries_compiled(length, hinge_length, width, fillet, thickness_1, thickness_2, section, connector,
                            end_block, actuator_compliance, material, shear_coefficient, nodes, weights) -> np.ndarray:
     """Compiled ``chain.chain_compliance_entries``: broadcast inputs -> (..., 8) entries.
 
     shear_coefficient [-]: Timoshenko's coefficient of ``material`` (``hinge.shear_coefficient``).
     """
-    arrays = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (
-        length, hinge_length, width, fillet, thickness_1, thickness_2, section, connector, end_block,
-        actuator_compliance)))
-    shape = arrays[0].shape
-    flat = [np.array(v, dtype=float).reshape(-1) for v in arrays]  # copies: numba warns on a broadcast view
+    shape, flat = _flat_batch(length, hinge_length, width, fillet, thickness_1, thickness_2, section, connector,
+                              end_block, actuator_compliance)
     out = np.empty((flat[0].size, 8))
     _kernels()[2](*flat, float(material.youngs_modulus), float(material.shear_modulus),
                   float(shear_coefficient), np.asarray(nodes, float),
@@ -93,10 +97,8 @@ def chain_entries_elements_compiled(length, hinge_length, width, fillet, thickne
     entries (..., 9, 8) and offsets (..., 9) [m]."""
     from . import _numba_kernels
 
-    arrays = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (
-        length, hinge_length, width, fillet, thickness_1, thickness_2, section, connector, end_block)))
-    shape = arrays[0].shape
-    flat = [np.array(v, dtype=float).reshape(-1) for v in arrays]  # copies: numba warns on a broadcast view
+    shape, flat = _flat_batch(length, hinge_length, width, fillet, thickness_1, thickness_2, section, connector,
+                              end_block)
     n = flat[0].size
     out, elements, offsets = np.empty((n, 8)), np.empty((n, 9, 8)), np.empty((n, 9))
     _numba_kernels.chain_entries_elements(*flat, float(material.youngs_modulus), float(material.shear_modulus),

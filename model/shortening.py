@@ -248,8 +248,6 @@ def _element_entries(length, hinge_length, width, fillet, thickness_1, thickness
     equal to ``segment_entries`` without fillet)."""
     length, l, w, a, t1, t2, strut = _dimensions(length, hinge_length, width, fillet, thickness_1, thickness_2,
                                                  end_block_length, connector_length)
-    if np.any(a < 0) or np.any(2.0 * a > l * (1.0 + 1e-12)):
-        raise ValueError("leaf fillet a must satisfy 0 <= a <= l/2 (both fillets must fit the segment)")
     shape = length.shape
     section, connector, block = (np.broadcast_to(np.asarray(v, dtype=float), shape)
                                  for v in (section, connector_length, end_block_length))
