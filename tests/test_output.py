@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import os
 import signal
+import sys
 
 import numpy as np
 import pytest
@@ -139,3 +140,39 @@ def test_an_ignored_ctrl_c_stays_ignored():
         assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
     finally:
         signal.signal(signal.SIGINT, previous)
+
+
+def test_an_interrupt_swallowed_in_the_block_leaves_out_untouched(tmp_path, monkeypatch):
+    # a library that swallows the exception (a destructor's is only "ignored") does not stop
+    # the run; staged_output must, before anything moves into out
+    from flexcal.validation.cli.signals import Terminated, termination_raises
+
+    class SignalsWhenDropped:
+        def __del__(self):
+            signal.raise_signal(signal.SIGTERM)
+
+    reported = []
+    monkeypatch.setattr(sys, "unraisablehook", reported.append)
+    out = tmp_path / "out"
+    with termination_raises(), pytest.raises(Terminated):
+        with staged_output(out) as staging:
+            (staging / "report.json").write_text("{}")
+            SignalsWhenDropped()
+            (staging / "more.json").write_text("{}")  # the block itself went on
+    assert sorted(p.name for p in tmp_path.iterdir()) == []  # no out, no staging folder
+    assert reported == []  # recorded, not printed as "Exception ignored"
+    assert sys.unraisablehook == reported.append  # put back
+
+
+def test_other_exceptions_of_destructors_are_still_reported(monkeypatch):
+    from flexcal.validation.cli.signals import termination_raises
+
+    class FailsWhenDropped:
+        def __del__(self):
+            raise ValueError("a destructor's own error")
+
+    reported = []
+    monkeypatch.setattr(sys, "unraisablehook", reported.append)
+    with termination_raises():
+        FailsWhenDropped()
+    assert [type(r.exc_value) for r in reported] == [ValueError]

@@ -1,6 +1,18 @@
-"""Ctrl-C and SIGTERM held back for a few steps that must not be cut halfway: the final
-moves of a run's files into ``--out`` (``output.staged_output``) and the taking and
-releasing of ``--out``'s lock (``out_lock.reserved``)."""
+"""Ctrl-C and SIGTERM: the record of what was received, and a few steps held back from them.
+
+``Terminated`` is SIGTERM as an exception (a ``KeyboardInterrupt``, so every clean-up written
+for Ctrl-C also runs for it); ``flexcal.validation.cli.signals.termination_raises`` raises it
+and records every signal it turns into an exception (``record_received``). A library can
+swallow that exception: one raised inside a destructor or a C callback (VTK's
+``DataObject.__del__`` while pictures render) is only "ignored" by Python, and the run would
+go on and publish its results as if nobody had asked it to stop. ``raise_received`` raises
+the recorded interrupt again; ``output.staged_output`` calls it before anything moves into
+``--out``.
+
+``interrupts_deferred`` holds both signals back for a few steps that must not be cut
+halfway: the final moves of a run's files into ``--out`` (``output.staged_output``) and the
+taking and releasing of ``--out``'s lock (``out_lock.reserved``).
+"""
 
 from __future__ import annotations
 
@@ -10,7 +22,48 @@ import signal
 import threading
 from typing import Any, Iterator
 
-__all__ = ["interrupts_deferred"]
+__all__ = ["Terminated", "interrupts_deferred", "record_received", "forget_received", "take_received",
+           "received_interrupt", "raise_received"]
+
+
+class Terminated(KeyboardInterrupt):
+    """The process received SIGTERM."""
+
+
+_received: list[int] = []  # signals turned into exceptions inside termination_raises()
+
+
+def record_received(signum: int) -> None:
+    """Note a Ctrl-C or SIGTERM that is being raised as an exception."""
+    _received.append(signum)
+
+
+def forget_received() -> None:
+    """A fresh record (a new ``termination_raises`` block)."""
+    del _received[:]
+
+
+def take_received() -> int | None:
+    """The first signal recorded, or None; forgotten once taken."""
+    signum = _received[0] if _received else None
+    forget_received()
+    return signum
+
+
+def received_interrupt() -> KeyboardInterrupt | None:
+    """The first recorded signal as its exception (``Terminated`` or ``KeyboardInterrupt``),
+    or None."""
+    if not _received:
+        return None
+    return Terminated("received signal SIGTERM") if _received[0] == signal.SIGTERM else KeyboardInterrupt()
+
+
+def raise_received() -> None:
+    """Raise the recorded interrupt, if any: the run was asked to stop, even if a library
+    swallowed the exception that said so (module doc)."""
+    interrupt = received_interrupt()
+    if interrupt is not None:
+        raise interrupt
 
 
 @contextlib.contextmanager

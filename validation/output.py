@@ -23,7 +23,8 @@ and folders of other names are never touched. When the ``with`` block finishes w
 its files are moved into ``out_dir``; with ``replace`` whatever ``out_dir`` held before is
 removed at that moment (a failed run keeps the old results). On any error,
 ``KeyboardInterrupt`` (Ctrl-C) and ``signals.Terminated`` (SIGTERM) included, the staging
-folder is removed and ``out_dir`` is untouched. A fresh ``out_dir`` appears in one
+folder is removed and ``out_dir`` is untouched; so too when such an interrupt was received
+and swallowed on the way (raised in a destructor, ``interrupts.raise_received``). A fresh ``out_dir`` appears in one
 rename; into an existing one each file moves by its own rename (each file is whole, old
 or new), with Ctrl-C and SIGTERM held back until the moves are done. The staged files
 include the marker ``.flexcal-run`` (the command's name); ``replace`` removes only
@@ -63,7 +64,7 @@ import numpy as np
 from flexcal.fem.owners import OWNER_TAG, owner_tag, remove_folders_of_gone_owners
 from flexcal.geometry.atomic import atomic_path
 
-from .interrupts import interrupts_deferred
+from .interrupts import interrupts_deferred, raise_received
 from .run_folder import MARKER_NAME, out_folder, visible_entries
 
 __all__ = ["out_folder", "staged_output", "atomic_path", "write_json", "write_text", "to_jsonable", "dumps_strict",
@@ -169,6 +170,7 @@ def staged_output(out_dir: str | os.PathLike, *, replace: bool = False, resume: 
         os.chmod(staging, 0o777 & ~_UMASK)
         try:
             yield staging
+            raise_received()  # an interrupt a library swallowed (interrupts' module doc): nothing moves in
             (staging / MARKER_NAME).write_text(f"{command}\n", encoding="utf-8")
             with interrupts_deferred():
                 _move_in(staging, out, replace)

@@ -153,6 +153,7 @@ def _pass_on_signal() -> None:
 
 
 def _run(argv: list[str], command: str | None, *, hold_back: bool = False) -> int:
+    from ..interrupts import raise_received
     from ..out_lock import held_folders, release_left
     from ..output import written_folders
     from .signals import termination_raises
@@ -163,6 +164,7 @@ def _run(argv: list[str], command: str | None, *, hold_back: bool = False) -> in
     try:
         with termination_raises():
             status = _main(argv, command)
+            raise_received()  # one a library swallowed on the way (interrupts' module doc)
             if hold_back:
                 _hold_back_late_signals()
             return status

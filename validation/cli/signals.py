@@ -6,7 +6,10 @@ folders beside ``--out`` behind. ``termination_raises()`` makes SIGTERM raise
 ``Terminated`` (a ``KeyboardInterrupt``, so every clean-up written for Ctrl-C also runs
 for it); the command line exits 130 on SIGINT and 143 on SIGTERM (128 + the signal
 number, what a shell reports for a process killed by it). An error that an interrupt
-caused (``interrupt_behind``) counts as that interrupt.
+caused (``interrupt_behind``) counts as that interrupt. Inside the block an interrupt that
+Python could only report as "ignored" (raised in a destructor or a C callback) is not
+printed: it is recorded (``flexcal.validation.interrupts``), and the run stops at its next
+``staged_output`` step or at its end as if it had been raised.
 
 Libraries that reset the SIGINT handler (pytetwild) run in a child process
 (``flexcal.fem.tetwild_process``).
@@ -16,8 +19,11 @@ from __future__ import annotations
 
 import contextlib
 import signal
+import sys
 import threading
 from typing import Iterator
+
+from ..interrupts import Terminated, forget_received, received_interrupt, record_received, take_received
 
 __all__ = ["Terminated", "termination_raises", "interrupt_behind", "exit_status", "take_received_signal",
            "HANDLED_SIGNALS"]
@@ -25,39 +31,45 @@ __all__ = ["Terminated", "termination_raises", "interrupt_behind", "exit_status"
 HANDLED_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
 
-class Terminated(KeyboardInterrupt):
-    """The process received SIGTERM."""
-
-
-_received: list[int] = []  # signals delivered while termination_raises() is active
-
-
 def _raise_terminated(signum, frame):
-    _received.append(signum)
+    record_received(signum)
     raise Terminated(f"received signal {signal.Signals(signum).name}")
 
 
 def _raise_interrupted(signum, frame):
-    _received.append(signum)
+    record_received(signum)
     raise KeyboardInterrupt
+
+
+def _quiet_about_interrupts(default):
+    """An ``unraisablehook`` that leaves out interrupts (recorded already, acted on later)
+    and passes everything else to ``default``."""
+    def hook(unraisable):
+        if not isinstance(unraisable.exc_value, KeyboardInterrupt):
+            default(unraisable)
+    return hook
 
 
 @contextlib.contextmanager
 def termination_raises() -> Iterator[None]:
     """Inside the block SIGTERM raises ``Terminated`` and Ctrl-C ``KeyboardInterrupt``
     (if Python's default handler is in place: an ignored SIGINT stays ignored), and both
-    are recorded for ``interrupt_behind``. Main thread only (elsewhere a no-op: Python
-    delivers signals to the main thread). The previous handlers are put back."""
+    are recorded for ``interrupt_behind``; one swallowed as "ignored" is not printed (module
+    doc). Main thread only (elsewhere a no-op: Python delivers signals to the main thread).
+    The previous handlers and ``sys.unraisablehook`` are put back."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    del _received[:]
+    forget_received()
     previous = {signal.SIGTERM: signal.signal(signal.SIGTERM, _raise_terminated)}
     if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
         previous[signal.SIGINT] = signal.signal(signal.SIGINT, _raise_interrupted)
+    unraisable_hook = sys.unraisablehook
+    sys.unraisablehook = _quiet_about_interrupts(unraisable_hook)
     try:
         yield
     finally:
+        sys.unraisablehook = unraisable_hook
         for signum, handler in previous.items():
             signal.signal(signum, handler)
 
@@ -73,17 +85,13 @@ def interrupt_behind(error: BaseException) -> KeyboardInterrupt | None:
             return error
         seen.add(id(error))
         error = error.__cause__ or error.__context__
-    if _received:
-        return Terminated() if _received[0] == signal.SIGTERM else KeyboardInterrupt()
-    return None
+    return received_interrupt()
 
 
 def take_received_signal() -> int | None:
     """The first signal (SIGINT or SIGTERM) delivered inside the last ``termination_raises``
     block, or None; forgotten once taken."""
-    signum = _received[0] if _received else None
-    del _received[:]
-    return signum
+    return take_received()
 
 
 def exit_status(interrupt: KeyboardInterrupt) -> int:
