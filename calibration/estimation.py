@@ -348,12 +348,16 @@ def choose_prior_scale(residuals_for: Callable[[np.ndarray], Residuals], n_param
 
     residuals_for(points (k,) int) -> batched residuals on those points only, (n, k *
     point_size); folds: held-out point sets (``held_out_folds``). For each scale and fold the
-    estimate is fitted on the other points (from the prior mean, or ``x0`` [unit box]) and scored on the fold.
-    Without a given noise, one fit on all points at ``reference_scale`` estimates it first and
-    the fold fits use that value (one fit each instead of up to ``max_noise_rounds``: the
-    noise sets the data's weight against the prior, the quantity the scale trades against,
-    so every scale is scored at the same noise); each fold fit gets 50 Jacobians' worth of
-    rows (a score needs the basin, not the last digit). on_fit() after each fit (progress).
+    estimate is fitted on the other points and scored on the fold.
+    Without a given noise, one fit on all points at ``reference_scale`` (from the prior mean,
+    or ``x0`` [unit box]) estimates it first and the fold fits use that value (one fit each
+    instead of up to ``max_noise_rounds``: the noise sets the data's weight against the prior,
+    the quantity the scale trades against, so every scale is scored at the same noise), and
+    start where it ended: a held-out fit is then a few steps from its own minimum (measured,
+    docs/calibration.md "Session 35": from ``x0`` 13 of the README run's 18 fold fits stopped
+    at their budget, and the scores were those of fits on their way). With a given noise they
+    start at ``x0``. Each fold fit gets 50 Jacobians' worth of rows. on_fit() after each fit
+    (progress).
     budget_restarts: the reference fit's (``estimate``), which is then the fit on all points at
     that scale (``CrossValidation.reference``).
     """
@@ -371,7 +375,7 @@ def choose_prior_scale(residuals_for: Callable[[np.ndarray], Residuals], n_param
         for fold in folds:
             train = np.setdiff1d(all_points, fold)
             fit = estimate(residuals_for(train), uniform_prior(n_params, scale), noise=noise, point_size=point_size,
-                           max_evaluations=50 * (n_params + 2), x0=x0)
+                           max_evaluations=50 * (n_params + 2), x0=x0 if reference is None else reference.x)
             on_fit()
             r = np.asarray(residuals_for(fold)(fit.x[None]), float)[0]
             fold_squares.append(float(r @ r))

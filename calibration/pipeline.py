@@ -52,7 +52,7 @@ FREE_MAX_EVALUATIONS = 400 * 46
 # noise-free table1 run's last fit stopped twice at its 100 Jacobians' worth of rows, at 0.026
 # urad RMS (max 0.139) where it converges to 0.0017 (max 0.009); with 300 Jacobians' worth it
 # converged (305 trust-region steps) to 0.0021 (max 0.0105). The held-out folds' fits keep their
-# cap (a score needs the basin, not the last digit).
+# cap of 50 Jacobians' worth: they start at the reference fit (``choose_prior_scale``).
 FINAL_BUDGET_RESTARTS = 2
 
 

@@ -67,3 +67,36 @@ def test_a_fit_stopped_at_its_budget_starts_again_until_it_converges():
     assert not done.stopped_at_budget
     # trf's tolerances (1e-8 on the step and the cost) leave x within ~1e-4 of a zero residual's minimum
     np.testing.assert_allclose(done.x, [0.5, 0.5], atol=1e-4)
+
+
+def test_the_fold_fits_start_at_the_reference_fit(monkeypatch):
+    """Without a given noise the folds' fits start where the fit on all points ended (a held-out
+    fit then needs only its own few steps from there, docs/calibration.md "Session 35"); with a
+    given noise there is no reference fit and they start at x0. A model linear in its two
+    parameters on 12 points of 3 residuals each (the wiring is under test)."""
+    rng = np.random.default_rng(7)
+    A = rng.normal(size=(12, 3, 2))
+    data = A @ np.array([0.3, 0.7]) + 1e-3 * rng.normal(size=(12, 3))
+
+    def residuals_for(points):
+        return lambda X: (np.einsum("pkj,nj->npk", A[points], np.atleast_2d(X)) - data[points]).reshape(len(X), -1)
+
+    starts = []
+    real = estimation.estimate
+
+    def recording(residuals, prior, **kwargs):
+        starts.append(None if kwargs.get("x0") is None else np.array(kwargs["x0"]))
+        return real(residuals, prior, **kwargs)
+    monkeypatch.setattr(estimation, "estimate", recording)
+    folds = [np.arange(0, 4), np.arange(4, 8), np.arange(8, 12)]
+    x0 = np.array([0.9, 0.1])
+    cv = estimation.choose_prior_scale(residuals_for, 2, folds, 12, scales=(1.0, 2.0), x0=x0)
+    assert len(starts) == 1 + 2 * 3
+    np.testing.assert_array_equal(starts[0], x0)  # the reference fit starts at x0
+    for start in starts[1:]:
+        np.testing.assert_array_equal(start, cv.reference.x)
+    starts.clear()
+    cv = estimation.choose_prior_scale(residuals_for, 2, folds, 12, scales=(1.0,), x0=x0, noise=1e-3)
+    assert cv.reference is None and len(starts) == 3
+    for start in starts:
+        np.testing.assert_array_equal(start, x0)

@@ -59,10 +59,13 @@ def test_a_consistent_fit_starts_at_the_second_order_estimate(monkeypatch, close
     # per stage: the noise fit, the folds; the noise fit, on all points at the one scale, is the
     # stage's estimate (calibration.estimation.CrossValidation.reference)
     assert len(calls) == 2 * half and half == 3
-    assert all(x0 is None for x0, _ in calls[:half])  # the second-order stage: from the prior mean
+    # each stage's held-out fits start where its reference fit ended
+    for stage in (calls[:half], calls[half:]):
+        for x0, _ in stage[1:]:
+            np.testing.assert_array_equal(x0, stage[0][1])
+    assert calls[0][0] is None  # the second-order stage: from the prior mean
     start = calls[0][1]  # the second-order stage's estimate
-    for x0, _ in calls[half:]:
-        assert np.allclose(x0, np.clip(start, 0.0, 1.0), atol=1e-12)  # unit-box round trip of its SI values
+    assert np.allclose(calls[half][0], np.clip(start, 0.0, 1.0), atol=1e-12)  # unit-box round trip of its SI values
     assert any(line.startswith("start: the second-order model's estimate") for line in lines)
 
 
