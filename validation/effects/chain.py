@@ -42,22 +42,18 @@ def settling_error(angles: np.ndarray, time: np.ndarray, time_constant, integrat
     angles (n, 3) [rad] true angles at the points; time (n,) [s]; time_constant [s] (one or
     (3,) per channel); integration_time [s] the reading's averaging window (<= every dwell;
     0: read at the instant). The sensor starts settled (error 0 at the first point)."""
-    theta = np.asarray(angles, dtype=float)
-    tau = np.broadcast_to(np.asarray(time_constant, dtype=float), (3,))
+    from ._recurrences import settling
+
+    theta = np.ascontiguousarray(angles, dtype=float)
+    tau = np.ascontiguousarray(np.broadcast_to(np.asarray(time_constant, dtype=float), (3,)))
     dwell = np.diff(np.asarray(time, dtype=float))
-    state = np.zeros_like(theta)  # s_k - theta_k at the end of dwell k
-    reading = np.zeros_like(theta)
-    for k in range(1, theta.shape[0]):
-        start = state[k - 1] + theta[k - 1] - theta[k]  # the error when the frame has jumped
-        q = np.exp(-dwell[k - 1] / tau)
-        state[k] = start * q
-        if integration_time > 0:
-            window = min(integration_time, dwell[k - 1])
-            # mean of start exp(-u / tau) over u in [dwell - window, dwell]
-            reading[k] = start * tau / window * (np.exp(-(dwell[k - 1] - window) / tau) - q)
-        else:
-            reading[k] = state[k]
-    return reading
+    # the state s_k - theta_k at the end of dwell k decays by q over it, from the error
+    # state_{k-1} + theta_{k-1} - theta_k when the frame has jumped (a compiled loop)
+    q = np.exp(-dwell[:, None] / tau[None, :])
+    window = np.minimum(integration_time, dwell)
+    # averaged: the mean of start exp(-u / tau) over u in [dwell - window, dwell]
+    tail = (np.exp(-(dwell - window)[:, None] / tau[None, :]) - q) if integration_time > 0 else q
+    return settling(theta, q, tau, window, tail, integration_time > 0)
 
 
 def ar1_series(time: np.ndarray, correlation_time: float, seed: int, channels: int = 3) -> np.ndarray:

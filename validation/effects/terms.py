@@ -190,13 +190,10 @@ def relaxed(series: np.ndarray, time: np.ndarray, time_constant: float) -> np.nd
     y_0 = series_0 (in equilibrium at the start); over the dwell t_k - t_{k-1} the input is
     series_{k-1}: y_k = series_{k-1} + (y_{k-1} - series_{k-1}) exp(-dwell / tau).
     """
-    u = np.asarray(series, dtype=float)
-    y = np.empty_like(u)
-    y[0] = u[0]
+    from ._recurrences import lag
+
     decay = np.exp(-np.diff(np.asarray(time, dtype=float)) / time_constant)
-    for k in range(1, u.shape[0]):
-        y[k] = u[k - 1] + (y[k - 1] - u[k - 1]) * decay[k - 1]
-    return y
+    return lag(np.ascontiguousarray(series, dtype=float), decay)  # the loop, compiled
 
 
 # ---------------------------------------------------------------- the terms
