@@ -63,9 +63,10 @@ class IdentificationSettings:
     max_std [fraction of range]: a base source's data-alone standard deviation limit
     (``base_parameters``); n_folds: held-out blocks when the trajectory has fewer than 3 legs;
     profile: widen the bars of the base combinations not identified alone by their profile
-    likelihood (``calibration.profile_bars``); start: values (45,) [SI] every fit starts from
-    (cross-validation folds included; None: the prior mean, or for a consistent space with
-    ``staged`` the second-order model's estimate on the same data, ``calibration.staged_start``);
+    likelihood (``calibration.profile_bars``); start: values (45,) [SI] the first fit on all
+    points starts from (None: the prior mean, or for a consistent space with ``staged`` the
+    second-order model's estimate on the same data, ``calibration.staged_start``); with a
+    cross-validation every later fit starts where that one ended (``choose_prior_scale``);
     n_threads: the model's threads per batch of candidates (``CalibrationProblem.n_threads``; the
     estimate's bits do not depend on it)."""
 
@@ -200,7 +201,9 @@ def identify_all(space: ParameterSpace, inputs: np.ndarray, angles: np.ndarray, 
         # start, noise and budget): its error bars alone are left to compute
         fit = with_discrepancy_bars(cv.reference, angles / WORKSPACE)
     else:
-        fit = estimate(in_chart(problem.residuals), prior, noise=settings.noise, x0=x0,
+        # from where the reference fit ended (all points, the same start) when there is one
+        reached = x0 if cv is None or cv.reference is None else cv.reference.x
+        fit = estimate(in_chart(problem.residuals), prior, noise=settings.noise, x0=reached,
                        max_evaluations=FREE_MAX_EVALUATIONS if math.isinf(scale) else None,
                        coordinates=angles / WORKSPACE, budget_restarts=FINAL_BUDGET_RESTARTS)
     if fit.stopped_at_budget:
