@@ -491,14 +491,15 @@ def test_parallel_fem_build_stopped_while_meshing_stops_at_once_and_leaves_no_me
 
 
 @pytest.mark.slow
-def test_finished_fem_segments_stay_cached_after_an_interrupt(tmp_path):
-    # cold cache: the FEM truth builds its chain segments (by default on one thread per
-    # core); stop it once the first one is reported, the others mid-build, then every cache
-    # file must be whole and readable
+def test_finished_fem_chains_stay_cached_after_an_interrupt(tmp_path):
+    # cold cache: the FEM truth builds its tied chains (by default on one thread per core;
+    # until session 25 it built chain segments, whose "FEM segment [" line this test waited
+    # for in vain since); stop it once the first one is reported, the others mid-build, then
+    # every cache file must be whole and readable
     from flexcal.fem.cache import load_cached
 
     cache = tmp_path / "cache"
-    status, lines, work = _interrupt_at(["truth", "--scenario", "table1", "--seed", "3"], tmp_path, "FEM segment [",
+    status, lines, work = _interrupt_at(["truth", "--scenario", "table1", "--seed", "3"], tmp_path, "FEM tied chain (",
                                         signal.SIGINT, env={"FLEXCAL_CACHE_DIR": str(cache)})
     assert status == 130 and "interrupted" in lines[-1], lines
     assert sorted(p.name for p in tmp_path.iterdir()) == ["cache", "work"]  # no out, no staging folder
