@@ -81,8 +81,14 @@ def test_variants_get_their_own_stages():
 
 
 def _args(**changes):
-    """bench_two_stage's parsed options (its own parser), with ``changes`` on the command line."""
-    argv = ["--out", "unused", "--seed", "3", "--scenario", "table1", "--keep-standard", "41"]
+    """bench_two_stage's parsed options (its own parser), with ``changes`` on the command line.
+    Its --out is a temporary folder, removed after (main makes it before its first stage;
+    "unused" in the working directory was left in the checkout by every test run)."""
+    import tempfile
+
+    scratch = tempfile.TemporaryDirectory(prefix="flexcal-bench-two-stage-")
+    argv = ["--out", str(Path(scratch.name) / "unused"), "--seed", "3", "--scenario", "table1",
+            "--keep-standard", "41"]
     for key, value in changes.items():
         argv += [f"--{key}"] if value is True else [f"--{key}", str(value)]
     captured = {}
@@ -93,7 +99,8 @@ def _args(**changes):
 
     from unittest import mock
 
-    with mock.patch.object(bench_two_stage, "stage_plan", lambda out, args: stop(args)), pytest.raises(_Parsed):
+    with scratch, mock.patch.object(bench_two_stage, "stage_plan", lambda out, args: stop(args)), \
+            pytest.raises(_Parsed):
         bench_two_stage.main(argv)
     return captured["args"]
 
