@@ -145,9 +145,9 @@ def _pass_on_signal() -> None:
     was inside ``main`` (status 143) and the run went on: it took a SIGKILL to stop it."""
     import signal
 
-    from .signals import take_received_signal
+    from ..interrupts import take_received
 
-    signum = take_received_signal()
+    signum = take_received()  # the first signal of the last termination_raises block
     if signum is not None:
         signal.raise_signal(signum)
 

@@ -23,10 +23,9 @@ import sys
 import threading
 from typing import Iterator
 
-from ..interrupts import Terminated, forget_received, received_interrupt, record_received, take_received
+from ..interrupts import Terminated, forget_received, received_interrupt, record_received
 
-__all__ = ["Terminated", "termination_raises", "interrupt_behind", "exit_status", "take_received_signal",
-           "HANDLED_SIGNALS"]
+__all__ = ["Terminated", "termination_raises", "interrupt_behind", "exit_status", "HANDLED_SIGNALS"]
 
 HANDLED_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
@@ -86,12 +85,6 @@ def interrupt_behind(error: BaseException) -> KeyboardInterrupt | None:
         seen.add(id(error))
         error = error.__cause__ or error.__context__
     return received_interrupt()
-
-
-def take_received_signal() -> int | None:
-    """The first signal (SIGINT or SIGTERM) delivered inside the last ``termination_raises``
-    block, or None; forgotten once taken."""
-    return take_received()
 
 
 def exit_status(interrupt: KeyboardInterrupt) -> int:

@@ -50,10 +50,13 @@ def settling_error(angles: np.ndarray, time: np.ndarray, time_constant, integrat
     # the state s_k - theta_k at the end of dwell k decays by q over it, from the error
     # state_{k-1} + theta_{k-1} - theta_k when the frame has jumped (a compiled loop)
     q = np.exp(-dwell[:, None] / tau[None, :])
+    averaged = integration_time > 0
+    if not averaged:
+        return settling(theta, q, tau, dwell, q, False)  # read at the instant: window and tail unread
     window = np.minimum(integration_time, dwell)
-    # averaged: the mean of start exp(-u / tau) over u in [dwell - window, dwell]
-    tail = (np.exp(-(dwell - window)[:, None] / tau[None, :]) - q) if integration_time > 0 else q
-    return settling(theta, q, tau, window, tail, integration_time > 0)
+    # the mean of start exp(-u / tau) over u in [dwell - window, dwell]
+    tail = np.exp(-(dwell - window)[:, None] / tau[None, :]) - q
+    return settling(theta, q, tau, window, tail, True)
 
 
 def ar1_series(time: np.ndarray, correlation_time: float, seed: int, channels: int = 3) -> np.ndarray:
