@@ -2,6 +2,7 @@
 (docs/model.md 11, session 20).
 
     .venv/bin/python benchmarks/bench_curvature_grid.py [--scenario table1] [--seeds 1,2,3] [--grids 3,4]
+        [--all-terms-grids 4,5]
 
 The FEM compliance factors of the scenario's nominal chains to first order (``compliance_slopes``) and
 to second order (``dimension_terms.compliance_curvatures``, the prototype's grid) against the as-built
@@ -11,6 +12,8 @@ factor: the driving chains' uz entries (D1 / D2 / D3), every entry but torsion o
 section (``fem_provider(...).on_grid(N)``, its own cache keys) as a relative curvature times the factor
 on the prototype's grid, the diagonal from the prototype's grid, with the CPU of the coarse grid's
 curvature builds (process CPU, build threads included; cold only if its segments are not cached).
+``--all-terms-grids N,..``: the slopes and every curvature on that grid (``elements_through``), as
+relative ones times the factor on the prototype's grid (docs/model.md 11, session 36).
 Not a test (cold, the FEM chains take minutes).
 """
 
@@ -40,6 +43,9 @@ def main(argv=None) -> int:
     parser.add_argument("--scenario", default="table1")
     parser.add_argument("--seeds", default="1,2,3")
     parser.add_argument("--grids", default="", help="elements through the thinnest section of the mixed entries' grid")
+    parser.add_argument("--all-terms-grids", default="",
+                        help="elements through the thinnest section of a grid for the slopes and every curvature "
+                             "(relative ones times the factor on the prototype's grid; docs/model.md 11, session 36)")
     args = parser.parse_args(argv)
     provider = stiffness_provider("fem", progress=False, workers=None)
     space = load_scenario(args.scenario).space
@@ -53,6 +59,13 @@ def main(argv=None) -> int:
         diagonal = np.arange(len(DIMENSION_SYMBOLS))
         mixed[:, diagonal, diagonal] = curvatures["prototype's grid"][:, diagonal, diagonal]
         curvatures[f"mixed entries on {n:g} through"] = mixed
+    sloped = {}  # label: (slopes, curvatures) on another grid, the first order's own
+    for n in (float(v) for v in args.all_terms_grids.split(",") if v):
+        start = time.perf_counter()
+        terms = (compliance_slopes(space, provider, elements_through=n),
+                 compliance_curvatures(space, provider, elements_through=n))
+        print(f"slopes and curvatures on {n:g} through: {time.perf_counter() - start:.1f} s wall")
+        sloped[f"slopes and curvatures on {n:g} through"] = terms
     print("\n| seed, factors | uz D1 / D2 / D3 % | all but torsion % | torsion % |\n|---|---|---|---|")
     for seed in (int(s) for s in args.seeds.split(",")):
         scenario = load_scenario(args.scenario, seed=seed)
@@ -66,6 +79,9 @@ def main(argv=None) -> int:
         for label, h in curvatures.items():
             print(_row(f"{seed}, + curvatures, {label}", linear + 0.5 * np.einsum("ck,cm,ckme->ce", relative, relative, h),
                        built))
+        for label, (g, h) in sloped.items():
+            print(_row(f"{seed}, {label}", factors + np.einsum("ck,cke->ce", relative, g)
+                       + 0.5 * np.einsum("ck,cm,ckme->ce", relative, relative, h), built))
     return 0
 
 

@@ -95,7 +95,8 @@ def main(argv=None) -> int:
     parser.add_argument("--slope-grids", default="default",
                         help="with --slopes: the mapped grid(s) of the slopes' FEM builds, comma-separated: 'default' "
                              "(model_correction.SLOPE_ELEMENTS_THROUGH), 'provider' (the prototype's own grid) or a "
-                             "number of cells through the thinnest section; one model row each")
+                             "number of cells through the thinnest section; one model row each (and with "
+                             "--curvatures the curvatures' and shortening slopes' rows on the same grid)")
     parser.add_argument("--curvatures", action="store_true",
                         help="with --slopes: add the consistent model whose factors follow the dimensions to second "
                              "order and whose shortening correction follows them (dimension_terms.curved_space, "
@@ -154,16 +155,15 @@ def _table(scenario_name, provider, corrections, args, strokes, force, trajector
             through = float(grid) if grid not in ("default", "provider") else through
             slopes = tuple(float(v) for v in compliance_slopes(paper, corrections, elements_through=through).ravel())
             shown = f"{through:g} through" if through is not None else "the prototype's grid"
-            models += ((f"+ FEM compliance factors following the dimensions (slopes at nominal, {shown})",
-                        dataclasses.replace(consistent, compliance_slopes=slopes)),)
-        if args.curvatures:
-            from flexcal.validation.runs.dimension_terms import curved_space
+            sloped = dataclasses.replace(consistent, compliance_slopes=slopes)
+            models += ((f"+ FEM compliance factors following the dimensions (slopes at nominal, {shown})", sloped),)
+            if args.curvatures:
+                from flexcal.validation.runs.dimension_terms import curved_space
 
-            sloped = models[-1][1]
-            for pairs in args.curvature_pairs.split(","):
-                models += ((f"+ the factors to second order ({pairs} pairs) and the shortening correction following "
-                            "the dimensions (curvatures, shortening slopes at nominal)",
-                            curved_space(sloped, corrections, pairs=pairs)),)
+                for pairs in args.curvature_pairs.split(","):
+                    models += ((f"+ the factors to second order ({pairs} pairs) and the shortening correction "
+                                f"following the dimensions (curvatures, shortening slopes at nominal, {shown})",
+                                curved_space(sloped, corrections, pairs=pairs, elements_through=through)),)
     amplitudes = standard_trajectory(scenario.space.mechanism).amplitudes
     trajectories = [("standard (77 points)", scenario.inputs, scenario.leg)]
     if trajectory_file:

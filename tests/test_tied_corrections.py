@@ -130,8 +130,52 @@ def test_a_tied_providers_slopes_and_curvatures_are_its_own_chains():
     np.testing.assert_allclose(curvatures, expected, rtol=0, atol=1e-7)
     with pytest.raises(ValueError, match="builds"):  # no condensed derivative of a tied chain
         compliance_slopes(space, provider, method="condensed")
-    with pytest.raises(ValueError, match="builds"):  # nor the rigid segments' relative slopes on another grid
-        compliance_slopes(space, provider, elements_through=3)
+
+
+def test_a_tied_providers_terms_on_another_grid_are_that_grids_relative_ones():
+    """On another grid (``elements_through``: the provider's ``on_grid``, tied too) the slopes and
+    curvatures are that grid's relative ones times the factor on the provider's grid: here the
+    other grid's chains are 2 % stiffer and their compliance goes as (w0 / w)^2, so the terms are
+    those of 1 / (1 + r)^2 (the 2 % cancels), not the provider's own 1 / (1 + r)."""
+    from flexcal.model.parameters import DIMENSION_SYMBOLS
+    from flexcal.validation.runs.dimension_terms import compliance_curvatures
+    from flexcal.validation.runs.model_correction import SLOPE_STEPS, compliance_slopes
+
+    space = parameter_space()
+    w0 = space.mechanism.chains[0].chain.width
+    provider = _softer_with_width(w0)
+    grids = []
+
+    def on_grid(n):
+        grids.append(n)
+        return _tied(analytic_provider(), lambda chain: 1.02 * _rigid_twist_stiffness(chain) * (chain.width / w0) ** 2)
+
+    provider.on_grid, provider.mesher = on_grid, "mapped"
+    s, w = SLOPE_STEPS["w"], DIMENSION_SYMBOLS.index("w")
+    plus, minus = (1.0 + s) ** -2, (1.0 - s) ** -2
+    slopes = compliance_slopes(space, provider, elements_through=3)
+    expected = np.zeros_like(slopes)
+    # the other grid's central difference over the mean of its +-s factors, times the factor here (1)
+    expected[:, w] = (plus - minus) / (2.0 * s) / (0.5 * (plus + minus))
+    # the analytic factors' rounding over 2 s (measured 2e-13 above); 1e-9
+    np.testing.assert_allclose(slopes, expected, rtol=0, atol=1e-9)
+    curvatures = compliance_curvatures(space, provider, elements_through=3)
+    expected = np.zeros_like(curvatures)
+    expected[:, w, w] = (plus + minus - 2.0) / s**2  # over the other grid's nominal factor, times 1
+    # the rounding over s^2 = 9e-4 (measured 3.8e-11 above); 1e-7
+    np.testing.assert_allclose(curvatures, expected, rtol=0, atol=1e-7)
+    assert grids and set(grids) == {3.0}
+
+
+def test_a_tied_fem_provider_on_another_grid_is_tied_on_that_grid():
+    from flexcal.validation.prototype.segments import is_tied
+    from flexcal.validation.prototype.tied_chains import tied_fem_provider
+
+    provider = tied_fem_provider("d12/p8", elements_through_thickness=7, progress=False)
+    coarse = provider.on_grid(4)
+    assert is_tied(coarse) and coarse.ties == provider.ties
+    assert coarse.elements_through_thickness == 4.0 and provider.elements_through_thickness == 7.0
+    assert coarse.keeping_segments().elements_through_thickness == 4.0
 
 
 def test_the_shortening_probe_runs_on_the_tied_chain():

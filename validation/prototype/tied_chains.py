@@ -250,7 +250,15 @@ def tied_fem_provider(ties: str = DEFAULT_TIES, *, keep_segments: bool = False, 
     def keeping_segments():
         return provider if keep_segments else tied_fem_provider(ties, keep_segments=True, **fem_options)
 
+    def on_grid(n: float):
+        """This provider (same ties, material, cache, executor) with ``n`` elements through the
+        thinnest section: the grid the model's dimension terms are measured on
+        (``model_correction.DIMENSION_TERMS_THROUGH``; their own cache keys)."""
+        return tied_fem_provider(ties, keep_segments=keep_segments,
+                                 **{**fem_options, "elements_through_thickness": float(n)})
+
     provider.prepare_chains, provider.ties, provider.keeping_segments = prepare_chains, ties, keeping_segments
+    provider.on_grid = on_grid
     provider.chain_stiffness = lambda chain: matrices(chain)["stiffness"]
     provider.chain_segments = lambda chain: matrices(chain)["segments"]
     provider.description = provider.description[:-1] + f", cuts tied through {ties} fields)"

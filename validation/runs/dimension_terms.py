@@ -52,8 +52,8 @@ from flexcal.model.parameters import DIMENSION_SYMBOLS, ParameterSpace
 from ..prototype.segments import (StiffnessProvider, chain_slices, is_tied, prepare_chains, prepare_provider,
                                   sharing_segments)
 from .chain_kinematics import chain_shortening
-from .model_correction import (SLOPE_STEPS, compliance_factors, moved_chain, provider_chain_compliance,
-                               same_design, slope_moves, unchanged_slices)
+from .model_correction import (SLOPE_ELEMENTS_THROUGH, SLOPE_STEPS, compliance_factors, moved_chain,
+                               provider_chain_compliance, same_design, slope_moves, slope_provider, unchanged_slices)
 
 __all__ = ["PAIR_DIFFERENCES", "DEFAULT_PAIR_DIFFERENCES", "compliance_curvatures", "shortening_slopes", "curved_space",
            "curvature_moves", "prepare_model_chains", "moved_chain", "moved_factors", "slice_owners"]
@@ -145,14 +145,21 @@ def prepare_model_chains(space: ParameterSpace, provider: StiffnessProvider, *,
 
 def compliance_curvatures(space: ParameterSpace, provider: StiffnessProvider,
                           steps: dict[str, float] | None = None, *,
-                          pairs: str = DEFAULT_PAIR_DIFFERENCES) -> np.ndarray:
+                          pairs: str = DEFAULT_PAIR_DIFFERENCES,
+                          elements_through: float | None = SLOPE_ELEMENTS_THROUGH) -> np.ndarray:
     """(n_chains, 5, 5, 8): the second derivative of each factor of ``compliance_factors`` per
     relative change of two chain dimensions (``DIMENSION_SYMBOLS``: w, a, l, t1, t2) at the
     nominal chains of ``space`` [-] (module docstring), symmetric in the two dimensions.
 
     pairs (``PAIR_DIFFERENCES``): the mixed entries from both pair moves, (+s_k, +s_m) and
     (-s_k, -s_m) ("central", O(s^2)), or from (+s_k, +s_m) alone ("one-sided":
-    ``(f(+s_k, +s_m) - f(+s_k) - f(+s_m) + f0) / (s_k s_m)``, O(s), half the pair builds)."""
+    ``(f(+s_k, +s_m) - f(+s_k) - f(+s_m) + f0) / (s_k s_m)``, O(s), half the pair builds).
+    elements_through: the grid of the builds (``slope_provider``; None, the default: ``provider``'s
+    own), as for the slopes: on another grid, that grid's relative curvature (H over its own
+    nominal factor) times the factor on ``provider``'s grid (measured and rejected as the
+    default, docs/model.md 11 "Session 36")."""
+    fine, provider = provider, slope_provider(provider, elements_through)
+    other_grid = provider is not fine
     steps = SLOPE_STEPS if steps is None else steps
     mech = space.mechanism
     design = same_design(mech.chains)
@@ -188,16 +195,21 @@ def compliance_curvatures(space: ParameterSpace, provider: StiffnessProvider,
             else:
                 mixed = (ratio[c, k, m, 1] - ratio[c, k, k, 1] - ratio[c, m, m, 1] + nominal[c]) / (h[k] * h[m])
             out[c, k, m] = out[c, m, k] = mixed
+    if other_grid:  # on another grid: its relative curvature times the factor on the provider's grid
+        out *= (compliance_factors(space, fine) / np.where(nominal == 0.0, 1.0, nominal))[:, None, None, :]
     return out[design]
 
 
 def shortening_slopes(space: ParameterSpace, provider: StiffnessProvider,
-                      steps: dict[str, float] | None = None) -> np.ndarray:
+                      steps: dict[str, float] | None = None, *,
+                      elements_through: float | None = SLOPE_ELEMENTS_THROUGH) -> np.ndarray:
     """(n_chains, 5, 6, 6): the change of each chain's shortening correction
     (``chain_kinematics.shortening_corrections``) per relative change of each dimension at the
-    nominal chains of ``space`` [1/m, 1, m]: central differences at +-``SLOPE_STEPS``."""
+    nominal chains of ``space`` [1/m, 1, m]: central differences at +-``SLOPE_STEPS``, probed on
+    the slopes' moved chains on their grid (``elements_through``, ``slope_provider``)."""
     from flexcal.model.shortening import chain_shortening_form
 
+    provider = slope_provider(provider, elements_through)
     steps = SLOPE_STEPS if steps is None else steps
     mech = space.mechanism
     design = same_design(mech.chains)
@@ -217,13 +229,17 @@ def shortening_slopes(space: ParameterSpace, provider: StiffnessProvider,
 
 
 def curved_space(space: ParameterSpace, provider: StiffnessProvider, *,
-                 pairs: str = DEFAULT_PAIR_DIFFERENCES) -> ParameterSpace:
+                 pairs: str = DEFAULT_PAIR_DIFFERENCES,
+                 elements_through: float | None = SLOPE_ELEMENTS_THROUGH) -> ParameterSpace:
     """``space`` (a consistent space with ``compliance_slopes``) whose factors follow the
     dimensions to second order and whose shortening correction follows them:
-    ``compliance_curvatures`` (``pairs``) and ``shortening_slopes`` of ``space`` and ``provider``."""
+    ``compliance_curvatures`` (``pairs``) and ``shortening_slopes`` of ``space`` and ``provider``,
+    built on ``elements_through`` (the slopes' grid; None: the provider's own)."""
     if not (space.compliance_slopes and space.chain_shortening):
         raise ValueError("curved_space needs a consistent space with compliance slopes "
                          "(chain_kinematics.consistent_space over corrected_space(..., slopes=True))")
     return dataclasses.replace(
-        space, compliance_curvatures=tuple(float(v) for v in compliance_curvatures(space, provider, pairs=pairs).ravel()),
-        shortening_slopes=tuple(float(v) for v in shortening_slopes(space, provider).ravel()))
+        space, compliance_curvatures=tuple(float(v) for v in compliance_curvatures(
+            space, provider, pairs=pairs, elements_through=elements_through).ravel()),
+        shortening_slopes=tuple(float(v) for v in shortening_slopes(space, provider,
+                                                                    elements_through=elements_through).ravel()))

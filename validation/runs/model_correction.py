@@ -126,7 +126,11 @@ SLOPE_STEPS = {"w": 0.03, "a": 0.025, "l": 0.03, "t1": 0.03, "t2": 0.03}
 # session 15): at 3 through the slopes' CPU drops ~5x and the factors at table1's true
 # dimensions move by <= 0.14 % (their error left is 0.11-0.19 %), but the form error on
 # table1's `flexcal design` trajectory rises from 0.10 / 0.27 / 0.07 to 0.18 / 0.49 / 0.12 urad
-# (4 through: 0.14 / 0.39 / 0.10).
+# (4 through: 0.14 / 0.39 / 0.10). Measured again on the tied chains with the quadratic terms
+# (session 36: slopes, curvatures and shortening slopes on 4 / 5 through, which would take the
+# cold main job's model chains from ~92 to ~30 / ~55 s): the design's form error 0.07 / 0.05 /
+# 0.01 urad becomes 0.14 / 0.65 / 0.16 (4) and 0.13 / 0.51 / 0.12 (5), past issue 24's 0.25
+# (docs/model.md 11, "Session 36"). The tied provider's ``on_grid`` is tied too.
 SLOPE_ELEMENTS_THROUGH: float | None = None
 
 
@@ -193,10 +197,10 @@ def compliance_slopes(space: ParameterSpace, provider: StiffnessProvider,
     method = SLOPE_METHOD if method is None else method
     if method not in SLOPE_METHODS:
         raise ValueError(f"slope method {method!r} must be one of {', '.join(SLOPE_METHODS)}")
-    if is_tied(provider) and (method != "builds" or elements_through is not None):
-        raise ValueError(f"a tied provider's slopes are the builds of its own chains on its own grid (method 'builds', "
-                         f"elements_through None), not {method!r} on {elements_through}: the rigidly joined "
-                         "segments' (relative) slopes miss the tied chains' (docs/model.md 7, 'Session 25')")
+    if is_tied(provider) and method != "builds":
+        raise ValueError(f"a tied provider's slopes are the builds of its own chains (method 'builds'), not "
+                         f"{method!r}: the rigidly joined segments' (relative) slopes miss the tied chains' "
+                         "(docs/model.md 7, 'Session 25')")
     if method != "builds" and elements_through is None and getattr(provider, "mesher", None) == "mapped":
         secant = SLOPE_STEPS if steps is None else steps
         return _slopes_condensed(space, provider, secant if method == "condensed-secant" else None)
@@ -250,10 +254,10 @@ def _slopes_by_builds(space: ParameterSpace, provider: StiffnessProvider,
     # (``tied_chains``), since the rigid cuts' slopes miss how the cuts' axial compliance follows
     # the dimensions (docs/model.md 7, "Session 25"); the nominal chains first, so that the moved
     # ones read the segment condensations a dimension leaves as they were from the cache
-    tied = provider is fine and is_tied(fine)
+    tied = is_tied(provider)
     if tied:  # the chains keep their segment condensations, which the moved ones share
         nominals = [p.chain for c, p in enumerate(mech.chains) if design[c] == c]
-        sharing = sharing_segments(fine)
+        sharing = sharing_segments(provider)
         prepare_chains(sharing, list(dict.fromkeys([*nominals, *moved.values()])))  # parallel FEM builds
     else:
         prepare_provider(provider, list(dict.fromkeys(s for key in moved for s in slices_of(key))))
