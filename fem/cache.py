@@ -332,7 +332,13 @@ def cached(
     thread is computing waits for it and reads its result (two job threads building tied chains
     that share a segment, ``validation.prototype.tied_chains``; a computation that asks for other
     entries nests, as the keys it asks for never ask back). Other processes (Dask workers) may
-    compute the same entry at once: the same bits, each written whole (``store_cached``)."""
+    compute the same entry at once: the same bits, each written whole (``store_cached``).
+
+    ``compute`` runs on one thread (``fem.solve.one_thread``: PARDISO and BLAS), so an entry
+    holds the same bits whichever command, batch or machine's core count computed it: before,
+    a chain built alone on both cores and the same chain built beside another came out 1.4e-13
+    apart, and a later noise-free run read whichever the cache held first (docs/scale.md,
+    "Issue 26, session 36")."""
     key = cache_key(parts)
     cache_is_writable(directory)  # up front: the warning comes before the FEM work, not after it
     found = load_cached(key, directory)
@@ -346,7 +352,10 @@ def cached(
         if found is not None:
             return found
         try:
-            arrays = {name: np.asarray(a) for name, a in compute().items()}
+            from .solve import one_thread
+
+            with one_thread():  # an entry's bits do not depend on the cores it was computed on
+                arrays = {name: np.asarray(a) for name, a in compute().items()}
             keep_cached(key, arrays, directory)
         finally:
             with _LOCK:

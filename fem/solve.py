@@ -31,7 +31,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-__all__ = ["SOLVERS", "pardiso_available", "solve_spd", "solver_threads", "inverse_quadratic_form"]
+__all__ = ["SOLVERS", "pardiso_available", "solve_spd", "solver_threads", "one_thread", "inverse_quadratic_form"]
 
 SOLVERS = ("auto", "pardiso", "splu", "spsolve", "amg")
 RESIDUAL_LIMIT = 1e-6
@@ -85,6 +85,33 @@ def solver_threads(n_threads: int) -> Iterator[None]:
             yield
     finally:
         _PER_THREAD.mkl_threads = previous
+
+
+@contextlib.contextmanager
+def one_thread() -> Iterator[None]:
+    """Inside the block, this thread's PARDISO on one MKL thread (``solver_threads(1)``) and, on
+    the main thread, the process's BLAS pools on one thread (threadpoolctl), so that what is
+    computed does not depend on the machine's cores or on how many jobs shared them: MKL's
+    PARDISO and OpenBLAS give other last bits on another thread count (a tied chain alone on both
+    cores against one of two side by side: 1.4e-13 relative; with both at one thread, the same
+    bits). ``fem.cache.cached`` computes every entry inside it (docs/scale.md, "Issue 26, session
+    36"). Another thread's jobs run inside their executor's batch, which holds the pools at one
+    from the thread that started it (``validation.prototype.fem_provider.build_missing``):
+    OpenBLAS takes its count from there (measured, threadpoolctl 3 on OpenBLAS 0.3.30: a limit
+    set on another thread after the main thread set one did not show)."""
+    with solver_threads(1), (_blas_on_one_thread() if threading.current_thread() is threading.main_thread()
+                             else contextlib.nullcontext()):
+        yield
+
+
+def _blas_on_one_thread():
+    """threadpoolctl's limit of every loaded BLAS to one thread, after loading scipy's own
+    OpenBLAS and MKL (a library loaded after the limit keeps its own count)."""
+    import scipy.linalg  # noqa: F401
+    from threadpoolctl import threadpool_limits
+
+    pardiso_available()
+    return threadpool_limits(1, user_api="blas")
 
 
 def _openmp_threads(n_threads: int):

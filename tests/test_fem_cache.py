@@ -375,3 +375,40 @@ def test_a_failed_computation_lets_the_next_thread_compute(tmp_path):
         cache.cached(PARTS, fails, tmp_path)
     assert not cache._COMPUTING
     np.testing.assert_array_equal(cache.cached(PARTS, lambda: {"value": np.ones(1)}, tmp_path)["value"], np.ones(1))
+
+
+def _blas_threads() -> set[int]:
+    """The thread counts of the loaded OpenBLAS pools (numpy's and scipy's BLAS; MKL serves PARDISO
+    only, on ``solve._PER_THREAD.mkl_threads``)."""
+    from threadpoolctl import threadpool_info
+
+    return {pool["num_threads"] for pool in threadpool_info() if pool["internal_api"] == "openblas"}
+
+
+def test_an_entry_is_computed_on_one_thread_and_the_pools_given_back(tmp_path):
+    """``compute`` runs with PARDISO on one MKL thread (this thread's count) and, on the main
+    thread, OpenBLAS's pools on one thread (fem.solve.one_thread: the same bits on any machine or
+    batch); after, the pools are as they were. On a job thread the PARDISO count is that
+    thread's own (its executor holds the pools)."""
+    import threading
+
+    from threadpoolctl import threadpool_limits
+
+    from flexcal.fem import solve
+
+    seen = []
+
+    def compute():
+        seen.append((threading.current_thread() is threading.main_thread(),
+                     getattr(solve._PER_THREAD, "mkl_threads", 0), _blas_threads()))
+        return {"x": np.zeros(1)}
+
+    with threadpool_limits(2, user_api="blas"):
+        assert _blas_threads() == {2}
+        cache.cached({**PARTS, "entry": 1}, compute, tmp_path)
+        assert _blas_threads() == {2}  # given back
+        job = threading.Thread(target=cache.cached, args=({**PARTS, "entry": 2}, compute, tmp_path))
+        job.start()
+        job.join(10)
+    assert seen[0] == (True, 1, {1})
+    assert seen[1][:2] == (False, 1)

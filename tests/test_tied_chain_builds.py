@@ -210,3 +210,26 @@ def test_the_curvatures_moved_chains_keep_their_segments(monkeypatch, tmp_path):
     # the 2 designs' single moves at +-step and pair moves at +step (then the nominal chains for the
     # factors, which this fake executor never stored)
     assert keep[0] == (2 * (5 * 2 + 10), True)
+
+
+def test_a_tied_chain_holds_the_same_bits_built_alone_on_every_core_or_beside_another(tmp_path):
+    """The entry of a chain built here with PARDISO and BLAS on two threads (all of this machine's
+    cores, as a lone build had them) is the one built on a job thread beside another chain: an
+    entry is computed on one thread (``fem.cache.cached``). Before, D1 on 2 cells through came
+    out 3.8e-15 relative apart, and 1.4e-13 for table1's L2 on the prototype's grid, which the
+    shortening probe turned into a noise-free run's other estimate (docs/scale.md, "Issue 26,
+    session 36")."""
+    import dataclasses
+
+    from flexcal.fem.solve import solver_threads
+    from flexcal.validation.blas_threads import blas_threads
+
+    chain = reference_mechanism().chains[3].chain
+    other = dataclasses.replace(chain, thickness_1=chain.thickness_1 * 1.03)
+    with solver_threads(2), blas_threads(2):
+        here = tc.tied_chain_matrices(chain, elements_through_thickness=2, cache_directory=tmp_path / "here")
+    assert tc.build_tied_chains([chain, other], elements_through_thickness=2, cache_directory=tmp_path / "pair",
+                                workers=2, progress=False) == 2
+    beside = tc.tied_chain_matrices(chain, elements_through_thickness=2, cache_directory=tmp_path / "pair")
+    for name in ("stiffness", "segments"):
+        np.testing.assert_array_equal(here[name], beside[name])

@@ -314,9 +314,11 @@ def build_missing(missing: dict[str, Any], job: Callable[..., dict[str, Any]], o
     # PARDISO runs on each job's own (solver_threads), but the products beside it (a condensation's
     # Y^T Y, the cut fields' least squares) ran on every core from every job thread, four BLAS
     # threads on 2 cores. Cold table1 truth 32.5 -> 25.6 s wall, 61.7 -> 48.1 s CPU (docs/scale.md,
-    # "Issue 26, session 30"). The pools are the process's, held while this thread waits.
-    shared = in_threads and n_workers > 1
-    with blas_threads(cores_each) if shared else contextlib.nullcontext():
+    # "Issue 26, session 30"). The pools are the process's, held while this thread waits. At one
+    # thread whatever the batch's size (session 36): a job's entry then holds the same bits built
+    # alone or beside others, on any core count (``flexcal.fem.solve.one_thread``, which holds
+    # each job's PARDISO at one thread too).
+    with blas_threads(1) if in_threads else contextlib.nullcontext():
         failures = run_jobs(list(missing.values()), job, on_done, key=lambda item: keys[id(item)][:16],
                             workers=n_workers, scheduler=scheduler,
                             job_options={**options, "mesher_threads": cores_each, "solver_threads": cores_each},
