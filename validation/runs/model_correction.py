@@ -340,13 +340,12 @@ def segment_stiffness_slopes(chain: FlexureChain, index: int, symbols=None, *, m
     default), cached (its own key, which names the method and ``step``). One mapped mesh and
     one factorisation (``fem.condense.solve_chain`` on the whole mesh of ``FAST_CHAIN_OPTIONS``;
     not the provider's numbers, whose cache entry it leaves alone); each dimension then costs two meshes and assemblies
-    (``fem.condense.chain_stiffness_derivative``), or none when it leaves the slice as it was."""
-    import contextlib
-
+    (``fem.condense.chain_stiffness_derivative``), or none when it leaves the slice as it was.
+    solver_threads: unused (the executor's job option; an entry is computed on one thread,
+    ``fem.cache.cached``)."""
     from flexcal.fem.cache import cached
     from flexcal.fem.condense import MorphedChain, chain_stiffness_derivative, solve_chain
     from flexcal.fem.mesh_mapped_chain import FAST_CHAIN_OPTIONS, mapped_mesh_chain
-    from flexcal.fem.solve import solver_threads as mkl_threads
     from flexcal.geometry.exact import end_planes, pieces, reference_points
     from flexcal.model.parameters import DIMENSION_SYMBOLS
 
@@ -367,8 +366,7 @@ def segment_stiffness_slopes(chain: FlexureChain, index: int, symbols=None, *, m
     def compute() -> dict[str, np.ndarray]:
         mesh = mesh_of(segment)
         planes, points = end_planes(segment), reference_points(segment)
-        with mkl_threads(solver_threads) if solver_threads else contextlib.nullcontext():
-            solution = solve_chain(mesh, material, planes["A"], points["A"], planes["B"], points["B"])
+        solution = solve_chain(mesh, material, planes["A"], points["A"], planes["B"], points["B"])
         stiffness = 0.5 * (solution.stiffness + solution.stiffness.T)
         # not written under the provider's key (segment_cache_key): the provider's segments are on
         # PROTOTYPE_CHAIN_OPTIONS and condensed on their mirror part (session 16 / 17), other
