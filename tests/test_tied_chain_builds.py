@@ -231,5 +231,10 @@ def test_a_tied_chain_holds_the_same_bits_built_alone_on_every_core_or_beside_an
     assert tc.build_tied_chains([chain, other], elements_through_thickness=2, cache_directory=tmp_path / "pair",
                                 workers=2, progress=False) == 2
     beside = tc.tied_chain_matrices(chain, elements_through_thickness=2, cache_directory=tmp_path / "pair")
+    # a lone job on the executor (it had every core: both MKL threads and the BLAS pools unlimited)
+    assert tc.build_tied_chains([chain], elements_through_thickness=2, cache_directory=tmp_path / "lone",
+                                workers=None, progress=False) == 1
+    lone = tc.tied_chain_matrices(chain, elements_through_thickness=2, cache_directory=tmp_path / "lone")
     for name in ("stiffness", "segments"):
         np.testing.assert_array_equal(here[name], beside[name])
+        np.testing.assert_array_equal(lone[name], beside[name])
