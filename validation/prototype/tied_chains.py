@@ -252,8 +252,8 @@ def tied_fem_provider(ties: str = DEFAULT_TIES, *, keep_segments: bool = False, 
 
     def on_grid(n: float):
         """This provider (same ties, material, cache, executor) with ``n`` elements through the
-        thinnest section: the grid the model's dimension terms are measured on
-        (``model_correction.DIMENSION_TERMS_THROUGH``; their own cache keys)."""
+        thinnest section, for the model's dimension terms measured on another grid
+        (``model_correction.slope_provider``; their own cache keys)."""
         return tied_fem_provider(ties, keep_segments=keep_segments,
                                  **{**fem_options, "elements_through_thickness": float(n)})
 

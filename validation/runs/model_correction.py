@@ -250,7 +250,7 @@ def _slopes_by_builds(space: ParameterSpace, provider: StiffnessProvider,
         nominal, chain = mech.chains[key[0]].chain, moved[key]
         return [(nominal if (x0, x1) in shared[key] else chain, x0, x1) for _, x0, x1 in chain_slices([chain])]
 
-    # a tied provider on its own grid: each moved chain condensed whole through its cut fields
+    # a tied provider (on its own grid or elements_through's): each moved chain condensed whole through its cut fields
     # (``tied_chains``), since the rigid cuts' slopes miss how the cuts' axial compliance follows
     # the dimensions (docs/model.md 7, "Session 25"); the nominal chains first, so that the moved
     # ones read the segment condensations a dimension leaves as they were from the cache
