@@ -4,6 +4,7 @@
         [--corrections fem|fem-rigid] [--scenario-seeds 1,2,3]
         [--walks 3] [--points 60] [--strokes 0.5,0.8] [--seed 1] [--breakaway 2] [--slopes]
         [--slope-grids default,provider] [--curvatures] [--curvature-pairs central,one-sided]
+        [--mixed-grids default,3,4]
         [--trajectory table1=DIR/trajectory.csv ...]
 
 Truth: the scenario's as-built virtual prototype (FEM segment stiffness by default, noise-free
@@ -104,6 +105,10 @@ def main(argv=None) -> int:
     parser.add_argument("--curvature-pairs", default="one-sided",
                         help="with --curvatures: the mixed entries' differences, comma-separated rows "
                              "(dimension_terms.PAIR_DIFFERENCES: central, one-sided; the default's one-sided)")
+    parser.add_argument("--mixed-grids", default="default",
+                        help="with --curvatures: the mapped grid(s) of the mixed curvatures' builds alone, "
+                             "comma-separated: 'default' (dimension_terms.MIXED_ELEMENTS_THROUGH), 'same' (the "
+                             "slopes' grid) or a number of cells through the thinnest section; one row each")
     parser.add_argument("--trajectory", action="append", default=[], metavar="SCENARIO=FILE",
                         help="a trajectory file (columns xa1_mm, xa2_mm, xa3_mm) to add for that scenario")
     args = parser.parse_args(argv)
@@ -160,10 +165,18 @@ def _table(scenario_name, provider, corrections, args, strokes, force, trajector
             if args.curvatures:
                 from flexcal.validation.runs.dimension_terms import curved_space
 
+                from flexcal.validation.runs.dimension_terms import MIXED_ELEMENTS_THROUGH
+
                 for pairs in args.curvature_pairs.split(","):
-                    models += ((f"+ the factors to second order ({pairs} pairs) and the shortening correction "
-                                f"following the dimensions (curvatures, shortening slopes at nominal, {shown})",
-                                curved_space(sloped, corrections, pairs=pairs, elements_through=through)),)
+                    for mixed_grid in args.mixed_grids.split(","):
+                        mixed = {"default": MIXED_ELEMENTS_THROUGH, "same": None}.get(mixed_grid)
+                        mixed = float(mixed_grid) if mixed_grid not in ("default", "same") else mixed
+                        mixed_shown = "" if mixed is None else f", the mixed ones on {mixed:g} through"
+                        models += ((f"+ the factors to second order ({pairs} pairs) and the shortening correction "
+                                    f"following the dimensions (curvatures, shortening slopes at nominal, {shown}"
+                                    f"{mixed_shown})",
+                                    curved_space(sloped, corrections, pairs=pairs, elements_through=through,
+                                                 mixed_elements_through=mixed)),)
     amplitudes = standard_trajectory(scenario.space.mechanism).amplitudes
     trajectories = [("standard (77 points)", scenario.inputs, scenario.leg)]
     if trajectory_file:

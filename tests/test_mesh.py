@@ -306,6 +306,7 @@ def test_runs_away_past_25_times_the_sizing_fields_vertex_count():
     assert not runs_away(25_000, 1000.0) and runs_away(25_001, 1000.0)
 
 
+@pytest.mark.slow  # ~60 s of a real fTetWild runaway (an option since the mapped mesher's default, issue 26)
 def test_a_seed_whose_run_runs_away_is_left_for_the_next(monkeypatch):
     """tests/data/tetwild_runaway.npz: the fTetWild input (surface, sizing field, options)
     of a 36 mm block segment of the mount on which MESHER_SEED's run grows without end

@@ -262,3 +262,57 @@ def test_one_batch_builds_every_chain_the_models_corrections_ask_for():
     assert len(batches) > 1 and all(set(b) <= batch for b in batches[1:])
     assert asked and set(asked) <= batch
     assert set(asked) | {c for b in batches[1:] for c in b} == batch  # the batch builds nothing unasked
+
+
+def test_the_mixed_curvatures_on_another_grid_are_that_grids_relative_ones_and_the_diagonal_stays():
+    """``mixed_elements_through``: the mixed entries are the other grid's relative ones (its
+    one-sided pair difference over its own nominal factor) times the factor here, the diagonal
+    the provider's own. Here the chains' compliance goes as 1 / x, x = (w / w0) (t1 / t1_0) (each
+    factor 1 / x), on the other grid as 1 / (1.02 x^2): the mixed (w, t1) entry is (1 - 1 / (1 + s_w)
+    ^2) (1 - 1 / (1 + s_t)^2) / (s_w s_t) (the 2 % cancels), not this grid's 1 / ((1 + s_w)(1 + s_t)),
+    and the diagonal is this grid's 2 / (1 - s^2). The batch of the model's chains builds the
+    other grid's apart, after: its nominal designs, single moves (+s alone) and pairs."""
+    from flexcal.model.parameters import DIMENSION_SYMBOLS
+    from flexcal.validation.runs.dimension_terms import compliance_curvatures, prepare_model_chains
+    from flexcal.validation.runs.model_correction import SLOPE_STEPS
+
+    space = parameter_space()
+    w0 = space.mechanism.chains[0].chain.width
+    assert len({p.chain.width for p in space.mechanism.chains}) == 1  # one nominal width, w0
+    # the designs' leaf thicknesses (4 and 3 mm): a moved one is within 3 % of its own
+    t_nominal = sorted({p.chain.thickness_1 for p in space.mechanism.chains})
+
+    def x(chain):
+        t0 = min(t_nominal, key=lambda t: abs(chain.thickness_1 - t))
+        return (chain.width / w0) * (chain.thickness_1 / t0)
+
+    batches = []
+    provider = _tied(analytic_provider(), lambda chain: _rigid_twist_stiffness(chain) * x(chain))
+    coarse = _tied(analytic_provider(), lambda chain: 1.02 * _rigid_twist_stiffness(chain) * x(chain) ** 2)
+    grids = []
+
+    def on_grid(n):
+        grids.append(n)
+        return coarse
+
+    provider.on_grid, provider.mesher = on_grid, "mapped"
+    provider.prepare_chains = lambda chains: batches.append(("fine", list(chains)))
+    coarse.prepare_chains = lambda chains: batches.append(("coarse", list(chains)))
+    sw, st = SLOPE_STEPS["w"], SLOPE_STEPS["t1"]
+    w, t = DIMENSION_SYMBOLS.index("w"), DIMENSION_SYMBOLS.index("t1")
+    curvatures = compliance_curvatures(space, provider, mixed_elements_through=3)
+    expected = np.zeros_like(curvatures)
+    expected[:, w, w] = 2.0 / (1.0 - sw * sw)
+    expected[:, t, t] = 2.0 / (1.0 - st * st)
+    expected[:, w, t] = expected[:, t, w] = (1 - (1 + sw) ** -2) * (1 - (1 + st) ** -2) / (sw * st)
+    # the analytic factors' rounding over s^2 = 9e-4 (measured 3.8e-11 in the test above); 1e-7
+    np.testing.assert_allclose(curvatures, expected, rtol=0, atol=1e-7)
+    same = compliance_curvatures(space, provider)  # the default: every entry on this grid
+    assert abs(same[0, w, t, 0] - 1.0 / ((1 + sw) * (1 + st))) < 1e-7  # this grid's one-sided pair
+    np.testing.assert_array_equal(np.diagonal(curvatures, axis1=1, axis2=2), np.diagonal(same, axis1=1, axis2=2))
+    assert set(grids) == {3.0}
+    batches.clear()
+    prepare_model_chains(space, provider, mixed_elements_through=3)
+    assert [kind for kind, _ in batches] == ["fine", "coarse"]
+    # fine: the 3 nominal chains and 2 x 10 single moves; coarse: the 2 designs, 2 x 5 (+s) moves, 2 x 10 pairs
+    assert (len(batches[0][1]), len(batches[1][1])) == (3 + 20, 2 + 10 + 20)

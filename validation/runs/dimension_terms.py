@@ -55,7 +55,7 @@ from .chain_kinematics import chain_shortening
 from .model_correction import (SLOPE_ELEMENTS_THROUGH, SLOPE_STEPS, compliance_factors, moved_chain,
                                provider_chain_compliance, same_design, slope_moves, slope_provider, unchanged_slices)
 
-__all__ = ["PAIR_DIFFERENCES", "DEFAULT_PAIR_DIFFERENCES", "compliance_curvatures", "shortening_slopes", "curved_space",
+__all__ = ["PAIR_DIFFERENCES", "DEFAULT_PAIR_DIFFERENCES", "CURVATURE_TERMS", "MIXED_ELEMENTS_THROUGH", "compliance_curvatures", "shortening_slopes", "curved_space",
            "curvature_moves", "prepare_model_chains", "moved_chain", "moved_factors", "slice_owners"]
 
 
@@ -102,22 +102,37 @@ PAIR_DIFFERENCES = ("central", "one-sided")
 DEFAULT_PAIR_DIFFERENCES = "one-sided"
 
 
+CURVATURE_TERMS = ("all", "diagonal", "mixed")
+# The grid of the mixed curvatures' builds by default: None, the diagonal's (the slopes' grid).
+# A number n: the mixed entries are that grid's relative ones (``on_grid(n)``, nominal, single and
+# pair moves on it) times the factor on the provider's grid, the diagonal stays on the slopes'
+# builds (docs/model.md 11, "Session 37"; session 19 measured it on the rigid cuts)
+MIXED_ELEMENTS_THROUGH: float | None = None
+
+
 def curvature_moves(space: ParameterSpace, steps: dict[str, float] | None = None, *,
-                    pairs: str = DEFAULT_PAIR_DIFFERENCES) -> dict[tuple, FlexureChain]:
+                    pairs: str = DEFAULT_PAIR_DIFFERENCES, terms: str = "all") -> dict[tuple, FlexureChain]:
     """{(chain index, k, m, sign): the moved chain} of ``compliance_curvatures``' builds: each
     chain design's first chain (``same_design``) with dimension k moved by sign step (k == m,
     the slopes' own chains) or k and m both (``pairs``: sign +1 and -1 "central", +1 alone
-    "one-sided"), in the order the builds ask for them."""
+    "one-sided"), in the order the builds ask for them. terms (``CURVATURE_TERMS``): "all";
+    "diagonal", the single moves alone; "mixed", the pairs and the single moves their formula
+    reads (+1 alone for one-sided pairs)."""
     if pairs not in PAIR_DIFFERENCES:
         raise ValueError(f"pairs={pairs!r} must be one of {', '.join(PAIR_DIFFERENCES)}")
+    if terms not in CURVATURE_TERMS:
+        raise ValueError(f"terms={terms!r} must be one of {', '.join(CURVATURE_TERMS)}")
     steps = SLOPE_STEPS if steps is None else steps
     mech = space.mechanism
     design = same_design(mech.chains)
+    single_signs = (1,) if terms == "mixed" and pairs == "one-sided" else (1, -1)
     moves = {}
     for c in (c for c in range(len(mech.chains)) if design[c] == c):
         for k, symbol in enumerate(DIMENSION_SYMBOLS):
-            for sign in (1, -1):
+            for sign in single_signs:
                 moves[c, k, k, sign] = {symbol: sign * steps[symbol]}
+        if terms == "diagonal":
+            continue
         for k, m in itertools.combinations(range(len(DIMENSION_SYMBOLS)), 2):
             for sign in ((1, -1) if pairs == "central" else (1,)):
                 moves[c, k, m, sign] = {DIMENSION_SYMBOLS[k]: sign * steps[DIMENSION_SYMBOLS[k]],
@@ -126,7 +141,8 @@ def curvature_moves(space: ParameterSpace, steps: dict[str, float] | None = None
 
 
 def prepare_model_chains(space: ParameterSpace, provider: StiffnessProvider, *,
-                         pairs: str = DEFAULT_PAIR_DIFFERENCES) -> None:
+                         pairs: str = DEFAULT_PAIR_DIFFERENCES,
+                         mixed_elements_through: float | None = MIXED_ELEMENTS_THROUGH) -> None:
     """Build at once, in one batch on the executor, every chain the consistent model's FEM
     corrections with quadratic dimension terms will ask a tied ``provider`` for: the mount's
     nominal chains (every placement's: L2, 1 ulp longer than L1, has its own shortening probe,
@@ -134,19 +150,38 @@ def prepare_model_chains(space: ParameterSpace, provider: StiffnessProvider, *,
     and the curvatures' (``curvature_moves``), each keeping its segment condensations for the
     moved chains that share them (``sharing_segments``). The phases then read them from the
     cache: asked for phase by phase, L2's probe chain was built alone on one of the two cores
-    (6 s) and each batch's end left a core idle (docs/scale.md, "Issue 26, session 31"). Any
-    other provider: nothing (its segments are prepared phase by phase)."""
+    (6 s) and each batch's end left a core idle (docs/scale.md, "Issue 26, session 31"). With
+    the mixed curvatures on another grid (``mixed_elements_through``), their chains on it (the
+    nominal ones, single and pair moves) in a second batch after. Any other provider: nothing
+    (its segments are prepared phase by phase)."""
     if not is_tied(provider):
         return
+    coarse = _mixed_provider(provider, mixed_elements_through)
     chains = [p.chain for p in space.mechanism.chains]
-    chains += [*slope_moves(space).values(), *curvature_moves(space, pairs=pairs).values()]
+    chains += [*slope_moves(space).values(),
+               *curvature_moves(space, pairs=pairs, terms="all" if coarse is None else "diagonal").values()]
     prepare_chains(sharing_segments(provider), list(dict.fromkeys(chains)))
+    if coarse is not None:  # the small jobs last: less of a core idle at the batch's end
+        designs = same_design(space.mechanism.chains)
+        mixed = [*(p.chain for c, p in enumerate(space.mechanism.chains) if designs[c] == c),
+                 *curvature_moves(space, pairs=pairs, terms="mixed").values()]
+        prepare_chains(sharing_segments(coarse), list(dict.fromkeys(mixed)))
+
+
+def _mixed_provider(provider: StiffnessProvider, elements_through: float | None):
+    """The provider of the mixed curvatures on ``elements_through`` (``slope_provider``), None
+    where that is ``provider`` itself (elements_through None, a provider without another grid)."""
+    if elements_through is None:
+        return None
+    coarse = slope_provider(provider, elements_through)
+    return None if coarse is provider else coarse
 
 
 def compliance_curvatures(space: ParameterSpace, provider: StiffnessProvider,
                           steps: dict[str, float] | None = None, *,
                           pairs: str = DEFAULT_PAIR_DIFFERENCES,
-                          elements_through: float | None = SLOPE_ELEMENTS_THROUGH) -> np.ndarray:
+                          elements_through: float | None = SLOPE_ELEMENTS_THROUGH,
+                          mixed_elements_through: float | None = MIXED_ELEMENTS_THROUGH) -> np.ndarray:
     """(n_chains, 5, 5, 8): the second derivative of each factor of ``compliance_factors`` per
     relative change of two chain dimensions (``DIMENSION_SYMBOLS``: w, a, l, t1, t2) at the
     nominal chains of ``space`` [-] (module docstring), symmetric in the two dimensions.
@@ -157,14 +192,27 @@ def compliance_curvatures(space: ParameterSpace, provider: StiffnessProvider,
     elements_through: the grid of the builds (``slope_provider``; None, the default: ``provider``'s
     own), as for the slopes: on another grid, that grid's relative curvature (H over its own
     nominal factor) times the factor on ``provider``'s grid (measured and rejected as the
-    default, docs/model.md 11 "Session 36")."""
+    default, docs/model.md 11 "Session 36").
+    mixed_elements_through: the mixed entries' grid alone (None, the default
+    ``MIXED_ELEMENTS_THROUGH``: the diagonal's), the same relative rule; the diagonal stays on
+    ``elements_through`` (the slopes' own builds)."""
+    if _mixed_provider(slope_provider(provider, elements_through), mixed_elements_through) is None:
+        return _curvatures(space, provider, steps, pairs, elements_through, "all")
+    return (_curvatures(space, provider, steps, pairs, elements_through, "diagonal")
+            + _curvatures(space, provider, steps, pairs, mixed_elements_through, "mixed"))
+
+
+def _curvatures(space: ParameterSpace, provider: StiffnessProvider, steps, pairs: str,
+                elements_through: float | None, terms: str) -> np.ndarray:
+    """``compliance_curvatures``' ``terms`` (``CURVATURE_TERMS``; the others zero) on the grid
+    ``elements_through``: its builds (``curvature_moves``) and finite differences."""
     fine, provider = provider, slope_provider(provider, elements_through)
     other_grid = provider is not fine
     steps = SLOPE_STEPS if steps is None else steps
     mech = space.mechanism
     design = same_design(mech.chains)
     first = [c for c in range(len(mech.chains)) if design[c] == c]
-    chains = curvature_moves(space, steps, pairs=pairs)
+    chains = curvature_moves(space, steps, pairs=pairs, terms=terms)
     # a slice of a pair's chain that only one of its two dimensions (or neither) reaches is that
     # single move's (or the nominal chain's) segment: t1 reaches leaf 1's slice only, t2 leaf 2's,
     # w and a both leaves', l all three (it moves the nodes); 48 segment builds where 96 were
@@ -185,16 +233,22 @@ def compliance_curvatures(space: ParameterSpace, provider: StiffnessProvider,
     nominal = compliance_factors(space, provider)
     h = np.array([steps[s] for s in DIMENSION_SYMBOLS])
     out = np.zeros((len(mech.chains), len(DIMENSION_SYMBOLS), len(DIMENSION_SYMBOLS), 8))
+    diagonal = np.zeros_like(out)
     for c in first:
-        for k in range(len(DIMENSION_SYMBOLS)):
-            out[c, k, k] = (ratio[c, k, k, 1] + ratio[c, k, k, -1] - 2.0 * nominal[c]) / h[k] ** 2
+        if (c, 0, 0, -1) in chains:  # both single moves built: the diagonal
+            for k in range(len(DIMENSION_SYMBOLS)):
+                diagonal[c, k, k] = (ratio[c, k, k, 1] + ratio[c, k, k, -1] - 2.0 * nominal[c]) / h[k] ** 2
+        if terms == "diagonal":
+            continue
         for k, m in itertools.combinations(range(len(DIMENSION_SYMBOLS)), 2):
             if pairs == "central":
                 both = ratio[c, k, m, 1] + ratio[c, k, m, -1] - 2.0 * nominal[c]
-                mixed = (both - h[k] ** 2 * out[c, k, k] - h[m] ** 2 * out[c, m, m]) / (2.0 * h[k] * h[m])
+                mixed = (both - h[k] ** 2 * diagonal[c, k, k] - h[m] ** 2 * diagonal[c, m, m]) / (2.0 * h[k] * h[m])
             else:
                 mixed = (ratio[c, k, m, 1] - ratio[c, k, k, 1] - ratio[c, m, m, 1] + nominal[c]) / (h[k] * h[m])
             out[c, k, m] = out[c, m, k] = mixed
+    if terms != "mixed":
+        out += diagonal
     if other_grid:  # on another grid: its relative curvature times the factor on the provider's grid
         out *= (compliance_factors(space, fine) / np.where(nominal == 0.0, 1.0, nominal))[:, None, None, :]
     return out[design]
@@ -230,16 +284,19 @@ def shortening_slopes(space: ParameterSpace, provider: StiffnessProvider,
 
 def curved_space(space: ParameterSpace, provider: StiffnessProvider, *,
                  pairs: str = DEFAULT_PAIR_DIFFERENCES,
-                 elements_through: float | None = SLOPE_ELEMENTS_THROUGH) -> ParameterSpace:
+                 elements_through: float | None = SLOPE_ELEMENTS_THROUGH,
+                 mixed_elements_through: float | None = MIXED_ELEMENTS_THROUGH) -> ParameterSpace:
     """``space`` (a consistent space with ``compliance_slopes``) whose factors follow the
     dimensions to second order and whose shortening correction follows them:
     ``compliance_curvatures`` (``pairs``) and ``shortening_slopes`` of ``space`` and ``provider``,
-    built on ``elements_through`` (the slopes' grid; None: the provider's own)."""
+    built on ``elements_through`` (the slopes' grid; None: the provider's own), the mixed
+    curvatures on ``mixed_elements_through`` (``compliance_curvatures``)."""
     if not (space.compliance_slopes and space.chain_shortening):
         raise ValueError("curved_space needs a consistent space with compliance slopes "
                          "(chain_kinematics.consistent_space over corrected_space(..., slopes=True))")
     return dataclasses.replace(
         space, compliance_curvatures=tuple(float(v) for v in compliance_curvatures(
-            space, provider, pairs=pairs, elements_through=elements_through).ravel()),
+            space, provider, pairs=pairs, elements_through=elements_through,
+            mixed_elements_through=mixed_elements_through).ravel()),
         shortening_slopes=tuple(float(v) for v in shortening_slopes(space, provider,
                                                                     elements_through=elements_through).ravel()))
