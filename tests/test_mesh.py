@@ -306,7 +306,32 @@ def test_runs_away_past_25_times_the_sizing_fields_vertex_count():
     assert not runs_away(25_000, 1000.0) and runs_away(25_001, 1000.0)
 
 
-@pytest.mark.slow  # ~60 s of a real fTetWild runaway (an option since the mapped mesher's default, issue 26)
+def test_a_run_past_the_watch_is_stopped_and_the_next_seed_meshes(monkeypatch):
+    """The runaway path of ``tetrahedralize_in_child`` in ~2 s (the real runaway below is slow):
+    the first seed's child is watched against an expected count of 1e-3 vertices, so its first
+    reported pass is past 25x and it is stopped mid-run; seed + 1, unwatched, gives the mesh."""
+    from flexcal.fem import tetwild_process
+
+    outcomes = []
+    run = tetwild_process._mesh_in_child
+
+    def watched_first(arrays, options, expected):
+        first = options["__seed__"] == tetwild_process.MESHER_SEED
+        outcomes.append((options["__seed__"], run(arrays, options, 1e-3 if first else None)))
+        return outcomes[-1][1]
+
+    monkeypatch.setattr(tetwild_process, "_mesh_in_child", watched_first)
+    vertices, faces = _box_surface()
+    nodes, tets = tetwild_process.tetrahedralize_in_child(vertices, faces, edge_length_fac=0.1, quiet=True,
+                                                          num_threads=1)
+    seed = tetwild_process.MESHER_SEED
+    assert [s for s, _ in outcomes] == [seed, seed + 1]
+    assert outcomes[0][1] is None and np.array_equal(outcomes[1][1][0], nodes) and len(tets) > 0
+
+
+# ~60 s of a real fTetWild runaway (fTetWild is an option since the mapped mesher became the default,
+# issue 26); test_a_run_past_the_watch_is_stopped_and_the_next_seed_meshes runs the same path in the default run
+@pytest.mark.slow
 def test_a_seed_whose_run_runs_away_is_left_for_the_next(monkeypatch):
     """tests/data/tetwild_runaway.npz: the fTetWild input (surface, sizing field, options)
     of a 36 mm block segment of the mount on which MESHER_SEED's run grows without end
