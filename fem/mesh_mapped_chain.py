@@ -57,7 +57,7 @@ from .mesh import MeshReport, TetMesh
 from .mesh_snap import _jacobian_ratios, snap_to_part
 from .structured import _EDGES, _folded_tets, _straighten, grid_tet_mesh
 
-__all__ = ["ChainGrid", "cells_through", "chain_grid", "chain_mapped_supported", "mapped_mesh_chain",
+__all__ = ["ChainGrid", "cells_through", "chain_grid", "template_grid", "chain_mapped_supported", "mapped_mesh_chain",
            "mapped_mesh_chain_mirror_part",
            "DEFAULT_CHAIN_OPTIONS", "FAST_CHAIN_OPTIONS",
            "PROTOTYPE_CHAIN_OPTIONS", "COARSE_PROTOTYPE_CHAIN_OPTIONS", "EXTRA_CHAIN_OPTIONS"]
@@ -337,7 +337,11 @@ def chain_grid(params, n_thickness: int, *, aspect: float = 3.0, n_arc: int = 8,
         if np.min(np.diff(lines)) < 1e-6 * cell:  # a flat layer of cells: its tets have no volume
             raise RuntimeError(f"the chain mapper made a flat layer of cells along {name} (lines "
                                f"{np.min(np.diff(lines)):.3g} m apart); please report this chain's dimensions")
-    # which cells each piece keeps
+    return ChainGrid(x=x, p=p, q=q, active=_active_cells(x, p, q, ps), cores=_cores(leaves, core_y, core_z))
+
+
+def _active_cells(x: np.ndarray, p: np.ndarray, q: np.ndarray, ps) -> np.ndarray:
+    """(n_x, n_y, n_z) bool: the cells of the grid lines x, p, q [m] inside one of the pieces ``ps``."""
     xm, pm, qm = 0.5 * (x[1:] + x[:-1]), 0.5 * (p[1:] + p[:-1]), 0.5 * (q[1:] + q[:-1])
     active = np.zeros((len(xm), len(pm), len(qm)), bool)
     for piece in ps:
@@ -345,12 +349,75 @@ def chain_grid(params, n_thickness: int, *, aspect: float = 3.0, n_arc: int = 8,
         half_y, half_z = piece.end_extent()
         inside = (np.abs(pm)[:, None] < half_y) & (np.abs(qm)[None, :] < half_z)
         active[rows] = inside[None]
+    return active
+
+
+def _cores(leaves, core_y: float | None, core_z: float | None) -> dict:
+    """``ChainGrid.cores`` of ``leaves`` with the half core heights along y and z [m] (None: none)."""
     cores = {}
     if core_y is not None:
         cores[1] = (core_y, tuple(leaf for leaf in leaves if leaf.thin_axis == 1))
     if core_z is not None:
         cores[2] = (core_z, tuple(leaf for leaf in leaves if leaf.thin_axis == 2))
-    return ChainGrid(x=x, p=p, q=q, active=active, cores=cores)
+    return cores
+
+
+def _x_features(params) -> np.ndarray:
+    """The x [m] of ``params``' features along its axis, ascending: every piece's ends and each
+    leaf's fillet ends (x0 + a, x1 - a)."""
+    out = []
+    for piece in pieces(params):
+        out += [piece.x0, piece.x1]
+        if isinstance(piece, LeafPiece) and piece.fillet > 0:
+            out += [piece.x0 + piece.fillet, piece.x1 - piece.fillet]
+    return np.unique(np.asarray(out, float))
+
+
+def _section_features(params, axis: int) -> np.ndarray:
+    """The distances from the axis [m] of ``params``' features across its section along ``axis``
+    (1 = y, 2 = z), ascending from 0: the cores (t + 2a) / 2 of the leaves thin along it, the half
+    widths of those wide along it, the blocks' half extents."""
+    out = [0.0]
+    for piece in pieces(params):
+        if isinstance(piece, BoxPiece):
+            out.append(piece.half_y if axis == 1 else piece.half_z)
+        elif piece.thin_axis == axis:  # as _section_lines rounds the core
+            out.append(0.5 * round(piece.thickness + 2 * piece.fillet, 12))
+        elif piece.width_axis == axis:
+            out.append(piece.half_width)
+    return np.unique(np.asarray(out, float))
+
+
+def template_grid(params, template, n_thickness: int, **options) -> ChainGrid:
+    """The parent grid of ``params`` with the cells of ``template``'s (``chain_grid`` of the
+    template with ``n_thickness`` and ``options``): the same counts along every line and the same
+    active cells, so their meshes have one connectivity, node for node, whatever the dimensions
+    (a chain and its design's nominal one: the model's moved chains, an as-built chain).
+
+    Each family of lines is mapped piecewise linearly from the template's features to those of
+    ``params`` (``_x_features``: piece ends and fillet ends; ``_section_features``: cores, leaf
+    half widths, section), so every feature of ``params`` is a grid line where it is one of the
+    template's and the cores follow ``params``' leaves. ValueError if the two do not have the
+    same features in the same order (another kind of part, a leaf more) or the mapped lines
+    keep other cells."""
+    if not (chain_mapped_supported(params) and chain_mapped_supported(template)):
+        raise ValueError("template_grid takes two FlexureChains or ChainSegments of leaves")
+    grid = chain_grid(template, n_thickness, **options)
+    if params == template:
+        return grid
+    maps = [(_x_features(template), _x_features(params))]
+    maps += [(_section_features(template, axis), _section_features(params, axis)) for axis in (1, 2)]
+    if any(a.shape != b.shape or np.any(np.diff(b) <= 0) for a, b in maps):
+        raise ValueError("the part and its template do not have the same features (pieces, leaves, section) "
+                         "in the same order: not one design")
+    x = np.interp(grid.x, *maps[0])
+    p, q = (np.sign(lines) * np.interp(np.abs(lines), *m) for lines, m in zip((grid.p, grid.q), maps[1:]))
+    ps, leaves = pieces(params), _leaves(params)
+    if not np.array_equal(_active_cells(x, p, q, ps), grid.active):
+        raise ValueError("the part's pieces keep other cells of its template's grid: not one design")
+    core = {axis: (maps[axis][1][np.argmin(np.abs(maps[axis][0] - grid.cores[axis][0]))] if axis in grid.cores
+                   else None) for axis in (1, 2)}
+    return ChainGrid(x=x, p=p, q=q, active=grid.active, cores=_cores(leaves, core[1], core[2]))
 
 
 def _quadratic_mesh(grid: ChainGrid) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -425,7 +492,7 @@ def mapped_mesh_chain(params, *, elements_through_thickness: float = 7, refineme
 
 
 def mapped_mesh_chain_mirror_part(params, *, elements_through_thickness: float = 7, refinement: int = 1,
-                                  **options) -> tuple[TetMesh, tuple[int, ...]]:
+                                  template=None, **options) -> tuple[TetMesh, tuple[int, ...]]:
     """(mesh, mirror axes): the mapped mesh's part on y >= 0 and / or z >= 0, for a
     condensation that uses the part's two mirror planes (``flexcal.fem.condense.
     mirrored_chain_stiffness``). A chain or segment is symmetric about y = 0 and z = 0 (its
@@ -436,7 +503,9 @@ def mapped_mesh_chain_mirror_part(params, *, elements_through_thickness: float =
     coordinate 0 exactly. The part keeps the full mesh's cells in that quadrant or half
     (the same Kuhn split in every cell); its mirror images make a conforming mesh of the
     whole part, the full grid with the diagonals of the mirrored cells mirrored.
-    Options, n and refinement as ``mapped_mesh_chain`` (no report, no measuring)."""
+    Options, n and refinement as ``mapped_mesh_chain`` (no report, no measuring); template: a
+    part of the same design whose cells the mesh takes (``template_grid``: one connectivity for
+    both), None: its own."""
     n_float = float(elements_through_thickness)
     if not (math.isfinite(n_float) and n_float >= 1):
         raise ValueError(f"elements_through_thickness={elements_through_thickness!r} must be >= 1")
@@ -445,8 +514,9 @@ def mapped_mesh_chain_mirror_part(params, *, elements_through_thickness: float =
         raise ValueError(f"unknown chain mesh options {sorted(unknown)}")
     if int(refinement) != refinement or refinement < 1:
         raise ValueError(f"refinement={refinement!r} must be a positive integer")
-    grid = chain_grid(params, math.ceil(n_float - 1e-9), refinement=int(refinement),
-                      **{**DEFAULT_CHAIN_OPTIONS, **options})
+    settings = {**DEFAULT_CHAIN_OPTIONS, **options}
+    grid = (chain_grid(params, math.ceil(n_float - 1e-9), refinement=int(refinement), **settings) if template is None
+            else template_grid(params, template, math.ceil(n_float - 1e-9), refinement=int(refinement), **settings))
     p, q, active = grid.p, grid.q, grid.active
     axes = []
     if np.any(p == 0.0):

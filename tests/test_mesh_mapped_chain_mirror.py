@@ -106,3 +106,52 @@ def test_the_refined_mirror_part_is_the_quarter_of_the_refined_grid():
     assert np.array_equal(np.unique(part.nodes, axis=0), np.unique(quarter, axis=0))
     with pytest.raises(ValueError, match="refinement"):
         mapped_mesh_chain_mirror_part(segment, elements_through_thickness=2, refinement=0)
+
+
+def _moved(chain, **relative):
+    import dataclasses
+
+    return dataclasses.replace(chain, **{name: getattr(chain, name) * (1.0 + r) for name, r in relative.items()})
+
+
+# table1's as-built L1 chain 1 (seed of the scenario's own draw), rounded: the mapper's own grid of
+# its first segment has 35 x 18 x 20 cells against the nominal's 33 x 16 x 20 (more cells through)
+AS_BUILT_MOVES = {"hinge_length": -0.0125, "width": -0.0962, "fillet": -0.0847, "thickness_1": 0.0906,
+                  "thickness_2": 0.0629}
+
+
+@pytest.mark.parametrize("index", [0, 1, 2])
+def test_a_part_on_its_templates_cells_has_the_templates_connectivity_and_its_own_geometry(index):
+    """``template_grid``: an as-built L1 segment meshed on its nominal segment's cells has the
+    nominal mesh's tets node for node, its own volume (to the quadratic arcs' 5e-5, as its own
+    mesh) and every feature of its own (piece ends, fillet ends, leaf cores and widths) on a grid
+    line; a part of another design is refused."""
+    from flexcal.fem.mesh_mapped_chain import (_section_features, _x_features, chain_grid, template_grid)
+    from flexcal.fem.mesh_quality import corner_volumes
+    from flexcal.geometry.exact import exact_volume
+    from flexcal.validation.prototype.cut_fields import interface_segments
+
+    options = {**PROTOTYPE_CHAIN_OPTIONS, "even_through": True}
+    nominal_chain = reference_mechanism().chains[0].chain
+    nominal = interface_segments(nominal_chain, 5)[index][0]
+    part = interface_segments(_moved(nominal_chain, **AS_BUILT_MOVES), 5)[index][0]
+    own, _ = mapped_mesh_chain_mirror_part(part, elements_through_thickness=7, **options)
+    template, axes = mapped_mesh_chain_mirror_part(nominal, elements_through_thickness=7, **options)
+    mesh, mesh_axes = mapped_mesh_chain_mirror_part(part, elements_through_thickness=7, template=nominal, **options)
+    assert mesh_axes == axes and np.array_equal(mesh.tets, template.tets)
+    if index < 2:  # the leaf segments: the mapper's own grid of the as-built part has other cells
+        assert own.tets.shape != template.tets.shape
+    assert corner_volumes(mesh.nodes, mesh.tets).min() > 0
+    # curved P2 on the fillet cylinders: off only by the quadratic arcs (5e-5, as the test above)
+    assert abs(mesh.volume * 2 ** len(axes) / exact_volume(part) - 1.0) < 5e-5
+    grid = template_grid(part, nominal, 7, **options)
+    for lines, features in ((grid.x, _x_features(part)), (grid.p, _section_features(part, 1)),
+                            (grid.q, _section_features(part, 2))):
+        # each feature a grid line, to the interpolation's round-off (1e-12 of the part's 50 mm)
+        assert np.abs(features[:, None] - lines[None, :]).min(axis=1).max() < 1e-12 * 0.05
+    same, _ = mapped_mesh_chain_mirror_part(nominal, elements_through_thickness=7, template=nominal, **options)
+    assert np.array_equal(same.nodes, template.nodes)  # its own template: the mapper's grid itself
+    strut = interface_segments(nominal_chain, 5)[2][0]
+    if index < 2:
+        with pytest.raises(ValueError, match="not one design"):
+            template_grid(part, strut, 7, **options)
