@@ -3,7 +3,7 @@ derivative would give (issue 26's cold time; docs/model.md 11, "Session 37").
 
     .venv/bin/python benchmarks/bench_morphed_terms.py [--scenario table1] [--walks 3]
         [--trajectory table1=tests/data/table1_design_k41_drives.csv] [--morph template|velocity]
-        [--morphed-truth] [--scenario-seed N]
+        [--morphed-truth] [--scenario-seed N] [--difference-step 0.01]
 
 The model's slopes and curvatures are finite differences of tied FEM chains built at +-3 % of a
 dimension (``runs.model_correction.compliance_slopes``, ``runs.dimension_terms``); each moved
@@ -148,11 +148,19 @@ def main(argv=None) -> int:
                         help="template: each moved chain meshed on its nominal chain's cells (template_grid); "
                              "velocity: the nominal nodes moved along the mesher's node velocity")
     parser.add_argument("--step", type=float, default=1e-4, help="relative step of the mesher's node velocity")
+    parser.add_argument("--difference-step", type=float, default=None,
+                        help="every dimension's relative step of the slopes' and curvatures' differences, in both "
+                             "sections (default: model_correction.SLOPE_STEPS, 3 %% and the fillet's 2.5 %%): a "
+                             "smaller one on the nominal cells is closer to the derivatives")
     parser.add_argument("--trajectory", action="append", default=[], metavar="SCENARIO=FILE")
     parser.add_argument("--morphed-truth", action="store_true",
                         help="the truth's as-built chains morphed from the nominal meshes too (a smooth truth)")
     args = parser.parse_args(argv)
     start = time.perf_counter()
+    if args.difference_step is not None:  # the one dict every difference reads (bench only)
+        from flexcal.validation.runs.model_correction import SLOPE_STEPS
+
+        SLOPE_STEPS.update({symbol: float(args.difference_step) for symbol in SLOPE_STEPS})
     files = dict(item.split("=", 1) for item in args.trajectory)
     provider = stiffness_provider("fem")
     drawn = load_scenario(args.scenario) if args.scenario_seed is None else load_scenario(args.scenario,
