@@ -43,7 +43,8 @@ def morphed_tied_provider(provider, space, step: float, method: str = "template"
     from flexcal.fem.mesh import TetMesh
     from flexcal.fem.mesh_mapped_chain import mapped_mesh_chain_mirror_part
     from flexcal.model.parameters import DIMENSION_FIELDS
-    from flexcal.validation.prototype.cut_fields import chain_order_matrices, cut_orders, interface_condensed, mirror_part
+    from flexcal.validation.prototype.cut_fields import (chain_order_matrices, cut_orders, interface_condensed,
+                                                         mirror_part)
     from flexcal.validation.prototype.segments import same_design
     from flexcal.validation.prototype.tied_chains import _tied_plan
 
@@ -122,7 +123,7 @@ def morphed_tied_provider(provider, space, step: float, method: str = "template"
     morphed.chain_segments = lambda chain: matrices(chain)["segments"]
     morphed.ties = provider.ties
     morphed.prepare_chains = lambda chains: provider.prepare_chains(
-        [c for c in chains if relative_moves(c) is None or not relative_moves(c)[1]])
+        [c for c in chains if not (relative_moves(c) or (None, {}))[1]])  # the nominal chains and any other
     morphed.description = provider.description + " (moved chains on the nominal meshes, morphed)"
     return morphed
 

@@ -44,7 +44,8 @@ def main(argv=None) -> int:
     print("|---|---:|---|---:|---|")
     for c, placement in enumerate(mechanism.chains):
         nominal = nominal_chains[design[c]].chain
-        for (template, *_), (part, *_) in list(zip(interface_segments(nominal, 5), interface_segments(placement.chain, 5)))[:2]:
+        pairs = zip(interface_segments(nominal, 5)[:2], interface_segments(placement.chain, 5)[:2])
+        for (template, *_), (part, *_) in pairs:
             planes, points = end_planes(part), reference_points(part)
             stiffness, nodes = {}, {}
             for name, extra in (("own", {}), ("template", {"template": template})):

@@ -108,16 +108,9 @@ def test_the_refined_mirror_part_is_the_quarter_of_the_refined_grid():
         mapped_mesh_chain_mirror_part(segment, elements_through_thickness=2, refinement=0)
 
 
-def _moved(chain, **relative):
-    import dataclasses
-
-    return dataclasses.replace(chain, **{name: getattr(chain, name) * (1.0 + r) for name, r in relative.items()})
-
-
 # table1's as-built L1 chain 1 (seed of the scenario's own draw), rounded: the mapper's own grid of
 # its first segment has 35 x 18 x 20 cells against the nominal's 33 x 16 x 20 (more cells through)
-AS_BUILT_MOVES = {"hinge_length": -0.0125, "width": -0.0962, "fillet": -0.0847, "thickness_1": 0.0906,
-                  "thickness_2": 0.0629}
+AS_BUILT_MOVES = {"l": -0.0125, "w": -0.0962, "a": -0.0847, "t1": 0.0906, "t2": 0.0629}
 
 
 @pytest.mark.parametrize("index", [0, 1, 2])
@@ -130,11 +123,12 @@ def test_a_part_on_its_templates_cells_has_the_templates_connectivity_and_its_ow
     from flexcal.fem.mesh_quality import corner_volumes
     from flexcal.geometry.exact import exact_volume
     from flexcal.validation.prototype.cut_fields import interface_segments
+    from flexcal.validation.runs.model_correction import moved_chain
 
     options = {**PROTOTYPE_CHAIN_OPTIONS, "even_through": True}
     nominal_chain = reference_mechanism().chains[0].chain
     nominal = interface_segments(nominal_chain, 5)[index][0]
-    part = interface_segments(_moved(nominal_chain, **AS_BUILT_MOVES), 5)[index][0]
+    part = interface_segments(moved_chain(nominal_chain, AS_BUILT_MOVES), 5)[index][0]
     own, _ = mapped_mesh_chain_mirror_part(part, elements_through_thickness=7, **options)
     template, axes = mapped_mesh_chain_mirror_part(nominal, elements_through_thickness=7, **options)
     mesh, mesh_axes = mapped_mesh_chain_mirror_part(part, elements_through_thickness=7, template=nominal, **options)

@@ -55,8 +55,8 @@ from .chain_kinematics import chain_shortening
 from .model_correction import (SLOPE_ELEMENTS_THROUGH, SLOPE_STEPS, compliance_factors, moved_chain,
                                provider_chain_compliance, same_design, slope_moves, slope_provider, unchanged_slices)
 
-__all__ = ["PAIR_DIFFERENCES", "DEFAULT_PAIR_DIFFERENCES", "CURVATURE_TERMS", "MIXED_ELEMENTS_THROUGH", "compliance_curvatures", "shortening_slopes", "curved_space",
-           "curvature_moves", "prepare_model_chains", "moved_chain", "moved_factors", "slice_owners"]
+__all__ = ["PAIR_DIFFERENCES", "DEFAULT_PAIR_DIFFERENCES", "CURVATURE_TERMS", "MIXED_ELEMENTS_THROUGH",
+           "compliance_curvatures", "shortening_slopes", "curved_space", "curvature_moves", "prepare_model_chains", "moved_chain", "moved_factors", "slice_owners"]
 
 
 def slice_owners(chain: FlexureChain, alike) -> dict[tuple[float, float], FlexureChain]:
@@ -156,7 +156,8 @@ def prepare_model_chains(space: ParameterSpace, provider: StiffnessProvider, *,
     (its segments are prepared phase by phase)."""
     if not is_tied(provider):
         return
-    coarse = _mixed_provider(provider, mixed_elements_through)
+    coarse = None if mixed_elements_through is None else slope_provider(provider, mixed_elements_through)
+    coarse = None if coarse is provider else coarse
     chains = [p.chain for p in space.mechanism.chains]
     chains += [*slope_moves(space).values(),
                *curvature_moves(space, pairs=pairs, terms="all" if coarse is None else "diagonal").values()]
@@ -166,15 +167,6 @@ def prepare_model_chains(space: ParameterSpace, provider: StiffnessProvider, *,
         mixed = [*(p.chain for c, p in enumerate(space.mechanism.chains) if designs[c] == c),
                  *curvature_moves(space, pairs=pairs, terms="mixed").values()]
         prepare_chains(sharing_segments(coarse), list(dict.fromkeys(mixed)))
-
-
-def _mixed_provider(provider: StiffnessProvider, elements_through: float | None):
-    """The provider of the mixed curvatures on ``elements_through`` (``slope_provider``), None
-    where that is ``provider`` itself (elements_through None, a provider without another grid)."""
-    if elements_through is None:
-        return None
-    coarse = slope_provider(provider, elements_through)
-    return None if coarse is provider else coarse
 
 
 def compliance_curvatures(space: ParameterSpace, provider: StiffnessProvider,
@@ -196,7 +188,7 @@ def compliance_curvatures(space: ParameterSpace, provider: StiffnessProvider,
     mixed_elements_through: the mixed entries' grid alone (None, the default
     ``MIXED_ELEMENTS_THROUGH``: the diagonal's), the same relative rule; the diagonal stays on
     ``elements_through`` (the slopes' own builds)."""
-    if _mixed_provider(slope_provider(provider, elements_through), mixed_elements_through) is None:
+    if mixed_elements_through is None:
         return _curvatures(space, provider, steps, pairs, elements_through, "all")
     return (_curvatures(space, provider, steps, pairs, elements_through, "diagonal")
             + _curvatures(space, provider, steps, pairs, mixed_elements_through, "mixed"))
