@@ -41,7 +41,6 @@ come from one S.
 from __future__ import annotations
 
 import functools
-from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
@@ -195,14 +194,10 @@ def solve_points_consistent(matrices, inputs: np.ndarray, *, clearance: bool, to
         int(max_iter), float(divergence), _FACES, float(state_tolerance), c(m.input_gain), bool(reuse_rates),
         out["pose"], out["loads"], out["clearance"],
         out["release"], out["parasitic"], out["states"], out["point_class"], out["codes"], out["iterations"])
-    # the candidates in contiguous shares, one compiled call per thread (the kernel holds no GIL);
-    # a candidate's bits do not depend on its share (docs/scale.md "Issue 26, session 38")
-    threads = max(1, min(int(n_threads), numba.config.NUMBA_NUM_THREADS, n_c))
-    bounds = [round(k * n_c / threads) for k in range(threads + 1)]
-    if threads == 1:
-        _numba_consistent.solve(0, n_c, *arguments)
-    else:
-        with ThreadPoolExecutor(max_workers=threads) as pool:
-            list(pool.map(lambda first, stop: _numba_consistent.solve(first, stop, *arguments), bounds[:-1],
-                          bounds[1:]))
+    previous = numba.get_num_threads()
+    numba.set_num_threads(max(1, min(int(n_threads), numba.config.NUMBA_NUM_THREADS)))
+    try:
+        _numba_consistent.solve(*arguments)
+    finally:
+        numba.set_num_threads(previous)
     return out
