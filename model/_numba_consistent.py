@@ -20,7 +20,7 @@ rates of a nut that was off its flank there too instead of probing it (session 1
 """
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 from ._numba_kernels import solve_box, solve_play
 from .point_status import CLEARANCE_FAILED, DIVERGED, NOT_CONVERGED, OK
@@ -227,7 +227,10 @@ def _terms(cand, x, c, command, x0, axial, pack, point_b, defect_index, defect, 
         force[5] += 0.5 * (pb2 * tf + tp * g2 - 2.0 * t2 * pf)
 
 
-@njit(cache=True, nogil=True, fastmath=_FAST)
+# inlined into ``solve`` (session 38): as a call, numba linked a second copy of it into ``solve``
+# and optimised that one again, whose fused multiply-adds rounded otherwise, so ``solve``
+# compiled in the running process gave other last bits than loaded from numba's cache
+@njit(cache=True, nogil=True, fastmath=_FAST, inline="always")
 def _equilibrium(cand, x, c, command, compliance, wrench, x0, gain, axial, pack, point_b, defect_index, defect,
                  symmetric, weight, tol, max_iter, divergence, settle, r, u, n, force, d, ml, grad, work, secant):
     """Solve the pose x in place to ``tol`` at fixed offsets c: the fixed point ``x = Phi(x)``
@@ -312,12 +315,14 @@ def _equilibrium(cand, x, c, command, compliance, wrench, x0, gain, axial, pack,
     return NOT_CONVERGED, max_iter
 
 
-@njit(cache=True, nogil=True, parallel=True, fastmath=_FAST)
-def solve(compliance, wrench, gain, axial, pack, point_b, defect_index, defect, symmetric, weight, coupling, mu, limit,
+@njit(cache=True, nogil=True, fastmath=_FAST)
+def solve(first, stop, compliance, wrench, gain, axial, pack, point_b, defect_index, defect, symmetric, weight,
+          coupling, mu, limit,
           x0, nut, band, play, inputs, revisit, clearance, tol, max_iter, divergence,
           faces, state_tol, input_gain, reuse_rates,
           pose_out, load_out, c_out, release_out, r_out, state_out, class_out, code_out, iter_out):
-    """All candidates (in parallel) at all points (in order). Each fixed point starts from the
+    """Candidates ``first`` to ``stop - 1`` (one thread each call; ``consistent`` runs a call per
+    thread, and candidates share nothing) at all points (in order). Each fixed point starts from the
     previous solution moved by the response to what changed: the linear model's ``input_gain``
     (n_c, 6, 6), dX/du_j, to the command's step (plus the previous points' second-order drift),
     the last probe's measured dX/dC_k to an offset's step or a probe's. A start off by the
@@ -327,10 +332,9 @@ def solve(compliance, wrench, gain, axial, pack, point_b, defect_index, defect, 
     point or -1; ``consistent.revisits``) starts from that point's equilibrium when the nut offsets
     are those it ended with there: the same equations, so the start is the fixed point (the legs'
     way back; session 16)."""
-    n_c = compliance.shape[0]
     n_p = inputs.shape[0]
     inner_tol = INNER_SHARE * tol
-    for cand in prange(n_c):
+    for cand in range(first, stop):
         x = np.zeros(6)
         work = np.zeros((6, 6))
         secant = np.eye(6)

@@ -41,6 +41,8 @@ come from one S.
 from __future__ import annotations
 
 import functools
+import os
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
@@ -155,6 +157,13 @@ def _revisits(data: bytes, shape: tuple[int, ...]) -> np.ndarray:
     return out
 
 
+@functools.cache
+def _pool() -> ThreadPoolExecutor:
+    """The threads ``solve_points_consistent`` shares its candidates over, kept for the process
+    (a pool per call cost a calibration's small batches their threads' start)."""
+    return ThreadPoolExecutor(max_workers=os.cpu_count() or 1)
+
+
 def solve_points_consistent(matrices, inputs: np.ndarray, *, clearance: bool, tol: float, max_iter: int,
                             divergence: float, state_tolerance: float, n_threads: int = 1,
                             revisit: bool = True, reuse_rates: bool = True,
@@ -194,10 +203,13 @@ def solve_points_consistent(matrices, inputs: np.ndarray, *, clearance: bool, to
         int(max_iter), float(divergence), _FACES, float(state_tolerance), c(m.input_gain), bool(reuse_rates),
         out["pose"], out["loads"], out["clearance"],
         out["release"], out["parasitic"], out["states"], out["point_class"], out["codes"], out["iterations"])
-    previous = numba.get_num_threads()
-    numba.set_num_threads(max(1, min(int(n_threads), numba.config.NUMBA_NUM_THREADS)))
-    try:
-        _numba_consistent.solve(*arguments)
-    finally:
-        numba.set_num_threads(previous)
+    # the candidates in contiguous shares, one compiled call per thread (the kernel holds no GIL);
+    # a candidate's bits do not depend on its share (docs/scale.md "Issue 26, session 38")
+    threads = max(1, min(int(n_threads), numba.config.NUMBA_NUM_THREADS, n_c))
+    bounds = [round(k * n_c / threads) for k in range(threads + 1)]
+    if threads == 1:
+        _numba_consistent.solve(0, n_c, *arguments)
+    else:
+        list(_pool().map(lambda first, stop: _numba_consistent.solve(first, stop, *arguments), bounds[:-1],
+                         bounds[1:]))
     return out

@@ -240,9 +240,10 @@ def forward(space_values, inputs, directions=None, *, space: ParameterSpace | No
     include Eq. 4-5 / Eq. 6-7; clearance_mode "directional" (d_i from the travel direction)
     or "force_only" (d_i = +1: only tension opens the gap). tol [m] on the fixed point.
     engine "auto" (numba if available), "numba" or "numpy" (reference); n_threads > 1 splits
-    the candidates over that many threads: the compiled solve over numba threads after the
-    setup of the whole batch, whose bits then do not depend on n_threads (each candidate's
-    solve is its own loop; the setup's paths and quadrature follow the batch it is given:
+    the candidates over that many threads: the compiled solve over numba threads (the consistent
+    model's over Python threads, its set-up then on one) after the setup of the whole batch,
+    whose bits then do not depend on n_threads (each candidate's solve is its own loop; the
+    setup's paths and quadrature follow the batch it is given:
     ``chain.COMPILED_MIN_CHAINS``, ``hinge.gauss_node_count``); the numpy engine's setup and
     solve in Python threads over candidate blocks. chunk_size: candidates per numpy-engine
     block. The candidate axis is always present in the result.
@@ -259,8 +260,18 @@ def forward(space_values, inputs, directions=None, *, space: ParameterSpace | No
                    chunk_size=chunk_size)
     if n_threads <= 1 or values.shape[0] < 2:
         out = solve_matrices(mechanism_matrices(values, space), x, d, **options)
-    elif options["engine"] == "numba":  # the whole batch's setup, then numba's threads
-        out = solve_matrices(mechanism_matrices(values, space), x, d, n_threads=n_threads, **options)
+    elif options["engine"] == "numba":  # the whole batch's setup, then the compiled solve's threads
+        import numba
+
+        # the consistent model solves on Python threads (model/consistent.py): its set-up on one
+        # numba thread, so that no OpenMP team spins beside them (docs/scale.md "Issue 26, session 38")
+        previous = numba.get_num_threads()
+        numba.set_num_threads(1 if space.chain_shortening else previous)
+        try:
+            matrices = mechanism_matrices(values, space)
+        finally:
+            numba.set_num_threads(previous)
+        out = solve_matrices(matrices, x, d, n_threads=n_threads, **options)
     else:
         # the numpy engine: setup and solve in threads over candidate blocks
         bounds = np.linspace(0, values.shape[0], min(int(n_threads), values.shape[0]) + 1).astype(int)

@@ -1,10 +1,9 @@
-"""Do the model's kernels give the same bits compiled in the running process as loaded from
-numba's cache? Not yet (docs/scale.md "Issue 26, session 38"): the consistent model's poses move
-by up to 7e-16 rad between the two (numba links ``_equilibrium`` and the parallel loop's body into
-``solve`` as copies it optimises again, whose fused multiply-adds round otherwise), so the first
-run after its kernel was compiled gives another noise-free estimate than every run after it. The
-fix measured in session 38 (the candidates on Python threads) cost the warm main job 1.20x and
-was not kept; the test below is a known failure until a fix lands (strict: a pass fails it)."""
+"""The model's kernels give the same bits compiled in the running process as loaded from
+numba's cache (docs/scale.md "Issue 26, session 38"): before, the consistent model's poses moved
+by up to 7e-16 rad between the two (numba linked ``_equilibrium`` and the parallel loop's body
+into ``solve`` as copies it optimised again, whose fused multiply-adds rounded otherwise), so the
+first run after its kernel was compiled gave another noise-free estimate than every run after
+it. Needs the test process's kernels loaded from the cache (``setup.sh`` compiles them)."""
 
 import os
 import subprocess
@@ -35,8 +34,6 @@ def model_poses(out: str) -> None:
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, raises=AssertionError, reason="the consistent kernel's bits depend on where numba "
-                   "compiled it (docs/scale.md, Issue 26, session 38)")
 def test_a_kernel_compiled_in_the_process_gives_the_bits_of_the_cached_one(tmp_path):
     # a child with an empty numba cache compiles every kernel in its own process (~2-6 min)
     env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba"))
