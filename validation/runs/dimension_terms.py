@@ -56,7 +56,8 @@ from .model_correction import (SLOPE_ELEMENTS_THROUGH, SLOPE_STEPS, compliance_f
                                provider_chain_compliance, same_design, slope_moves, slope_provider, unchanged_slices)
 
 __all__ = ["PAIR_DIFFERENCES", "DEFAULT_PAIR_DIFFERENCES", "CURVATURE_TERMS", "MIXED_ELEMENTS_THROUGH",
-           "compliance_curvatures", "shortening_slopes", "curved_space", "curvature_moves", "prepare_model_chains", "moved_chain", "moved_factors", "slice_owners"]
+           "compliance_curvatures", "shortening_slopes", "curved_space", "curvature_moves", "prepare_model_chains",
+           "moved_chain", "moved_factors", "slice_owners"]
 
 
 def slice_owners(chain: FlexureChain, alike) -> dict[tuple[float, float], FlexureChain]:
