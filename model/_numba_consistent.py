@@ -22,7 +22,7 @@ rates of a nut that was off its flank there too instead of probing it (session 1
 import numpy as np
 from numba import njit
 
-from ._numba_kernels import solve_box, solve_play
+from ._numba_kernels import solve_box, solve_play  # both inlined (``inline="always"``), as ``_equilibrium`` is
 from .point_status import CLEARANCE_FAILED, DIVERGED, NOT_CONVERGED, OK
 
 _FAST = {"reassoc", "contract", "arcp"}

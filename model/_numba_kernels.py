@@ -134,7 +134,10 @@ def solve_box(a, b, lo, hi, status, tol, c, faces, trial):
             return True
     return enumerate_box(a, b, lo, hi, status, tol, c, faces, trial)
 
-@njit(cache=True, nogil=True, fastmath=_FAST)
+# inlined into its callers (session 39): as a call, its fifteen array arguments were reference-
+# counted at every call (one per Newton step on the offsets), which doubled the second-order
+# model's time with the play state; inlined, the same bits in about half the time (docs/model.md 10)
+@njit(inline="always", cache=True, nogil=True, fastmath=_FAST)
 def solve_play(a, b, lo, hi, c_prev, band, side, lo2, hi2, a2, status, tol, c, faces, trial, fresh):
     """C = clip(play(C_prev, a + B C, band), lo, hi) in place into c (docs/model.md 9); False if it failed.
 
