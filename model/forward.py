@@ -265,12 +265,8 @@ def forward(space_values, inputs, directions=None, *, space: ParameterSpace | No
 
         # the consistent model solves on Python threads (model/consistent.py): its set-up on one
         # numba thread, so that no OpenMP team spins beside them (docs/scale.md "Issue 26, session 38")
-        previous = numba.get_num_threads()
-        numba.set_num_threads(1 if space.chain_shortening else previous)
-        try:
+        with kernel.numba_threads(1 if space.chain_shortening else numba.get_num_threads()):
             matrices = mechanism_matrices(values, space)
-        finally:
-            numba.set_num_threads(previous)
         out = solve_matrices(matrices, x, d, n_threads=n_threads, **options)
     else:
         # the numpy engine: setup and solve in threads over candidate blocks

@@ -21,6 +21,7 @@ fast); ``available()`` says whether it can be. It comes with CadQuery here.
 
 from __future__ import annotations
 
+import contextlib
 import functools
 
 import numpy as np
@@ -39,6 +40,20 @@ def available() -> bool:
     except Exception:  # pragma: no cover - depends on the environment
         return False
     return True
+
+
+@contextlib.contextmanager
+def numba_threads(n_threads: int):
+    """numba's parallel regions on ``n_threads`` threads (clamped to 1..NUMBA_NUM_THREADS)
+    inside the block, this thread's previous count given back after it."""
+    import numba
+
+    previous = numba.get_num_threads()
+    numba.set_num_threads(max(1, min(int(n_threads), numba.config.NUMBA_NUM_THREADS)))
+    try:
+        yield
+    finally:
+        numba.set_num_threads(previous)
 
 
 def _kernels():
@@ -125,8 +140,6 @@ def solve_points_compiled(matrices, inputs: np.ndarray, directions: np.ndarray, 
     Returns (n_c, n_p, k) arrays "pose", "loads", "clearance", "release", "parasitic",
     "states" (int8), "point_class" (int8), "codes", "iterations" (see ``forward``).
     """
-    import numba
-
     from .clearance import clearance_coupling
     from .parameters import DRIVING
 
@@ -147,10 +160,6 @@ def solve_points_compiled(matrices, inputs: np.ndarray, directions: np.ndarray, 
         c(m.gravity_loads), c(m.nut_stiffness), float(state_tolerance), c(np.maximum(m.breakaway_band, 0.0)),
         bool(clearance and np.all(m.breakaway_band >= 0)), out["pose"], out["loads"], out["clearance"],
         out["release"], out["parasitic"], out["states"], out["point_class"], out["codes"], out["iterations"])
-    previous = numba.get_num_threads()
-    numba.set_num_threads(max(1, min(int(n_threads), numba.config.NUMBA_NUM_THREADS)))
-    try:
+    with numba_threads(n_threads):
         solve(*arguments)
-    finally:
-        numba.set_num_threads(previous)
     return out
