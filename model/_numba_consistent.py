@@ -25,6 +25,11 @@ from numba import njit
 from ._numba_kernels import solve_box, solve_play  # both inlined (``inline="always"``), as ``_equilibrium`` is
 from .point_status import CLEARANCE_FAILED, DIVERGED, NOT_CONVERGED, OK
 
+# numba keys this file's cached kernels by this file's text only: the files below, whose code
+# or constants they compile in, are named with a digest of their text, so that a change to one
+# changes this file too and numba compiles again (tests/test_numba_cache_keys.py)
+SOURCES_COMPILED_IN = {"_numba_kernels.py": "41b7a20b8124da30", "point_status.py": "9ba9d4aa3a906f93"}
+
 _FAST = {"reassoc", "contract", "arcp"}
 TANGENT_STEP = 1e-6  # [m] offset step of the measured tangent: its second-order error ~1e-6 relative
 MAX_NEWTON = 40  # Newton steps on the offsets per point (2-4 where a nut leaves its flank)
