@@ -25,10 +25,9 @@ from numba import njit
 from ._numba_kernels import solve_box, solve_play  # both inlined (``inline="always"``), as ``_equilibrium`` is
 from .point_status import CLEARANCE_FAILED, DIVERGED, NOT_CONVERGED, OK
 
-# numba keys this file's cached kernels by this file's text only: the files below, whose code
-# or constants they compile in, are named with a digest of their text, so that a change to one
-# changes this file too and numba compiles again (tests/test_numba_cache_keys.py)
-SOURCES_COMPILED_IN = {"_numba_kernels.py": "41b7a20b8124da30", "point_status.py": "9ba9d4aa3a906f93"}
+# the files whose code or constants these cached kernels compile in, with a digest of their text
+# (numba keys its cache by this file's text only: tests/test_numba_cache_keys.py)
+SOURCES_COMPILED_IN = {"_numba_kernels.py": "2caf0299d30a8c71", "point_status.py": "9ba9d4aa3a906f93"}
 
 _FAST = {"reassoc", "contract", "arcp"}
 TANGENT_STEP = 1e-6  # [m] offset step of the measured tangent: its second-order error ~1e-6 relative

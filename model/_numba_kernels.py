@@ -15,9 +15,8 @@ from numba import njit, prange
 from . import serial
 from .point_status import CLEARANCE_FAILED, DIVERGED, NOT_CONVERGED, OK
 
-# numba keys this file's cached kernels by this file's text only: the files below, whose code
-# or constants they compile in, are named with a digest of their text, so that a change to one
-# changes this file too and numba compiles again (tests/test_numba_cache_keys.py)
+# the files whose code or constants these cached kernels compile in, with a digest of their text
+# (numba keys its cache by this file's text only: tests/test_numba_cache_keys.py)
 SOURCES_COMPILED_IN = {"serial.py": "1ff40370185d149e", "point_status.py": "9ba9d4aa3a906f93"}
 
 # reassociation and fused multiply-add, but no "no NaN/inf" assumptions: divergence and NaN

@@ -14,9 +14,8 @@ evaluated with 6x6 products restricted to the lateral rows and columns (``LATERA
 import numpy as np
 from numba import njit
 
-# numba keys this file's cached kernels by this file's text only: the files below, whose code
-# or constants they compile in, are named with a digest of their text, so that a change to one
-# changes this file too and numba compiles again (tests/test_numba_cache_keys.py)
+# the files whose code or constants these cached kernels compile in, with a digest of their text
+# (numba keys its cache by this file's text only: tests/test_numba_cache_keys.py)
 SOURCES_COMPILED_IN = {}
 
 _FAST = {"reassoc", "contract", "arcp"}

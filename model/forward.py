@@ -25,6 +25,7 @@ else S1 if all three driving chains are compressed (N < 0); else S3.
 from __future__ import annotations
 
 import concurrent.futures
+import contextlib
 import dataclasses
 import sys
 from dataclasses import dataclass
@@ -261,11 +262,9 @@ def forward(space_values, inputs, directions=None, *, space: ParameterSpace | No
     if n_threads <= 1 or values.shape[0] < 2:
         out = solve_matrices(mechanism_matrices(values, space), x, d, **options)
     elif options["engine"] == "numba":  # the whole batch's setup, then the compiled solve's threads
-        import numba
-
         # the consistent model solves on Python threads (model/consistent.py): its set-up on one
         # numba thread, so that no OpenMP team spins beside them (docs/scale.md "Issue 26, session 38")
-        with kernel.numba_threads(1 if space.chain_shortening else numba.get_num_threads()):
+        with kernel.numba_threads(1) if space.chain_shortening else contextlib.nullcontext():
             matrices = mechanism_matrices(values, space)
         out = solve_matrices(matrices, x, d, n_threads=n_threads, **options)
     else:

@@ -8,22 +8,34 @@ again on every machine that cached the old one."""
 
 import ast
 import hashlib
+import importlib
 from pathlib import Path
 
 import pytest
 
-from flexcal.model import _numba_consistent, _numba_kernels, _numba_shortening
+import flexcal.model
 
-MODEL = Path(_numba_kernels.__file__).parent
-KERNEL_MODULES = (_numba_kernels, _numba_consistent, _numba_shortening)
+ROOT = Path(flexcal.model.__file__).parents[1]  # the package's folder (an editable install has no plain __path__)
+
+
+def kernel_modules() -> list:
+    """Every module of the package that caches a numba kernel (``njit`` with ``cache=True``)."""
+    packages = [d for d in ROOT.iterdir() if (d / "__init__.py").is_file() and d.name not in ("tests", "benchmarks")]
+    files = [f for d in packages for f in d.rglob("*.py") if "njit" in (text := f.read_text()) and "cache=True" in text]
+    return [importlib.import_module(".".join(("flexcal",) + f.relative_to(ROOT).with_suffix("").parts)) for f in files]
+
+
+KERNEL_MODULES = kernel_modules()
 
 
 def digest(path: Path) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest()[:16]
 
 
-def stale(module, folder: Path = MODEL) -> list[str]:
-    """The files ``module`` names whose text in ``folder`` no longer has the recorded digest."""
+def stale(module, folder: Path | None = None) -> list[str]:
+    """The files ``module`` names whose text in ``folder`` (its own by default) no longer has the
+    recorded digest."""
+    folder = folder or Path(module.__file__).parent
     return [name for name, recorded in module.SOURCES_COMPILED_IN.items() if recorded != digest(folder / name)]
 
 
@@ -40,7 +52,7 @@ def model_imports(module) -> set[str]:
 
 @pytest.mark.parametrize("module", KERNEL_MODULES, ids=lambda m: m.__name__.rsplit(".", 1)[-1])
 def test_each_kernel_module_holds_the_digests_of_the_files_it_compiles_in(module):
-    fixes = {name: digest(MODEL / name) for name in stale(module)}
+    fixes = {name: digest(Path(module.__file__).parent / name) for name in stale(module)}
     assert not fixes, (f"{sorted(fixes)} changed: numba's cache of {module.__name__} would keep the old code; "
                        f"write {fixes} into SOURCES_COMPILED_IN of {Path(module.__file__).name}")
 
@@ -50,9 +62,17 @@ def test_every_model_file_a_kernel_module_imports_is_named_with_a_digest(module)
     assert model_imports(module) == set(module.SOURCES_COMPILED_IN)
 
 
+def test_the_kernel_modules_are_found():
+    names = {m.__name__.rsplit(".", 1)[-1] for m in KERNEL_MODULES}
+    assert {"_numba_kernels", "_numba_consistent", "_numba_shortening", "_recurrences"} <= names
+
+
 def test_an_edited_dependency_is_found_stale(tmp_path):
+    from flexcal.model import _numba_consistent
+
+    model = Path(_numba_consistent.__file__).parent
     for name in _numba_consistent.SOURCES_COMPILED_IN:
-        (tmp_path / name).write_bytes((MODEL / name).read_bytes())
+        (tmp_path / name).write_bytes((model / name).read_bytes())
     assert stale(_numba_consistent, tmp_path) == []
     with open(tmp_path / "point_status.py", "a") as f:
         f.write("# an edit\n")

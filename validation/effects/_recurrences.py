@@ -12,6 +12,10 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+# the files whose code or constants these cached kernels compile in, with a digest of their text
+# (numba keys its cache by this file's text only: tests/test_numba_cache_keys.py)
+SOURCES_COMPILED_IN = {}
+
 __all__ = ["lag", "settling"]
 
 
