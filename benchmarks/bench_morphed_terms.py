@@ -145,9 +145,11 @@ def main(argv=None) -> int:
     parser.add_argument("--scenario-seed", type=int, default=None, help="the scenario's errors drawn with this seed "
                         "(default: its own draw)")
     parser.add_argument("--breakaway", type=float, default=2.0)
-    parser.add_argument("--morph", default="template", choices=("template", "velocity"),
+    parser.add_argument("--morph", default="template", choices=("template", "velocity", "taylor"),
                         help="template: each moved chain meshed on its nominal chain's cells (template_grid); "
-                             "velocity: the nominal nodes moved along the mesher's node velocity")
+                             "velocity: the nominal nodes moved along the mesher's node velocity; taylor: the "
+                             "nominal segments' second-order polynomials in the dimensions (tied_taylor, no build "
+                             "per moved chain)")
     parser.add_argument("--step", type=float, default=1e-4, help="relative step of the mesher's node velocity")
     parser.add_argument("--difference-step", type=float, default=None,
                         help="every dimension's relative step of the slopes' and curvatures' differences, in both "
@@ -167,7 +169,15 @@ def main(argv=None) -> int:
     drawn = load_scenario(args.scenario) if args.scenario_seed is None else load_scenario(args.scenario,
                                                                                          seed=args.scenario_seed)
     space = parameter_space(drawn.space.mechanism)
-    morphed = morphed_tied_provider(provider, space, args.step, args.morph)
+    if args.morph == "taylor":
+        from flexcal.validation.prototype.segments import same_design
+        from flexcal.validation.prototype.tied_taylor import taylor_tied_provider
+
+        design = same_design(space.mechanism.chains)
+        morphed = taylor_tied_provider(provider, [p.chain for c, p in enumerate(space.mechanism.chains)
+                                                  if design[c] == c])
+    else:
+        morphed = morphed_tied_provider(provider, space, args.step, args.morph)
     options = argparse.Namespace(slopes=True, slope_grids="provider", curvatures=True, curvature_pairs="one-sided",
                                  mixed_grids="same", walks=args.walks, points=args.points, seed=args.seed,
                                  provider="fem", corrections=None)

@@ -52,6 +52,10 @@ __all__ = [
     "mirrored_chain_stiffness",
     "mirrored_sections_stiffness",
     "mirrored_coupled_stiffness",
+    "mirror_class_systems",
+    "ClassSystem",
+    "MirrorClasses",
+    "class_block",
     "MIRROR_PARITY",
 ]
 
@@ -115,7 +119,8 @@ def reduced_system(
     return nodes, cmap, K_r
 
 
-def condensation_blocks(K: sp.spmatrix, cmap: CouplingMap) -> tuple[sp.csr_matrix, np.ndarray, np.ndarray]:
+def condensation_blocks(K: sp.spmatrix, cmap: CouplingMap, *,
+                        drop_zeros: bool = True) -> tuple[sp.csr_matrix, np.ndarray, np.ndarray]:
     """The blocks of K_r = T^T K T (``reduced_system``) that a condensation onto the free
     reference points needs, taken from K without forming K_r: (upper triangle of K_ii with
     its diagonal (n_i, n_i), CSR, sorted, no stored zeros; K_im (n_i, n_m); K_mm (n_m, n_m)),
@@ -126,7 +131,9 @@ def condensation_blocks(K: sp.spmatrix, cmap: CouplingMap) -> tuple[sp.csr_matri
     over the coupled DOFs s in ascending order, first over K's rows (C = T_s^T K_ss) then
     over its columns (C T_s), as scipy's products sum them, so the same products are added
     in the same order; zero sums are dropped as scipy drops them. Measured on a 108k-DOF
-    leaf segment: 0.1 s against 0.56 s for the product, slicing and triangle."""
+    leaf segment: 0.1 s against 0.56 s for the product, slicing and triangle. ``drop_zeros``
+    False: K_ii's stored zeros kept, so two meshes of one connectivity give one pattern
+    (``fem.condense_taylor`` differences the values)."""
     K = sp.csr_matrix(K, dtype=float)
     if not K.has_canonical_format:
         K = K.copy()
@@ -142,7 +149,7 @@ def condensation_blocks(K: sp.spmatrix, cmap: CouplingMap) -> tuple[sp.csr_matri
     row_new = np.repeat(new, counts)
     col_new = new[K.indices]
     # K_ii's upper triangle: free row, free column at or right of the diagonal, non-zero
-    keep = (col_new >= row_new) & (row_new >= 0) & (K.data != 0)
+    keep = (col_new >= row_new) & (row_new >= 0) & ((K.data != 0) | (not drop_zeros))
     kept_rows = row_new[keep]
     index_type = np.int32 if max(n_i, int(np.count_nonzero(keep))) < 2**31 else np.int64
     upper = sp.csr_matrix((K.data[keep], col_new[keep].astype(index_type),
@@ -260,16 +267,17 @@ def _end_couplings(mesh, plane_a: Plane, point_a: np.ndarray, plane_b: Plane, po
             for plane, point in ((plane_a, point_a), (plane_b, point_b))]
 
 
-def _coupled_blocks(mesh, material: Material, couplings: list[RigidCoupling], stiffness: sp.spmatrix | None = None):
+def _coupled_blocks(mesh, material: Material, couplings: list[RigidCoupling], stiffness: sp.spmatrix | None = None,
+                    *, drop_zeros: bool = True):
     """(nodes, coupling map, upper triangle of K_ii, K_im, K_mm) straight from K for PARDISO,
     which reads the upper triangle only (``condensation_blocks``: the same bits as slicing
-    T^T K T, in a fifth of the time)."""
+    T^T K T, in a fifth of the time; ``drop_zeros`` as there)."""
     nodes, _ = check_mesh(mesh)
     K = assemble_stiffness(mesh, material) if stiffness is None else sp.csr_matrix(stiffness)
     if K.shape != (3 * len(nodes),) * 2:
         raise ValueError(f"stiffness has shape {K.shape}; expected {(3 * len(nodes),) * 2}")
     cmap = coupling_map(len(nodes), nodes, couplings)
-    return (nodes, cmap, *condensation_blocks(K, cmap))
+    return (nodes, cmap, *condensation_blocks(K, cmap, drop_zeros=drop_zeros))
 
 
 def solve_chain(
@@ -419,20 +427,101 @@ def mirrored_coupled_stiffness(mesh, material: Material, couplings: list, axes: 
     block after; it couples every face DOF with every other (fill). Both need the fields to hold
     the rigid motions (order >= 1 or ``RIGID``), whose projections G does not annul. Parts
     without a floating piece are computed as before, to the bit."""
+    if floating not in ("pinned", "shift"):
+        raise ValueError(f"floating={floating!r}: 'pinned' or 'shift'")
+    parts = mirror_class_systems(mesh, material, couplings, axes)
+    stiffness = np.zeros((parts.size, parts.size))
+    for system in parts.classes:
+        sub, G = system.sub, system.G
+        if system.rigid is not None and floating == "pinned":
+            block = _pinned_block(sub, G, system.K_im, system.K_mm, system.rigid)
+            stiffness[np.ix_(system.both, system.both)] = parts.weight * block
+            continue
+        alpha = _floating_shift(sub, G) if parts.floats and floating == "shift" else 0.0
+        if alpha:
+            sub = (sub + sp.triu(alpha * (G.T @ G))).tocsr()
+        # only M = [K_im, G^T]^T K_ii^-1 [K_im, G^T] is needed: its blocks are K_im^T X, G X_m and
+        # G X_g of X = K_ii^-1 [K_im, G^T] (inverse_quadratic_form: forward substitution only)
+        M = inverse_quadratic_form(sub, system.rhs(), upper_triangle=True)
+        block = class_block(M, system.K_mm)
+        if alpha:
+            block[system.K_mm.shape[0]:, system.K_mm.shape[0]:] -= alpha * np.eye(G.shape[0])  # the shift, undone
+        stiffness[np.ix_(system.both, system.both)] = parts.weight * block
+    return stiffness[np.ix_(parts.order, parts.order)]
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class ClassSystem:
+    """One parity class of a mirrored coupled part (``mirror_class_systems``): ``both`` its
+    rows and columns of the condensed stiffness (kinematic masters, then distributing ones),
+    ``sub`` the upper triangle of its K_ii (kept DOFs, CSR), ``G`` (n_d, kept) its distributing
+    rows, ``K_im`` (kept, n_k) and ``K_mm`` (n_k, n_k) its kinematic blocks, ``rigid`` R
+    (``_class_rigid_motions``) where the part has floating pieces (else None), ``kept`` its DOFs
+    (indices into the part's free DOFs, ``MirrorClasses.free``)."""
+
+    both: np.ndarray
+    kept: np.ndarray
+    sub: sp.csr_matrix
+    G: sp.csr_matrix
+    K_im: np.ndarray
+    K_mm: np.ndarray
+    rigid: np.ndarray | None
+
+    def rhs(self) -> np.ndarray:
+        """[K_im, G^T] (kept, n_k + n_d), one dense copy in Fortran order as PARDISO takes it."""
+        rhs = np.empty((self.K_im.shape[0], self.K_im.shape[1] + self.G.shape[0]), order="F")
+        rhs[:, :self.K_im.shape[1]] = self.K_im
+        rhs[:, self.K_im.shape[1]:] = self.G.T.toarray()
+        return rhs
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class MirrorClasses:
+    """A mirrored coupled part's parity classes (``mirror_class_systems``): ``size`` the
+    condensed DOFs, ``weight`` 2^len(axes) (the whole part's energy over the mirror part's),
+    ``order`` the condensed DOFs in the couplings' own order, ``floats`` whether a piece of the
+    part is held by distributing couplings alone (``_floating_pieces``), ``free`` the free DOFs
+    (node * 3 + component, ascending)."""
+
+    classes: list
+    floats: bool
+    free: np.ndarray
+    size: int
+    weight: float
+    order: np.ndarray
+
+
+def class_block(M: np.ndarray, K_mm: np.ndarray) -> np.ndarray:
+    """One class's condensed block on [kinematic masters; distributing masters] from M = [K_im,
+    G^T]^T K_ii^-1 [K_im, G^T] and K_mm (``mirrored_coupled_stiffness``): S = K_mm - K_im^T X on
+    the kinematic masters, plus r^T H^-1 r with H = G K_ii^-1 G^T, r = B [m; q]."""
+    n_k = K_mm.shape[0]
+    n_d = M.shape[0] - n_k
+    block = K_mm - M[:n_k, :n_k]
+    if n_d:
+        B = np.hstack([M[n_k:, :n_k], np.eye(n_d)])  # r = B [m; q]
+        block = np.pad(block, (0, n_d)) + B.T @ np.linalg.solve(M[n_k:, n_k:], B)  # B^T H^-1 B
+    return block
+
+
+def mirror_class_systems(mesh, material: Material, couplings: list, axes: tuple[int, ...], *,
+                         drop_zeros: bool = True) -> MirrorClasses:
+    """The parity classes of ``mesh`` (its mirror part) with ``couplings`` (as
+    ``mirrored_coupled_stiffness`` takes them), each one's K_ii, G and kinematic blocks
+    (``ClassSystem``), the classes without a master left out; ``drop_zeros`` as
+    ``condensation_blocks``."""
     import itertools
 
     from .interface import DistributingCoupling
 
     axes = tuple(int(a) for a in axes)
-    if floating not in ("pinned", "shift"):
-        raise ValueError(f"floating={floating!r}: 'pinned' or 'shift'")
     if any(a not in MIRROR_PARITY for a in axes) or len(set(axes)) != len(axes):
         raise ValueError(f"axes={axes!r}: mirror axes are 1 (y) and / or 2 (z), each once")
     if any(c.reference_point[a] != 0.0 for c in couplings for a in axes):
         raise ValueError("the reference points must lie on the mirror planes")
     distributing = [c for c in couplings if isinstance(c, DistributingCoupling)]
     kinematic = [c for c in couplings if not isinstance(c, DistributingCoupling)]
-    nodes, cmap, upper_ii, K_im, K_mm = _coupled_blocks(mesh, material, kinematic)
+    nodes, cmap, upper_ii, K_im, K_mm = _coupled_blocks(mesh, material, kinematic, drop_zeros=drop_zeros)
     for a in axes:
         if nodes[:, a].min() != 0.0:
             raise ValueError(f"the mesh must lie on the non-negative side of its mirror plane (axis {a}) and touch it")
@@ -450,10 +539,10 @@ def mirrored_coupled_stiffness(mesh, material: Material, couplings: list, axes: 
         grams.append(gram)
     n_m = K_mm.shape[0]
     n_d = sum(len(g) for g in grams)
-    stiffness = np.zeros((n_m + n_d, n_m + n_d))
     pieces = _floating_pieces(check_mesh(mesh)[1], kinematic)
     kinematic_parities = _parities([c for c in kinematic if not c.fixed], axes)
     distributing_parities = [_parities([c], axes) for c in distributing]
+    classes = []
     for signs in itertools.product((1, -1), repeat=len(axes)):
         masters = _class_masters(kinematic_parities, axes, signs)
         keep = np.ones(free.size, bool)
@@ -474,38 +563,12 @@ def mirrored_coupled_stiffness(mesh, material: Material, couplings: list, axes: 
         if masters.size + d_masters.size == 0:
             continue
         sub = upper_ii[kept][:, kept]  # rows and columns ascending: still the upper triangle, sorted
-        if pieces and floating == "pinned":
-            rigid = _class_rigid_motions(nodes, free, kept, pieces)
-            if rigid.shape[1]:
-                block = _pinned_block(sub, G, K_im[kept][:, masters], K_mm[np.ix_(masters, masters)], rigid)
-                both = np.concatenate([masters, d_masters])
-                stiffness[np.ix_(both, both)] = 2.0 ** len(axes) * block
-                continue
-        alpha = _floating_shift(sub, G) if pieces and floating == "shift" else 0.0
-        if alpha:
-            sub = (sub + sp.triu(alpha * (G.T @ G))).tocsr()
-        # only M = [K_im, G^T]^T K_ii^-1 [K_im, G^T] is needed: its blocks are K_im^T X, G X_m and
-        # G X_g of X = K_ii^-1 [K_im, G^T] (inverse_quadratic_form: forward substitution only)
-        M = inverse_quadratic_form(sub, _class_rhs(K_im, kept, masters, G), upper_triangle=True)
-        n_k = masters.size
-        block = K_mm[np.ix_(masters, masters)] - M[:n_k, :n_k]
-        if d_masters.size:
-            B = np.hstack([M[n_k:, :n_k], np.eye(d_masters.size)])  # r = B [m; q]
-            block = np.pad(block, (0, d_masters.size)) + B.T @ np.linalg.solve(M[n_k:, n_k:], B)  # B^T H^-1 B
-            block[n_k:, n_k:] -= alpha * np.eye(d_masters.size)  # the shift, undone
-        both = np.concatenate([masters, d_masters])
-        stiffness[np.ix_(both, both)] = 2.0 ** len(axes) * block
-    order = _coupling_order(couplings, kinematic, distributing, n_m)
-    return stiffness[np.ix_(order, order)]
-
-
-def _class_rhs(K_im: np.ndarray, kept: np.ndarray, masters: np.ndarray, G: sp.csr_matrix) -> np.ndarray:
-    """[K_im, G^T] (kept.size, n_masters + n_q) of one parity class, one dense copy in Fortran
-    order as PARDISO takes it (``mirrored_coupled_stiffness``)."""
-    rhs = np.empty((kept.size, masters.size + G.shape[0]), order="F")
-    rhs[:, :masters.size] = K_im[np.ix_(kept, masters)]
-    rhs[:, masters.size:] = G.T.toarray()
-    return rhs
+        rigid = _class_rigid_motions(nodes, free, kept, pieces) if pieces else None
+        classes.append(ClassSystem(both=np.concatenate([masters, d_masters]), kept=kept, sub=sub, G=G,
+                                   K_im=K_im[np.ix_(kept, masters)], K_mm=K_mm[np.ix_(masters, masters)],
+                                   rigid=rigid if rigid is not None and rigid.shape[1] else None))
+    return MirrorClasses(classes=classes, floats=bool(pieces), free=free, size=n_m + n_d, weight=2.0 ** len(axes),
+                         order=_coupling_order(couplings, kinematic, distributing, n_m))
 
 
 def _floating_pieces(tets: np.ndarray, kinematic: list) -> list[np.ndarray]:

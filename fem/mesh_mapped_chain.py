@@ -410,8 +410,11 @@ def template_grid(params, template, n_thickness: int, **options) -> ChainGrid:
     if any(a.shape != b.shape or np.any(np.diff(b) <= 0) for a, b in maps):
         raise ValueError("the part and its template do not have the same features (pieces, leaves, section) "
                          "in the same order: not one design")
-    x = np.interp(grid.x, *maps[0])
-    p, q = (np.sign(lines) * np.interp(np.abs(lines), *m) for lines, m in zip((grid.p, grid.q), maps[1:]))
+    # a family whose features did not move keeps its lines to the bit (np.interp's round-off would
+    # move them by ~1e-17 m, which a shape derivative's differences divide by its step)
+    x = grid.x if np.array_equal(*maps[0]) else np.interp(grid.x, *maps[0])
+    p, q = (lines if np.array_equal(*m) else np.sign(lines) * np.interp(np.abs(lines), *m)
+            for lines, m in zip((grid.p, grid.q), maps[1:]))
     ps, leaves = pieces(params), _leaves(params)
     if not np.array_equal(_active_cells(x, p, q, ps), grid.active):
         raise ValueError("the part's pieces keep other cells of its template's grid: not one design")

@@ -31,7 +31,8 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-__all__ = ["SOLVERS", "pardiso_available", "solve_spd", "solver_threads", "one_thread", "inverse_quadratic_form"]
+__all__ = ["SOLVERS", "pardiso_available", "solve_spd", "solver_threads", "one_thread", "inverse_quadratic_form",
+           "SpdFactors", "spd_factors"]
 
 SOLVERS = ("auto", "pardiso", "splu", "spsolve", "amg")
 RESIDUAL_LIMIT = 1e-6
@@ -372,3 +373,60 @@ def inverse_quadratic_form(K: sp.spmatrix, B: np.ndarray, *, upper_triangle: boo
         solver._call_pardiso(upper, np.zeros((K.shape[0], 1), order="F"))
         return _forward_gram(solver, upper, B)
 
+
+
+class SpdFactors:
+    """PARDISO's factors K = P^T L L^T P of one symmetric positive-definite K (mtype 2), kept on a
+    handle of their own until ``free``, for several products with one factorisation
+    (``flexcal.fem.condense_taylor``: a class's K_ii^-1 against its condensation's columns and
+    their derivatives). ``half(B)``: Y = L^-1 P B, so B^T K^-1 B = Y^T Y (forward substitution
+    only, as ``inverse_quadratic_form``); ``solve(B)``: K^-1 B. The calling thread's MKL count
+    (``solver_threads``) at each call."""
+
+    def __init__(self, upper: sp.csr_matrix):
+        self.upper = _upper(sp.csr_matrix(upper, dtype=float), True)
+        self.n = self.upper.shape[0]
+        _pardiso_solver()  # this thread's MKL count set, MKL loaded
+        self._handle = _new_pardiso_solver()
+        self._threads()
+        with self._errors():
+            self._handle.set_phase(12)  # analysis and numerical factorization
+            self._handle._call_pardiso(self.upper, np.zeros((self.n, 1), order="F"))
+
+    def _threads(self) -> None:
+        self._handle.libmkl.MKL_Set_Num_Threads_Local(getattr(_PER_THREAD, "mkl_threads", 0))
+
+    @contextlib.contextmanager
+    def _errors(self) -> Iterator[None]:
+        import pypardiso
+
+        try:
+            yield
+        except pypardiso.pardiso_wrapper.PyPardisoError as error:
+            self.free()
+            raise ValueError(f"PARDISO failed ({error}); K is probably not positive definite: a body part is "
+                             "not held (check the clamps and couplings)") from error
+
+    def _phase(self, phase: int, B: np.ndarray) -> np.ndarray:
+        self._threads()
+        with self._errors():
+            self._handle.set_phase(phase)
+            return self._handle._call_pardiso(self.upper, np.asfortranarray(B, dtype=float))
+
+    def half(self, B: np.ndarray) -> np.ndarray:
+        return self._phase(331, B)
+
+    def solve(self, B: np.ndarray) -> np.ndarray:
+        return self._phase(33, B)
+
+    def free(self) -> None:
+        if self._handle is not None:
+            self._handle.free_memory(everything=True)
+            self._handle = None
+
+
+def spd_factors(upper: sp.csr_matrix) -> SpdFactors:
+    """``SpdFactors`` of K given by its upper triangle (CSR); needs PARDISO."""
+    if not pardiso_available():
+        raise RuntimeError("kept factorisations need PARDISO (pypardiso and MKL); install them with setup.sh")
+    return SpdFactors(upper)

@@ -48,8 +48,12 @@ class LeafPiece:
         """Thickness t(x) [m] along the thin axis at axial positions x (n,) [m] (x clamped to the piece)."""
         x = np.clip(np.asarray(x, float), self.x0, self.x1)
         a = self.fillet
-        dx = np.maximum(np.maximum(self.x0 + a - x, x - (self.x1 - a)), 0.0)
-        return self.thickness + 2.0 * (a - np.sqrt(np.maximum(a * a - dx * dx, 0.0)))
+        # u the distance to the nearer end: the arc's depth a - sqrt(a^2 - (a - u)^2) with a^2 - (a - u)^2
+        # written u (2a - u), which is exactly 0 at an end (a^2 - dx^2 lost ~1e-21 m^2 there to
+        # cancellation, and its root ~6e-11 m: the thickness at a fillet's end jumped with the fillet's
+        # last bits, which shape derivatives on one connectivity difference; fem.condense_taylor)
+        u = np.minimum(np.minimum(x - self.x0, self.x1 - x), a)
+        return self.thickness + 2.0 * (a - np.sqrt(np.maximum(u * (2.0 * a - u), 0.0)))
 
     def volume(self) -> float:
         length, t, a = self.x1 - self.x0, self.thickness, self.fillet

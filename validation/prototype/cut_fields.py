@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["INTERFACES", "mirror_part", "cut_coupling", "interface_segment_stiffness", "interface_order",
+__all__ = ["INTERFACES", "mirror_part", "cut_coupling", "interface_segment_stiffness", "segment_couplings", "interface_order",
            "interface_segments", "interface_condensations", "step_interfaces", "plan_key", "chain_order_matrices",
            "cut_orders", "joined_through_interface", "twist_stiffness_through_interface", "interface_scale",
            "interface_condensation_parts", "interface_condensed"]
@@ -56,14 +56,23 @@ def interface_segment_stiffness(segment, mesh_and_axes, starts_at_cut: bool, end
                                 scale: float) -> np.ndarray:
     """(n_A + n_B, n_A + n_B) [SI] of one ``segment`` (as meshed: a first-half one) on its
     meshed mirror part ``mesh_and_axes`` (``mapped_mesh_chain_mirror_part``), condensed onto its
-    end sections: a cut one coupled by ``interface`` (``cut_coupling``; a pair: the start's,
-    the end's), a chain end rigidly (6 DOFs, as the prototype's)."""
+    end sections (``segment_couplings``)."""
     from flexcal.fem.condense import mirrored_coupled_stiffness
-    from flexcal.fem.coupling import RigidCoupling, select_plane_nodes
-    from flexcal.geometry.exact import end_planes
     from flexcal.geometry.params import STEEL
 
     mesh, axes = mesh_and_axes
+    k = mirrored_coupled_stiffness(mesh, STEEL, segment_couplings(segment, mesh, starts_at_cut, ends_at_cut, interface,
+                                                                  scale), axes)
+    return 0.5 * (k + k.T)
+
+
+def segment_couplings(segment, mesh, starts_at_cut: bool, ends_at_cut: bool, interface, scale: float) -> list:
+    """The couplings of a ``segment``'s meshed mirror part at its end sections: a cut one by
+    ``interface`` (``cut_coupling``; a pair: the start's, the end's), a chain end rigidly (6
+    DOFs, as the prototype's)."""
+    from flexcal.fem.coupling import RigidCoupling, select_plane_nodes
+    from flexcal.geometry.exact import end_planes
+
     planes = end_planes(segment)
     labels = (interface, interface) if isinstance(interface, str) else tuple(interface)
     couplings = []
@@ -71,8 +80,7 @@ def interface_segment_stiffness(segment, mesh_and_axes, starts_at_cut: bool, end
         nodes, centre = select_plane_nodes(mesh, planes[end]), planes[end][0]
         couplings.append(cut_coupling(label, nodes, centre, scale) if at_cut
                          else RigidCoupling(nodes=nodes, reference_point=centre))
-    k = mirrored_coupled_stiffness(mesh, STEEL, couplings, axes)
-    return 0.5 * (k + k.T)
+    return couplings
 
 
 def interface_order(interface: str):
