@@ -15,20 +15,21 @@ derivatives in r_p),
 (the second from differentiating K X = C twice), where E_p^T K^-1 E_q = Y_p^T Y_q with Y_p = L^-1
 P E_p, one forward substitution per parameter on the class's own factors. No new factorisation:
 the derivatives of K, C and K_mm are differences of the part assembled at r = +-``step`` e_p
-(central, for the first and the diagonal second derivatives) and at step (e_p + e_q) (one-sided,
-the mixed ones), and only their products with X enter, so a class keeps m x m numbers per
+(central, for the first and the diagonal second derivatives) and at +-step (e_p + e_q) (the mixed
+ones, from those and the single moves: O(step^2) too), and only their products with X enter, so a class keeps m x m numbers per
 assembly. The class block S = A + B^T H^-1 B (A = K_mm - M_kk padded, B = [M_gk, I], H = M_gg)
 has the same form, so its derivatives follow with the same two formulas, dense.
 
 The assemblies' differences are those of smooth node motions (``fem.mesh_mapped_chain.
 template_grid``: the part meshed on the nominal cells; a parameter that leaves the nodes and
 couplings where they were has zero derivatives and no assembly). Errors: the central
-differences O(step^2), the mixed O(step) relative, the rounding of the second differences
+differences O(step^2), the rounding of the second differences
 ~1e-16 / step^2 of the entries (1e-8 at the default step; measured against finite differences
 of full condensations in tests/test_fem_condense_taylor.py)."""
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 from dataclasses import dataclass
 from typing import Callable
@@ -42,7 +43,7 @@ from .condense import ClassSystem, mirror_class_systems
 __all__ = ["StiffnessTaylor", "mirrored_coupled_stiffness_taylor", "DERIVATIVE_STEP"]
 
 # the relative move of the assemblies' differences: second differences keep ~1e-16 / step^2
-# = 1e-8 of an entry, the mixed ones' O(step) truncation 1e-4 relative
+# = 1e-8 of an entry; every difference is O(step^2)
 DERIVATIVE_STEP = 1e-4
 
 
@@ -115,7 +116,7 @@ def _symmetric_product(upper, X: np.ndarray) -> np.ndarray:
 @dataclass(eq=False)
 class _ClassState:
     """A class's nominal factors, X = K^-1 C and M = C^T K^-1 C, its nominal (K, C, K_mm) and
-    those of the part moved by +step along each parameter (for the mixed differences), C on
+    those of the part moved by +-step along each parameter (for the mixed differences), C on
     ``rows`` only (``_support``)."""
 
     factors: object
@@ -123,6 +124,7 @@ class _ClassState:
     M: np.ndarray
     nominal: tuple
     plus: dict
+    minus: dict = dataclasses.field(default_factory=dict)
     rows: np.ndarray | None = None
 
 
@@ -249,15 +251,19 @@ def mirrored_coupled_stiffness_taylor(part_at: Callable[[np.ndarray], tuple], ma
                 halves[k][p] = state.factors.half(KX_p)
                 M2[k][p, p], K2[k][p, p], _, _ = derivative(state, [(up, step ** -2), (down, step ** -2),
                                                                     (state.nominal, -2.0 * step ** -2)])
-                state.plus[p] = up
+                state.plus[p], state.minus[p] = up, down
         for p, q in itertools.combinations(reached, 2):
-            both = assemble(unit[p] + unit[q])
-            if both is None:
+            # [A(+p+q) + A(-p-q) - A(+-p) - A(+-q) + 2 A(0)] / (2 step^2): O(step^2), as the central
+            # differences (the one-sided mixed difference's O(step) was 0.6 % of a tied segment's
+            # (a, l) term at 1e-4, which a driving chain's lateral compliance amplified 10x)
+            both, both_back = assemble(unit[p] + unit[q]), assemble(-unit[p] - unit[q])
+            if both is None or both_back is None:
                 raise ValueError(f"parameters {p} and {q} together leave the part as it was, each alone does not")
+            w = 0.5 * step ** -2
             for k, state in enumerate(states):
-                M2[k][p, q], K2[k][p, q], _, _ = derivative(state, [(both[k], step ** -2), (state.plus[p], -step ** -2),
-                                                                    (state.plus[q], -step ** -2),
-                                                                    (state.nominal, step ** -2)])
+                M2[k][p, q], K2[k][p, q], _, _ = derivative(state, [
+                    (both[k], w), (both_back[k], w), (state.plus[p], -w), (state.minus[p], -w), (state.plus[q], -w),
+                    (state.minus[q], -w), (state.nominal, 2.0 * w)])
                 M2[k][q, p], K2[k][q, p] = M2[k][p, q], K2[k][p, q]
         value = np.zeros((nominal.size, nominal.size))
         first = np.zeros((P, *value.shape))

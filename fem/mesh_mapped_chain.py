@@ -373,16 +373,18 @@ def _x_features(params) -> np.ndarray:
     return np.unique(np.asarray(out, float))
 
 
-def _section_features(params, axis: int) -> np.ndarray:
+def _section_features(params, axis: int, *, exact: bool = False) -> np.ndarray:
     """The distances from the axis [m] of ``params``' features across its section along ``axis``
-    (1 = y, 2 = z), ascending from 0: the cores (t + 2a) / 2 of the leaves thin along it, the half
-    widths of those wide along it, the blocks' half extents."""
+    (1 = y, 2 = z), ascending from 0: the cores (t + 2a) / 2 of the leaves thin along it (rounded
+    to 1e-12 m as ``_section_lines`` rounds them, unless ``exact``), the half widths of those wide
+    along it, the blocks' half extents."""
     out = [0.0]
     for piece in pieces(params):
         if isinstance(piece, BoxPiece):
             out.append(piece.half_y if axis == 1 else piece.half_z)
         elif piece.thin_axis == axis:  # as _section_lines rounds the core
-            out.append(0.5 * round(piece.thickness + 2 * piece.fillet, 12))
+            height = piece.thickness + 2 * piece.fillet
+            out.append(0.5 * (height if exact else round(height, 12)))
         elif piece.width_axis == axis:
             out.append(piece.half_width)
     return np.unique(np.asarray(out, float))
@@ -406,7 +408,14 @@ def template_grid(params, template, n_thickness: int, **options) -> ChainGrid:
     if params == template:
         return grid
     maps = [(_x_features(template), _x_features(params))]
-    maps += [(_section_features(template, axis), _section_features(params, axis)) for axis in (1, 2)]
+    # the section's features moved by their exact change from the template's (the template's own
+    # rounded to 1e-12 m as its lines are): the part's lines then follow its dimensions smoothly
+    # and tend to the template's as they tend to its dimensions (the rounded cores stepped by up
+    # to 5e-13 m, which a shape derivative's second differences at 1e-4 divide by 1e-8)
+    for axis in (1, 2):
+        rounded, exact = _section_features(template, axis), _section_features(template, axis, exact=True)
+        moved = _section_features(params, axis, exact=True)
+        maps.append((rounded, rounded + (moved - exact) if moved.shape == exact.shape else moved))
     if any(a.shape != b.shape or np.any(np.diff(b) <= 0) for a, b in maps):
         raise ValueError("the part and its template do not have the same features (pieces, leaves, section) "
                          "in the same order: not one design")

@@ -138,10 +138,10 @@ def calibration_model(args: argparse.Namespace, mechanism, *, progress: bool):
                         model=model, breakaway_force=force,
                         also_build=prepare_model_chains if terms == "quadratic" else None, **executor_options(args))
     if terms == "quadratic":  # on the provider of the model's own factors (fem or fem-rigid)
-        from ..prototype.providers import stiffness_provider
+        from ..runs.model_correction import model_provider
 
-        space = curved_space(space, stiffness_provider(args.model_stiffness, progress=progress,
-                                                       **executor_options(args)))
+        space = curved_space(space, model_provider(args.model_stiffness, space.mechanism, progress=progress,
+                                                   **executor_options(args)))
     return space
 
 

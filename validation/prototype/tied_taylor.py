@@ -31,18 +31,31 @@ import numpy as np
 
 from flexcal.geometry.params import STEEL, FlexureChain, Material
 
-__all__ = ["TAYLOR_REACH", "relative_dimensions", "segment_taylor_key", "segment_taylors", "taylor_chain_matrices",
+__all__ = ["TAYLOR_REACH", "DIFFERENCE_STEP", "relative_dimensions", "segment_taylor_key", "segment_taylors", "taylor_chain_matrices",
            "build_segment_taylors", "taylor_tied_provider"]
 
 # the largest relative move of a dimension served from the polynomials: the dimension terms' steps
 # (3 %, 2.5 %) and their pairs; a chain moved further is built (the polynomial's error grows as r^3)
 TAYLOR_REACH = 0.05
 
+# the relative step of the dimension terms' differences on these chains (``runs.model_correction.
+# difference_steps``): the segments' polynomials are derivatives, exact to second order; their third
+# order is not the chains' (a segment's stiffness goes as 1 / length^3, the chain's compliance nearly
+# linearly), so at the builds' 3 % the l slopes of table1's chains came out 0.015-0.02 (10-20 %) off
+# the builds' and the template cells' differences, at 0.3 % within 4e-4 of them (session 40)
+DIFFERENCE_STEP = 3e-3
+
 # the modules whose code computes a segment's Taylor entry (its cache key's "code")
 TAYLOR_CODE = ("flexcal.validation.prototype.tied_taylor", "flexcal.validation.prototype.tied_chains",
                "flexcal.validation.prototype.cut_fields", "flexcal.validation.prototype.segments",
                "flexcal.fem.condense_taylor", "flexcal.fem.condense", "flexcal.fem.mesh_mapped_chain",
                "flexcal.geometry.profiles.leaf")
+
+
+def _symbols() -> list[str]:
+    from flexcal.model.parameters import DIMENSION_SYMBOLS
+
+    return list(DIMENSION_SYMBOLS)
 
 
 def _fields() -> list[str]:
@@ -314,5 +327,6 @@ def taylor_tied_provider(provider, nominal_chains: Iterable[FlexureChain], *, re
     wrapped.chain_segments = lambda chain: matrices(chain)["segments"]
     wrapped.prepare_chains = prepare_chains
     wrapped.keeping_segments = lambda: wrapped
+    wrapped.difference_steps = {symbol: DIFFERENCE_STEP for symbol in _symbols()}
     wrapped.description = provider.description + " (moved chains from the nominal segments' derivatives)"
     return wrapped

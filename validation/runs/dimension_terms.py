@@ -52,7 +52,7 @@ from flexcal.model.parameters import DIMENSION_SYMBOLS, ParameterSpace
 from ..prototype.segments import (StiffnessProvider, chain_slices, is_tied, prepare_chains, prepare_provider,
                                   sharing_segments)
 from .chain_kinematics import chain_shortening
-from .model_correction import (SLOPE_ELEMENTS_THROUGH, SLOPE_STEPS, compliance_factors, moved_chain,
+from .model_correction import (SLOPE_ELEMENTS_THROUGH, SLOPE_STEPS, compliance_factors, difference_steps, moved_chain,
                                provider_chain_compliance, same_design, slope_moves, slope_provider, unchanged_slices)
 
 __all__ = ["PAIR_DIFFERENCES", "DEFAULT_PAIR_DIFFERENCES", "CURVATURE_TERMS", "MIXED_ELEMENTS_THROUGH",
@@ -160,13 +160,14 @@ def prepare_model_chains(space: ParameterSpace, provider: StiffnessProvider, *,
     coarse = None if mixed_elements_through is None else slope_provider(provider, mixed_elements_through)
     coarse = None if coarse is provider else coarse
     chains = [p.chain for p in space.mechanism.chains]
-    chains += [*slope_moves(space).values(),
-               *curvature_moves(space, pairs=pairs, terms="all" if coarse is None else "diagonal").values()]
+    steps = difference_steps(provider)
+    chains += [*slope_moves(space, steps).values(),
+               *curvature_moves(space, steps, pairs=pairs, terms="all" if coarse is None else "diagonal").values()]
     prepare_chains(sharing_segments(provider), list(dict.fromkeys(chains)))
     if coarse is not None:  # the small jobs last: less of a core idle at the batch's end
         designs = same_design(space.mechanism.chains)
         mixed = [*(p.chain for c, p in enumerate(space.mechanism.chains) if designs[c] == c),
-                 *curvature_moves(space, pairs=pairs, terms="mixed").values()]
+                 *curvature_moves(space, difference_steps(coarse), pairs=pairs, terms="mixed").values()]
         prepare_chains(sharing_segments(coarse), list(dict.fromkeys(mixed)))
 
 
@@ -201,7 +202,7 @@ def _curvatures(space: ParameterSpace, provider: StiffnessProvider, steps, pairs
     ``elements_through``: its builds (``curvature_moves``) and finite differences."""
     fine, provider = provider, slope_provider(provider, elements_through)
     other_grid = provider is not fine
-    steps = SLOPE_STEPS if steps is None else steps
+    steps = difference_steps(provider) if steps is None else steps
     mech = space.mechanism
     design = same_design(mech.chains)
     first = [c for c in range(len(mech.chains)) if design[c] == c]
@@ -257,7 +258,7 @@ def shortening_slopes(space: ParameterSpace, provider: StiffnessProvider,
     from flexcal.model.shortening import chain_shortening_form
 
     provider = slope_provider(provider, elements_through)
-    steps = SLOPE_STEPS if steps is None else steps
+    steps = difference_steps(provider) if steps is None else steps
     mech = space.mechanism
     design = same_design(mech.chains)
     out = np.zeros((len(mech.chains), len(DIMENSION_SYMBOLS), 6, 6))

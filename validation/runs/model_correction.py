@@ -39,7 +39,8 @@ from .model_names import DEFAULT_BREAKAWAY_N, MODEL_STIFFNESS, MODELS
 
 __all__ = ["provider_chain_compliance", "twist_end_compliance", "compliance_factors", "compliance_slopes", "slope_provider", "unchanged_slices", "same_design", "corrected_space",
            "model_space", "MODEL_STIFFNESS", "MODELS", "DEFAULT_BREAKAWAY_N", "SLOPE_STEPS", "SLOPE_ELEMENTS_THROUGH",
-           "SLOPE_METHODS", "SLOPE_METHOD", "segment_stiffness_slopes", "DERIVATIVE_STEP"]
+           "SLOPE_METHODS", "SLOPE_METHOD", "segment_stiffness_slopes", "DERIVATIVE_STEP", "TERM_CHAINS",
+           "DEFAULT_TERM_CHAINS", "model_provider", "difference_steps"]
 
 
 def provider_chain_compliance(chain: FlexureChain, provider: StiffnessProvider) -> np.ndarray:
@@ -132,6 +133,13 @@ SLOPE_STEPS = {"w": 0.03, "a": 0.025, "l": 0.03, "t1": 0.03, "t2": 0.03}
 # 0.01 urad becomes 0.14 / 0.65 / 0.16 (4) and 0.13 / 0.51 / 0.12 (5), past issue 24's 0.25
 # (docs/model.md 11, "Session 36"). The tied provider's ``on_grid`` is tied too.
 SLOPE_ELEMENTS_THROUGH: float | None = None
+
+
+def difference_steps(provider: StiffnessProvider) -> dict[str, float]:
+    """The relative steps of the dimension terms' differences with ``provider``: its own
+    ``difference_steps`` if it has them (``prototype.tied_taylor``: its moved chains are
+    derivatives, taken at small steps), else ``SLOPE_STEPS``."""
+    return getattr(provider, "difference_steps", None) or SLOPE_STEPS
 
 
 def slope_provider(provider: StiffnessProvider, elements_through: float | None = SLOPE_ELEMENTS_THROUGH):
@@ -236,7 +244,7 @@ def _slopes_by_builds(space: ParameterSpace, provider: StiffnessProvider,
     2.8 % at 3 through) cancels, and with it most of the slopes' (the torsion entry's 0.52 ->
     0.12 % of the factor at table1's dimensions; not enough for the form error, docs/model.md 7)."""
     fine, provider = provider, slope_provider(provider, elements_through)
-    steps = SLOPE_STEPS if steps is None else steps
+    steps = difference_steps(provider) if steps is None else steps
     mech = space.mechanism
     design = same_design(mech.chains)
     moved = slope_moves(space, steps)
@@ -488,6 +496,34 @@ def corrected_space(space: ParameterSpace, provider: StiffnessProvider, *, slope
                                **extra)
 
 
+# How a tied provider gives the model's dimension terms their moved chains (the slopes', the
+# curvatures', the shortening slopes'): "derivatives", each from its nominal chain's segment
+# condensations and their first and second derivatives in the five dimensions
+# (``prototype.tied_taylor``: no FEM build per moved chain; session 40, docs/scale.md "Issue 26,
+# session 40"), or "builds", a tied FEM chain built for each (sessions 25-39)
+TERM_CHAINS = ("derivatives", "builds")
+DEFAULT_TERM_CHAINS = "derivatives"
+
+
+def model_provider(stiffness: str, mechanism, *, chains: str | None = None, **options) -> StiffnessProvider:
+    """The stiffness provider of the model's FEM corrections for ``mechanism``:
+    ``stiffness_provider(stiffness, **options)``, a tied one with the moves of each chain design
+    (``same_design``) from its segments' derivatives when ``chains`` (None: ``DEFAULT_TERM_CHAINS``)
+    is "derivatives" (``TERM_CHAINS``)."""
+    from ..prototype.providers import stiffness_provider
+
+    chains = DEFAULT_TERM_CHAINS if chains is None else chains
+    if chains not in TERM_CHAINS:
+        raise ValueError(f"term chains {chains!r} must be one of {', '.join(TERM_CHAINS)}")
+    provider = stiffness_provider(stiffness, **options)
+    if chains == "builds" or not is_tied(provider):
+        return provider
+    from ..prototype.tied_taylor import taylor_tied_provider
+
+    design = same_design(mechanism.chains)
+    return taylor_tied_provider(provider, [p.chain for c, p in enumerate(mechanism.chains) if design[c] == c])
+
+
 def model_space(stiffness: str = "fem", second_order: bool = True, *, progress: bool = False, workers: int | None = 0,
                 scheduler: str | None = None, mechanism=None, breakaway_force: float | None = None,
                 model: str = "second-order", also_build: Callable | None = None) -> ParameterSpace:
@@ -528,10 +564,9 @@ def model_space(stiffness: str = "fem", second_order: bool = True, *, progress: 
         if stiffness == "closed-form":  # Eq. 1's chains and the chains' own shortening form, nothing measured
             return dataclasses.replace(space, second_order=True, breakaway_force=force,
                                        chain_shortening=(0.0,) * (36 * len(space.mechanism.chains)))
-        from ..prototype.providers import stiffness_provider
         from .chain_kinematics import consistent_space
 
-        provider = stiffness_provider(stiffness, progress=progress, workers=workers, scheduler=scheduler)
+        provider = model_provider(stiffness, space.mechanism, progress=progress, workers=workers, scheduler=scheduler)
         if also_build is not None:  # e.g. the curvatures' chains in the same batch as the slopes'
             also_build(space, provider)
         space = consistent_space(corrected_space(space, provider, slopes=True), provider)
