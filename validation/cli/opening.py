@@ -140,7 +140,7 @@ def calibration_model(args: argparse.Namespace, mechanism, *, progress: bool):
     if terms == "quadratic":  # on the provider of the model's own factors (fem or fem-rigid)
         from ..runs.model_correction import model_provider
 
-        space = curved_space(space, model_provider(args.model_stiffness, space.mechanism, progress=progress,
+        space = curved_space(space, model_provider(args.model_stiffness, mechanism, progress=progress,
                                                    **executor_options(args)))
     return space
 

@@ -261,13 +261,15 @@ def build_segments(slices: Iterable[tuple[FlexureChain, float, float]], material
 
 
 def build_missing(missing: dict[str, Any], job: Callable[..., dict[str, Any]], options: dict[str, Any],
-                  arrays: tuple[str, ...], describe: Callable[[Any], str], *, workers: int | None,
+                  arrays: tuple[str, ...] | Callable[[Any], tuple[str, ...]], describe: Callable[[Any], str], *,
+                  workers: int | None,
                   scheduler: str | None, progress: bool, cache_directory, in_threads: bool, task_prefix: str,
                   what: str) -> int:
     """Run ``job(item, **options, mesher_threads=n, solver_threads=n)`` (n: each local job's
     share of the cores, ``plan_local_builds``; 0: all) for each of ``missing``
     ({cache key: item}, in the order handed out; those already cached are skipped) on the shared
-    executor and store each result's ``arrays`` under its key; returns how many were built.
+    executor and store each result's ``arrays`` (names, or item -> names for a batch of several
+    kinds) under its key; returns how many were built.
 
     workers / scheduler as ``build_segments``; in_threads: local jobs on threads of this process
     (``LOCAL_BUILDS_IN_THREADS``), else on worker processes. A job returns {"key": its cache key
@@ -304,7 +306,8 @@ def build_missing(missing: dict[str, Any], job: Callable[..., dict[str, Any]], o
             raise RuntimeError("a Dask worker runs another flexcal version (its FEM cache key differs); install the "
                                "same flexcal on the workers as on this machine")
         if load_cached(key, cache_directory) is None:  # an unwritable cache keeps it in memory (warned once)
-            keep_cached(key, {name: result[name] for name in arrays}, cache_directory)
+            names = arrays(item) if callable(arrays) else arrays
+            keep_cached(key, {name: result[name] for name in names}, cache_directory)
         built.append(key)
         log(f"  FEM {describe(item)}: {result['wall_s']:.1f} s ({len(built)}/{len(missing)}, "
             f"{time.perf_counter() - start:.0f} s elapsed)")

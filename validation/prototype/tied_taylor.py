@@ -199,7 +199,15 @@ def _at(entry: dict[str, np.ndarray], r: np.ndarray) -> np.ndarray:
 def taylor_chain_matrices(chain: FlexureChain, nominal: FlexureChain, taylors: dict, ties: str) -> dict[str, np.ndarray]:
     """{"stiffness": K_chain (30, 30), "segments": (5, 12, 12)} [SI] of ``chain``, a move of
     ``nominal`` (``relative_dimensions``), as ``tied_chains.tied_chain_matrices`` gives them, its
-    segment condensations from ``taylors`` (``segment_taylors`` of ``nominal``) at its r."""
+    segment condensations from ``taylors`` (``segment_taylors`` of ``nominal``) at its r, on one
+    thread."""
+    from flexcal.fem.solve import one_thread
+
+    with one_thread():  # the dense algebra's bits as a built chain's (``fem.cache.cached`` computes on one thread)
+        return _taylor_chain_matrices(chain, nominal, taylors, ties)
+
+
+def _taylor_chain_matrices(chain: FlexureChain, nominal: FlexureChain, taylors: dict, ties: str) -> dict:
     from flexcal.fem.cut_warping import chain_twist_stiffness, rigid_part_stiffness
 
     from .cut_fields import chain_order_matrices, cut_orders, plan_key, step_interfaces
@@ -207,36 +215,42 @@ def taylor_chain_matrices(chain: FlexureChain, nominal: FlexureChain, taylors: d
 
     found = relative_dimensions(chain, [nominal], reach=np.inf)
     r = np.zeros(len(_fields())) if found is None else found[1]
-    nominal_keys = list(_distinct_steps(nominal, ties))
-    by_index = {index: key for key, index in _distinct_steps(nominal, ties).items()}
     plan, interfaces, _, scale = _tied_plan(chain, ties)
     plan0, _, _, _ = _tied_plan(nominal, ties)
+    labels0 = step_interfaces(plan0, interfaces)
     condensed = {}
     for index, (step, labels) in enumerate(zip(plan, step_interfaces(plan, interfaces))):
         key = plan_key(step, labels)
         if key in condensed:
             continue
-        own = plan_key(plan0[index], step_interfaces(plan0, interfaces)[index])
-        if own not in nominal_keys:
+        own = plan_key(plan0[index], labels0[index])  # the nominal step this one moves
+        if own not in taylors:
             raise ValueError("the moved chain's plan does not follow its nominal chain's")
-        first_index = _distinct_steps(nominal, ties)[own]
-        condensed[key] = _at(taylors[by_index[first_index]], r)
+        condensed[key] = _at(taylors[own], r)
     matrices, orders = chain_order_matrices(plan, condensed, interfaces), cut_orders(plan, interfaces)
     return {"stiffness": chain_twist_stiffness(matrices, orders, scale),
             "segments": rigid_part_stiffness(matrices, orders, scale)}
 
 
-def build_segment_taylor_job(item: tuple[FlexureChain, int], *, ties: str, material: Material,
-                             elements_through_thickness: float, step: float, cache_directory=None,
-                             mesher_threads: int = 0, solver_threads: int = 0) -> dict[str, Any]:
-    """One segment's Taylor entry (``segment_taylors``) on a job thread: {"key", its arrays,
-    "wall_s"}; PARDISO on ``solver_threads`` MKL threads (0: all)."""
+def build_segment_taylor_job(item: tuple, *, ties: str, material: Material, elements_through_thickness: float,
+                             step: float, cache_directory=None, mesher_threads: int = 0,
+                             solver_threads: int = 0) -> dict[str, Any]:
+    """One job of ``build_segment_taylors``' batch on a job thread: item ("taylor", nominal chain,
+    step index), that segment's Taylor entry (``segment_taylors``), or ("chain", chain), its tied
+    chain (``tied_chains.build_tied_chain_job``); {"key", its arrays, "wall_s"}; PARDISO on
+    ``solver_threads`` MKL threads (0: all)."""
     import contextlib
 
     from flexcal.fem.cache import cached
     from flexcal.fem.solve import solver_threads as mkl_threads
 
-    nominal, index = item
+    from .tied_chains import build_tied_chain_job
+
+    if item[0] == "chain":
+        return build_tied_chain_job(item[1], ties=ties, material=material,
+                                    elements_through_thickness=elements_through_thickness,
+                                    cache_directory=cache_directory, solver_threads=solver_threads)
+    _, nominal, index = item
     start = time.perf_counter()
     parts = _segment_taylor_parts(nominal, index, ties, material, elements_through_thickness, step)
     with mkl_threads(solver_threads) if solver_threads else contextlib.nullcontext():
@@ -247,29 +261,51 @@ def build_segment_taylor_job(item: tuple[FlexureChain, int], *, ties: str, mater
             **arrays, "wall_s": time.perf_counter() - start}
 
 
+# a segment's Taylor jobs, longest first (so the batch's end leaves no core idle long): the leaf
+# segments [m1, s0] and [0, m1] (4 dimensions each, ~20-30 s on the prototype's grid) before the strut
+# (the length alone, ~1 s); measured on table1's L1 and D1 (session 40)
+_TAYLOR_ORDER = (1, 0, 2)
+
+
 def build_segment_taylors(nominals: Iterable[FlexureChain], ties: str, material: Material = STEEL, *,
                           elements_through_thickness: float, cache_directory=None, step: float | None = None,
-                          workers: int | None = None, scheduler: str | None = None, progress: bool = True) -> int:
-    """Compute the missing ``segment_taylors`` entries of ``nominals`` on the shared executor
-    (``fem_provider.build_missing``: one job per distinct segment), into the cache; returns how
+                          chains: Iterable[FlexureChain] = (), workers: int | None = None,
+                          scheduler: str | None = None, progress: bool = True) -> int:
+    """Compute the missing ``segment_taylors`` entries of ``nominals`` (one job per distinct
+    segment) and build the missing tied ``chains`` (``tied_chains.tied_chain_matrices``) in one
+    batch on the shared executor (``fem_provider.build_missing``), into the cache; returns how
     many were computed."""
     from flexcal.fem.condense_taylor import DERIVATIVE_STEP
 
     from .fem_provider import build_missing
+    from .tied_chains import tied_chain_key
 
     step = DERIVATIVE_STEP if step is None else step
-    missing = {}
+    jobs = []
     for nominal in dict.fromkeys(nominals):
-        for index in _distinct_steps(nominal, ties).values():
-            missing[segment_taylor_key(nominal, index, ties, material,
-                                       elements_through_thickness=elements_through_thickness, step=step)] = (nominal, index)
+        steps = sorted(_distinct_steps(nominal, ties).values(),
+                       key=lambda i: _TAYLOR_ORDER.index(i) if i in _TAYLOR_ORDER else len(_TAYLOR_ORDER))
+        jobs += [(segment_taylor_key(nominal, index, ties, material, elements_through_thickness=elements_through_thickness,
+                                     step=step), ("taylor", nominal, index)) for index in steps]
+    # longest first: every design's leaf segments, the chains (~6-8 s), the struts
+    leaves, struts = [job for job in jobs if job[1][2] != 2], [job for job in jobs if job[1][2] == 2]
+    built = [(tied_chain_key(chain, ties, material, elements_through_thickness=elements_through_thickness),
+              ("chain", chain)) for chain in dict.fromkeys(chains)]
+    missing = dict(leaves + built + struts)
     options = {"ties": ties, "material": material, "elements_through_thickness": float(elements_through_thickness),
                "step": float(step), "cache_directory": None if cache_directory is None else str(cache_directory)}
-    return build_missing(missing, build_segment_taylor_job, options, ("value", "parameters", "first", "second"),
-                         lambda item: f"segment derivatives ({ties}) of a {item[0].length * 1e3:.1f} mm chain, "
-                                      f"step {item[1]}",
-                         workers=workers, scheduler=scheduler, progress=progress, cache_directory=cache_directory,
-                         in_threads=True, task_prefix="fem-segment-taylor", what="segment derivatives")
+
+    def describe(item):
+        if item[0] == "chain":
+            return f"tied chain ({ties}) of a {item[1].length * 1e3:.1f} mm chain"
+        return f"segment derivatives ({ties}) of a {item[1].length * 1e3:.1f} mm chain, step {item[2]}"
+
+    return build_missing(missing, build_segment_taylor_job, options,
+                         lambda item: ("stiffness", "segments") if item[0] == "chain" else
+                         ("value", "parameters", "first", "second"),
+                         describe, workers=workers, scheduler=scheduler, progress=progress,
+                         cache_directory=cache_directory, in_threads=True, task_prefix="fem-segment-taylor",
+                         what="segment derivatives and tied chains")
 
 
 def taylor_tied_provider(provider, nominal_chains: Iterable[FlexureChain], *, reach: float = TAYLOR_REACH):
@@ -294,27 +330,31 @@ def taylor_tied_provider(provider, nominal_chains: Iterable[FlexureChain], *, re
                                             cache_directory=cache_directory)
         return memo[nominal]
 
+    moved_memo: dict = {}
+
     def matrices(chain):
         found = relative_dimensions(chain, nominals, reach)
         if found is None:
             return {"stiffness": provider.chain_stiffness(chain), "segments": provider.chain_segments(chain)}
-        start = time.perf_counter()
-        out = taylor_chain_matrices(chain, found[0], taylors_of(found[0]), provider.ties)
-        if progress and time.perf_counter() - start > 0.5:
-            print(f"  FEM tied chain from segment derivatives: {time.perf_counter() - start:.1f} s", file=sys.stderr)
-        return out
+        if chain not in moved_memo:
+            start = time.perf_counter()
+            moved_memo[chain] = taylor_chain_matrices(chain, found[0], taylors_of(found[0]), provider.ties)
+            if progress and time.perf_counter() - start > 0.5:
+                print(f"  FEM tied chain from segment derivatives: {time.perf_counter() - start:.1f} s",
+                      file=sys.stderr)
+        return moved_memo[chain]
 
     def prepare_chains(chains):
         chains = list(dict.fromkeys(chains))
         moved = [relative_dimensions(c, nominals, reach) for c in chains]
         designs = list(dict.fromkeys(found[0] for found in moved if found is not None))
         others = [c for c, found in zip(chains, moved) if found is None]
-        count = provider.prepare_chains(others) if others else 0
-        if designs and not (provider.scheduler is None and provider.workers == 0):
-            count += build_segment_taylors(designs, provider.ties, elements_through_thickness=through,
-                                           cache_directory=cache_directory, workers=provider.workers,
-                                           scheduler=provider.scheduler, progress=progress)
-        return count
+        if provider.scheduler is None and provider.workers == 0:
+            return 0  # built lazily, in order, by the calls that follow
+        # the Taylor jobs and the other chains' builds in one batch: no core idle between two
+        return build_segment_taylors(designs, provider.ties, elements_through_thickness=through,
+                                     cache_directory=cache_directory, chains=others, workers=provider.workers,
+                                     scheduler=provider.scheduler, progress=progress)
 
     def wrapped(chain, x_start, x_end):
         return provider(chain, x_start, x_end)

@@ -506,10 +506,12 @@ DEFAULT_TERM_CHAINS = "derivatives"
 
 
 def model_provider(stiffness: str, mechanism, *, chains: str | None = None, **options) -> StiffnessProvider:
-    """The stiffness provider of the model's FEM corrections for ``mechanism``:
-    ``stiffness_provider(stiffness, **options)``, a tied one with the moves of each chain design
-    (``same_design``) from its segments' derivatives when ``chains`` (None: ``DEFAULT_TERM_CHAINS``)
-    is "derivatives" (``TERM_CHAINS``)."""
+    """The stiffness provider of the model's FEM corrections for ``mechanism`` (None: the
+    reference one): ``stiffness_provider(stiffness, **options)``, a tied one with the moves of each
+    chain design (``same_design``) from its segments' derivatives when ``chains`` (None:
+    ``DEFAULT_TERM_CHAINS``) is "derivatives" (``TERM_CHAINS``)."""
+    from flexcal.model.parameters import parameter_space
+
     from ..prototype.providers import stiffness_provider
 
     chains = DEFAULT_TERM_CHAINS if chains is None else chains
@@ -520,6 +522,7 @@ def model_provider(stiffness: str, mechanism, *, chains: str | None = None, **op
         return provider
     from ..prototype.tied_taylor import taylor_tied_provider
 
+    mechanism = parameter_space(mechanism).mechanism if mechanism is None else mechanism
     design = same_design(mechanism.chains)
     return taylor_tied_provider(provider, [p.chain for c, p in enumerate(mechanism.chains) if design[c] == c])
 
