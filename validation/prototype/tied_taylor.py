@@ -45,11 +45,10 @@ TAYLOR_REACH = 0.05
 # the builds' and the template cells' differences, at 0.3 % within 4e-4 of them (session 40)
 DIFFERENCE_STEP = 3e-3
 
-# the modules whose code computes a segment's Taylor entry (its cache key's "code")
+# the modules of flexcal.validation whose code computes a segment's Taylor entry (its cache key's
+# "code"; every key carries flexcal.fem's and flexcal.geometry's already, ``fem.cache.code_version``)
 TAYLOR_CODE = ("flexcal.validation.prototype.tied_taylor", "flexcal.validation.prototype.tied_chains",
-               "flexcal.validation.prototype.cut_fields", "flexcal.validation.prototype.segments",
-               "flexcal.fem.condense_taylor", "flexcal.fem.condense", "flexcal.fem.mesh_mapped_chain",
-               "flexcal.geometry.profiles.leaf")
+               "flexcal.validation.prototype.cut_fields", "flexcal.validation.prototype.segments")
 
 
 def _symbols() -> list[str]:
