@@ -380,7 +380,8 @@ class SpdFactors:
     handle of their own until ``free``, for several products with one factorisation
     (``flexcal.fem.condense_taylor``: a class's K_ii^-1 against its condensation's columns and
     their derivatives). ``half(B)``: Y = L^-1 P B, so B^T K^-1 B = Y^T Y (forward substitution
-    only, as ``inverse_quadratic_form``); ``solve(B)``: K^-1 B. The calling thread's MKL count
+    only, as ``inverse_quadratic_form``); ``solve(B)``: K^-1 B; ``back(Y)``: K^-1 B from Y = half(B)
+    (the backward substitution alone). The calling thread's MKL count
     (``solver_threads``) at each call."""
 
     def __init__(self, upper: sp.csr_matrix):
@@ -418,6 +419,10 @@ class SpdFactors:
 
     def solve(self, B: np.ndarray) -> np.ndarray:
         return self._phase(33, B)
+
+    def back(self, Y: np.ndarray) -> np.ndarray:
+        """K^-1 B from Y = ``half(B)``: the backward substitution alone (phase 333)."""
+        return self._phase(333, Y)
 
     def free(self) -> None:
         if self._handle is not None:
