@@ -67,10 +67,9 @@ class StiffnessTaylor:
 def _add_second_order(second: np.ndarray, halves: list) -> None:
     """E_p^T K^-1 E_q + E_q^T K^-1 E_p added into ``second`` (P, P, m, m) from the halves Y_p
     (Y_p^T Y_q = E_p^T K^-1 E_q; None where E_p = 0), in place."""
-    E = halves
-    for p, q in itertools.product(range(len(E)), repeat=2):
-        if E[p] is not None and E[q] is not None:
-            product = E[p].T @ E[q]
+    for p, q in itertools.product(range(len(halves)), repeat=2):
+        if halves[p] is not None and halves[q] is not None:
+            product = halves[p].T @ halves[q]
             second[p, q] += product + product.T
 
 
