@@ -34,7 +34,10 @@ numbers (``ParameterSpace.compliance_curvatures``, ``ParameterSpace.shortening_s
 provider (``chain_stiffness``, ``--model-stiffness fem``) is asked for each moved chain whole
 (its segments joined through the cut fields; the segments it shares with the nominal chain and
 the single moves read from the cache): 40 tied chains for the reference mount's curvatures (60
-central), 20 of them the slopes' (the shortening slopes ask for those 20 only).
+central), 20 of them the slopes' (the shortening slopes ask for those 20 only). The model's
+provider by default (``model_correction.model_provider``, session 40) gives those moved chains
+from the nominal segments' first and second derivatives (``prototype.tied_taylor``), no build
+each, and its ``difference_steps`` (0.3 %) replace ``SLOPE_STEPS`` in every difference here.
 """
 
 from __future__ import annotations
