@@ -129,6 +129,12 @@ def test_local_builds_default_to_one_thread_per_core_within_memory():
     # free memory for 3 builds on 8 cores: 3 threads; for none: still one (built in turn)
     assert plan_local_builds(None, 18, cores=8, available_bytes=3.5 * BUILD_MEMORY_BYTES) == (3, 2)
     assert plan_local_builds(None, 18, cores=8, available_bytes=0.2 * BUILD_MEMORY_BYTES) == (1, 8)
+    # a heavier job (the segment derivatives, TAYLOR_MEMORY_BYTES): fewer fit in the same memory
+    from flexcal.validation.prototype.tied_taylor import TAYLOR_MEMORY_BYTES
+
+    assert plan_local_builds(None, 6, cores=2, available_bytes=3 * BUILD_MEMORY_BYTES) == (2, 1)
+    assert plan_local_builds(None, 6, cores=2, available_bytes=3 * BUILD_MEMORY_BYTES,
+                             job_bytes=TAYLOR_MEMORY_BYTES) == (1, 2)
     # asked for: as asked, whatever the memory; 0 is this process on all cores
     assert plan_local_builds(2, 18, cores=2, available_bytes=0.0) == (2, 1)
     assert plan_local_builds(4, 18, cores=2, available_bytes=plenty) == (4, 1)

@@ -196,18 +196,19 @@ def segment_build_cost(segment: ChainSegment) -> float:
 BUILD_MEMORY_BYTES = 1.5e9
 
 
-def plan_local_builds(workers: int | None, n_missing: int, *, cores: int, available_bytes: float) -> tuple[int, int]:
+def plan_local_builds(workers: int | None, n_missing: int, *, cores: int, available_bytes: float,
+                      job_bytes: float = BUILD_MEMORY_BYTES) -> tuple[int, int]:
     """(job threads, cores each) for ``n_missing`` segment builds on this machine.
 
     workers: None (the command line's default): one thread per usable core, at most one
-    per missing segment and per ``BUILD_MEMORY_BYTES`` of free memory (at least 1);
+    per missing segment and per ``job_bytes`` (``BUILD_MEMORY_BYTES``) of free memory (at least 1);
     0: none (built one after the other in this process, all cores each); N > 0: N threads
     as asked. Each thread owns cores // threads of the cores (at least 1)."""
     from ..executor import resolve_workers
 
     threads = resolve_workers(workers, n_missing, cores=cores)
     if workers is None and threads:
-        threads = max(1, min(threads, int(available_bytes // BUILD_MEMORY_BYTES)))
+        threads = max(1, min(threads, int(available_bytes // job_bytes)))
     return threads, max(1, cores // threads) if threads else 0
 
 
@@ -264,14 +265,15 @@ def build_missing(missing: dict[str, Any], job: Callable[..., dict[str, Any]], o
                   arrays: tuple[str, ...] | Callable[[Any], tuple[str, ...]], describe: Callable[[Any], str], *,
                   workers: int | None,
                   scheduler: str | None, progress: bool, cache_directory, in_threads: bool, task_prefix: str,
-                  what: str) -> int:
+                  what: str, job_bytes: float = BUILD_MEMORY_BYTES) -> int:
     """Run ``job(item, **options, mesher_threads=n, solver_threads=n)`` (n: each local job's
     share of the cores, ``plan_local_builds``; 0: all) for each of ``missing``
     ({cache key: item}, in the order handed out; those already cached are skipped) on the shared
     executor and store each result's ``arrays`` (names, or item -> names for a batch of several
     kinds) under its key; returns how many were built.
 
-    workers / scheduler as ``build_segments``; in_threads: local jobs on threads of this process
+    workers / scheduler as ``build_segments``; job_bytes: what one job may hold at once
+    (``plan_local_builds``); in_threads: local jobs on threads of this process
     (``LOCAL_BUILDS_IN_THREADS``), else on worker processes. A job returns {"key": its cache key
     there, the arrays, "wall_s": [s]}; the worker's own cache write makes the store a no-op on
     shared storage, a remote worker without it hands the arrays back, and a cache folder that
@@ -291,7 +293,8 @@ def build_missing(missing: dict[str, Any], job: Callable[..., dict[str, Any]], o
         import psutil
 
         n_workers, cores_each = plan_local_builds(workers, len(missing), cores=usable_cores(),
-                                                  available_bytes=psutil.virtual_memory().available)
+                                                  available_bytes=psutil.virtual_memory().available,
+                                                  job_bytes=job_bytes)
     else:
         n_workers, cores_each = 0, 0  # the cluster's workers keep their cores
     in_threads = in_threads and n_workers > 0  # LOCAL_BUILDS_IN_THREADS

@@ -260,6 +260,11 @@ def build_segment_taylor_job(item: tuple, *, ties: str, material: Material, elem
             **arrays, "wall_s": time.perf_counter() - start}
 
 
+# what one derivative job may hold at once (``fem_provider.plan_local_builds``): every parity class's
+# factors, forward substitutions and +- assemblies together; two side by side put table1's cold
+# main job at 4.5-4.8 GiB against 1.2 GiB with the builds (session 40), ~2.2 GB each
+TAYLOR_MEMORY_BYTES = 2.5e9
+
 # a segment's Taylor jobs, longest first (so the batch's end leaves no core idle long): the leaf
 # segments [m1, s0] and [0, m1] (4 dimensions each, ~20-30 s on the prototype's grid) before the strut
 # (the length alone, ~1 s); measured on table1's L1 and D1 (session 40)
@@ -304,7 +309,7 @@ def build_segment_taylors(nominals: Iterable[FlexureChain], ties: str, material:
                          ("value", "parameters", "first", "second"),
                          describe, workers=workers, scheduler=scheduler, progress=progress,
                          cache_directory=cache_directory, in_threads=True, task_prefix="fem-segment-taylor",
-                         what="segment derivatives and tied chains")
+                         what="segment derivatives and tied chains", job_bytes=TAYLOR_MEMORY_BYTES)
 
 
 def taylor_tied_provider(provider, nominal_chains: Iterable[FlexureChain], *, reach: float = TAYLOR_REACH):
