@@ -122,9 +122,9 @@ class _ClassState:
     X: np.ndarray
     M: np.ndarray
     nominal: tuple
-    plus: dict
+    rows: np.ndarray
+    plus: dict = dataclasses.field(default_factory=dict)
     minus: dict = dataclasses.field(default_factory=dict)
-    rows: np.ndarray | None = None
 
 
 def _support(system: ClassSystem, neighbours: np.ndarray) -> np.ndarray:
@@ -143,8 +143,10 @@ def _rhs_block(system: ClassSystem, rows: np.ndarray) -> np.ndarray:
 
 
 def _same_class(nominal: ClassSystem, other: ClassSystem) -> None:
-    if not (np.array_equal(nominal.both, other.both) and nominal.sub.shape == other.sub.shape
-            and nominal.K_im.shape == other.K_im.shape and nominal.G.shape == other.G.shape):
+    """ValueError unless ``other`` has ``nominal``'s DOFs and K_ii pattern (both with stored zeros)."""
+    if not (np.array_equal(nominal.both, other.both) and nominal.K_im.shape == other.K_im.shape
+            and nominal.G.shape == other.G.shape and np.array_equal(nominal.sub.indptr, other.sub.indptr)
+            and np.array_equal(nominal.sub.indices, other.sub.indices)):
         raise ValueError("a moved part's parity class has other DOFs than the nominal one's: the moved mesh is not "
                          "the nominal connectivity with its nodes moved (fem.mesh_mapped_chain.template_grid)")
 
@@ -163,7 +165,9 @@ def mirrored_coupled_stiffness_taylor(part_at: Callable[[np.ndarray], tuple], ma
     P = int(n_parameters)
     unit = np.eye(P) * step
     mesh0, couplings0 = part_at(np.zeros(P))
-    nominal = mirror_class_systems(mesh0, material, couplings0, axes)
+    # K_ii with its stored zeros: the pattern every moved part shares (their differences are the
+    # values'); the factors take it without them, as ``mirrored_coupled_stiffness`` does
+    nominal = mirror_class_systems(mesh0, material, couplings0, axes, drop_zeros=False)
     if nominal.floats:
         raise ValueError("a part with floating pieces (held by distributing couplings alone) has no Taylor "
                          "condensation here: use condense.mirrored_coupled_stiffness")
@@ -177,17 +181,29 @@ def mirrored_coupled_stiffness_taylor(part_at: Callable[[np.ndarray], tuple], ma
                 and all(np.array_equal(np.asarray(c.reference_point, float), p) for c, p in zip(couplings, points0)))
         return None if same else (mesh, couplings)
 
+    tets = check_mesh(mesh0)[1]
+    coupled = np.zeros(len(nodes0), bool)
+    for c in couplings0:
+        if not isinstance(c, DistributingCoupling):
+            coupled[c.nodes] = True
+    near = np.zeros(len(nodes0), bool)
+    near[np.unique(tets[np.any(coupled[tets], axis=1)])] = True
+    neighbours = near[nominal.free // 3]
     states = []
     try:
         for system in nominal.classes:
-            factors = spd_factors(system.sub)
+            without_zeros = system.sub.copy()
+            without_zeros.eliminate_zeros()
+            factors = spd_factors(without_zeros)
             C = system.rhs()
             Y = factors.half(C)
             X = factors.back(Y)  # K^-1 C, the same bits as a full solve (measured), at half its cost
             if np.linalg.norm(_symmetric_product(factors.upper, X) - C) > RESIDUAL_LIMIT * np.linalg.norm(C):
                 raise ValueError("the nominal class's solve failed its residual check: K is singular or nearly so")
             M = Y.T @ Y
-            states.append(_ClassState(factors=factors, X=X, M=0.5 * (M + M.T), nominal=None, plus={}))
+            rows = _support(system, neighbours)
+            states.append(_ClassState(factors=factors, X=X, M=0.5 * (M + M.T), rows=rows,
+                                      nominal=(system.sub, _rhs_block(system, rows), system.K_mm)))
 
         def assemble(r):
             """Per class (K's upper triangle with its stored zeros: one pattern for every r; C;
@@ -200,30 +216,14 @@ def mirrored_coupled_stiffness_taylor(part_at: Callable[[np.ndarray], tuple], ma
                 _same_class(base, system)
             return [(system.sub, _rhs_block(system, state.rows), system.K_mm) for system, state in zip(systems, states)]
 
-        pattern0 = mirror_class_systems(mesh0, material, couplings0, axes, drop_zeros=False)
-        tets = check_mesh(mesh0)[1]
-        coupled = np.zeros(len(nodes0), bool)
-        for c in couplings0:
-            if not isinstance(c, DistributingCoupling):
-                coupled[c.nodes] = True
-        near = np.zeros(len(nodes0), bool)
-        near[np.unique(tets[np.any(coupled[tets], axis=1)])] = True
-        neighbours = near[pattern0.free // 3]
-        for state, system in zip(states, pattern0.classes):
-            state.rows = _support(system, neighbours)
-            state.nominal = (system.sub, _rhs_block(system, state.rows), system.K_mm)
-
         def derivative(state, weights):
             """(M's term C'^T X + X^T C' - X^T K' X, K_mm', C', K' X) of the difference sum_i w_i
             (K_i, C_i, K_mm_i): the matrices differenced entry by entry first (their products with
             X would lose the differences to rounding: X^T K X sits K's condition number above
             them), K on the pattern every r shares."""
-            pattern = weights[0][0][0]
-            data = sum(w * k.data for (k, _, _), w in weights)
-            if any(k.indptr.shape != pattern.indptr.shape or not np.array_equal(k.indices, pattern.indices)
-                   for (k, _, _), _ in weights):
-                raise ValueError("a moved part's K has another pattern than the nominal one's: not one connectivity")
-            K = type(pattern)((data, pattern.indices, pattern.indptr), shape=pattern.shape)
+            pattern = weights[0][0][0]  # every assembly's (``_same_class``)
+            K = type(pattern)((sum(w * k.data for (k, _, _), w in weights), pattern.indices, pattern.indptr),
+                              shape=pattern.shape)
             C = sum(w * c for (_, c, _), w in weights)  # on the class's rows
             KX = _symmetric_product(K, state.X)
             CX = C.T @ state.X[state.rows]

@@ -192,17 +192,18 @@ def _pardiso_errors(n_dofs: int) -> Iterator[None]:
     try:
         yield
     except pypardiso.pardiso_wrapper.PyPardisoError as error:
-        if getattr(error, "value", None) == PARDISO_OUT_OF_MEMORY:
-            raise RuntimeError(
-                f"PARDISO failed ({error}): not enough memory for the factorization of "
-                f"{n_dofs} DOF (a coarser mesh or a machine with more memory)"
-            ) from error
-        raise ValueError(
-            f"PARDISO failed ({error}); K is probably not positive definite: a body part is not "
-            "held (check the clamps and couplings)"
-        ) from error
+        raise _pardiso_failure(error, n_dofs) from error
     finally:
         _pardiso_solver().free_memory(everything=True)
+
+
+def _pardiso_failure(error, n_dofs: int) -> Exception:
+    """The error a user can act on for PARDISO's ``error`` on an ``n_dofs`` system."""
+    if getattr(error, "value", None) == PARDISO_OUT_OF_MEMORY:
+        return RuntimeError(f"PARDISO failed ({error}): not enough memory for the factorization of {n_dofs} DOF "
+                            "(a coarser mesh or a machine with more memory)")
+    return ValueError(f"PARDISO failed ({error}); K is probably not positive definite: a body part is not held "
+                      "(check the clamps and couplings)")
 
 
 def _upper(K: sp.csr_matrix, upper_triangle: bool) -> sp.csr_matrix:
@@ -405,8 +406,7 @@ class SpdFactors:
             yield
         except pypardiso.pardiso_wrapper.PyPardisoError as error:
             self.free()
-            raise ValueError(f"PARDISO failed ({error}); K is probably not positive definite: a body part is "
-                             "not held (check the clamps and couplings)") from error
+            raise _pardiso_failure(error, self.n) from error
 
     def _phase(self, phase: int, B: np.ndarray) -> np.ndarray:
         self._threads()

@@ -143,27 +143,26 @@ def _compute_segment_taylor(nominal: FlexureChain, index: int, ties: str, elemen
     from .cut_fields import segment_couplings, step_interfaces
     from .tied_chains import _tied_plan
 
-    plan0, interfaces, options, _ = _tied_plan(nominal, ties)
+    plan0, interfaces, options, scale0 = _tied_plan(nominal, ties)
     labels = step_interfaces(plan0, interfaces)[index]
-    template = plan0[index][0]
-    axes_seen = []
+    template, _, starts0, ends0 = plan0[index]
+    mesh0, axes = mapped_mesh_chain_mirror_part(template, elements_through_thickness=elements_through_thickness,
+                                                template=template, **options)
+    couplings0 = segment_couplings(template, mesh0, starts0, ends0, labels, scale0)
 
     def part_at(r):
         plan, _, _, scale = _tied_plan(_moved(nominal, r), ties)
         segment, _, starts, ends = plan[index]
-        if nominal_part and _same_solid(segment, template) and scale == nominal_part[2]:
-            return nominal_part[:2]  # a dimension this segment does not have (as ``unchanged_slices``)
-        mesh, axes = mapped_mesh_chain_mirror_part(segment, elements_through_thickness=elements_through_thickness,
-                                                   template=template, **options)
-        axes_seen.append(axes)
+        if _same_solid(segment, template) and scale == scale0:
+            return mesh0, couplings0  # a dimension this segment does not have (as ``unchanged_slices``)
+        mesh, moved_axes = mapped_mesh_chain_mirror_part(segment, elements_through_thickness=elements_through_thickness,
+                                                         template=template, **options)
+        if moved_axes != axes:
+            raise ValueError("a moved segment's mirror axes differ from the nominal one's")
         return mesh, segment_couplings(segment, mesh, starts, ends, labels, scale)
 
     n = len(_fields())
-    nominal_part = []
-    nominal_part.extend([*part_at(np.zeros(n)), _tied_plan(nominal, ties)[3]])
-    taylor = mirrored_coupled_stiffness_taylor(part_at, STEEL, axes_seen[0], n, step=step)
-    if any(axes != axes_seen[0] for axes in axes_seen):
-        raise ValueError("a moved segment's mirror axes differ from the nominal one's")
+    taylor = mirrored_coupled_stiffness_taylor(part_at, STEEL, axes, n, step=step)
     reached = np.array([p for p in range(n) if np.any(taylor.first[p]) or np.any(taylor.second[p])], int)
     return {"value": taylor.value, "parameters": reached, "first": taylor.first[reached],
             "second": taylor.second[np.ix_(reached, reached)]}
