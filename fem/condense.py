@@ -29,7 +29,7 @@ import scipy.sparse as sp
 from flexcal.geometry.frames import skew, twist_transform
 from flexcal.geometry.params import Material
 
-from .assembly import assemble_stiffness, check_mesh
+from .assembly import assemble_blocks, assemble_stiffness, check_mesh, node_pattern
 from .coupling import (DEFAULT_PLANE_TOLERANCE, MIRROR_PARITY, CouplingMap, RigidCoupling, coupling_map,
                        select_plane_nodes)
 from .solve import inverse_quadratic_form, pardiso_available, solve_spd
@@ -55,6 +55,8 @@ __all__ = [
     "mirror_class_systems",
     "ClassSystem",
     "MirrorClasses",
+    "ConnectivityPlan",
+    "connectivity_plan",
     "class_block",
     "MIRROR_PARITY",
 ]
@@ -138,11 +140,33 @@ def condensation_blocks(K: sp.spmatrix, cmap: CouplingMap, *,
     if not K.has_canonical_format:
         K = K.copy()
         K.sum_duplicates()  # sorted, no duplicates: the order the sums below follow
-    T = cmap.transform
+    return _blocks_from(K.data, _block_entries(K, cmap, drop_zeros), cmap)
+
+
+@dataclass(frozen=True, eq=False)
+class _BlockEntries:
+    """Where ``condensation_blocks``' sparse blocks take their entries in K's (CSR, canonical):
+    ``upper`` (K_ii's upper triangle), ``K_is`` (free rows, slave columns), ``K_ss`` (slave rows
+    and columns), each a CSR pattern whose data are positions in K.data; ``slave`` the coupled
+    DOFs, ascending."""
+
+    upper: sp.csr_matrix
+    K_is: sp.csr_matrix
+    K_ss: sp.csr_matrix
+    slave: np.ndarray
+
+
+def _with_data(pattern: sp.csr_matrix, data: np.ndarray) -> sp.csr_matrix:
+    return sp.csr_matrix((data, pattern.indices, pattern.indptr), shape=pattern.shape)
+
+
+def _block_entries(K: sp.csr_matrix, cmap: CouplingMap, drop_zeros: bool) -> _BlockEntries:
+    """``_BlockEntries`` of K (canonical CSR): index work only, K's values read for ``drop_zeros``."""
     n_full = K.shape[0]
     n_i = cmap.free_node_dofs.size
     # 32-bit indices while they fit: these arrays have one entry per stored entry of K
     index = np.int32 if n_full < 2**31 else np.int64
+    positions = np.arange(K.nnz, dtype=np.int64)
     new = np.full(n_full, -1, index)
     new[cmap.free_node_dofs] = np.arange(n_i)
     counts = np.diff(K.indptr)
@@ -152,26 +176,38 @@ def condensation_blocks(K: sp.spmatrix, cmap: CouplingMap, *,
     keep = (col_new >= row_new) & (row_new >= 0) & ((K.data != 0) | (not drop_zeros))
     kept_rows = row_new[keep]
     index_type = np.int32 if max(n_i, int(np.count_nonzero(keep))) < 2**31 else np.int64
-    upper = sp.csr_matrix((K.data[keep], col_new[keep].astype(index_type),
+    upper = sp.csr_matrix((positions[keep], col_new[keep].astype(index_type),
                            np.concatenate([[0], np.cumsum(np.bincount(kept_rows, minlength=n_i))]).astype(index_type)),
                           shape=(n_i, n_i))
-    # the coupled (slave) DOFs, ascending, and their rows of T on the master columns
+    # the coupled (slave) DOFs, ascending
     slave = np.flatnonzero(new < 0)
     position = np.full(n_full, -1, index)
     position[slave] = np.arange(slave.size)
-    T_s = T[slave][:, n_i:].tocsr()
-    T_s.sort_indices()
-    # K_im = K_is T_s: row by row, over the row's slave columns in ascending order
     to_slave = (row_new >= 0) & (col_new < 0)
     rows_is = row_new[to_slave]
-    K_is = sp.csr_matrix((K.data[to_slave], position[K.indices[to_slave]],
+    K_is = sp.csr_matrix((positions[to_slave], position[K.indices[to_slave]],
                           np.concatenate([[0], np.cumsum(np.bincount(rows_is, minlength=n_i))])),
                          shape=(n_i, slave.size))
-    K_im = (K_is @ T_s).toarray()
-    # K_mm = T_s^T K_ss T_s, the two products as in T^T K T
-    K_ss = K[slave][:, slave]
+    # K[slave][:, slave] with sorted indices; positions + 1 through the slicing, which keeps
+    # every stored entry, so that no position is a zero
+    K_ss = _with_data(K, positions + 1.0)[slave][:, slave]
     K_ss.sort_indices()
-    K_mm = (T_s.T @ K_ss @ T_s).toarray()
+    K_ss = _with_data(K_ss, K_ss.data.astype(np.int64) - 1)
+    return _BlockEntries(upper=upper, K_is=K_is, K_ss=K_ss, slave=slave)
+
+
+def _blocks_from(data: np.ndarray, entries: _BlockEntries, cmap: CouplingMap, upper: bool = True):
+    """(upper triangle of K_ii (None unless ``upper``), K_im, K_mm) of ``condensation_blocks``
+    from K's entries ``data``."""
+    n_i = cmap.free_node_dofs.size
+    upper = _with_data(entries.upper, data[entries.upper.data]) if upper else None
+    # the slaves' rows of T on the master columns
+    T_s = cmap.transform[entries.slave][:, n_i:].tocsr()
+    T_s.sort_indices()
+    # K_im = K_is T_s: row by row, over the row's slave columns in ascending order
+    K_im = (_with_data(entries.K_is, data[entries.K_is.data]) @ T_s).toarray()
+    # K_mm = T_s^T K_ss T_s, the two products as in T^T K T
+    K_mm = (T_s.T @ _with_data(entries.K_ss, data[entries.K_ss.data]) @ T_s).toarray()
     return upper, K_im, K_mm
 
 
@@ -504,12 +540,56 @@ def class_block(M: np.ndarray, K_mm: np.ndarray) -> np.ndarray:
     return block
 
 
+@dataclass(frozen=True, kw_only=True, eq=False)
+class ConnectivityPlan:
+    """The index work of ``mirror_class_systems`` for one connectivity and its couplings' nodes,
+    kept for meshes that only move its nodes (``fem.condense_taylor``'s ~20 assemblies of one
+    segment: ~0.2 s of the 0.4 s each took on the prototype's leaf segments): ``tets``, the node
+    pattern (``assembly.node_pattern``), ``to_csr`` K's entries (CSR, canonical) as positions in
+    the node blocks (``assembly.assemble_blocks``), the condensation's entries (``_block_entries``,
+    stored zeros kept) and per class its ``kept`` DOFs and K_ii's upper triangle as a pattern
+    whose data are positions in K's entries."""
+
+    tets: np.ndarray
+    pattern: tuple
+    to_csr: np.ndarray
+    entries: _BlockEntries
+    kept: list
+    classes: list
+
+
+def connectivity_plan(mesh, couplings: list, classes: MirrorClasses) -> ConnectivityPlan:
+    """The ``ConnectivityPlan`` of ``mesh`` with ``couplings``, whose parity classes are ``classes``
+    (``mirror_class_systems`` of the same mesh and couplings)."""
+    from .interface import DistributingCoupling
+
+    nodes, tets = check_mesh(mesh)
+    n_nodes = len(nodes)
+    indptr, indices, slot = node_pattern(tets, n_nodes)
+    n_blocks = indices.size
+    # assemble_stiffness' CSR of the node blocks, each entry its block position + 1 (no zero)
+    trace = sp.bsr_matrix(((np.arange(9 * n_blocks) + 1.0).reshape(n_blocks, 3, 3), indices, indptr),
+                          shape=(3 * n_nodes, 3 * n_nodes)).tocsr()
+    trace.sort_indices()
+    cmap = coupling_map(n_nodes, nodes, [c for c in couplings if not isinstance(c, DistributingCoupling)])
+    entries = _block_entries(trace, cmap, drop_zeros=False)
+    upper = _with_data(entries.upper, entries.upper.data + 1.0)
+    subs = []
+    for system in classes.classes:
+        sub = upper[system.kept][:, system.kept]  # as ``mirror_class_systems`` slices K_ii
+        subs.append(_with_data(sub, sub.data.astype(np.int64) - 1))
+    return ConnectivityPlan(tets=tets, pattern=(indptr, indices, slot), to_csr=trace.data.astype(np.int64) - 1,
+                            entries=entries, kept=[system.kept for system in classes.classes], classes=subs)
+
+
 def mirror_class_systems(mesh, material: Material, couplings: list, axes: tuple[int, ...], *,
-                         drop_zeros: bool = True) -> MirrorClasses:
+                         drop_zeros: bool = True, plan: ConnectivityPlan | None = None) -> MirrorClasses:
     """The parity classes of ``mesh`` (its mirror part) with ``couplings`` (as
     ``mirrored_coupled_stiffness`` takes them), each one's K_ii, G and kinematic blocks
     (``ClassSystem``), the classes without a master left out; ``drop_zeros`` as
-    ``condensation_blocks``."""
+    ``condensation_blocks``. ``plan``: the ``connectivity_plan`` of a mesh this one moves the
+    nodes of (the same couplings' nodes), its index work reused, the same numbers
+    (``drop_zeros`` False: its patterns keep the stored zeros)."""
     import itertools
 
     from .interface import DistributingCoupling
@@ -521,7 +601,10 @@ def mirror_class_systems(mesh, material: Material, couplings: list, axes: tuple[
         raise ValueError("the reference points must lie on the mirror planes")
     distributing = [c for c in couplings if isinstance(c, DistributingCoupling)]
     kinematic = [c for c in couplings if not isinstance(c, DistributingCoupling)]
-    nodes, cmap, upper_ii, K_im, K_mm = _coupled_blocks(mesh, material, kinematic, drop_zeros=drop_zeros)
+    if plan is None:
+        nodes, cmap, upper_ii, K_im, K_mm = _coupled_blocks(mesh, material, kinematic, drop_zeros=drop_zeros)
+    else:
+        nodes, data, cmap, K_im, K_mm = _planned_blocks(mesh, material, kinematic, drop_zeros, plan)
     for a in axes:
         if nodes[:, a].min() != 0.0:
             raise ValueError(f"the mesh must lie on the non-negative side of its mirror plane (axis {a}) and touch it")
@@ -562,13 +645,39 @@ def mirror_class_systems(mesh, material: Material, couplings: list, axes: tuple[
         d_masters = np.concatenate(d_masters) if d_masters else np.zeros(0, int)
         if masters.size + d_masters.size == 0:
             continue
-        sub = upper_ii[kept][:, kept]  # rows and columns ascending: still the upper triangle, sorted
+        if plan is None:
+            sub = upper_ii[kept][:, kept]  # rows and columns ascending: still the upper triangle, sorted
+        else:
+            sub = _planned_class(plan, len(classes), kept, data)
         rigid = _class_rigid_motions(nodes, free, kept, pieces) if pieces else None
         classes.append(ClassSystem(both=np.concatenate([masters, d_masters]), kept=kept, sub=sub, G=G,
                                    K_im=K_im[np.ix_(kept, masters)], K_mm=K_mm[np.ix_(masters, masters)],
                                    rigid=rigid if rigid is not None and rigid.shape[1] else None))
     return MirrorClasses(classes=classes, floats=bool(pieces), free=free, size=n_m + n_d, weight=2.0 ** len(axes),
                          order=_coupling_order(couplings, kinematic, distributing, n_m))
+
+
+def _planned_blocks(mesh, material: Material, kinematic: list, drop_zeros: bool, plan: ConnectivityPlan):
+    """(nodes, K's entries, coupling map, K_im, K_mm) of a mesh of ``plan``'s connectivity."""
+    if drop_zeros:
+        raise ValueError("a connectivity plan keeps K_ii's stored zeros: pass drop_zeros=False with it")
+    nodes, tets = check_mesh(mesh)
+    if not np.array_equal(tets, plan.tets):
+        raise ValueError("the mesh is not the connectivity plan's (other elements or node numbers)")
+    _, indices, slot = plan.pattern
+    data = assemble_blocks(nodes, tets, material, slot, indices.size)[plan.to_csr]
+    cmap = coupling_map(len(nodes), nodes, kinematic)
+    if not np.array_equal(np.setdiff1d(np.arange(3 * len(nodes)), cmap.free_node_dofs), plan.entries.slave):
+        raise ValueError("the couplings hold other nodes than the connectivity plan's")
+    _, K_im, K_mm = _blocks_from(data, plan.entries, cmap, upper=False)
+    return nodes, data, cmap, K_im, K_mm
+
+
+def _planned_class(plan: ConnectivityPlan, index: int, kept: np.ndarray, data: np.ndarray) -> sp.csr_matrix:
+    """Class ``index``'s K_ii upper triangle from K's entries ``data`` (``ConnectivityPlan``)."""
+    if index >= len(plan.kept) or not np.array_equal(kept, plan.kept[index]):
+        raise ValueError("a parity class keeps other DOFs than the connectivity plan's")
+    return _with_data(plan.classes[index], data[plan.classes[index].data])
 
 
 def _floating_pieces(tets: np.ndarray, kinematic: list) -> list[np.ndarray]:

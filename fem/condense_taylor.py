@@ -38,7 +38,7 @@ import numpy as np
 
 from flexcal.geometry.params import Material
 
-from .condense import ClassSystem, mirror_class_systems
+from .condense import ClassSystem, connectivity_plan, mirror_class_systems
 
 __all__ = ["StiffnessTaylor", "mirrored_coupled_stiffness_taylor", "DERIVATIVE_STEP"]
 
@@ -67,10 +67,13 @@ class StiffnessTaylor:
 def _add_second_order(second: np.ndarray, halves: list) -> None:
     """E_p^T K^-1 E_q + E_q^T K^-1 E_p added into ``second`` (P, P, m, m) from the halves Y_p
     (Y_p^T Y_q = E_p^T K^-1 E_q; None where E_p = 0), in place."""
-    for p, q in itertools.product(range(len(halves)), repeat=2):
+    for p, q in itertools.combinations_with_replacement(range(len(halves)), 2):
         if halves[p] is not None and halves[q] is not None:
             product = halves[p].T @ halves[q]
-            second[p, q] += product + product.T
+            term = product + product.T  # (p, q)'s and (q, p)'s: one product for both
+            second[p, q] += term
+            if q != p:
+                second[q, p] += term
 
 
 def _block_taylor(M: np.ndarray, M1: np.ndarray, M2: np.ndarray, K: np.ndarray, K1: np.ndarray, K2: np.ndarray):
@@ -112,17 +115,29 @@ def _symmetric_product(upper, X: np.ndarray) -> np.ndarray:
     return upper @ X + upper.T @ X - upper.diagonal()[:, None] * X
 
 
+def _diagonal_entries(upper) -> np.ndarray:
+    """The positions of the diagonal in the entries of an upper triangle (CSR, sorted, every
+    diagonal entry stored: a positive definite K's)."""
+    rows = np.repeat(np.arange(upper.shape[0]), np.diff(upper.indptr))
+    diagonal = np.flatnonzero(upper.indices == rows)
+    if diagonal.size != upper.shape[0]:
+        raise ValueError("a class's K has a diagonal entry missing: not positive definite")
+    return diagonal
+
+
 @dataclass(eq=False)
 class _ClassState:
-    """A class's nominal factors, X = K^-1 C and M = C^T K^-1 C, its nominal (K, C, K_mm) and
-    those of the part moved by +-step along each parameter (for the mixed differences), C on
-    ``rows`` only (``_support``)."""
+    """A class's nominal factors, X = K^-1 C (C order) and M = C^T K^-1 C, its nominal (K, C,
+    K_mm) and those of the part moved by +-step along each parameter (for the mixed differences),
+    C on ``rows`` only (``_support``), ``diagonal`` the positions of K's diagonal in its upper
+    triangle's entries (the pattern every r shares)."""
 
     factors: object
     X: np.ndarray
     M: np.ndarray
     nominal: tuple
     rows: np.ndarray
+    diagonal: np.ndarray
     plus: dict = dataclasses.field(default_factory=dict)
     minus: dict = dataclasses.field(default_factory=dict)
 
@@ -171,6 +186,7 @@ def mirrored_coupled_stiffness_taylor(part_at: Callable[[np.ndarray], tuple], ma
     if nominal.floats:
         raise ValueError("a part with floating pieces (held by distributing couplings alone) has no Taylor "
                          "condensation here: use condense.mirrored_coupled_stiffness")
+    plan = connectivity_plan(mesh0, couplings0, nominal)  # the moved parts' index work, done once
     nodes0 = check_mesh(mesh0)[0]
     points0 = [np.asarray(c.reference_point, float) for c in couplings0]
 
@@ -202,8 +218,9 @@ def mirrored_coupled_stiffness_taylor(part_at: Callable[[np.ndarray], tuple], ma
                 raise ValueError("the nominal class's solve failed its residual check: K is singular or nearly so")
             M = Y.T @ Y
             rows = _support(system, neighbours)
-            states.append(_ClassState(factors=factors, X=X, M=0.5 * (M + M.T), rows=rows,
-                                      nominal=(system.sub, _rhs_block(system, rows), system.K_mm)))
+            states.append(_ClassState(factors=factors, X=np.ascontiguousarray(X), M=0.5 * (M + M.T), rows=rows,
+                                      nominal=(system.sub, _rhs_block(system, rows), system.K_mm),
+                                      diagonal=_diagonal_entries(system.sub)))
 
         def assemble(r):
             """Per class (K's upper triangle with its stored zeros: one pattern for every r; C;
@@ -211,23 +228,28 @@ def mirrored_coupled_stiffness_taylor(part_at: Callable[[np.ndarray], tuple], ma
             moved = moves(r)
             if moved is None:
                 return None
-            systems = mirror_class_systems(moved[0], material, moved[1], axes, drop_zeros=False).classes
+            systems = mirror_class_systems(moved[0], material, moved[1], axes, drop_zeros=False, plan=plan).classes
             for base, system in zip(nominal.classes, systems):
                 _same_class(base, system)
             return [(system.sub, _rhs_block(system, state.rows), system.K_mm) for system, state in zip(systems, states)]
 
-        def derivative(state, weights):
-            """(M's term C'^T X + X^T C' - X^T K' X, K_mm', C', K' X) of the difference sum_i w_i
-            (K_i, C_i, K_mm_i): the matrices differenced entry by entry first (their products with
-            X would lose the differences to rounding: X^T K X sits K's condition number above
-            them), K on the pattern every r shares."""
+        def derivative(state, weights, product=False):
+            """(M's term C'^T X + X^T C' - X^T K' X, K_mm', C', K' X if ``product`` else None) of
+            the difference sum_i w_i (K_i, C_i, K_mm_i): the matrices differenced entry by entry
+            first (their products with X would lose the differences to rounding: X^T K X sits K's
+            condition number above them), K on the pattern every r shares. K' = U + U^T with U
+            its upper triangle, diagonal halved: X^T K' X = A + A^T with A = X^T (U X), one sparse
+            product where K' X takes two (0.07 s against 0.13 s on a 38k-DOF class, 105 columns)."""
             pattern = weights[0][0][0]  # every assembly's (``_same_class``)
-            K = type(pattern)((sum(w * k.data for (k, _, _), w in weights), pattern.indices, pattern.indptr),
-                              shape=pattern.shape)
+            data = sum(w * k.data for (k, _, _), w in weights)
+            data[state.diagonal] *= 0.5
+            U = type(pattern)((data, pattern.indices, pattern.indptr), shape=pattern.shape)
+            UX = U @ state.X
+            A = state.X.T @ UX
             C = sum(w * c for (_, c, _), w in weights)  # on the class's rows
-            KX = _symmetric_product(K, state.X)
             CX = C.T @ state.X[state.rows]
-            return CX + CX.T - state.X.T @ KX, sum(w * m for (_, _, m), w in weights), C, KX
+            KX = UX + U.T @ state.X if product else None
+            return CX + CX.T - A - A.T, sum(w * m for (_, _, m), w in weights), C, KX
 
         M1 = [np.zeros((P, s_.M.shape[0], s_.M.shape[0])) for s_ in states]
         M2 = [np.zeros((P, P, s_.M.shape[0], s_.M.shape[0])) for s_ in states]
@@ -244,7 +266,8 @@ def mirrored_coupled_stiffness_taylor(part_at: Callable[[np.ndarray], tuple], ma
             reached.append(p)
             for k, state in enumerate(states):
                 up, down = plus[k], minus[k]
-                M1[k][p], K1[k][p], C_p, KX_p = derivative(state, [(up, 0.5 / step), (down, -0.5 / step)])
+                M1[k][p], K1[k][p], C_p, KX_p = derivative(state, [(up, 0.5 / step), (down, -0.5 / step)],
+                                                           product=True)
                 KX_p *= -1.0  # E_p = C_p - K_p X
                 KX_p[state.rows] += C_p
                 halves[k][p] = state.factors.half(KX_p)

@@ -113,3 +113,31 @@ def test_the_mixed_second_derivatives_are_the_four_point_differences(segment_fam
 def test_a_dimension_the_segment_does_not_have_has_no_derivative(taylor):
     """t2 is leaf 2's: segment [0, m1] holds leaf 1 only."""
     assert not np.any(taylor.first[4]) and not np.any(taylor.second[4])
+
+
+def test_a_connectivity_plan_gives_a_moved_parts_classes_to_the_bit(segment_family):
+    """The Taylor's moved assemblies reuse the nominal part's index work (``connectivity_plan``):
+    every class's K_ii (pattern and values), K_im, K_mm and G equal those ``mirror_class_systems``
+    finds from scratch; a mesh of another connectivity is refused."""
+    from flexcal.fem.condense import connectivity_plan, mirror_class_systems
+    from flexcal.fem.mesh_tets import TetMesh
+    from flexcal.geometry.params import STEEL
+
+    part_at, _ = segment_family
+    mesh0, couplings0, axes = part_at(np.zeros(5))
+    plan = connectivity_plan(mesh0, couplings0, mirror_class_systems(mesh0, STEEL, couplings0, axes, drop_zeros=False))
+    mesh, couplings, _ = part_at(np.array([0.02, -0.02, 0.01, 0.03, 0.0]))
+    scratch = mirror_class_systems(mesh, STEEL, couplings, axes, drop_zeros=False)
+    planned = mirror_class_systems(mesh, STEEL, couplings, axes, drop_zeros=False, plan=plan)
+    assert len(planned.classes) == len(scratch.classes) == 4
+    for mine, theirs in zip(planned.classes, scratch.classes):
+        for name in ("indptr", "indices", "data"):
+            assert np.array_equal(getattr(mine.sub, name), getattr(theirs.sub, name))
+        assert np.array_equal(mine.K_im, theirs.K_im) and np.array_equal(mine.K_mm, theirs.K_mm)
+        assert (mine.G != theirs.G).nnz == 0
+    assert not np.array_equal(planned.classes[0].sub.data, plan.classes[0].data)  # values, not positions
+    one_fewer = TetMesh(nodes=mesh.nodes, tets=mesh.tets[:-1])
+    with pytest.raises(ValueError, match="connectivity plan"):
+        mirror_class_systems(one_fewer, STEEL, couplings, axes, drop_zeros=False, plan=plan)
+    with pytest.raises(ValueError, match="drop_zeros=False"):
+        mirror_class_systems(mesh, STEEL, couplings, axes, plan=plan)

@@ -25,11 +25,18 @@ def setting(tmp_path_factory):
     return base, taylor_tied_provider(base, [nominal]), nominal, space
 
 
-def test_a_nominal_chain_is_the_providers_own_and_its_polynomials_give_it_to_the_bit(setting):
-    from flexcal.validation.prototype.tied_taylor import segment_taylors, taylor_chain_matrices
+def test_a_nominal_chain_comes_from_its_polynomials_at_zero_with_its_builds_bits(setting):
+    from flexcal.validation.prototype.tied_chains import tied_fem_provider
+    from flexcal.validation.prototype.tied_taylor import segment_taylors, taylor_chain_matrices, taylor_tied_provider
 
-    base, taylor, nominal, _ = setting
+    base, _, nominal, _ = setting
+    asked = []
+    spied = tied_fem_provider(elements_through_thickness=THROUGH, cache_directory=base.cache_directory, progress=False)
+    own = spied.chain_stiffness
+    spied.chain_stiffness = lambda chain: asked.append(chain) or own(chain)
+    taylor = taylor_tied_provider(spied, [nominal])
     assert np.array_equal(taylor.chain_stiffness(nominal), base.chain_stiffness(nominal))
+    assert asked == []  # served by the polynomials, not built
     taylors = segment_taylors(nominal, base.ties, elements_through_thickness=THROUGH,
                               cache_directory=base.cache_directory)
     at_zero = taylor_chain_matrices(nominal, nominal, taylors, base.ties)

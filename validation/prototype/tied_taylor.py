@@ -17,8 +17,8 @@ the derivatives: session 37 measured terms on the nominal cells at 1 % and 3 % s
 0.01 urad of form error (docs/model.md 11), which is what these are.
 
 ``taylor_tied_provider(provider, nominal_chains)`` wraps a tied provider (``tied_chains.
-tied_fem_provider``): its nominal chains and any chain that is not such a move are the
-provider's own builds; a move of one of ``nominal_chains`` comes from the polynomials."""
+tied_fem_provider``): ``nominal_chains`` and their moves come from the polynomials (a nominal
+chain's at r = 0 is its build to the bit), any other chain is the provider's own build."""
 
 from __future__ import annotations
 
@@ -314,9 +314,10 @@ def build_segment_taylors(nominals: Iterable[FlexureChain], ties: str, material:
 def taylor_tied_provider(provider, nominal_chains: Iterable[FlexureChain], *, reach: float = TAYLOR_REACH):
     """``provider`` (a tied one: ``tied_chains.tied_fem_provider``) whose moves of
     ``nominal_chains`` (``relative_dimensions``) come from their segments' derivatives
-    (``taylor_chain_matrices``; module docstring); every other chain, the nominal ones included,
-    is ``provider``'s. ``prepare_chains`` computes the missing derivatives (one job per distinct
-    segment of each nominal chain with a move asked for) and builds the other chains."""
+    (``taylor_chain_matrices``; module docstring), as do ``nominal_chains`` themselves (the
+    polynomials at r = 0, their builds to the bit); every other chain is ``provider``'s.
+    ``prepare_chains`` computes the missing derivatives (one job per distinct segment of each
+    nominal chain asked for or moved) and builds the other chains."""
     from .segments import is_tied
 
     if not is_tied(provider):
@@ -335,8 +336,16 @@ def taylor_tied_provider(provider, nominal_chains: Iterable[FlexureChain], *, re
 
     moved_memo: dict = {}
 
+    def served(chain):
+        """(nominal chain, r) of a chain the polynomials give, None for the provider's: a nominal
+        chain itself at r = 0 (its build to the bit, and its moves need the polynomials anyway: one
+        chain build fewer per design, 5-6 s of CPU each on the reference mount) and its moves."""
+        if chain in nominals:
+            return chain, np.zeros(len(_fields()))
+        return relative_dimensions(chain, nominals, reach)
+
     def matrices(chain):
-        found = relative_dimensions(chain, nominals, reach)
+        found = served(chain)
         if found is None:
             return {"stiffness": provider.chain_stiffness(chain), "segments": provider.chain_segments(chain)}
         if chain not in moved_memo:
@@ -349,7 +358,7 @@ def taylor_tied_provider(provider, nominal_chains: Iterable[FlexureChain], *, re
 
     def prepare_chains(chains):
         chains = list(dict.fromkeys(chains))
-        moved = [relative_dimensions(c, nominals, reach) for c in chains]
+        moved = [served(c) for c in chains]
         designs = list(dict.fromkeys(found[0] for found in moved if found is not None))
         others = [c for c, found in zip(chains, moved) if found is None]
         if provider.scheduler is None and provider.workers == 0:
