@@ -26,6 +26,8 @@ def setting(tmp_path_factory):
 
 
 def test_a_nominal_chain_comes_from_its_polynomials_at_zero_with_its_builds_bits(setting):
+    import dataclasses
+
     from flexcal.validation.prototype.tied_chains import tied_fem_provider
     from flexcal.validation.prototype.tied_taylor import segment_taylors, taylor_chain_matrices, taylor_tied_provider
 
@@ -37,6 +39,11 @@ def test_a_nominal_chain_comes_from_its_polynomials_at_zero_with_its_builds_bits
     taylor = taylor_tied_provider(spied, [nominal])
     assert np.array_equal(taylor.chain_stiffness(nominal), base.chain_stiffness(nominal))
     assert asked == []  # served by the polynomials, not built
+    twin = dataclasses.replace(nominal, length=np.nextafter(nominal.length, 1.0))  # as the mount's L2 and L1
+    # a 1-ulp longer chain meshes to the same nodes: its build is its twin's to the bit (so are
+    # table1's L1 and L2 on the prototype's grid, measured), and the polynomials give it too
+    assert np.array_equal(taylor.chain_stiffness(twin), base.chain_stiffness(twin))
+    assert asked == []
     taylors = segment_taylors(nominal, base.ties, elements_through_thickness=THROUGH,
                               cache_directory=base.cache_directory)
     at_zero = taylor_chain_matrices(nominal, nominal, taylors, base.ties)
@@ -76,7 +83,11 @@ def test_a_chain_moved_beyond_the_reach_or_in_another_field_is_built(setting):
     from flexcal.validation.prototype.tied_taylor import TAYLOR_REACH, relative_dimensions
 
     _, _, nominal, _ = setting
-    assert relative_dimensions(nominal, [nominal]) is None
+    itself = relative_dimensions(nominal, [nominal])
+    assert itself[0] is nominal and np.array_equal(itself[1], np.zeros(5))
+    # a rounding twin (the mount's L2 is 1 ulp longer than L1) is its nominal chain at r = 0
+    twin = dataclasses.replace(nominal, length=np.nextafter(nominal.length, 1.0))
+    assert twin != nominal and np.array_equal(relative_dimensions(twin, [nominal])[1], np.zeros(5))
     far = dataclasses.replace(nominal, width=nominal.width * (1 + 2 * TAYLOR_REACH))
     assert relative_dimensions(far, [nominal]) is None
     longer = dataclasses.replace(nominal, length=nominal.length * 1.001)  # not a dimension term's move

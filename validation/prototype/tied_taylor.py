@@ -17,8 +17,10 @@ the derivatives: session 37 measured terms on the nominal cells at 1 % and 3 % s
 0.01 urad of form error (docs/model.md 11), which is what these are.
 
 ``taylor_tied_provider(provider, nominal_chains)`` wraps a tied provider (``tied_chains.
-tied_fem_provider``): ``nominal_chains`` and their moves come from the polynomials (a nominal
-chain's at r = 0 is its build to the bit), any other chain is the provider's own build."""
+tied_fem_provider``): ``nominal_chains``, their rounding twins (``ROUNDING_TWIN``: a chain of the
+same design whose length the mount's geometry rounded otherwise) and their moves come from the
+polynomials (a nominal chain's at r = 0 is its build to the bit; a twin's is its nominal chain's
+segments joined on its own plan), any other chain is the provider's own build."""
 
 from __future__ import annotations
 
@@ -31,7 +33,7 @@ import numpy as np
 
 from flexcal.geometry.params import STEEL, FlexureChain, Material
 
-__all__ = ["TAYLOR_REACH", "DIFFERENCE_STEP", "relative_dimensions", "segment_taylor_key", "segment_taylors", "taylor_chain_matrices",
+__all__ = ["TAYLOR_REACH", "DIFFERENCE_STEP", "ROUNDING_TWIN", "relative_dimensions", "segment_taylor_key", "segment_taylors", "taylor_chain_matrices",
            "build_segment_taylors", "taylor_tied_provider"]
 
 # the largest relative move of a dimension served from the polynomials: the dimension terms' steps
@@ -63,18 +65,34 @@ def _fields() -> list[str]:
     return [DIMENSION_FIELDS[s] for s in DIMENSION_SYMBOLS]
 
 
+# how far (relative) a chain's other fields may sit from its nominal chain's and still be that chain:
+# the mount computes each chain's length from its anchor points, so chains of one design differ by
+# rounding (table1's L2 is 1 ulp longer than L1 and L3); 8 ulps, far below any real change
+ROUNDING_TWIN = 8 * np.finfo(float).eps
+
+
+def _same_but_rounding(chain: FlexureChain, nominal: FlexureChain) -> bool:
+    """Whether ``chain`` is ``nominal`` but for the rounding of its float fields (``ROUNDING_TWIN``)."""
+    for field in dataclasses.fields(nominal):
+        mine, theirs = getattr(chain, field.name), getattr(nominal, field.name)
+        if mine != theirs and not (isinstance(theirs, float) and isinstance(mine, float)
+                                   and abs(mine - theirs) <= ROUNDING_TWIN * abs(theirs)):
+            return False
+    return True
+
+
 def relative_dimensions(chain: FlexureChain, nominals: Iterable[FlexureChain],
                         reach: float = TAYLOR_REACH) -> tuple[FlexureChain, np.ndarray] | None:
     """(nominal chain, r (5,)): ``chain`` is that chain of ``nominals`` with its five dimensions
-    (``DIMENSION_SYMBOLS``) scaled by (1 + r), |r| <= reach, everything else equal; None if it is
-    no such move (or is a nominal chain itself)."""
+    (``DIMENSION_SYMBOLS``) scaled by (1 + r), |r| <= reach, everything else equal but for
+    rounding (``ROUNDING_TWIN``: the nominal chain itself and its rounding twins have r = 0); None
+    if it is no such chain."""
     fields = _fields()
     for nominal in nominals:
-        rest = dataclasses.replace(chain, **{f: getattr(nominal, f) for f in fields})
-        if rest != nominal:
+        if not _same_but_rounding(dataclasses.replace(chain, **{f: getattr(nominal, f) for f in fields}), nominal):
             continue
         r = np.array([getattr(chain, f) / getattr(nominal, f) - 1.0 for f in fields])
-        if np.any(r != 0.0) and np.all(np.abs(r) <= reach):
+        if np.all(np.abs(r) <= reach):
             return nominal, r
     return None
 
@@ -212,7 +230,9 @@ def _taylor_chain_matrices(chain: FlexureChain, nominal: FlexureChain, taylors: 
     from .tied_chains import _tied_plan
 
     found = relative_dimensions(chain, [nominal], reach=np.inf)
-    r = np.zeros(len(_fields())) if found is None else found[1]
+    if found is None:
+        raise ValueError("the chain is no move of the nominal chain given (tied_taylor.relative_dimensions)")
+    r = found[1]
     plan, interfaces, _, scale = _tied_plan(chain, ties)
     plan0, _, _, _ = _tied_plan(nominal, ties)
     labels0 = step_interfaces(plan0, interfaces)
@@ -314,8 +334,10 @@ def build_segment_taylors(nominals: Iterable[FlexureChain], ties: str, material:
 def taylor_tied_provider(provider, nominal_chains: Iterable[FlexureChain], *, reach: float = TAYLOR_REACH):
     """``provider`` (a tied one: ``tied_chains.tied_fem_provider``) whose moves of
     ``nominal_chains`` (``relative_dimensions``) come from their segments' derivatives
-    (``taylor_chain_matrices``; module docstring), as do ``nominal_chains`` themselves (the
-    polynomials at r = 0, their builds to the bit); every other chain is ``provider``'s.
+    (``taylor_chain_matrices``; module docstring), as do ``nominal_chains`` themselves and their
+    rounding twins (the polynomials at r = 0; a nominal chain's is its build to the bit); every
+    other chain is ``provider``'s (one chain build fewer per design and twin, 5-7 s of CPU each on
+    the reference mount: the moves need the polynomials anyway).
     ``prepare_chains`` computes the missing derivatives (one job per distinct segment of each
     nominal chain asked for or moved) and builds the other chains."""
     from .segments import is_tied
@@ -336,16 +358,8 @@ def taylor_tied_provider(provider, nominal_chains: Iterable[FlexureChain], *, re
 
     moved_memo: dict = {}
 
-    def served(chain):
-        """(nominal chain, r) of a chain the polynomials give, None for the provider's: a nominal
-        chain itself at r = 0 (its build to the bit, and its moves need the polynomials anyway: one
-        chain build fewer per design, 5-6 s of CPU each on the reference mount) and its moves."""
-        if chain in nominals:
-            return chain, np.zeros(len(_fields()))
-        return relative_dimensions(chain, nominals, reach)
-
     def matrices(chain):
-        found = served(chain)
+        found = relative_dimensions(chain, nominals, reach)
         if found is None:
             return {"stiffness": provider.chain_stiffness(chain), "segments": provider.chain_segments(chain)}
         if chain not in moved_memo:
@@ -358,7 +372,7 @@ def taylor_tied_provider(provider, nominal_chains: Iterable[FlexureChain], *, re
 
     def prepare_chains(chains):
         chains = list(dict.fromkeys(chains))
-        moved = [served(c) for c in chains]
+        moved = [relative_dimensions(c, nominals, reach) for c in chains]
         designs = list(dict.fromkeys(found[0] for found in moved if found is not None))
         others = [c for c, found in zip(chains, moved) if found is None]
         if provider.scheduler is None and provider.workers == 0:
