@@ -20,7 +20,7 @@ __all__ = ["add_out", "add_seed", "add_scenario", "add_trajectory", "load_scenar
            "DEFAULT_MODEL", "DEFAULT_DIMENSION_TERMS",
            "CALIBRATION_DEFAULTS", "calibration_defaults", "add_model_options",
            "add_identification_options", "add_method_options", "prior_scale_option", "add_calibration_options",
-           "add_source_options", "load_source", "load_source_with_truth", "check_sobol_options",
+           "add_source_options", "load_source", "load_source_with_truth", "prepare_source_truth", "check_sobol_options",
            "add_point_model_options", "add_unit_check_option", "read_data"]
 
 
@@ -424,6 +424,18 @@ def read_data(path, args: argparse.Namespace):
 def load_source(args: argparse.Namespace, space, *, progress: bool):
     """(measurement, presets (45,) [SI] or None) from ``--scenario`` or ``--data``."""
     return load_source_with_truth(args, space, progress=progress)[:2]
+
+
+def prepare_source_truth(args: argparse.Namespace, *, progress: bool) -> None:
+    """Build now the FEM of the truth ``load_source_with_truth`` will make (``--scenario``: its
+    prototype's chains, ``truth.prepare_truth``; nothing for ``--data``)."""
+    if args.scenario is None:
+        return
+    from ..prototype.providers import stiffness_provider
+    from ..prototype.truth import prepare_truth
+
+    prepare_truth(load_scenario_with_trajectory(args),
+                  stiffness_provider(args.provider, progress=progress, **executor_options(args)))
 
 
 def load_source_with_truth(args: argparse.Namespace, space, *, progress: bool):

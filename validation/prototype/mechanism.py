@@ -50,6 +50,7 @@ __all__ = [
     "Prototype",
     "PrototypeRun",
     "build_prototype",
+    "prepare_prototype",
     "apply_mount_offsets",
     "simulate",
     "frame_stiffness",
@@ -167,6 +168,16 @@ def _transmissions(values: Sequence) -> tuple[ActuatorTransmission, ...]:
     return tuple(out)
 
 
+def prepare_prototype(mechanism: MechanismParams, provider: StiffnessProvider, *,
+                      mount_offsets: Mapping[str, tuple[float, float]] | None = None) -> None:
+    """Build at once what ``build_prototype`` of ``mechanism`` (with ``mount_offsets``, which move
+    the chains' ends and so their lengths) asks ``provider`` for: its chains' FEM
+    (``segments.prepare_chains``: tied chains or segments, in parallel)."""
+    if mount_offsets:
+        mechanism = apply_mount_offsets(mechanism, mount_offsets)
+    prepare_chains(provider, [p.chain for p in mechanism.chains])
+
+
 def _segment_stiffness(mechanism: MechanismParams, provider: StiffnessProvider):
     """(12 x 12, K_jj, section x) of every segment: ``provider(chain, x_start, x_end)``, or, for a
     provider with ``chain_segments(chain)`` (the tied one: its chains' five 12 x 12 from the
@@ -177,7 +188,7 @@ def _segment_stiffness(mechanism: MechanismParams, provider: StiffnessProvider):
     asked: dict = {}  # equal chains (L1-L3, D1-D3 by default) ask the provider once
     by_chain = getattr(provider, "chain_segments", None)
     chain_matrices: dict = {}  # a chain's five 12 x 12 read once, not once per segment
-    prepare_chains(provider, [p.chain for p in mechanism.chains])  # parallel FEM builds (tied chains or segments)
+    prepare_prototype(mechanism, provider)
     for c, placement in enumerate(mechanism.chains):
         xs[c] = section_nodes(placement.chain)
         for s in range(N_SEGMENTS):

@@ -20,11 +20,11 @@ from flexcal.model.parameters import DIMENSION_FIELDS, ParameterSpace
 
 from ..measurements import Measurement
 from .equilibrium import NonConvergenceError
-from .mechanism import PrototypeRun, build_prototype, simulate
+from .mechanism import PrototypeRun, build_prototype, prepare_prototype, simulate
 from ..effects.hooks import room_temperature
 from .scenario import Scenario
 
-__all__ = ["as_built", "make_truth", "TruthResult", "why_no_equilibrium", "heaviest_payload"]
+__all__ = ["as_built", "make_truth", "prepare_truth", "TruthResult", "why_no_equilibrium", "heaviest_payload"]
 
 
 def as_built(space: ParameterSpace, values: np.ndarray) -> tuple[MechanismParams, dict[str, tuple[float, float]],
@@ -54,6 +54,14 @@ class TruthResult:
 
     measurement: Measurement
     run: PrototypeRun
+
+
+def prepare_truth(scenario: Scenario, provider: Callable) -> None:
+    """Build now what ``make_truth`` of ``scenario`` will ask ``provider`` for (its as-built
+    prototype's FEM, ``mechanism.prepare_prototype``), e.g. on a thread beside other work; the
+    FEM cache then holds it."""
+    mechanism, offsets, _ = as_built(scenario.space, scenario.values)
+    prepare_prototype(mechanism, provider, mount_offsets=offsets)
 
 
 def make_truth(scenario: Scenario, provider: Callable, *, effects: tuple = (), progress: bool = False,
