@@ -27,7 +27,8 @@ from .elements import (
     shape_gradients,
 )
 
-__all__ = ["check_mesh", "element_dofs", "node_pattern", "assemble_stiffness", "assemble_blocks", "assemble_body_force", "n_dofs"]
+__all__ = ["check_mesh", "element_dofs", "node_pattern", "assemble_stiffness", "assemble_blocks", "assemble_body_force",
+           "n_dofs"]
 
 DEFAULT_CHUNK = 256
 

@@ -16,8 +16,8 @@ derivatives in r_p),
 P E_p, one forward substitution per parameter on the class's own factors. No new factorisation:
 the derivatives of K, C and K_mm are differences of the part assembled at r = +-``step`` e_p
 (central, for the first and the diagonal second derivatives) and at +-step (e_p + e_q) (the mixed
-ones, from those and the single moves: O(step^2) too), and only their products with X enter, so a class keeps m x m numbers per
-assembly. The class block S = A + B^T H^-1 B (A = K_mm - M_kk padded, B = [M_gk, I], H = M_gg)
+ones, from those and the single moves: O(step^2) too), and only their products with X enter, so
+a class keeps m x m numbers per assembly. The class block S = A + B^T H^-1 B (A = K_mm - M_kk padded, B = [M_gk, I], H = M_gg)
 has the same form, so its derivatives follow with the same two formulas, dense.
 
 The assemblies' differences are those of smooth node motions (``fem.mesh_mapped_chain.

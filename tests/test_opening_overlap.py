@@ -108,3 +108,17 @@ def test_the_truths_fem_prepared_ahead_is_what_the_truth_then_asks_for(monkeypat
     truth.make_truth(scenario, provider)
     assert len(asked) == 2 and asked[0] == asked[1]
     assert asked[0] != [p.chain for p in truth.as_built(scenario.space, scenario.values)[0].chains]  # offsets moved them
+
+
+def test_only_the_model_with_quadratic_dimension_terms_prepares_fem_ahead(monkeypatch):
+    """``prepare_model_fem`` builds for the model whose set-up reads FEM terms (the default:
+    consistent, FEM chains, quadratic terms) and for no other."""
+    from flexcal.validation.runs import dimension_terms
+
+    built = []
+    monkeypatch.setattr(dimension_terms, "prepare_model_chains", lambda space, provider: built.append(provider))
+    mechanism = options.load_scenario_with_trajectory(_args()).space.mechanism
+    assert opening.prepare_model_fem(_args(), mechanism, progress=False) and len(built) == 1
+    for other in (["--model", "second-order"], ["--dimension-terms", "linear"], ["--model-stiffness", "closed-form"]):
+        assert not opening.prepare_model_fem(_args(*other), mechanism, progress=False)
+    assert len(built) == 1

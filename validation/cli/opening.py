@@ -146,14 +146,11 @@ def calibration_model(args: argparse.Namespace, mechanism, *, progress: bool):
 
 
 def prepare_model_fem(args: argparse.Namespace, mechanism, *, progress: bool) -> bool:
-    """Build now, in one batch, the FEM the default calibration model of ``mechanism`` reads
-    (``--model consistent`` on FEM chains with the quadratic dimension terms: the chains of
-    ``dimension_terms.prepare_model_chains`` from ``model_correction.model_provider``, as
-    ``calibration_model`` asks for them); False, nothing built, for any other model."""
-    from ..runs.model_names import FEM_STIFFNESS
-
-    if model_option(args) != "consistent" or args.model_stiffness not in FEM_STIFFNESS or \
-            dimension_terms(args) != "quadratic":
+    """Build now, in one batch, the FEM the calibration model of ``mechanism`` reads when it takes
+    the quadratic dimension terms (``dimension_terms``: the consistent model on FEM chains): the
+    chains of ``dimension_terms.prepare_model_chains`` from ``model_correction.model_provider``,
+    the batch ``calibration_model`` asks for; False, nothing built, for any other model."""
+    if dimension_terms(args) != "quadratic":
         return False
     from flexcal.model.parameters import parameter_space
 

@@ -33,8 +33,8 @@ import numpy as np
 
 from flexcal.geometry.params import STEEL, FlexureChain, Material
 
-__all__ = ["TAYLOR_REACH", "DIFFERENCE_STEP", "ROUNDING_TWIN", "relative_dimensions", "segment_taylor_key", "segment_taylors", "taylor_chain_matrices",
-           "build_segment_taylors", "taylor_tied_provider"]
+__all__ = ["TAYLOR_REACH", "DIFFERENCE_STEP", "ROUNDING_TWIN", "relative_dimensions", "segment_taylor_key",
+           "segment_taylors", "taylor_chain_matrices", "build_segment_taylors", "taylor_tied_provider"]
 
 # the largest relative move of a dimension served from the polynomials: the dimension terms' steps
 # (3 %, 2.5 %) and their pairs; a chain moved further is built (the polynomial's error grows as r^3)
