@@ -1,5 +1,6 @@
 """cli.opening: a --scenario run's opening builds the model's FEM first, then sets the model up on
-the main thread while another thread builds the truth's FEM, under one BLAS thread, and returns
+the main thread while another thread builds the truth's FEM (started from model_space's
+after_batch), under one BLAS thread, and returns
 what the sequential opening returns (the FEM and the models are stubbed: only the order, the
 threads and the BLAS limits are under test; the real numbers are the slow tests' and the cold
 runs', docs/scale.md "Issue 26, session 41")."""
@@ -40,9 +41,15 @@ def stubs(monkeypatch):
         return opening.DataOpening(measurement="measured", presets=None, truth=None,
                                    mechanism=options.load_scenario_with_trajectory(args).space.mechanism)
 
-    monkeypatch.setattr(opening, "prepare_model_fem", lambda args, mechanism, progress: record("model FEM") or True)
+    def model(args, mechanism, *, progress, after_batch=None):
+        record("model batch")
+        if after_batch is not None:
+            after_batch()
+        record("model", 0.3)
+        return "space"
+
     monkeypatch.setattr(options, "prepare_source_truth", lambda args, progress: record("truth FEM", 0.3))
-    monkeypatch.setattr(opening, "calibration_model", lambda args, mechanism, progress: record("model", 0.3) or "space")
+    monkeypatch.setattr(opening, "calibration_model", model)
     monkeypatch.setattr(opening, "open_data", data)
     return log
 
@@ -51,32 +58,41 @@ def test_the_model_is_set_up_beside_the_truths_fem_on_one_blas_thread(stubs):
     found = opening.open_calibration(_args(), progress=False)
     assert (found.space, found.measurement) == ("space", "measured")
     steps = {what: (thread, blas, start, end) for what, thread, blas, start, end in stubs}
-    assert [what for what, *_ in stubs][0] == "model FEM" and [what for what, *_ in stubs][-1] == "data"
+    assert [what for what, *_ in stubs][0] == "model batch" and [what for what, *_ in stubs][-1] == "data"
     main = threading.main_thread().name
     assert steps["model"][0] == main and steps["truth FEM"][0] != main
-    # side by side: each started before the other ended
+    # side by side, the truth's FEM started after the model's batch: each started before the other ended
+    assert steps["model batch"][3] <= steps["truth FEM"][2]
     assert steps["model"][2] < steps["truth FEM"][3] and steps["truth FEM"][2] < steps["model"][3]
     assert steps["model"][1] == steps["truth FEM"][1] == {1}
     assert steps["data"][2] >= max(steps["model"][3], steps["truth FEM"][3])  # the truth's FEM is cached by then
 
 
-def test_a_model_without_fem_a_data_file_or_a_check_opens_in_order(stubs, monkeypatch):
-    monkeypatch.setattr(opening, "prepare_model_fem", lambda args, mechanism, progress: False)
-    opening.open_calibration(_args(), progress=False)
-    assert [what for what, *_ in stubs] == ["data", "model"]
-    assert {thread for _, thread, *_ in stubs} == {threading.main_thread().name}
-    stubs.clear()
+def test_a_model_without_the_quadratic_terms_or_a_check_opens_in_order(stubs):
+    for other in (["--dimension-terms", "linear"], ["--model", "second-order"]):
+        opening.open_calibration(_args(*other), progress=False)
+        assert [what for what, *_ in stubs] == ["data", "model batch", "model"]
+        assert {thread for _, thread, *_ in stubs} == {threading.main_thread().name}
+        stubs.clear()
     checked = []
-    monkeypatch.setattr(opening, "prepare_model_fem", lambda args, mechanism, progress: pytest.fail("no overlap"))
     opening.open_calibration(_args(), progress=False, check=checked.append)
-    assert [what for what, *_ in stubs] == ["data", "model"] and checked == ["measured"]
+    assert [what for what, *_ in stubs] == ["data", "model batch", "model"] and checked == ["measured"]
+
+
+def test_a_bad_scenario_fails_before_the_models_fem(stubs):
+    with pytest.raises(ValueError, match="must be >= 0"):
+        opening.open_calibration(_args("--noise-urad", "-1"), progress=False)
+    with pytest.raises(ValueError, match="scenario table1"):
+        opening.open_calibration(_args("--noise-urad", "1e9"), progress=False)
+    assert stubs == []
 
 
 def test_a_data_mount_other_than_the_scenarios_gets_its_own_model(stubs, monkeypatch):
     import dataclasses
 
     models = []
-    monkeypatch.setattr(opening, "calibration_model", lambda args, mechanism, progress: models.append(mechanism))
+    monkeypatch.setattr(opening, "calibration_model",
+                        lambda args, mechanism, progress, after_batch=None: models.append(mechanism))
     real_data = opening.open_data
 
     def other_mount(args, *, progress, data_path=None):
@@ -110,15 +126,30 @@ def test_the_truths_fem_prepared_ahead_is_what_the_truth_then_asks_for(monkeypat
     assert asked[0] != [p.chain for p in truth.as_built(scenario.space, scenario.values)[0].chains]  # offsets moved them
 
 
-def test_only_the_model_with_quadratic_dimension_terms_prepares_fem_ahead(monkeypatch):
-    """``prepare_model_fem`` builds for the model whose set-up reads FEM terms (the default:
-    consistent, FEM chains, quadratic terms) and for no other."""
-    from flexcal.validation.runs import dimension_terms
+def test_the_models_batch_then_the_hook_then_its_set_up(monkeypatch):
+    """``model_space`` calls ``after_batch`` once the consistent model's FEM batch (``also_build``)
+    is built and before its set-up reads it; a model without that batch never calls it."""
+    from flexcal.validation.runs import model_correction
 
-    built = []
-    monkeypatch.setattr(dimension_terms, "prepare_model_chains", lambda space, provider: built.append(provider))
-    mechanism = options.load_scenario_with_trajectory(_args()).space.mechanism
-    assert opening.prepare_model_fem(_args(), mechanism, progress=False) and len(built) == 1
-    for other in (["--model", "second-order"], ["--dimension-terms", "linear"], ["--model-stiffness", "closed-form"]):
-        assert not opening.prepare_model_fem(_args(*other), mechanism, progress=False)
-    assert len(built) == 1
+    order = []
+
+    class SetUp(Exception):
+        pass
+
+    def set_up(*args, **kwargs):
+        order.append("set-up")
+        raise SetUp
+
+    monkeypatch.setattr(model_correction, "model_provider", lambda *args, **kwargs: "provider")
+    monkeypatch.setattr(model_correction, "corrected_space", set_up)
+    with pytest.raises(SetUp):
+        model_correction.model_space("fem", model="consistent", also_build=lambda space, provider: order.append("batch"),
+                                     after_batch=lambda: order.append("after"))
+    assert order == ["batch", "after", "set-up"]
+    order.clear()
+    import flexcal.validation.prototype.providers as providers
+
+    monkeypatch.setattr(providers, "stiffness_provider", lambda *args, **kwargs: "provider")
+    with pytest.raises(SetUp):
+        model_correction.model_space("fem", model="second-order", after_batch=lambda: order.append("after"))
+    assert order == ["set-up"]

@@ -22,7 +22,7 @@ from typing import Any, Callable
 import numpy as np
 
 __all__ = ["DataOpening", "Opening", "open_data", "model_option", "dimension_terms", "model_key", "check_model_options",
-           "calibration_model", "prepare_model_fem", "open_calibration", "overlapped_opening"]
+           "calibration_model", "open_calibration", "overlapped_opening"]
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -119,11 +119,13 @@ def model_key(args: argparse.Namespace) -> dict:
     return key
 
 
-def calibration_model(args: argparse.Namespace, mechanism, *, progress: bool):
+def calibration_model(args: argparse.Namespace, mechanism, *, progress: bool,
+                      after_batch: Callable[[], None] | None = None):
     """The calibration model (``ParameterSpace``) of ``mechanism`` with the command's
     ``--model``, ``--model-stiffness``, ``--second-order``, ``--breakaway-force``,
     ``--dimension-terms`` and executor options (``runs.model_correction.model_space``, then for
-    ``--dimension-terms quadratic`` ``runs.dimension_terms.curved_space`` on the same FEM cache)."""
+    ``--dimension-terms quadratic`` ``runs.dimension_terms.curved_space`` on the same FEM cache).
+    after_batch(): ``model_space``'s, called once the model's FEM batch is built."""
     from ..runs.model_correction import model_space
     from .options import executor_options
 
@@ -135,7 +137,7 @@ def calibration_model(args: argparse.Namespace, mechanism, *, progress: bool):
     terms = dimension_terms(args)
     # with the quadratic terms, their chains built in the slopes' batch (prepare_model_chains)
     space = model_space(args.model_stiffness, args.second_order, progress=progress, mechanism=mechanism,
-                        model=model, breakaway_force=force,
+                        model=model, breakaway_force=force, after_batch=after_batch,
                         also_build=prepare_model_chains if terms == "quadratic" else None, **executor_options(args))
     if terms == "quadratic":  # on the provider of the model's own factors (fem or fem-rigid)
         from ..runs.model_correction import model_provider
@@ -145,45 +147,30 @@ def calibration_model(args: argparse.Namespace, mechanism, *, progress: bool):
     return space
 
 
-def prepare_model_fem(args: argparse.Namespace, mechanism, *, progress: bool) -> bool:
-    """Build now, in one batch, the FEM the calibration model of ``mechanism`` reads when it takes
-    the quadratic dimension terms (``dimension_terms``: the consistent model on FEM chains): the
-    chains of ``dimension_terms.prepare_model_chains`` from ``model_correction.model_provider``,
-    the batch ``calibration_model`` asks for; False, nothing built, for any other model."""
-    if dimension_terms(args) != "quadratic":
-        return False
-    from flexcal.model.parameters import parameter_space
-
-    from ..runs.dimension_terms import prepare_model_chains
-    from ..runs.model_correction import model_provider
-    from .options import executor_options
-
-    prepare_model_chains(parameter_space(mechanism), model_provider(args.model_stiffness, mechanism, progress=progress,
-                                                                    **executor_options(args)))
-    return True
-
-
 def open_calibration(args: argparse.Namespace, *, progress: bool, data_path=None,
                      check: Callable[[Any], None] | None = None) -> Opening:
     """``open_data`` then ``calibration_model``; check(measurement) runs between them and
     raises to stop before the model is built (a cold FEM-corrected model takes ~30 s).
 
-    Without ``check``, for a ``--scenario`` source and the default model: the model's FEM batch
-    first (both cores), then the model's set-up (~10 s of one core on a cold cache: the chains'
-    shortening probes and joins, small-matrix Python) on this thread while the truth's FEM is
-    built on the executor's, then ``open_data`` (its FEM cached); the same numbers in less time
-    (``overlapped_opening``)."""
+    Without ``check``, for a ``--scenario`` source and a model with the quadratic dimension terms
+    (the default): the model first, its FEM batch on both cores, then its set-up (~10 s of one
+    core on a cold cache: the chains' shortening probes and joins, small-matrix Python) on this
+    thread while the truth's FEM is built on the executor's (``overlapped_opening``), then
+    ``open_data`` (its FEM cached); the same numbers in less time. The scenario's own checks come
+    first (``truth.check_scenario``), so that a bad one fails before the model's FEM."""
     check_model_options(args)
-    if check is None and data_path is None and args.scenario is not None:
+    if check is None and data_path is None and args.scenario is not None and dimension_terms(args) == "quadratic":
+        from ..prototype.truth import check_scenario
         from .options import load_scenario_with_trajectory
 
-        mechanism = load_scenario_with_trajectory(args).space.mechanism  # the data's (--mount or the scenario's)
-        if prepare_model_fem(args, mechanism, progress=progress):
-            space = overlapped_opening(args, mechanism, progress=progress)
-            data = open_data(args, progress=progress)
-            if data.mechanism != mechanism:  # not expected: the sidecar's mount is the scenario's
-                space = calibration_model(args, data.mechanism, progress=progress)
-            return Opening(measurement=data.measurement, presets=data.presets, truth=data.truth, space=space)
+        scenario = load_scenario_with_trajectory(args)
+        check_scenario(scenario)
+        mechanism = scenario.space.mechanism  # the data's (--mount or the scenario's)
+        space = overlapped_opening(args, mechanism, progress=progress)
+        data = open_data(args, progress=progress)
+        if data.mechanism != mechanism:  # not expected: the sidecar's mount is the scenario's
+            space = calibration_model(args, data.mechanism, progress=progress)
+        return Opening(measurement=data.measurement, presets=data.presets, truth=data.truth, space=space)
     data = open_data(args, progress=progress, data_path=data_path)
     if check is not None:
         check(data.measurement)
@@ -192,22 +179,25 @@ def open_calibration(args: argparse.Namespace, *, progress: bool, data_path=None
 
 
 def overlapped_opening(args: argparse.Namespace, mechanism, *, progress: bool):
-    """``calibration_model`` of ``mechanism`` (its FEM cached: ``prepare_model_fem``) on this
-    thread while another builds the truth's FEM (``options.prepare_source_truth``): the model's
-    set-up is small-matrix Python on one core, the builds' work is PARDISO and numpy outside the
-    interpreter lock. Both under one BLAS thread from here to the end: threadpoolctl's limits are
-    the process's, and a build batch's limit (``fem_provider.build_missing``) or a block's
-    (``fem.solve.one_thread``) ending on one thread would otherwise lift the other's midway; with
-    the pools held at one outside, every limit inside restores one, as each computes alone."""
+    """``calibration_model`` of ``mechanism``, its set-up on this thread while another builds the
+    truth's FEM (``options.prepare_source_truth``), started once the model's FEM batch is built
+    (``after_batch``): the set-up is small-matrix Python on one core, the builds' work PARDISO and
+    numpy outside the interpreter lock. Both under one BLAS thread from here to the end:
+    threadpoolctl's limits are the process's, and a build batch's limit
+    (``fem_provider.build_missing``) or a block's (``fem.solve.one_thread``) ending on one thread
+    would otherwise lift the other's midway; with the pools held at one outside, every limit inside
+    restores one, as each computes alone."""
     from concurrent.futures import ThreadPoolExecutor
 
     from ..blas_threads import single_blas_thread
     from .options import prepare_source_truth
 
     with single_blas_thread(), ThreadPoolExecutor(1, thread_name_prefix="flexcal-truth-fem") as pool:
-        truth_fem = pool.submit(prepare_source_truth, args, progress=progress)
-        space = calibration_model(args, mechanism, progress=progress)
-        truth_fem.result()
+        started = []
+        space = calibration_model(args, mechanism, progress=progress, after_batch=lambda: started.append(
+            pool.submit(prepare_source_truth, args, progress=progress)))
+        for truth_fem in started:
+            truth_fem.result()
     return space
 
 

@@ -109,11 +109,17 @@ def data_mechanism(metadata: dict, args: argparse.Namespace):
     return mount
 
 
+def _check_noise_option(args: argparse.Namespace) -> None:
+    if getattr(args, "noise_urad", None) is not None and args.noise_urad < 0:
+        raise ValueError(f"--noise-urad={args.noise_urad} must be >= 0")
+
+
 def load_scenario_with_trajectory(args: argparse.Namespace):
     """The scenario of ``--scenario``/``--seed``/``--noise-urad``/``--mount``, along
     ``--trajectory`` if given."""
     from ..prototype.scenario import load_scenario
 
+    _check_noise_option(args)
     scenario = load_scenario(args.scenario, seed=args.seed, noise_urad=args.noise_urad, mount=mount_option(args))
     trajectory = getattr(args, "trajectory", None)
     return scenario.with_trajectory(trajectory) if trajectory else scenario
@@ -444,8 +450,7 @@ def load_source_with_truth(args: argparse.Namespace, space, *, progress: bool):
     for data without presets)."""
     from ..runs.form_floor import truth_from_measurement, truth_from_run
 
-    if args.noise_urad is not None and args.noise_urad < 0:
-        raise ValueError(f"--noise-urad={args.noise_urad} must be >= 0")
+    _check_noise_option(args)
     if args.scenario is not None:
         from ..prototype.providers import stiffness_provider
         from ..prototype.truth import make_truth

@@ -24,7 +24,7 @@ from .mechanism import PrototypeRun, build_prototype, prepare_prototype, simulat
 from ..effects.hooks import room_temperature
 from .scenario import Scenario
 
-__all__ = ["as_built", "make_truth", "prepare_truth", "TruthResult", "why_no_equilibrium", "heaviest_payload"]
+__all__ = ["as_built", "check_scenario", "make_truth", "prepare_truth", "TruthResult", "why_no_equilibrium", "heaviest_payload"]
 
 
 def as_built(space: ParameterSpace, values: np.ndarray) -> tuple[MechanismParams, dict[str, tuple[float, float]],
@@ -56,6 +56,20 @@ class TruthResult:
     run: PrototypeRun
 
 
+def check_scenario(scenario: Scenario) -> np.ndarray:
+    """The times [s] of ``scenario``'s points; ValueError, before any physics, for what the
+    measurement file's reader would refuse (one set of limits: sensor figures, inputs, times)."""
+    from ..measurement_limits import inputs_problem, sensor_problem, time_problem
+
+    with np.errstate(over="ignore", invalid="ignore"):  # an overflowing dwell is refused just below
+        time = np.arange(scenario.inputs.shape[0]) * scenario.dwell
+    problem = (sensor_problem(scenario.noise * 1e6, scenario.offset * 1e6) or inputs_problem(scenario.inputs * 1e3)
+               or time_problem(time))
+    if problem:
+        raise ValueError(f"scenario {scenario.name}: {problem}")
+    return time
+
+
 def prepare_truth(scenario: Scenario, provider: Callable) -> None:
     """Build now what ``make_truth`` of ``scenario`` will ask ``provider`` for (its as-built
     prototype's FEM, ``mechanism.prepare_prototype``), e.g. on a thread beside other work; the
@@ -78,15 +92,8 @@ def make_truth(scenario: Scenario, provider: Callable, *, effects: tuple = (), p
     gives the same file; offsets are added as given.
     """
     from ..effects.library import effects_from_scenario
-    from ..measurement_limits import inputs_problem, sensor_problem, time_problem
 
-    with np.errstate(over="ignore", invalid="ignore"):  # an overflowing dwell is refused just below
-        time = np.arange(scenario.inputs.shape[0]) * scenario.dwell
-    # before any physics: what the file's reader would refuse (one set of limits)
-    problem = (sensor_problem(scenario.noise * 1e6, scenario.offset * 1e6) or inputs_problem(scenario.inputs * 1e3)
-               or time_problem(time))
-    if problem:
-        raise ValueError(f"scenario {scenario.name}: {problem}")
+    time = check_scenario(scenario)
     mechanism, offsets, drives = as_built(scenario.space, scenario.values)
     transmissions = [(x0, cl, mu, scenario.breakaway_force) for x0, cl, mu in drives]
     prototype = build_prototype(mechanism, transmissions, provider, mount_offsets=offsets)

@@ -529,7 +529,8 @@ def model_provider(stiffness: str, mechanism, *, chains: str | None = None, **op
 
 def model_space(stiffness: str = "fem", second_order: bool = True, *, progress: bool = False, workers: int | None = 0,
                 scheduler: str | None = None, mechanism=None, breakaway_force: float | None = None,
-                model: str = "second-order", also_build: Callable | None = None) -> ParameterSpace:
+                model: str = "second-order", also_build: Callable | None = None,
+                after_batch: Callable[[], None] | None = None) -> ParameterSpace:
     """The parameter space of ``mechanism`` (the reference one by default) with the model
     options the calibration commands share.
 
@@ -549,7 +550,9 @@ def model_space(stiffness: str = "fem", second_order: bool = True, *, progress: 
     FEM segments are built (``fem_provider``). also_build(space, provider): for "consistent" on
     FEM chains, called with the provider before the slopes, to build what later terms will ask
     for in the same batch (``dimension_terms.prepare_model_chains``, which the command line passes
-    for the quadratic dimension terms; a callable, since dimension_terms imports this module)."""
+    for the quadratic dimension terms; a callable, since dimension_terms imports this module).
+    after_batch(): called then, once that batch is built and before the model's set-up (its
+    probes and joins: ``cli.opening.overlapped_opening`` starts the truth's FEM there)."""
     from flexcal.model.parameters import parameter_space
 
     if model not in MODELS:
@@ -572,6 +575,8 @@ def model_space(stiffness: str = "fem", second_order: bool = True, *, progress: 
         provider = model_provider(stiffness, space.mechanism, progress=progress, workers=workers, scheduler=scheduler)
         if also_build is not None:  # e.g. the curvatures' chains in the same batch as the slopes'
             also_build(space, provider)
+        if after_batch is not None:
+            after_batch()
         space = consistent_space(corrected_space(space, provider, slopes=True), provider)
         return dataclasses.replace(space, breakaway_force=force)
     if stiffness != "closed-form":
