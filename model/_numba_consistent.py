@@ -23,11 +23,13 @@ import numpy as np
 from numba import njit
 
 from ._numba_kernels import solve_box, solve_play  # both inlined (``inline="always"``), as ``_equilibrium`` is
+from .consistent_native import equilibrium
 from .point_status import CLEARANCE_FAILED, DIVERGED, NOT_CONVERGED, OK
 
 # the files whose code or constants these cached kernels compile in, with a digest of their text
 # (numba keys its cache by this file's text only: tests/test_numba_cache_keys.py)
-SOURCES_COMPILED_IN = {"_numba_kernels.py": "2caf0299d30a8c71", "point_status.py": "9ba9d4aa3a906f93"}
+SOURCES_COMPILED_IN = {"_numba_kernels.py": "2caf0299d30a8c71", "point_status.py": "9ba9d4aa3a906f93",
+                       "consistent_native.py": "1b040e120df069b0"}
 
 _FAST = {"reassoc", "contract", "arcp"}
 TANGENT_STEP = 1e-6  # [m] offset step of the measured tangent: its second-order error ~1e-6 relative
@@ -231,6 +233,7 @@ def _terms(cand, x, c, command, x0, axial, pack, point_b, defect_index, defect, 
         force[5] += 0.5 * (pb2 * tf + tp * g2 - 2.0 * t2 * pf)
 
 
+
 # inlined into ``solve`` (session 38): as a call, numba linked a second copy of it into ``solve``
 # and optimised that one again, whose fused multiply-adds rounded otherwise, so ``solve``
 # compiled in the running process gave other last bits than loaded from numba's cache
@@ -248,7 +251,8 @@ def _equilibrium(cand, x, c, command, compliance, wrench, x0, gain, axial, pack,
     (6, 6) from call to call and updated by the secant condition at each step): Phi contracts
     by only 0.04-0.09 per step here (its Jacobian's spectral radius on the standard trajectory),
     the secant steps converge superlinearly. A step that does not halve the residual resets B to
-    the identity, i.e. to the plain fixed-point step. work (6, 6) scratch."""
+    the identity, i.e. to the plain fixed-point step. work (6, 6) scratch.
+"""
     x_new, f_prev, s_prev, b_y, s_b, rhs = work[0], work[1], work[2], work[3], work[4], work[5]
     previous = np.inf
     for it in range(max_iter):
@@ -319,8 +323,15 @@ def _equilibrium(cand, x, c, command, compliance, wrench, x0, gain, axial, pack,
     return NOT_CONVERGED, max_iter
 
 
+@njit(inline="always", nogil=True)
+def _status(packed):
+    """(point_status code, evaluations) of ``consistent_native.equilibrium``'s packed return."""
+    status = packed % 4
+    return (OK if status == 0 else (NOT_CONVERGED if status == 1 else DIVERGED)), packed // 4
+
+
 @njit(cache=True, nogil=True, fastmath=_FAST)
-def solve(first, stop, compliance, wrench, gain, axial, pack, point_b, defect_index, defect, symmetric, weight,
+def solve(first, stop, compliance, wrench, gain, axial, pack, lanes, point_b, defect_index, defect, symmetric, weight,
           coupling, mu, limit,
           x0, nut, band, play, inputs, revisit, clearance, tol, max_iter, divergence,
           faces, state_tol, input_gain, reuse_rates,
@@ -384,6 +395,20 @@ def solve(first, stop, compliance, wrench, gain, axial, pack, point_b, defect_in
         ml = np.zeros(WIDTH)
         grad = np.zeros(WIDTH)
         force = np.zeros(WIDTH)
+        native = lanes.shape[1] > 0  # the C extension's equilibrium (``consistent_native``)
+        context = np.zeros(11, dtype=np.int64)  # its slots: the addresses of this call's arguments (CONTEXT)
+        if native:
+            context[0], context[1], context[2] = cand, lanes.shape[1], lanes.ctypes.data
+            context[3], context[4], context[5] = x0.ctypes.data, weight.ctypes.data, defect_index.shape[0]
+            context[6], context[7], context[8] = defect_index.ctypes.data, 1 if symmetric else 0, compliance.ctypes.data
+            context[9], context[10] = wrench.ctypes.data, gain.ctypes.data
+        # the C equilibrium's arrays as addresses, taken once: each ``.ctypes`` at a call cost a
+        # reference count pair. Every one of these arrays is used in this loop's numba code too,
+        # so numba keeps it alive (allocated) through the loop
+        context_at, x_at, c_at, n_at = context.ctypes.data, x.ctypes.data, c.ctypes.data, n.ctypes.data
+        r_at, u_at, force_at = r.ctypes.data, u.ctypes.data, force.ctypes.data
+        work_at, secant_at, inputs_at = work.ctypes.data, secant.ctypes.data, inputs.ctypes.data
+        x_probe_at, c_probe_at, n_probe_at = x_probe.ctypes.data, c_probe.ctypes.data, n_probe.ctypes.data
         use_clearance = False
         if clearance:
             for i in range(3):
@@ -458,10 +483,16 @@ def solve(first, stop, compliance, wrench, gain, axial, pack, point_b, defect_in
                 for k in range(3):
                     reuse[k] = (reuse_rates and loose and p > 0 and rate_point[k] == p - 1
                                 and mu[cand, k] > 0 and c[k] > state_tol)
-                code, its = _equilibrium(cand, x, c, command, compliance, wrench, x0, gain, axial, pack, point_b,
-                                         defect_index, defect, symmetric, weight, LOOSE_TOL if loose else inner_tol,
-                                         max_iter, divergence, probed and not loose, r, u, n, force, d, ml, grad, work,
-                                         secant)
+                if native:
+                    code, its = _status(equilibrium(context_at, x_at, c_at, n_at, r_at, u_at, force_at, work_at, secant_at,
+                                                    inputs_at, p,
+                                                    LOOSE_TOL if loose else inner_tol, max_iter, divergence,
+                                                    1 if probed and not loose else 0))
+                else:
+                    code, its = _equilibrium(cand, x, c, command, compliance, wrench, x0, gain, axial, pack, point_b,
+                                             defect_index, defect, symmetric, weight,
+                                             LOOSE_TOL if loose else inner_tol, max_iter, divergence,
+                                             probed and not loose, r, u, n, force, d, ml, grad, work, secant)
                 iterations += its
                 if code != OK or not use_clearance:
                     break
@@ -478,11 +509,16 @@ def solve(first, stop, compliance, wrench, gain, axial, pack, point_b, defect_in
                         for i in range(3):
                             c_probe[i] = c[i]
                         c_probe[k] += TANGENT_STEP
-                        code, its = _equilibrium(cand, x_probe, c_probe, command, compliance, wrench, x0, gain,
-                                                 axial, pack, point_b, defect_index, defect, symmetric, weight,
-                                                 LOOSE_TOL if loose else PROBE_TOL,
-                                                 max_iter, divergence, not loose, r, u, n_probe, force, d, ml,
-                                                 grad, work, secant)
+                        if native:
+                            code, its = _status(equilibrium(context_at, x_probe_at, c_probe_at, n_probe_at, r_at,
+                                                            u_at, force_at, work_at, secant_at, inputs_at, p,
+                                                            LOOSE_TOL if loose else PROBE_TOL, max_iter, divergence,
+                                                            0 if loose else 1))
+                        else:
+                            code, its = _equilibrium(cand, x_probe, c_probe, command, compliance, wrench, x0, gain,
+                                                     axial, pack, point_b, defect_index, defect, symmetric, weight,
+                                                     LOOSE_TOL if loose else PROBE_TOL, max_iter, divergence,
+                                                     not loose, r, u, n_probe, force, d, ml, grad, work, secant)
                         iterations += its
                         if code != OK:
                             break
@@ -535,9 +571,14 @@ def solve(first, stop, compliance, wrench, gain, axial, pack, point_b, defect_in
                 if change == 0.0:
                     break
                 if change <= tol:  # the offsets moved by <= tol: one more equilibrium settles the pose
-                    code, its = _equilibrium(cand, x, c, command, compliance, wrench, x0, gain, axial, pack,
-                                             point_b, defect_index, defect, symmetric, weight, inner_tol, max_iter,
-                                             divergence, False, r, u, n, force, d, ml, grad, work, secant)
+                    if native:
+                        code, its = _status(equilibrium(context_at, x_at, c_at, n_at, r_at, u_at, force_at,
+                                                        work_at, secant_at, inputs_at, p, inner_tol, max_iter, divergence, 0))
+                    else:
+                        code, its = _equilibrium(cand, x, c, command, compliance, wrench, x0, gain, axial, pack,
+                                                 point_b, defect_index, defect, symmetric, weight, inner_tol,
+                                                 max_iter, divergence, False, r, u, n, force, d, ml, grad, work,
+                                                 secant)
                     iterations += its
                     break
                 code = NOT_CONVERGED

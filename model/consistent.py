@@ -115,12 +115,36 @@ def pack_chains(m) -> np.ndarray:
     the kernel's products are sums of 8-wide rows, which the compiler vectorizes."""
     from . import _numba_consistent as nc
 
-    n_c = m.n_candidates
+    pack = np.zeros((m.n_candidates, 6, nc.N_PACK, nc.WIDTH))
+    _fill_pack(m, pack)
+    return pack
+
+
+def lane_rows(m, defect: np.ndarray) -> np.ndarray:
+    """The same entries for ``consistent_native``'s map, the chains as lanes: (n_c, n_rows, 8),
+    row ``row * WIDTH + col`` holding ``pack_chains``' [chain, row, col] in lane ``chain`` (lanes
+    6, 7 zero), then the rows of ``_consistent_map.c``: point_b (3), the axial stiffness (1) and
+    the lateral defect's coefficients ``defect`` (n_c, 6, n_t) (n_t rows)."""
+    from . import _numba_consistent as nc
+
+    n_c, n_pack = m.n_candidates, nc.N_PACK * nc.WIDTH
+    rows = np.zeros((n_c, n_pack + 4 + defect.shape[2], 8))
+    _fill_pack(m, rows[:, :n_pack].reshape(n_c, nc.N_PACK, nc.WIDTH, 8).transpose(0, 3, 1, 2)[:, :6])
+    rows[:, n_pack:n_pack + 3, :6] = np.swapaxes(m.point_b, 1, 2)
+    rows[:, n_pack + 3, :6] = m.axial_stiffness
+    rows[:, n_pack + 4:, :6] = np.swapaxes(defect, 1, 2)
+    return rows
+
+
+def _fill_pack(m, pack: np.ndarray) -> None:
+    """Write the kernel's per-chain matrices into ``pack`` (n_c, 6, N_PACK, WIDTH), zeros
+    where no entry goes (a fresh array, or a view of ``lane_rows``')."""
+    from . import _numba_consistent as nc
+
     k = m.chain_stiffness
     t = m.load_shortening.copy()
     t[..., 0, :] = 0.0  # the kernel's load form has no axial row or column (``_load_form``)
     t[..., :, 0] = 0.0
-    pack = np.zeros((n_c, 6, nc.N_PACK, nc.WIDTH))
     swap = lambda a: np.swapaxes(a, -1, -2)  # noqa: E731
     pack[:, :, nc.J_COL:nc.J_COL + 6, :6] = swap(m.frame_transform)
     pack[:, :, nc.R_ROW:nc.R_ROW + 3, :3] = m.rotation
@@ -133,7 +157,6 @@ def pack_chains(m) -> np.ndarray:
     pack[:, :, nc.GAIN, :6] = swap(m.axial_gain)
     pack[:, :, nc.AXIAL_ROW, :3] = k[:, :, 0, :3]
     pack[:, :, nc.K_ROW0, :6] = k[:, :, 0, :]
-    return pack
 
 
 def revisits(inputs: np.ndarray) -> np.ndarray:
@@ -167,7 +190,7 @@ def _pool() -> ThreadPoolExecutor:
 def solve_points_consistent(matrices, inputs: np.ndarray, *, clearance: bool, tol: float, max_iter: int,
                             divergence: float, state_tolerance: float, n_threads: int = 1,
                             revisit: bool = True, reuse_rates: bool = True,
-                            written_out: bool = True) -> dict[str, np.ndarray]:
+                            written_out: bool = True, native: bool | None = None) -> dict[str, np.ndarray]:
     """Run the compiled consistent kernel; same outputs as ``kernel.solve_points_compiled``
     (force_only clearance; ``tol`` [m, rad] on the pose update per point). ``revisit=False``
     starts no point from an earlier one with the same command (``revisits``; for the tests);
@@ -175,10 +198,11 @@ def solve_points_consistent(matrices, inputs: np.ndarray, *, clearance: bool, to
     point's loose first one too, instead of taking the previous point's tight rates there (the
     code before session 19; for the tests). ``written_out=False`` sums the lateral defect's terms
     in the loop over their index even where they are ``SYMMETRIC_DEFECT``'s (the code before
-    session 21; for the tests)."""
+    session 21; for the tests). ``native``: the map by ``consistent_native``'s lane copy (None: where
+    the C extension is built); False runs numba's ``_terms`` (the reference; for the tests)."""
     import numba
 
-    from . import _numba_consistent
+    from . import _numba_consistent, consistent_native
     from .kernel import _FACES
     from .parameters import DRIVING
 
@@ -194,8 +218,15 @@ def solve_points_consistent(matrices, inputs: np.ndarray, *, clearance: bool, to
     seen = revisits(inputs) if revisit else np.full(inputs.shape[0], -1, dtype=np.int64)
     defect_index, defect = defect_terms(m.lateral_defect)
     symmetric = written_out and np.array_equal(defect_index, _numba_consistent.SYMMETRIC_DEFECT)
+    if consistent_native.AVAILABLE if native is None else native:
+        if not consistent_native.AVAILABLE:
+            raise RuntimeError("flexcal.model._consistent_map is not built (no C compiler when flexcal was installed)")
+        pack = np.zeros((0, 6, _numba_consistent.N_PACK, _numba_consistent.WIDTH))
+        lanes = lane_rows(m, defect)
+    else:
+        pack, lanes = pack_chains(m), np.zeros((n_c, 0, 8))
     arguments = (
-        c(compliance), c(wrench), c(m.axial_gain), c(m.axial_stiffness), pack_chains(m), c(m.point_b),
+        c(compliance), c(wrench), c(m.axial_gain), c(m.axial_stiffness), pack, lanes, c(m.point_b),
         defect_index, defect, bool(symmetric), c(m.payload),
         c(m.coupling[:, DRIVING][:, :, DRIVING]), c(m.mu), c(m.clearance),
         c(m.initial_position), c(m.nut_stiffness), c(np.maximum(m.breakaway_band, 0.0)),

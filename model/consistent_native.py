@@ -1,0 +1,66 @@
+"""The consistent model's map with the six chains as vector lanes (``model/_consistent_map.c``).
+
+``_numba_consistent._terms`` runs the chains one after another on scalars: numba's LLVM does not
+vectorize across them (its SLP pass is off, numba PR 8852; an 8-wide loop is unrolled before the
+loop vectorizer sees it). The C copy runs every product on the six chains at once, and the
+consistent kernel calls it by its symbol (``numba.types.ExternalFunction``), so numba still
+caches the kernel: the symbol is resolved when the cached code is loaded, after ``AVAILABLE``
+below has loaded the library into the process. Measured per evaluation of the map (one
+process, 10^6 calls): 0.09-0.10 us with AVX-512 against numba's 0.33 us (docs/model.md 10,
+"Session 42").
+
+Where the extension was not built (no C compiler at install), the symbol is bound to a
+placeholder that is never called, and the kernel runs numba's ``_terms`` (``AVAILABLE`` False).
+The two give the same numbers to rounding (tests/test_consistent_native.py), not the same bits.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+
+import llvmlite.binding as llvm
+from numba import cfunc, types
+
+SYMBOL = "flexcal_consistent_terms"
+_DOUBLES = types.CPointer(types.float64)
+_LONGS = types.CPointer(types.int64)
+# (cand, n_rows, lanes, x, c, command, x0, weight, n_terms, defect_index, symmetric, r, u, n, force)
+SIGNATURE = types.void(types.int64, types.int64, _DOUBLES, _DOUBLES, _DOUBLES, _DOUBLES, _DOUBLES, _DOUBLES,
+                       types.int64, _LONGS, types.int64, _DOUBLES, _DOUBLES, _DOUBLES, _DOUBLES)
+terms = types.ExternalFunction(SYMBOL, SIGNATURE)
+EQUILIBRIUM = "flexcal_consistent_equilibrium"
+# (context, x, c, n, r, u, force, work, secant, inputs, p, tol, max_iter, divergence, settle)
+#   -> 4 x evaluations + status
+# (the arrays as their addresses: an array's ``.ctypes`` at each call cost a reference count pair)
+EQUILIBRIUM_SIGNATURE = types.int64(*(types.intp,) * 10, types.int64, types.float64, types.int64, types.float64,
+                                    types.int64)
+# the int64 slots of a candidate's context, in ``_consistent_map.c``'s order (its ``CX_*``): the
+# kernel's read-only arrays (their addresses) and sizes
+CONTEXT = ("cand", "n_rows", "lanes", "x0", "weight", "n_terms", "defect_index", "symmetric", "compliance",
+           "wrench", "gain")
+equilibrium = types.ExternalFunction(EQUILIBRIUM, EQUILIBRIUM_SIGNATURE)
+
+
+def _load() -> bool:
+    spec = importlib.util.find_spec("flexcal.model._consistent_map")
+    if spec is not None and spec.origin:
+        llvm.load_library_permanently(spec.origin)
+        return True
+
+    # placeholders that are never called (the kernel takes numba's copies where AVAILABLE is False),
+    # so that the kernel's code links
+    @cfunc(SIGNATURE)
+    def no_terms(cand, n_rows, lanes, x, c, command, x0, weight, n_terms, defect_index, symmetric, r, u, n, force):
+        pass
+
+    @cfunc(EQUILIBRIUM_SIGNATURE)
+    def no_equilibrium(context, x, c, n, r, u, force, work, secant, inputs, p, tol, max_iter, divergence, settle):
+        return -1
+
+    _load.placeholders = (no_terms, no_equilibrium)  # kept alive with the process
+    llvm.add_symbol(SYMBOL, no_terms.address)
+    llvm.add_symbol(EQUILIBRIUM, no_equilibrium.address)
+    return False
+
+
+AVAILABLE = _load()
