@@ -14,12 +14,15 @@
  * Layout (model/consistent.py ``lane_rows``): per candidate ``n_rows`` rows of 8 lanes:
  * rows row * WIDTH + col hold ``pack_chains``' entry [chain, row, col] in lane ``chain``
  * (the same row constants as ``_numba_consistent``); then point_b (3 rows), the axial
- * stiffness (1) and the lateral defect's coefficients (n_terms rows).
+ * stiffness (1), and for the equilibrium's 6 x 6 products the frame's gains G[:, j] (6 rows) and
+ * compliance columns C[:, m] (6 rows) and its wrench F_C (1 row), in lanes 0-5 (there the lanes
+ * are the pose's six components); last the lateral defect's coefficients (n_terms rows).
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
 #include <math.h>
 #include <stdint.h>
+#include <string.h>
 
 typedef double lanes_t __attribute__((vector_size(64)));
 typedef double lanes_u __attribute__((vector_size(64), aligned(8)));  /* numpy's rows: 8-byte aligned */
@@ -27,7 +30,8 @@ typedef double lanes_u __attribute__((vector_size(64), aligned(8)));  /* numpy's
 enum {
     WIDTH = 8, J_COL = 0, R_ROW = 6, S_COL = 9, K_COL = 15, T_COL = 21, J_ROW = 27, W_COL = 33, GAIN = 36,
     AXIAL_ROW = 37, K_ROW0 = 38, N_PACK = 39,
-    POINT = N_PACK * WIDTH, AXIAL = POINT + 3, DEFECT = AXIAL + 1
+    POINT = N_PACK * WIDTH, AXIAL = POINT + 3, GAIN_COLUMNS = AXIAL + 1, COMPLIANCE_COLUMNS = GAIN_COLUMNS + 6,
+    WRENCH = COMPLIANCE_COLUMNS + 6, DEFECT = WRENCH + 1
 };
 
 #if defined(__GNUC__) && defined(__x86_64__) && !defined(__clang__)
@@ -43,18 +47,18 @@ static inline double lane_sum(lanes_t a)
 
 #define P(row, col) (L[(row) * WIDTH + (col)])
 
-CLONES
-void flexcal_consistent_terms(long cand, long n_rows, const double *lanes, const double *x, const double *c,
-                              const double *command, const double *x0, const double *weight, long n_terms,
-                              const long *defect_index, long symmetric, double *r, double *u, double *n,
-                              double *force)
+/* the map at pose x for one candidate: ``block`` its lane rows, x0c and w its x0 (3) and weight (6) */
+static inline __attribute__((always_inline)) void
+map_at(const double *restrict block, const double *restrict x, const double *restrict c,
+       const double *restrict command, const double *restrict x0c, const double *restrict w, long n_terms,
+       const long *restrict defect_index, long symmetric, double *restrict r, double *restrict u,
+       double *restrict n, double *restrict force)
 {
-    const lanes_u *L = (const lanes_u *)(lanes + cand * n_rows * WIDTH);
+    const lanes_u *L = (const lanes_u *)block;
     const double t0 = x[3], t1 = x[4], t2 = x[5];
     const double tt = t0 * t0 + t1 * t1 + t2 * t2;
     double f[6] = {0.0, 0.0, 0.0, 0.0, 0.0, 0.0};
     /* the weight W at the centre of gravity r turns with the frame: -d ext_r / d theta^T W */
-    const double *w = weight + 6 * cand;
     const double tw = t0 * w[0] + t1 * w[1] + t2 * w[2];
     const double tr = t0 * w[3] + t1 * w[4] + t2 * w[5];
     const double rw = w[3] * w[0] + w[4] * w[1] + w[5] * w[2];
@@ -77,14 +81,13 @@ void flexcal_consistent_terms(long cand, long n_rows, const double *lanes, const
         s[k] = d[0] * P(S_COL, k) + d[1] * P(S_COL + 1, k) + d[2] * P(S_COL + 2, k) + d[3] * P(S_COL + 3, k)
                + d[4] * P(S_COL + 4, k) + d[5] * P(S_COL + 5, k);
     const lanes_t rr = d[0] * s[0] + d[1] * s[1] + d[2] * s[2] + d[3] * s[3] + d[4] * s[4] + d[5] * s[5];
-    const double *x0c = x0 + 3 * cand;
     const lanes_t offset = {0.0, 0.0, 0.0, command[0] + x0c[0] + c[0], command[1] + x0c[1] + c[1],
                             command[2] + x0c[2] + c[2], 0.0, 0.0};
     const lanes_t uj = -rr + offset;
 
     /* the lateral compatibility defect m_c = sum_t q_t d_a d_b (c = y..rz) */
     const lanes_u *q = L + DEFECT;
-    lanes_t m[6] = {{0}};
+    lanes_t m[6];
     if (symmetric) {  /* _numba_consistent.SYMMETRIC_DEFECT's terms in its order */
         m[1] = q[0] * d[2] * d[3] + q[1] * d[3] * d[4];
         m[2] = q[2] * d[1] * d[3] + q[3] * d[3] * d[5];
@@ -92,6 +95,8 @@ void flexcal_consistent_terms(long cand, long n_rows, const double *lanes, const
         m[4] = q[8] * d[1] * d[3] + q[9] * d[3] * d[5];
         m[5] = q[10] * d[2] * d[3] + q[11] * d[3] * d[4];
     } else {
+        for (int i = 1; i < 6; i++)
+            m[i] = (lanes_t){0};
         for (long t = 0; t < n_terms; t++)
             m[defect_index[3 * t]] += q[t] * d[defect_index[3 * t + 1]] * d[defect_index[3 * t + 2]];
     }
@@ -162,6 +167,18 @@ void flexcal_consistent_terms(long cand, long n_rows, const double *lanes, const
     }
     for (int a = 0; a < 6; a++)
         force[a] = f[a];
+}
+
+/* the map at pose x for candidate ``cand`` of the lane rows (n_c, n_rows, 8): r, u, n (6) and force
+   (8, its entries 6 and 7 zero) as ``_numba_consistent._terms`` gives them */
+CLONES
+void flexcal_consistent_terms(long cand, long n_rows, const double *lanes, const double *x, const double *c,
+                              const double *command, const double *x0, const double *weight, long n_terms,
+                              const long *defect_index, long symmetric, double *r, double *u, double *n,
+                              double *force)
+{
+    map_at(lanes + cand * n_rows * WIDTH, x, c, command, x0 + 3 * cand, weight + 6 * cand, n_terms, defect_index,
+           symmetric, r, u, n, force);
     force[6] = force[7] = 0.0;
 }
 
@@ -172,110 +189,310 @@ void flexcal_consistent_terms(long cand, long n_rows, const double *lanes, const
    (``consistent_native.CONTEXT``) written once per candidate: each array argument of an inlined
    numba call costs a reference count pair, and with the map in C those were ~1/5 of the kernel's
    time (measured); so does an array's ``.ctypes`` at a call, so every array arrives as its address,
-   taken once per candidate. ``secant`` (6 x 6, row-major) is kept from call to call, ``work`` (6 x 6) is
-   scratch. Returns 4 x (evaluations of the map) + status, the status 0 converged, 1 not converged
+   taken once per candidate. ``secant`` (6 x 6, row-major) is kept from call to call. Returns 4 x (evaluations of the map) + status, the status 0 converged, 1 not converged
    in max_iter, 2 diverged (``_numba_consistent._status`` maps them to point_status' codes). */
-enum { CX_CAND, CX_ROWS, CX_LANES, CX_X0, CX_WEIGHT, CX_TERMS, CX_DEFECT, CX_SYMMETRIC, CX_COMPLIANCE, CX_WRENCH,
-       CX_GAIN, CX_SIZE };
+enum { CX_CAND, CX_ROWS, CX_LANES, CX_X0, CX_WEIGHT, CX_TERMS, CX_DEFECT, CX_SYMMETRIC, CX_SIZE };
 _Static_assert(sizeof(void *) == sizeof(int64_t), "addresses travel in int64 slots");
+
+static inline lanes_t load6(const double *v)
+{
+    lanes_t out = {0};
+    for (int k = 0; k < 6; k++)
+        out[k] = v[k];
+    return out;
+}
+
+static inline double max_abs6(lanes_t v)
+{
+    double worst = 0.0;
+    for (int k = 0; k < 6; k++) {
+        const double a = fabs(v[k]);
+        worst = a > worst ? a : worst;  /* Python's max(worst, a), NaN as the numba copy */
+    }
+    return worst;
+}
 
 CLONES
 long flexcal_consistent_equilibrium(intptr_t context_at, intptr_t x_at, intptr_t c_at, intptr_t n_at, intptr_t r_at,
-                                    intptr_t u_at, intptr_t force_at, intptr_t work_at, intptr_t secant_at,
-                                    intptr_t inputs_at, long p, double tol, long max_iter, double divergence,
-                                    long settle)
+                                    intptr_t u_at, intptr_t force_at, intptr_t secant_at, intptr_t inputs_at, long p,
+                                    double tol, long max_iter, double divergence, long settle)
 {
     const int64_t *cx = (const int64_t *)context_at;
-    double *x = (double *)x_at, *n = (double *)n_at, *r = (double *)r_at, *u = (double *)u_at;
-    double *force = (double *)force_at, *work = (double *)work_at, *secant = (double *)secant_at;
-    const double *c = (const double *)c_at, *inputs = (const double *)inputs_at;
-    const long cand = cx[CX_CAND], n_rows = cx[CX_ROWS], n_terms = cx[CX_TERMS], symmetric = cx[CX_SYMMETRIC];
-    const double *lanes = (const double *)cx[CX_LANES], *x0 = (const double *)cx[CX_X0];
-    const double *weight = (const double *)cx[CX_WEIGHT];
+    const long cand = cx[CX_CAND], n_terms = cx[CX_TERMS], symmetric = cx[CX_SYMMETRIC];
+    const double *block = (const double *)cx[CX_LANES] + cand * cx[CX_ROWS] * WIDTH;
+    const double *x0c = (const double *)cx[CX_X0] + 3 * cand, *w = (const double *)cx[CX_WEIGHT] + 6 * cand;
     const long *defect_index = (const long *)cx[CX_DEFECT];
-    const double *compliance = (const double *)cx[CX_COMPLIANCE], *wrench = (const double *)cx[CX_WRENCH];
-    const double *gain = (const double *)cx[CX_GAIN];
-    const double *command = inputs + 3 * p;
-    double *x_new = work, *f_prev = work + 6, *s_prev = work + 12, *b_y = work + 18, *s_b = work + 24, *rhs = work + 30;
-    const double *cc = compliance + 36 * cand, *gg = gain + 36 * cand, *ww = wrench + 6 * cand;
+    const double *command = (const double *)inputs_at + 3 * p, *c = (const double *)c_at;
+    const lanes_u *L = (const lanes_u *)block;
+    /* the 6 x 6 products on the pose's six components as lanes: G u = sum_j u_j G[:, j], and so
+       on; B kept as its columns (``secant``'s rows in memory hold B's columns here: only this
+       copy reads them, and the identity it starts from is symmetric) */
+    const lanes_u *gain = L + GAIN_COLUMNS, *compliance = L + COMPLIANCE_COLUMNS;
+    const lanes_t wrench = L[WRENCH];
+    double *secant_mem = (double *)secant_at;
+    lanes_t B[6], x = load6((const double *)x_at), f_prev = {0}, s_prev = {0};
+    for (int b = 0; b < 6; b++)
+        B[b] = load6(secant_mem + 6 * b);
+    double r[6], u[6], n[6], force[6], xs[6];
     double previous = INFINITY;
+    long packed = 4 * max_iter + 1;
     for (long it = 0; it < max_iter; it++) {
-        flexcal_consistent_terms(cand, n_rows, lanes, x, c, command, x0, weight, n_terms, defect_index, symmetric,
-                                 r, u, n, force);
-        for (int m = 0; m < 6; m++) {  /* F_C + sum_j g_j u_j - f2(x) */
-            double acc = ww[m] - force[m];
-            for (int j = 0; j < 6; j++)
-                acc += gg[6 * m + j] * u[j];
-            rhs[m] = acc;
-        }
-        double change = 0.0;
-        for (int k = 0; k < 6; k++) {
-            double acc = 0.0;
-            for (int m = 0; m < 6; m++)
-                acc += cc[6 * k + m] * rhs[m];
-            x_new[k] = acc;
-            const double step = fabs(acc - x[k]);
-            change = step > change ? step : change;  /* Python's max(change, step), NaN as it does */
-        }
+        for (int k = 0; k < 6; k++)
+            xs[k] = x[k];
+        map_at(block, xs, c, command, x0c, w, n_terms, defect_index, symmetric, r, u, n, force);
+        lanes_t rhs = wrench - load6(force);  /* F_C + sum_j g_j u_j - f2(x) */
+        for (int j = 0; j < 6; j++)
+            rhs += u[j] * gain[j];
+        lanes_t x_new = {0};
+        for (int m = 0; m < 6; m++)
+            x_new += rhs[m] * compliance[m];
+        const lanes_t residual = x_new - x;  /* f = Phi(x) - x */
+        const double change = max_abs6(residual);
         double r_max = 0.0;
         for (int j = 0; j < 6; j++)
             r_max = fabs(r[j]) > r_max ? fabs(r[j]) : r_max;
         if (!isfinite(change) || r_max > divergence) {
-            for (int k = 0; k < 6; k++)
-                x[k] = x_new[k];
-            return 4 * (it + 1) + 2;
+            x = x_new;
+            packed = 4 * (it + 1) + 2;
+            break;
         }
         if (change <= tol) {
             if (settle) {  /* x moved to Phi(x), ~rho tol from the fixed point, and its terms */
+                x = x_new;
                 for (int k = 0; k < 6; k++)
-                    x[k] = x_new[k];
-                flexcal_consistent_terms(cand, n_rows, lanes, x, c, command, x0, weight, n_terms, defect_index,
-                                         symmetric, r, u, n, force);
+                    xs[k] = x[k];
+                map_at(block, xs, c, command, x0c, w, n_terms, defect_index, symmetric, r, u, n, force);
             }
-            return 4 * (it + 1);
+            packed = 4 * (it + 1);
+            break;
         }
-        for (int k = 0; k < 6; k++)  /* residual f = Phi(x) - x, kept in x_new */
-            x_new[k] -= x[k];
         if (it > 0) {
             if (change > 0.5 * previous) {  /* the secant model did not help: plain fixed-point steps again */
-                for (int a = 0; a < 36; a++)
-                    secant[a] = (a % 7 == 0) ? 1.0 : 0.0;
+                for (int b = 0; b < 6; b++) {
+                    B[b] = (lanes_t){0};
+                    B[b][b] = 1.0;
+                }
             } else {  /* B+ = B - (s + B y) (s^T B) / (s^T B y), y = f - f_prev: then B+ y = -s */
-                for (int a = 0; a < 6; a++) {
-                    double acc = 0.0, acc2 = 0.0;
-                    for (int b = 0; b < 6; b++) {
-                        acc += secant[6 * a + b] * (x_new[b] - f_prev[b]);
-                        acc2 += s_prev[b] * secant[6 * b + a];
-                    }
-                    b_y[a] = acc;
-                    s_b[a] = acc2;
+                const lanes_t y = residual - f_prev;
+                lanes_t b_y = {0};
+                double s_b[6];
+                for (int b = 0; b < 6; b++) {
+                    b_y += y[b] * B[b];
+                    s_b[b] = lane_sum(s_prev * B[b]);
                 }
-                double denominator = 0.0, scale = 0.0;
-                for (int a = 0; a < 6; a++) {
-                    denominator += s_prev[a] * b_y[a];
-                    scale += s_prev[a] * s_prev[a];
-                }
+                const double denominator = lane_sum(s_prev * b_y), scale = lane_sum(s_prev * s_prev);
                 if (fabs(denominator) > 1e-3 * scale) {  /* |B y| ~ |s|: a well-posed update */
-                    for (int a = 0; a < 6; a++) {
-                        const double row = (s_prev[a] + b_y[a]) / denominator;
-                        for (int b = 0; b < 6; b++)
-                            secant[6 * a + b] -= row * s_b[b];
-                    }
+                    const lanes_t row = (s_prev + b_y) / denominator;
+                    for (int b = 0; b < 6; b++)
+                        B[b] -= row * s_b[b];
                 }
             }
         }
-        for (int a = 0; a < 6; a++) {
-            double acc = 0.0;
-            for (int b = 0; b < 6; b++)
-                acc += secant[6 * a + b] * x_new[b];
-            s_prev[a] = acc;
-            f_prev[a] = x_new[a];
-        }
-        for (int k = 0; k < 6; k++)
-            x[k] += s_prev[k];
+        s_prev = (lanes_t){0};
+        for (int b = 0; b < 6; b++)
+            s_prev += residual[b] * B[b];
+        f_prev = residual;
+        x += s_prev;
         previous = change;
     }
-    return 4 * max_iter + 1;
+    for (int k = 0; k < 6; k++)
+        ((double *)x_at)[k] = x[k];
+    for (int b = 0; b < 6; b++)
+        for (int a = 0; a < 6; a++)
+            secant_mem[6 * b + a] = B[b][a];
+    memcpy((double *)r_at, r, sizeof r);
+    memcpy((double *)u_at, u, sizeof u);
+    memcpy((double *)n_at, n, sizeof n);
+    memcpy((double *)force_at, force, sizeof force);
+    return packed;
+}
+
+/* ``_numba_kernels``' box and play problems of the nut offsets (docs/model.md 6, 9), the same
+   steps in the same order: face_values, face_slack, enumerate_box, solve_box, solve_play. The
+   consistent kernel calls them once per Newton step on the offsets; as inlined numba calls their
+   fifteen array arguments cost ~35 reference count pairs per posture, ~15 % of the kernel's time
+   with the map in C (measured). b is 3 x 3 row-major, status 0 lower / 1 free / 2 upper. */
+static int face_values(const long *status, const double *a, const double *b, const double *lo, const double *hi,
+                       double *out)
+{
+    for (int i = 0; i < 3; i++)
+        out[i] = status[i] == 0 ? lo[i] : (status[i] == 2 ? hi[i] : 0.0);
+    const double r0 = a[0] + b[1] * out[1] + b[2] * out[2];
+    const double r1 = a[1] + b[3] * out[0] + b[5] * out[2];
+    const double r2 = a[2] + b[6] * out[0] + b[7] * out[1];
+    const int f0 = status[0] == 1, f1 = status[1] == 1, f2 = status[2] == 1;
+    const int n_free = f0 + f1 + f2;
+    if (n_free == 0)
+        return 1;
+    if (n_free == 1) {  /* B_ii = 0: the free chain's equation is explicit */
+        if (f0)
+            out[0] = r0;
+        else if (f1)
+            out[1] = r1;
+        else
+            out[2] = r2;
+        return 1;
+    }
+    /* identity-padded 3x3: rows/columns of clamped chains are the unit vectors */
+    const double m01 = (f0 && f1) ? -b[1] : 0.0, m02 = (f0 && f2) ? -b[2] : 0.0;
+    const double m10 = (f1 && f0) ? -b[3] : 0.0, m12 = (f1 && f2) ? -b[5] : 0.0;
+    const double m20 = (f2 && f0) ? -b[6] : 0.0, m21 = (f2 && f1) ? -b[7] : 0.0;
+    const double s0 = f0 ? r0 : 0.0, s1 = f1 ? r1 : 0.0, s2 = f2 ? r2 : 0.0;
+    const double det = (1.0 - m12 * m21) - m01 * (m10 - m12 * m20) + m02 * (m10 * m21 - m20);
+    if (det == 0.0)
+        return 0;
+    const double x0 = (s0 * (1.0 - m12 * m21) - m01 * (s1 - m12 * s2) + m02 * (s1 * m21 - s2)) / det;
+    const double x1 = ((s1 - m12 * s2) - s0 * (m10 - m12 * m20) + m02 * (m10 * s2 - m20 * s1)) / det;
+    const double x2 = ((s2 - m21 * s1) - m01 * (m10 * s2 - s1 * m20) + s0 * (m10 * m21 - m20)) / det;
+    if (f0)
+        out[0] = x0;
+    if (f1)
+        out[1] = x1;
+    if (f2)
+        out[2] = x2;
+    return 1;
+}
+
+static double face_slack(const long *status, const double *c, const double *a, const double *b, const double *lo,
+                         const double *hi)
+{
+    double worst = -INFINITY;
+    for (int i = 0; i < 3; i++) {
+        double v;
+        if (status[i] == 1) {
+            v = (lo[i] - c[i]) > (c[i] - hi[i]) ? (lo[i] - c[i]) : (c[i] - hi[i]);
+        } else {
+            double z = a[i];
+            for (int j = 0; j < 3; j++)
+                z += b[3 * i + j] * c[j];
+            v = status[i] == 0 ? z - lo[i] : hi[i] - z;
+        }
+        worst = v > worst ? v : worst;
+    }
+    return worst;
+}
+
+/* Python's min(max(v, lo), hi), as the numba copy: the same value for equal arguments */
+static inline double clip(double v, double lo, double hi)
+{
+    const double m = lo > v ? lo : v;
+    return hi < m ? hi : m;
+}
+
+static int enumerate_box(const double *a, const double *b, const double *lo, const double *hi, long *status,
+                         double tol, double *c)
+{
+    double best = INFINITY, trial[3];
+    long best_face = -1, face[3];
+    for (long f = 0; f < 27; f++) {  /* the faces in _FACES' order: (i, j, k) over {0, 1, 2}^3 */
+        face[0] = f / 9, face[1] = (f / 3) % 3, face[2] = f % 3;
+        if (!face_values(face, a, b, lo, hi, trial))
+            continue;
+        const double slack = face_slack(face, trial, a, b, lo, hi);
+        if (slack < best) {
+            best = slack;
+            best_face = f;
+            if (slack <= tol)
+                break;
+        }
+    }
+    if (best_face < 0 || best > 1e-9 + tol)
+        return 0;
+    status[0] = best_face / 9, status[1] = (best_face / 3) % 3, status[2] = best_face % 3;
+    face_values(status, a, b, lo, hi, c);
+    for (int i = 0; i < 3; i++)
+        c[i] = clip(c[i], lo[i], hi[i]);
+    return 1;
+}
+
+static int solve_box(const double *a, const double *b, const double *lo, const double *hi, long *status, double tol,
+                     double *c)
+{
+    for (int sweep = 0; sweep < 8; sweep++) {
+        if (!face_values(status, a, b, lo, hi, c))
+            break;
+        int changed = 0;
+        for (int i = 0; i < 3; i++) {
+            if (status[i] == 1) {
+                if (c[i] < lo[i] - tol) {
+                    status[i] = 0;
+                    changed = 1;
+                } else if (c[i] > hi[i] + tol) {
+                    status[i] = 2;
+                    changed = 1;
+                }
+            } else {
+                const double z = a[i] + b[3 * i] * c[0] + b[3 * i + 1] * c[1] + b[3 * i + 2] * c[2];
+                if (status[i] == 0 && z > lo[i] + tol) {
+                    status[i] = z >= hi[i] ? 2 : 1;
+                    changed = 1;
+                } else if (status[i] == 2 && z < hi[i] - tol) {
+                    status[i] = z <= lo[i] ? 0 : 1;
+                    changed = 1;
+                }
+            }
+        }
+        if (!changed) {
+            for (int i = 0; i < 3; i++)
+                c[i] = clip(c[i], lo[i], hi[i]);
+            return 1;
+        }
+    }
+    return enumerate_box(a, b, lo, hi, status, tol, c);
+}
+
+/* C = clip(play(C_prev, a + B C, band), lo, hi) in place into c, or (play 0) the box problem
+   C = clip(a + B C, lo, hi); status (and the play's sides ``side``) updated; 1 solved, 0 failed.
+   Every array arrives as its address (see flexcal_consistent_equilibrium). */
+CLONES
+long flexcal_consistent_offsets(intptr_t a_at, intptr_t b_at, intptr_t lo_at, intptr_t hi_at, intptr_t c_prev_at,
+                                intptr_t band_at, intptr_t side_at, intptr_t status_at, double tol, intptr_t c_at,
+                                long play, long fresh)
+{
+    const double *a = (const double *)a_at, *b = (const double *)b_at, *lo = (const double *)lo_at;
+    const double *hi = (const double *)hi_at, *c_prev = (const double *)c_prev_at, *band = (const double *)band_at;
+    double *side = (double *)side_at, *c = (double *)c_at;
+    long *status = (long *)status_at;
+    if (!play)
+        return solve_box(a, b, lo, hi, status, tol, c);
+    double lo2[3], hi2[3], a2[3];
+    if (fresh) {  /* side guess: where the target at the previous offsets lies */
+        for (int i = 0; i < 3; i++) {
+            const double t = a[i] + b[3 * i] * c_prev[0] + b[3 * i + 1] * c_prev[1] + b[3 * i + 2] * c_prev[2];
+            side[i] = t >= c_prev[i] ? 1.0 : -1.0;
+        }
+    }
+    for (int attempt = 0; attempt < 8; attempt++) {
+        for (int i = 0; i < 3; i++) {
+            if (side[i] > 0) {
+                lo2[i] = c_prev[i] > lo[i] ? c_prev[i] : lo[i];
+                hi2[i] = hi[i];
+                a2[i] = a[i] - band[i];
+            } else {
+                lo2[i] = lo[i];
+                hi2[i] = c_prev[i] < hi[i] ? c_prev[i] : hi[i];
+                a2[i] = a[i] + band[i];
+            }
+            if (lo2[i] > hi2[i])
+                lo2[i] = hi2[i];
+        }
+        if (!solve_box(a2, b, lo2, hi2, status, tol, c))
+            return 0;
+        int changed = 0;
+        for (int i = 0; i < 3; i++) {
+            const double t = a[i] + b[3 * i] * c[0] + b[3 * i + 1] * c[1] + b[3 * i + 2] * c[2];
+            if (side[i] > 0 && t < c_prev[i] - band[i] - tol) {
+                side[i] = -1.0;
+                changed = 1;
+            } else if (side[i] < 0 && t > c_prev[i] + band[i] + tol) {
+                side[i] = 1.0;
+                changed = 1;
+            }
+        }
+        if (!changed)
+            return 1;
+    }
+    return 0;
 }
 
 /* an importable module, so that setuptools builds it and importlib finds it; numba calls the

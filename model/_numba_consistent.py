@@ -23,13 +23,13 @@ import numpy as np
 from numba import njit
 
 from ._numba_kernels import solve_box, solve_play  # both inlined (``inline="always"``), as ``_equilibrium`` is
-from .consistent_native import equilibrium
+from .consistent_native import equilibrium, offsets
 from .point_status import CLEARANCE_FAILED, DIVERGED, NOT_CONVERGED, OK
 
 # the files whose code or constants these cached kernels compile in, with a digest of their text
 # (numba keys its cache by this file's text only: tests/test_numba_cache_keys.py)
 SOURCES_COMPILED_IN = {"_numba_kernels.py": "2caf0299d30a8c71", "point_status.py": "9ba9d4aa3a906f93",
-                       "consistent_native.py": "1b040e120df069b0"}
+                       "consistent_native.py": "133aae7d1276ebf5"}
 
 _FAST = {"reassoc", "contract", "arcp"}
 TANGENT_STEP = 1e-6  # [m] offset step of the measured tangent: its second-order error ~1e-6 relative
@@ -396,19 +396,21 @@ def solve(first, stop, compliance, wrench, gain, axial, pack, lanes, point_b, de
         grad = np.zeros(WIDTH)
         force = np.zeros(WIDTH)
         native = lanes.shape[1] > 0  # the C extension's equilibrium (``consistent_native``)
-        context = np.zeros(11, dtype=np.int64)  # its slots: the addresses of this call's arguments (CONTEXT)
+        context = np.zeros(8, dtype=np.int64)  # its slots: the addresses of this call's arguments (CONTEXT)
         if native:
             context[0], context[1], context[2] = cand, lanes.shape[1], lanes.ctypes.data
             context[3], context[4], context[5] = x0.ctypes.data, weight.ctypes.data, defect_index.shape[0]
-            context[6], context[7], context[8] = defect_index.ctypes.data, 1 if symmetric else 0, compliance.ctypes.data
-            context[9], context[10] = wrench.ctypes.data, gain.ctypes.data
+            context[6], context[7] = defect_index.ctypes.data, 1 if symmetric else 0
         # the C equilibrium's arrays as addresses, taken once: each ``.ctypes`` at a call cost a
         # reference count pair. Every one of these arrays is used in this loop's numba code too,
         # so numba keeps it alive (allocated) through the loop
         context_at, x_at, c_at, n_at = context.ctypes.data, x.ctypes.data, c.ctypes.data, n.ctypes.data
         r_at, u_at, force_at = r.ctypes.data, u.ctypes.data, force.ctypes.data
-        work_at, secant_at, inputs_at = work.ctypes.data, secant.ctypes.data, inputs.ctypes.data
+        secant_at, inputs_at = secant.ctypes.data, inputs.ctypes.data
         x_probe_at, c_probe_at, n_probe_at = x_probe.ctypes.data, c_probe.ctypes.data, n_probe.ctypes.data
+        a_at, b_at, lo_at, hi_at = a.ctypes.data, b.ctypes.data, lo.ctypes.data, hi.ctypes.data
+        c_prev_at, band_n_at, side_at = c_prev.ctypes.data, band_n.ctypes.data, side.ctypes.data
+        status_at, c_new_at = status.ctypes.data, c_new.ctypes.data
         use_clearance = False
         if clearance:
             for i in range(3):
@@ -484,7 +486,7 @@ def solve(first, stop, compliance, wrench, gain, axial, pack, lanes, point_b, de
                     reuse[k] = (reuse_rates and loose and p > 0 and rate_point[k] == p - 1
                                 and mu[cand, k] > 0 and c[k] > state_tol)
                 if native:
-                    code, its = _status(equilibrium(context_at, x_at, c_at, n_at, r_at, u_at, force_at, work_at, secant_at,
+                    code, its = _status(equilibrium(context_at, x_at, c_at, n_at, r_at, u_at, force_at, secant_at,
                                                     inputs_at, p,
                                                     LOOSE_TOL if loose else inner_tol, max_iter, divergence,
                                                     1 if probed and not loose else 0))
@@ -511,7 +513,7 @@ def solve(first, stop, compliance, wrench, gain, axial, pack, lanes, point_b, de
                         c_probe[k] += TANGENT_STEP
                         if native:
                             code, its = _status(equilibrium(context_at, x_probe_at, c_probe_at, n_probe_at, r_at,
-                                                            u_at, force_at, work_at, secant_at, inputs_at, p,
+                                                            u_at, force_at, secant_at, inputs_at, p,
                                                             LOOSE_TOL if loose else PROBE_TOL, max_iter, divergence,
                                                             0 if loose else 1))
                         else:
@@ -551,7 +553,10 @@ def solve(first, stop, compliance, wrench, gain, axial, pack, lanes, point_b, de
                 box_tol = 1e-13 + 1e-13 * amax
                 for i in range(3):
                     c_new[i] = c[i]
-                if play and p > 0:
+                if native:
+                    ok = offsets(a_at, b_at, lo_at, hi_at, c_prev_at, band_n_at, side_at, status_at, box_tol,
+                                 c_new_at, 1 if play and p > 0 else 0, 1 if step == 0 else 0) != 0
+                elif play and p > 0:
                     ok = solve_play(a, b, lo, hi, c_prev, band_n, side, lo2, hi2, a2, status, box_tol, c_new, faces,
                                     trial, step == 0)
                 else:
@@ -573,7 +578,7 @@ def solve(first, stop, compliance, wrench, gain, axial, pack, lanes, point_b, de
                 if change <= tol:  # the offsets moved by <= tol: one more equilibrium settles the pose
                     if native:
                         code, its = _status(equilibrium(context_at, x_at, c_at, n_at, r_at, u_at, force_at,
-                                                        work_at, secant_at, inputs_at, p, inner_tol, max_iter, divergence, 0))
+                                                        secant_at, inputs_at, p, inner_tol, max_iter, divergence, 0))
                     else:
                         code, its = _equilibrium(cand, x, c, command, compliance, wrench, x0, gain, axial, pack,
                                                  point_b, defect_index, defect, symmetric, weight, inner_tol,

@@ -120,19 +120,24 @@ def pack_chains(m) -> np.ndarray:
     return pack
 
 
-def lane_rows(m, defect: np.ndarray) -> np.ndarray:
+def lane_rows(m, defect: np.ndarray, compliance: np.ndarray, wrench: np.ndarray) -> np.ndarray:
     """The same entries for ``consistent_native``'s map, the chains as lanes: (n_c, n_rows, 8),
     row ``row * WIDTH + col`` holding ``pack_chains``' [chain, row, col] in lane ``chain`` (lanes
-    6, 7 zero), then the rows of ``_consistent_map.c``: point_b (3), the axial stiffness (1) and
-    the lateral defect's coefficients ``defect`` (n_c, 6, n_t) (n_t rows)."""
+    6, 7 zero), then the rows of ``_consistent_map.c``: point_b (3), the axial stiffness (1), the
+    frame's gain columns G[:, j] (6), compliance columns C[:, k] (6; ``compliance`` (n_c, 6, 6)) and
+    wrench (1; (n_c, 6)) with the pose's components as lanes, and the lateral defect's
+    coefficients ``defect`` (n_c, 6, n_t) (n_t rows)."""
     from . import _numba_consistent as nc
 
     n_c, n_pack = m.n_candidates, nc.N_PACK * nc.WIDTH
-    rows = np.zeros((n_c, n_pack + 4 + defect.shape[2], 8))
+    rows = np.zeros((n_c, n_pack + 17 + defect.shape[2], 8))
     _fill_pack(m, rows[:, :n_pack].reshape(n_c, nc.N_PACK, nc.WIDTH, 8).transpose(0, 3, 1, 2)[:, :6])
     rows[:, n_pack:n_pack + 3, :6] = np.swapaxes(m.point_b, 1, 2)
     rows[:, n_pack + 3, :6] = m.axial_stiffness
-    rows[:, n_pack + 4:, :6] = np.swapaxes(defect, 1, 2)
+    rows[:, n_pack + 4:n_pack + 10, :6] = np.swapaxes(m.axial_gain, 1, 2)
+    rows[:, n_pack + 10:n_pack + 16, :6] = np.swapaxes(compliance, 1, 2)
+    rows[:, n_pack + 16, :6] = wrench
+    rows[:, n_pack + 17:, :6] = np.swapaxes(defect, 1, 2)
     return rows
 
 
@@ -181,9 +186,10 @@ def _revisits(data: bytes, shape: tuple[int, ...]) -> np.ndarray:
 
 
 @functools.cache
-def _pool() -> ThreadPoolExecutor:
-    """The threads ``solve_points_consistent`` shares its candidates over, kept for the process
-    (a pool per call cost a calibration's small batches their threads' start)."""
+def thread_pool() -> ThreadPoolExecutor:
+    """The threads ``solve_points_consistent`` shares its candidates over, and ``forward`` its
+    candidate blocks, kept for the process (a pool per call cost a calibration's small batches
+    their threads' start). Work submitted to it never submits to it again (no deadlock)."""
     return ThreadPoolExecutor(max_workers=os.cpu_count() or 1)
 
 
@@ -222,7 +228,7 @@ def solve_points_consistent(matrices, inputs: np.ndarray, *, clearance: bool, to
         if not consistent_native.AVAILABLE:
             raise RuntimeError("flexcal.model._consistent_map is not built (no C compiler when flexcal was installed)")
         pack = np.zeros((0, 6, _numba_consistent.N_PACK, _numba_consistent.WIDTH))
-        lanes = lane_rows(m, defect)
+        lanes = lane_rows(m, defect, compliance, wrench)
     else:
         pack, lanes = pack_chains(m), np.zeros((n_c, 0, 8))
     arguments = (
@@ -241,6 +247,6 @@ def solve_points_consistent(matrices, inputs: np.ndarray, *, clearance: bool, to
     if threads == 1:
         _numba_consistent.solve(0, n_c, *arguments)
     else:
-        list(_pool().map(lambda first, stop: _numba_consistent.solve(first, stop, *arguments), bounds[:-1],
+        list(thread_pool().map(lambda first, stop: _numba_consistent.solve(first, stop, *arguments), bounds[:-1],
                          bounds[1:]))
     return out

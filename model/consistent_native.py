@@ -29,15 +29,18 @@ SIGNATURE = types.void(types.int64, types.int64, _DOUBLES, _DOUBLES, _DOUBLES, _
                        types.int64, _LONGS, types.int64, _DOUBLES, _DOUBLES, _DOUBLES, _DOUBLES)
 terms = types.ExternalFunction(SYMBOL, SIGNATURE)
 EQUILIBRIUM = "flexcal_consistent_equilibrium"
-# (context, x, c, n, r, u, force, work, secant, inputs, p, tol, max_iter, divergence, settle)
+# (context, x, c, n, r, u, force, secant, inputs, p, tol, max_iter, divergence, settle)
 #   -> 4 x evaluations + status
 # (the arrays as their addresses: an array's ``.ctypes`` at each call cost a reference count pair)
-EQUILIBRIUM_SIGNATURE = types.int64(*(types.intp,) * 10, types.int64, types.float64, types.int64, types.float64,
+EQUILIBRIUM_SIGNATURE = types.int64(*(types.intp,) * 9, types.int64, types.float64, types.int64, types.float64,
                                     types.int64)
+OFFSETS = "flexcal_consistent_offsets"
+# (a, b, lo, hi, c_prev, band, side, status, tol, c, play, fresh) -> 1 solved, 0 failed
+OFFSETS_SIGNATURE = types.int64(*(types.intp,) * 8, types.float64, types.intp, types.int64, types.int64)
+offsets = types.ExternalFunction(OFFSETS, OFFSETS_SIGNATURE)
 # the int64 slots of a candidate's context, in ``_consistent_map.c``'s order (its ``CX_*``): the
 # kernel's read-only arrays (their addresses) and sizes
-CONTEXT = ("cand", "n_rows", "lanes", "x0", "weight", "n_terms", "defect_index", "symmetric", "compliance",
-           "wrench", "gain")
+CONTEXT = ("cand", "n_rows", "lanes", "x0", "weight", "n_terms", "defect_index", "symmetric")
 equilibrium = types.ExternalFunction(EQUILIBRIUM, EQUILIBRIUM_SIGNATURE)
 
 
@@ -54,12 +57,16 @@ def _load() -> bool:
         pass
 
     @cfunc(EQUILIBRIUM_SIGNATURE)
-    def no_equilibrium(context, x, c, n, r, u, force, work, secant, inputs, p, tol, max_iter, divergence, settle):
+    def no_equilibrium(context, x, c, n, r, u, force, secant, inputs, p, tol, max_iter, divergence, settle):
         return -1
 
-    _load.placeholders = (no_terms, no_equilibrium)  # kept alive with the process
-    llvm.add_symbol(SYMBOL, no_terms.address)
-    llvm.add_symbol(EQUILIBRIUM, no_equilibrium.address)
+    @cfunc(OFFSETS_SIGNATURE)
+    def no_offsets(a, b, lo, hi, c_prev, band, side, status, tol, c, play, fresh):
+        return 0
+
+    _load.placeholders = (no_terms, no_equilibrium, no_offsets)  # kept alive with the process
+    for name, placeholder in zip((SYMBOL, EQUILIBRIUM, OFFSETS), _load.placeholders):
+        llvm.add_symbol(name, placeholder.address)
     return False
 
 

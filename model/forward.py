@@ -24,8 +24,6 @@ else S1 if all three driving chains are compressed (N < 0); else S3.
 
 from __future__ import annotations
 
-import concurrent.futures
-import contextlib
 import dataclasses
 import sys
 from dataclasses import dataclass
@@ -35,6 +33,7 @@ import numpy as np
 from . import consistent, kernel, point_status, solver
 from .assembly import MechanismMatrices, mechanism_matrices
 from .clearance import ConvergenceError
+from .consistent import thread_pool
 from .parameters import DRIVING, ParameterSpace, parameter_space
 from .second_order import second_order_pose
 from .trajectory import travel_directions
@@ -261,25 +260,23 @@ def forward(space_values, inputs, directions=None, *, space: ParameterSpace | No
                    chunk_size=chunk_size)
     if n_threads <= 1 or values.shape[0] < 2:
         out = solve_matrices(mechanism_matrices(values, space), x, d, **options)
-    elif options["engine"] == "numba":  # the whole batch's setup, then the compiled solve's threads
-        # the consistent model solves on Python threads (model/consistent.py): its set-up on one
-        # numba thread, so that no OpenMP team spins beside them (docs/scale.md "Issue 26, session 38")
-        with kernel.numba_threads(1) if space.chain_shortening else contextlib.nullcontext():
-            matrices = mechanism_matrices(values, space)
-        out = solve_matrices(matrices, x, d, n_threads=n_threads, **options)
+    elif options["engine"] == "numba" and not space.chain_shortening:
+        # the whole batch's setup, then the compiled solve's threads
+        out = solve_matrices(mechanism_matrices(values, space), x, d, n_threads=n_threads, **options)
     else:
-        # the numpy engine: setup and solve in threads over candidate blocks
+        # setup and solve in threads over candidate blocks: the numpy engine, and the consistent
+        # model, whose set-up (its chains' shortening forms on one thread) was ~1/4 of a batch's
+        # time before its solve's threads started (docs/model.md 10, "Session 42"). Each block's
+        # set-up on one numba thread, so that no OpenMP team spins beside the other block
+        # (docs/scale.md "Issue 26, session 38"); a candidate's bits do not depend on its block
         bounds = np.linspace(0, values.shape[0], min(int(n_threads), values.shape[0]) + 1).astype(int)
-        spans = list(zip(bounds[:-1], bounds[1:]))
 
-        def setup(span):
-            return mechanism_matrices(values[span[0]:span[1]], space, candidate_offset=int(span[0]))
-
-        def run(span, matrices):
+        def block(span):
+            with kernel.numba_threads(1):
+                matrices = mechanism_matrices(values[span[0]:span[1]], space, candidate_offset=int(span[0]))
             return solve_matrices(matrices, x, d, candidate_offset=int(span[0]), **options)
 
-        with concurrent.futures.ThreadPoolExecutor(max_workers=len(spans)) as pool:
-            parts = list(pool.map(run, spans, pool.map(setup, spans)))
+        parts = list(thread_pool().map(block, zip(bounds[:-1], bounds[1:])))
         out = {k: np.concatenate([p[k] for p in parts]) for k in parts[0] if k != "n_iterations"}
         out["n_iterations"] = max(p["n_iterations"] for p in parts)
     return ForwardResult(pose=out["pose"], axial_loads=out["loads"], clearance=out["clearance"],
