@@ -225,14 +225,13 @@ long flexcal_consistent_equilibrium(intptr_t context_at, intptr_t x_at, intptr_t
     const double *command = (const double *)inputs_at + 3 * p, *c = (const double *)c_at;
     const lanes_u *L = (const lanes_u *)block;
     /* the 6 x 6 products on the pose's six components as lanes: G u = sum_j u_j G[:, j], and so
-       on; B kept as its columns (``secant``'s rows in memory hold B's columns here: only this
-       copy reads them, and the identity it starts from is symmetric) */
+       on; B as its six columns, ``secant`` (6, 8) holding them (lanes 6, 7 zero) */
     const lanes_u *gain = L + GAIN_COLUMNS, *compliance = L + COMPLIANCE_COLUMNS;
     const lanes_t wrench = L[WRENCH];
-    double *secant_mem = (double *)secant_at;
+    lanes_u *secant = (lanes_u *)secant_at;
     lanes_t B[6], x = load6((const double *)x_at), f_prev = {0}, s_prev = {0};
     for (int b = 0; b < 6; b++)
-        B[b] = load6(secant_mem + 6 * b);
+        B[b] = secant[b];
     double r[6], u[6], n[6], force[6], xs[6];
     double previous = INFINITY;
     long packed = 4 * max_iter + 1;
@@ -298,8 +297,7 @@ long flexcal_consistent_equilibrium(intptr_t context_at, intptr_t x_at, intptr_t
     for (int k = 0; k < 6; k++)
         ((double *)x_at)[k] = x[k];
     for (int b = 0; b < 6; b++)
-        for (int a = 0; a < 6; a++)
-            secant_mem[6 * b + a] = B[b][a];
+        secant[b] = B[b];
     memcpy((double *)r_at, r, sizeof r);
     memcpy((double *)u_at, u, sizeof u);
     memcpy((double *)n_at, n, sizeof n);

@@ -349,6 +349,13 @@ def solve(first, stop, compliance, wrench, gain, axial, pack, lanes, point_b, de
     way back; session 16)."""
     n_p = inputs.shape[0]
     inner_tol = INNER_SHARE * tol
+    # the C copy (``consistent_native``; where the call has lanes) reaches its arrays by address
+    # (an array argument costs a reference count pair at each call). Every array whose address it
+    # takes is used in the candidate loop's numba code too (these two at each candidate's start),
+    # which keeps it allocated through that loop
+    native = lanes.shape[1] > 0
+    context = np.zeros(8, dtype=np.int64)  # the candidate's read-only arguments: CONTEXT's slots
+    secant_lanes = np.zeros((6, WIDTH))  # the C copy's B as columns, padded to vector lanes
     for cand in range(first, stop):
         x = np.zeros(6)
         work = np.zeros((6, 6))
@@ -395,18 +402,19 @@ def solve(first, stop, compliance, wrench, gain, axial, pack, lanes, point_b, de
         ml = np.zeros(WIDTH)
         grad = np.zeros(WIDTH)
         force = np.zeros(WIDTH)
-        native = lanes.shape[1] > 0  # the C extension's equilibrium (``consistent_native``)
-        context = np.zeros(8, dtype=np.int64)  # its slots: the addresses of this call's arguments (CONTEXT)
         if native:
             context[0], context[1], context[2] = cand, lanes.shape[1], lanes.ctypes.data
             context[3], context[4], context[5] = x0.ctypes.data, weight.ctypes.data, defect_index.shape[0]
             context[6], context[7] = defect_index.ctypes.data, 1 if symmetric else 0
-        # the C equilibrium's arrays as addresses, taken once: each ``.ctypes`` at a call cost a
-        # reference count pair. Every one of these arrays is used in this loop's numba code too,
-        # so numba keeps it alive (allocated) through the loop
+        # the C copy's per-candidate arrays as addresses, taken once (each ``.ctypes`` at a call cost
+        # a reference count pair too); each is used in the point loop's numba code, which keeps it
+        # allocated through that loop
         context_at, x_at, c_at, n_at = context.ctypes.data, x.ctypes.data, c.ctypes.data, n.ctypes.data
         r_at, u_at, force_at = r.ctypes.data, u.ctypes.data, force.ctypes.data
-        secant_at, inputs_at = secant.ctypes.data, inputs.ctypes.data
+        for k in range(6):
+            for m in range(WIDTH):
+                secant_lanes[k, m] = 1.0 if k == m else 0.0
+        secant_at, inputs_at = secant_lanes.ctypes.data, inputs.ctypes.data
         x_probe_at, c_probe_at, n_probe_at = x_probe.ctypes.data, c_probe.ctypes.data, n_probe.ctypes.data
         a_at, b_at, lo_at, hi_at = a.ctypes.data, b.ctypes.data, lo.ctypes.data, hi.ctypes.data
         c_prev_at, band_n_at, side_at = c_prev.ctypes.data, band_n.ctypes.data, side.ctypes.data
