@@ -45,26 +45,57 @@ static inline double lane_sum(lanes_t a)
     return ((a[0] + a[1]) + (a[2] + a[3])) + ((a[4] + a[5]) + (a[6] + a[7]));
 }
 
+static inline lanes_t load6(const double *v)
+{
+    lanes_t out = {0};
+    for (int k = 0; k < 6; k++)
+        out[k] = v[k];
+    return out;
+}
+
+/* lane k of the result = the sum of a[k]'s lanes (k < 6; a[6], a[7] taken as zero): six sums at
+   once by three rounds of pairwise shuffles, instead of six sums of one vector each */
+static inline lanes_t lane_sums6(const lanes_t *a)
+{
+    typedef long long index_t __attribute__((vector_size(64)));
+    const lanes_t zero = {0};
+    const index_t even = {0, 8, 2, 10, 4, 12, 6, 14}, odd = {1, 9, 3, 11, 5, 13, 7, 15};
+    const index_t low2 = {0, 1, 8, 9, 4, 5, 12, 13}, high2 = {2, 3, 10, 11, 6, 7, 14, 15};
+    const index_t low4 = {0, 1, 2, 3, 8, 9, 10, 11}, high4 = {4, 5, 6, 7, 12, 13, 14, 15};
+    const lanes_t s01 = __builtin_shuffle(a[0], a[1], even) + __builtin_shuffle(a[0], a[1], odd);
+    const lanes_t s23 = __builtin_shuffle(a[2], a[3], even) + __builtin_shuffle(a[2], a[3], odd);
+    const lanes_t s45 = __builtin_shuffle(a[4], a[5], even) + __builtin_shuffle(a[4], a[5], odd);
+    const lanes_t s67 = zero;
+    const lanes_t t03 = __builtin_shuffle(s01, s23, low2) + __builtin_shuffle(s01, s23, high2);
+    const lanes_t t47 = __builtin_shuffle(s45, s67, low2) + __builtin_shuffle(s45, s67, high2);
+    return __builtin_shuffle(t03, t47, low4) + __builtin_shuffle(t03, t47, high4);
+}
+
+/* the map's outputs, lanes 0-5: the chains' shortening r, axial inputs u and tensions n, and the
+   second-order wrench (its six components as lanes) */
+struct map_out {
+    lanes_t r, u, n, force;
+};
+
 #define P(row, col) (L[(row) * WIDTH + (col)])
 
 /* the map at pose x for one candidate: ``block`` its lane rows, x0c and w its x0 (3) and weight (6) */
-static inline __attribute__((always_inline)) void
-map_at(const double *restrict block, const double *restrict x, const double *restrict c,
-       const double *restrict command, const double *restrict x0c, const double *restrict w, long n_terms,
-       const long *restrict defect_index, long symmetric, double *restrict r, double *restrict u,
-       double *restrict n, double *restrict force)
+static inline __attribute__((always_inline)) struct map_out
+map_at(const double *restrict block, const lanes_t x, const double *restrict c, const double *restrict command,
+       const double *restrict x0c, const double *restrict w, long n_terms, const long *restrict defect_index,
+       long symmetric)
 {
     const lanes_u *L = (const lanes_u *)block;
     const double t0 = x[3], t1 = x[4], t2 = x[5];
     const double tt = t0 * t0 + t1 * t1 + t2 * t2;
-    double f[6] = {0.0, 0.0, 0.0, 0.0, 0.0, 0.0};
+    lanes_t wrench[6];  /* wrench[a]: component a of each chain's second-order wrench, summed at the end */
     /* the weight W at the centre of gravity r turns with the frame: -d ext_r / d theta^T W */
     const double tw = t0 * w[0] + t1 * w[1] + t2 * w[2];
     const double tr = t0 * w[3] + t1 * w[4] + t2 * w[5];
     const double rw = w[3] * w[0] + w[4] * w[1] + w[5] * w[2];
-    f[3] -= 0.5 * (w[3] * tw + tr * w[0] - 2.0 * t0 * rw);
-    f[4] -= 0.5 * (w[4] * tw + tr * w[1] - 2.0 * t1 * rw);
-    f[5] -= 0.5 * (w[5] * tw + tr * w[2] - 2.0 * t2 * rw);
+    const lanes_t weight_turn = {0.0, 0.0, 0.0, -0.5 * (w[3] * tw + tr * w[0] - 2.0 * t0 * rw),
+                                 -0.5 * (w[4] * tw + tr * w[1] - 2.0 * t1 * rw),
+                                 -0.5 * (w[5] * tw + tr * w[2] - 2.0 * t2 * rw), 0.0, 0.0};
 
     const lanes_t pb0 = L[POINT], pb1 = L[POINT + 1], pb2 = L[POINT + 2];
     const lanes_t tp = t0 * pb0 + t1 * pb1 + t2 * pb2;
@@ -147,9 +178,9 @@ map_at(const double *restrict block, const double *restrict x, const double *res
     for (int i = 0; i < 6; i++)
         v[i] = two_t * s[i] + gr[i];
     for (int a = 0; a < 6; a++)
-        f[a] += lane_sum(v[0] * P(J_ROW, a) + v[1] * P(J_ROW + 1, a) + v[2] * P(J_ROW + 2, a)
-                         + v[3] * P(J_ROW + 3, a) + v[4] * P(J_ROW + 4, a) + v[5] * P(J_ROW + 5, a)
-                         + (e0 * P(W_COL, a) + e1 * P(W_COL + 1, a) + e2 * P(W_COL + 2, a)));
+        wrench[a] = v[0] * P(J_ROW, a) + v[1] * P(J_ROW + 1, a) + v[2] * P(J_ROW + 2, a) + v[3] * P(J_ROW + 3, a)
+                    + v[4] * P(J_ROW + 4, a) + v[5] * P(J_ROW + 5, a)
+                    + (e0 * P(W_COL, a) + e1 * P(W_COL + 1, a) + e2 * P(W_COL + 2, a));
     /* the chain force F (tension along the axis, lateral K e) works through the second-order
        displacement of B: d ext / d theta^T F = 1/2 (p (theta.F) + (theta.p) F - 2 theta (p.F)) */
     const lanes_t g0 = P(R_ROW, 0) * tension + P(R_ROW, 1) * fl[1] + P(R_ROW, 2) * fl[2];
@@ -157,16 +188,10 @@ map_at(const double *restrict block, const double *restrict x, const double *res
     const lanes_t g2 = P(R_ROW + 2, 0) * tension + P(R_ROW + 2, 1) * fl[1] + P(R_ROW + 2, 2) * fl[2];
     const lanes_t tf = t0 * g0 + t1 * g1 + t2 * g2;
     const lanes_t pf = pb0 * g0 + pb1 * g1 + pb2 * g2;
-    f[3] += lane_sum(0.5 * (pb0 * tf + tp * g0 - 2.0 * t0 * pf));
-    f[4] += lane_sum(0.5 * (pb1 * tf + tp * g1 - 2.0 * t1 * pf));
-    f[5] += lane_sum(0.5 * (pb2 * tf + tp * g2 - 2.0 * t2 * pf));
-    for (int j = 0; j < 6; j++) {
-        r[j] = -rr[j];
-        u[j] = uj[j];
-        n[j] = tension[j];
-    }
-    for (int a = 0; a < 6; a++)
-        force[a] = f[a];
+    wrench[3] += 0.5 * (pb0 * tf + tp * g0 - 2.0 * t0 * pf);
+    wrench[4] += 0.5 * (pb1 * tf + tp * g1 - 2.0 * t1 * pf);
+    wrench[5] += 0.5 * (pb2 * tf + tp * g2 - 2.0 * t2 * pf);
+    return (struct map_out){-rr, uj, tension, weight_turn + lane_sums6(wrench)};
 }
 
 /* the map at pose x for candidate ``cand`` of the lane rows (n_c, n_rows, 8): r, u, n (6) and force
@@ -177,8 +202,14 @@ void flexcal_consistent_terms(long cand, long n_rows, const double *lanes, const
                               const long *defect_index, long symmetric, double *r, double *u, double *n,
                               double *force)
 {
-    map_at(lanes + cand * n_rows * WIDTH, x, c, command, x0 + 3 * cand, weight + 6 * cand, n_terms, defect_index,
-           symmetric, r, u, n, force);
+    const struct map_out out = map_at(lanes + cand * n_rows * WIDTH, load6(x), c, command, x0 + 3 * cand,
+                                      weight + 6 * cand, n_terms, defect_index, symmetric);
+    for (int k = 0; k < 6; k++) {
+        r[k] = out.r[k];
+        u[k] = out.u[k];
+        n[k] = out.n[k];
+        force[k] = out.force[k];
+    }
     force[6] = force[7] = 0.0;
 }
 
@@ -193,14 +224,6 @@ void flexcal_consistent_terms(long cand, long n_rows, const double *lanes, const
    in max_iter, 2 diverged (``_numba_consistent._status`` maps them to point_status' codes). */
 enum { CX_CAND, CX_ROWS, CX_LANES, CX_X0, CX_WEIGHT, CX_TERMS, CX_DEFECT, CX_SYMMETRIC, CX_SIZE };
 _Static_assert(sizeof(void *) == sizeof(int64_t), "addresses travel in int64 slots");
-
-static inline lanes_t load6(const double *v)
-{
-    lanes_t out = {0};
-    for (int k = 0; k < 6; k++)
-        out[k] = v[k];
-    return out;
-}
 
 static inline double max_abs6(lanes_t v)
 {
@@ -232,24 +255,20 @@ long flexcal_consistent_equilibrium(intptr_t context_at, intptr_t x_at, intptr_t
     lanes_t B[6], x = load6((const double *)x_at), f_prev = {0}, s_prev = {0};
     for (int b = 0; b < 6; b++)
         B[b] = secant[b];
-    double r[6], u[6], n[6], force[6], xs[6];
+    struct map_out out = {{0}};
     double previous = INFINITY;
     long packed = 4 * max_iter + 1;
     for (long it = 0; it < max_iter; it++) {
-        for (int k = 0; k < 6; k++)
-            xs[k] = x[k];
-        map_at(block, xs, c, command, x0c, w, n_terms, defect_index, symmetric, r, u, n, force);
-        lanes_t rhs = wrench - load6(force);  /* F_C + sum_j g_j u_j - f2(x) */
+        out = map_at(block, x, c, command, x0c, w, n_terms, defect_index, symmetric);
+        lanes_t rhs = wrench - out.force;  /* F_C + sum_j g_j u_j - f2(x) */
         for (int j = 0; j < 6; j++)
-            rhs += u[j] * gain[j];
+            rhs += out.u[j] * gain[j];
         lanes_t x_new = {0};
         for (int m = 0; m < 6; m++)
             x_new += rhs[m] * compliance[m];
         const lanes_t residual = x_new - x;  /* f = Phi(x) - x */
         const double change = max_abs6(residual);
-        double r_max = 0.0;
-        for (int j = 0; j < 6; j++)
-            r_max = fabs(r[j]) > r_max ? fabs(r[j]) : r_max;
+        const double r_max = max_abs6(out.r);
         if (!isfinite(change) || r_max > divergence) {
             x = x_new;
             packed = 4 * (it + 1) + 2;
@@ -258,9 +277,7 @@ long flexcal_consistent_equilibrium(intptr_t context_at, intptr_t x_at, intptr_t
         if (change <= tol) {
             if (settle) {  /* x moved to Phi(x), ~rho tol from the fixed point, and its terms */
                 x = x_new;
-                for (int k = 0; k < 6; k++)
-                    xs[k] = x[k];
-                map_at(block, xs, c, command, x0c, w, n_terms, defect_index, symmetric, r, u, n, force);
+                out = map_at(block, x, c, command, x0c, w, n_terms, defect_index, symmetric);
             }
             packed = 4 * (it + 1);
             break;
@@ -273,12 +290,12 @@ long flexcal_consistent_equilibrium(intptr_t context_at, intptr_t x_at, intptr_t
                 }
             } else {  /* B+ = B - (s + B y) (s^T B) / (s^T B y), y = f - f_prev: then B+ y = -s */
                 const lanes_t y = residual - f_prev;
-                lanes_t b_y = {0};
-                double s_b[6];
+                lanes_t b_y = {0}, s_bb[6];
                 for (int b = 0; b < 6; b++) {
                     b_y += y[b] * B[b];
-                    s_b[b] = lane_sum(s_prev * B[b]);
+                    s_bb[b] = s_prev * B[b];
                 }
+                const lanes_t s_b = lane_sums6(s_bb);
                 const double denominator = lane_sum(s_prev * b_y), scale = lane_sum(s_prev * s_prev);
                 if (fabs(denominator) > 1e-3 * scale) {  /* |B y| ~ |s|: a well-posed update */
                     const lanes_t row = (s_prev + b_y) / denominator;
@@ -294,14 +311,17 @@ long flexcal_consistent_equilibrium(intptr_t context_at, intptr_t x_at, intptr_t
         x += s_prev;
         previous = change;
     }
-    for (int k = 0; k < 6; k++)
-        ((double *)x_at)[k] = x[k];
+    double *x_out = (double *)x_at, *r = (double *)r_at, *u = (double *)u_at, *n = (double *)n_at;
+    double *force = (double *)force_at;
+    for (int k = 0; k < 6; k++) {
+        x_out[k] = x[k];
+        r[k] = out.r[k];
+        u[k] = out.u[k];
+        n[k] = out.n[k];
+        force[k] = out.force[k];
+    }
     for (int b = 0; b < 6; b++)
         secant[b] = B[b];
-    memcpy((double *)r_at, r, sizeof r);
-    memcpy((double *)u_at, u, sizeof u);
-    memcpy((double *)n_at, n, sizeof n);
-    memcpy((double *)force_at, force, sizeof force);
     return packed;
 }
 
