@@ -69,6 +69,77 @@ K_ROW0 = 38  # K[0, :]
 N_PACK = 39
 
 
+@njit(inline="always", nogil=True)
+def _put(out, lanes, cand, j, row, col, value):
+    """One entry [chain j, row, col] of candidate ``cand``'s pack: out (n_c, 6, N_PACK, WIDTH) as
+    ``pack_chains`` lays it out, or with ``lanes`` (n_c, N_PACK, WIDTH, 8), chain j in lane j."""
+    if lanes:
+        out[cand, row, col, j] = value
+    else:
+        out[cand, j, row, col] = value
+
+
+@njit(cache=True, nogil=True)
+def fill_pack(transform, rotation, shortening, stiffness, load_form, gain, first, stop, out, lanes):
+    """The pack rows above of candidates ``first`` to ``stop - 1`` into ``out`` (zeros where no
+    entry goes; layout by ``lanes``, see ``_put``): J's columns and rows, R, the shortening form S,
+    K, the load form T with its axial row and column zero (``shortening._load_form``), J^T K[:, :3]
+    R^T (``to_wrench``), the axial gain's column j and K's first row. transform, shortening,
+    stiffness, load_form (n_c, 6, 6, 6), rotation (n_c, 6, 3, 3), gain (n_c, 6, 6) (dof, chain)."""
+    for cand in range(first, stop):
+        for j in range(6):
+            for k in range(6):
+                for col in range(6):
+                    _put(out, lanes, cand, j, J_COL + k, col, transform[cand, j, col, k])
+                    _put(out, lanes, cand, j, S_COL + k, col, shortening[cand, j, col, k])
+                    _put(out, lanes, cand, j, K_COL + k, col, stiffness[cand, j, col, k])
+                    _put(out, lanes, cand, j, T_COL + k, col,
+                         0.0 if k == 0 or col == 0 else load_form[cand, j, col, k])
+                    _put(out, lanes, cand, j, J_ROW + k, col, transform[cand, j, k, col])
+                _put(out, lanes, cand, j, GAIN, k, gain[cand, k, j])
+                _put(out, lanes, cand, j, K_ROW0, k, stiffness[cand, j, 0, k])
+            for k in range(3):
+                for col in range(3):
+                    _put(out, lanes, cand, j, R_ROW + k, col, rotation[cand, j, k, col])
+                _put(out, lanes, cand, j, AXIAL_ROW, k, stiffness[cand, j, 0, k])
+            for a in range(6):  # to_wrench[a, b] = sum_m sum_n<3 J[m, a] K[m, n] R[b, n]
+                for b in range(3):
+                    acc = 0.0
+                    for m in range(6):
+                        kr = 0.0
+                        for n in range(3):
+                            kr += stiffness[cand, j, m, n] * rotation[cand, j, b, n]
+                        acc += transform[cand, j, m, a] * kr
+                    _put(out, lanes, cand, j, W_COL + b, a, acc)
+
+
+@njit(cache=True, nogil=True)
+def fill_lanes(transform, rotation, shortening, stiffness, load_form, gain, point_b, axial, compliance, wrench, defect,
+               first, stop, rows4, rows):
+    """``consistent.lane_rows`` of candidates ``first`` to ``stop - 1``: rows (n_c, n_rows, 8) zeroed,
+    then ``fill_pack``'s entries through rows4, the same memory as (n_c, n_rows / 8, WIDTH, 8), then
+    the rows after them (``_consistent_map.c``: point_b, the axial stiffness, the frame's gain and
+    compliance columns and wrench with the pose's components as lanes, the defect's coefficients)."""
+    extra = N_PACK * WIDTH
+    for cand in range(first, stop):
+        for i in range(rows.shape[1]):
+            for lane in range(8):
+                rows[cand, i, lane] = 0.0
+    fill_pack(transform, rotation, shortening, stiffness, load_form, gain, first, stop, rows4, True)
+    for cand in range(first, stop):
+        for j in range(6):
+            for k in range(3):
+                rows[cand, extra + k, j] = point_b[cand, j, k]
+            rows[cand, extra + 3, j] = axial[cand, j]
+            for t in range(defect.shape[2]):
+                rows[cand, extra + 17 + t, j] = defect[cand, j, t]
+        for k in range(6):
+            for a in range(6):
+                rows[cand, extra + 4 + k, a] = gain[cand, a, k]
+                rows[cand, extra + 10 + k, a] = compliance[cand, a, k]
+            rows[cand, extra + 16, k] = wrench[cand, k]
+
+
 @njit(inline="always", fastmath=_FAST)
 def _dot3(p, row, col, a0, a1, a2):
     """sum_k a_k p[row + k, col] over three rows of a packed block."""

@@ -172,7 +172,8 @@ def _parasitic_rows(rotation, point_b, end_block, l, connector, length) -> np.nd
     return np.concatenate([rows_y, rows_z], axis=1)
 
 
-def mechanism_matrices(values, space: ParameterSpace, *, candidate_offset: int = 0) -> MechanismMatrices:
+def mechanism_matrices(values, space: ParameterSpace, *, candidate_offset: int = 0,
+                       n_threads: int = 1) -> MechanismMatrices:
     """Per-candidate matrices for parameter vectors ``values`` (n_c, 45) or (45,) [SI].
 
     ``space`` supplies the nominal mechanism (points, material, payload, actuators).
@@ -182,7 +183,8 @@ def mechanism_matrices(values, space: ParameterSpace, *, candidate_offset: int =
     least-squares residual's single candidate spent ~3/4 of its call in numpy's per-call
     overhead (docs/model.md 10, "Session 34"). Raises ``ValueError`` naming the candidate
     (index + ``candidate_offset``) and parameter for invalid values, or a chain whose
-    dimensions leave no strut.
+    dimensions leave no strut. ``n_threads``: the consistent model's chain kernels split their
+    chains over that many threads (each chain's bits as on one).
     """
     values = np.atleast_2d(np.asarray(values, dtype=float))
     if values.ndim != 2 or values.shape[1] != len(space.parameters):
@@ -215,7 +217,7 @@ def mechanism_matrices(values, space: ParameterSpace, *, candidate_offset: int =
     if consistent:
         compliance, *elements = chain_entries_and_elements(length, l, w, a, t1, t2, section=section,
                                                            connector_length=connector, end_block_length=end_block,
-                                                           material=mech.material)
+                                                           material=mech.material, n_threads=n_threads)
     else:
         compliance = chain_compliance_entries(length, l, w, a, t1, t2, section=section, connector_length=connector,
                                               end_block_length=end_block, material=mech.material)
@@ -297,7 +299,8 @@ def mechanism_matrices(values, space: ParameterSpace, *, candidate_offset: int =
                 "cjk,jkab->cjab", relative, np.reshape(space.shortening_slopes, (N_CHAINS, len(DIMENSION_SYMBOLS), 6, 6)))
         shortening, lateral_defect, load_shortening = shortening_matrices(
             correction, length, l, w, a, t1, t2, section=section,
-            connector_length=connector, end_block_length=end_block, material=mech.material, elements=elements)
+            connector_length=connector, end_block_length=end_block, material=mech.material, elements=elements,
+            n_threads=n_threads)
     else:
         shortening, load_shortening = np.zeros((n_c, N_CHAINS, 6, 6)), np.zeros((n_c, N_CHAINS, 6, 6))
         lateral_defect = np.zeros((n_c, N_CHAINS, 5, 6, 6))

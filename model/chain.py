@@ -171,20 +171,21 @@ def _chain_quadrature(a, t1, t2) -> tuple[np.ndarray, np.ndarray]:
 
 
 def chain_entries_and_elements(length, hinge_length, width, fillet, thickness_1, thickness_2, *, section,
-                               connector_length, end_block_length, material: Material
+                               connector_length, end_block_length, material: Material, n_threads: int = 1
                                ) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray]:
     """``chain_compliance_entries`` (no actuator) and ``shortening``'s element entries of the same
     chains from one pass of the compiled kernel (``_numba_kernels.chain_entries_elements``): the
     entries {key: (...)}, the elements' entries (..., 9, 8) at their loaded ends in the chain's
     axes (A -> B: block, leaf 1, connector, leaf 2 turned, strut, ...; ``hinge.ENTRY_INDEX``
     order) and their offsets (..., 9) [m] (loaded end minus B along x). Needs numba: the
-    consistent model's set-up, which runs compiled at every batch size (``assembly``)."""
+    consistent model's set-up, which runs compiled at every batch size (``assembly``); the chains
+    split over ``n_threads``."""
     length, l, w, a, t1, t2, _ = _dimensions(length, hinge_length, width, fillet, thickness_1, thickness_2,
                                              end_block_length, connector_length)
     nodes, weights = _chain_quadrature(a, t1, t2)
     out, elements, offsets = kernel.chain_entries_elements_compiled(
         length, l, w, a, t1, t2, section, connector_length, end_block_length, material,
-        shear_coefficient(material.poisson_ratio), nodes, weights)
+        shear_coefficient(material.poisson_ratio), nodes, weights, n_threads=n_threads)
     return {key: out[..., i] for i, key in enumerate(_KEYS)}, elements, offsets
 
 

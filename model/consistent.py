@@ -41,10 +41,10 @@ come from one S.
 from __future__ import annotations
 
 import functools
-import os
-from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
+
+from .threads import run_split
 
 __all__ = ["pivot_shortening", "shortening_matrices", "defect_terms", "solve_points_consistent"]
 
@@ -66,17 +66,18 @@ def pivot_shortening(end_block, hinge_length, connector, length) -> np.ndarray:
 
 
 def shortening_matrices(correction, length, hinge_length, width, fillet, thickness_1, thickness_2, *, section,
-                        connector_length, end_block_length, material, elements=None
+                        connector_length, end_block_length, material, elements=None, n_threads: int = 1
                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(S_j (n_c, 6, 6, 6), L_j (n_c, 6, 5, 6, 6), T_j (n_c, 6, 6, 6)): each candidate's chains' own
     shortening form plus the measured correction (6, 6, 6) (or per candidate (n_c, 6, 6, 6)), their lateral defect forms and their
     load forms (``shortening.chain_second_order_forms``; dimensions (n_c, 6) [m]). elements: the
     chains' (element entries, offsets) when the caller has them (``chain.chain_entries_and_elements``;
-    the forms then come from them, ``shortening.forms_from_elements``)."""
+    the forms then come from them, ``shortening.forms_from_elements``, their chains split over
+    ``n_threads``)."""
     from .shortening import chain_second_order_forms, forms_from_elements
 
     if elements is not None:
-        own, lateral, load = forms_from_elements(*elements)
+        own, lateral, load = forms_from_elements(*elements, n_threads=n_threads)
     else:
         own, lateral, load = chain_second_order_forms(length, hinge_length, width, fillet, thickness_1, thickness_2,
                                                       section=section, connector_length=connector_length,
@@ -109,59 +110,39 @@ def defect_terms(lateral: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return index, np.ascontiguousarray(coefficients)
 
 
-def pack_chains(m) -> np.ndarray:
+def pack_chains(m, n_threads: int = 1) -> np.ndarray:
     """The kernel's per-chain matrices (n_c, 6, N_PACK, WIDTH) (``_numba_consistent``'s row
     layout): each 6 x 6 matrix as its columns (or rows) padded with zeros to 8 entries, so that
-    the kernel's products are sums of 8-wide rows, which the compiler vectorizes."""
+    the kernel's products are sums of 8-wide rows (``_numba_consistent.fill_pack``)."""
     from . import _numba_consistent as nc
 
     pack = np.zeros((m.n_candidates, 6, nc.N_PACK, nc.WIDTH))
-    _fill_pack(m, pack)
+    c = np.ascontiguousarray
+    parts = (c(m.frame_transform), c(m.rotation), c(m.shortening), c(m.chain_stiffness), c(m.load_shortening),
+             c(m.axial_gain))
+    run_split(lambda first, stop: nc.fill_pack(*parts, first, stop, pack, False), m.n_candidates, n_threads)
     return pack
 
 
-def lane_rows(m, defect: np.ndarray, compliance: np.ndarray, wrench: np.ndarray) -> np.ndarray:
+def lane_rows(m, defect: np.ndarray, compliance: np.ndarray, wrench: np.ndarray, n_threads: int = 1) -> np.ndarray:
     """The same entries for ``consistent_native``'s map, the chains as lanes: (n_c, n_rows, 8),
     row ``row * WIDTH + col`` holding ``pack_chains``' [chain, row, col] in lane ``chain`` (lanes
     6, 7 zero), then the rows of ``_consistent_map.c``: point_b (3), the axial stiffness (1), the
     frame's gain columns G[:, j] (6), compliance columns C[:, k] (6; ``compliance`` (n_c, 6, 6)) and
     wrench (1; (n_c, 6)) with the pose's components as lanes, and the lateral defect's
-    coefficients ``defect`` (n_c, 6, n_t) (n_t rows)."""
+    coefficients ``defect`` (n_c, 6, n_t) (n_t rows); zero rows after them up to a multiple of
+    WIDTH (``_numba_consistent.fill_lanes``)."""
     from . import _numba_consistent as nc
 
-    n_c, n_pack = m.n_candidates, nc.N_PACK * nc.WIDTH
-    rows = np.zeros((n_c, n_pack + 17 + defect.shape[2], 8))
-    _fill_pack(m, rows[:, :n_pack].reshape(n_c, nc.N_PACK, nc.WIDTH, 8).transpose(0, 3, 1, 2)[:, :6])
-    rows[:, n_pack:n_pack + 3, :6] = np.swapaxes(m.point_b, 1, 2)
-    rows[:, n_pack + 3, :6] = m.axial_stiffness
-    rows[:, n_pack + 4:n_pack + 10, :6] = np.swapaxes(m.axial_gain, 1, 2)
-    rows[:, n_pack + 10:n_pack + 16, :6] = np.swapaxes(compliance, 1, 2)
-    rows[:, n_pack + 16, :6] = wrench
-    rows[:, n_pack + 17:, :6] = np.swapaxes(defect, 1, 2)
+    n_c, width = m.n_candidates, nc.WIDTH
+    groups = nc.N_PACK + -(-(17 + defect.shape[2]) // width)  # the rows in groups of WIDTH
+    rows4 = np.empty((n_c, groups, width, 8))
+    rows = rows4.reshape(n_c, groups * width, 8)
+    c = np.ascontiguousarray
+    parts = (c(m.frame_transform), c(m.rotation), c(m.shortening), c(m.chain_stiffness), c(m.load_shortening),
+             c(m.axial_gain), c(m.point_b), c(m.axial_stiffness), c(compliance), c(wrench), c(defect))
+    run_split(lambda first, stop: nc.fill_lanes(*parts, first, stop, rows4, rows), n_c, n_threads)
     return rows
-
-
-def _fill_pack(m, pack: np.ndarray) -> None:
-    """Write the kernel's per-chain matrices into ``pack`` (n_c, 6, N_PACK, WIDTH), zeros
-    where no entry goes (a fresh array, or a view of ``lane_rows``')."""
-    from . import _numba_consistent as nc
-
-    k = m.chain_stiffness
-    t = m.load_shortening.copy()
-    t[..., 0, :] = 0.0  # the kernel's load form has no axial row or column (``_load_form``)
-    t[..., :, 0] = 0.0
-    swap = lambda a: np.swapaxes(a, -1, -2)  # noqa: E731
-    pack[:, :, nc.J_COL:nc.J_COL + 6, :6] = swap(m.frame_transform)
-    pack[:, :, nc.R_ROW:nc.R_ROW + 3, :3] = m.rotation
-    pack[:, :, nc.S_COL:nc.S_COL + 6, :6] = swap(m.shortening)
-    pack[:, :, nc.K_COL:nc.K_COL + 6, :6] = swap(k)
-    pack[:, :, nc.T_COL:nc.T_COL + 6, :6] = swap(t)
-    pack[:, :, nc.J_ROW:nc.J_ROW + 6, :6] = m.frame_transform
-    to_wrench = swap(m.frame_transform) @ k[..., :3] @ swap(m.rotation)  # J^T K[:, :3] R^T (n_c, 6 chains, 6, 3)
-    pack[:, :, nc.W_COL:nc.W_COL + 3, :6] = swap(to_wrench)
-    pack[:, :, nc.GAIN, :6] = swap(m.axial_gain)
-    pack[:, :, nc.AXIAL_ROW, :3] = k[:, :, 0, :3]
-    pack[:, :, nc.K_ROW0, :6] = k[:, :, 0, :]
 
 
 def revisits(inputs: np.ndarray) -> np.ndarray:
@@ -183,14 +164,6 @@ def _revisits(data: bytes, shape: tuple[int, ...]) -> np.ndarray:
         out[p] = last.get(key, -1)
         last[key] = p
     return out
-
-
-@functools.cache
-def thread_pool() -> ThreadPoolExecutor:
-    """The threads ``solve_points_consistent`` shares its candidates over, and ``forward`` its
-    candidate blocks, kept for the process (a pool per call cost a calibration's small batches
-    their threads' start). Work submitted to it never submits to it again (no deadlock)."""
-    return ThreadPoolExecutor(max_workers=os.cpu_count() or 1)
 
 
 def solve_points_consistent(matrices, inputs: np.ndarray, *, clearance: bool, tol: float, max_iter: int,
@@ -228,9 +201,9 @@ def solve_points_consistent(matrices, inputs: np.ndarray, *, clearance: bool, to
         if not consistent_native.AVAILABLE:
             raise RuntimeError("flexcal.model._consistent_map is not built (no C compiler when flexcal was installed)")
         pack = np.zeros((0, 6, _numba_consistent.N_PACK, _numba_consistent.WIDTH))
-        lanes = lane_rows(m, defect, compliance, wrench)
+        lanes = lane_rows(m, defect, compliance, wrench, n_threads)
     else:
-        pack, lanes = pack_chains(m), np.zeros((n_c, 0, 8))
+        pack, lanes = pack_chains(m, n_threads), np.zeros((n_c, 0, 8))
     arguments = (
         c(compliance), c(wrench), c(m.axial_gain), c(m.axial_stiffness), pack, lanes, c(m.point_b),
         defect_index, defect, bool(symmetric), c(m.payload),
@@ -242,11 +215,6 @@ def solve_points_consistent(matrices, inputs: np.ndarray, *, clearance: bool, to
         out["release"], out["parasitic"], out["states"], out["point_class"], out["codes"], out["iterations"])
     # the candidates in contiguous shares, one compiled call per thread (the kernel holds no GIL);
     # a candidate's bits do not depend on its share (docs/scale.md "Issue 26, session 38")
-    threads = max(1, min(int(n_threads), numba.config.NUMBA_NUM_THREADS, n_c))
-    bounds = [round(k * n_c / threads) for k in range(threads + 1)]
-    if threads == 1:
-        _numba_consistent.solve(0, n_c, *arguments)
-    else:
-        list(thread_pool().map(lambda first, stop: _numba_consistent.solve(first, stop, *arguments), bounds[:-1],
-                         bounds[1:]))
+    run_split(lambda first, stop: _numba_consistent.solve(first, stop, *arguments), n_c,
+              min(int(n_threads), numba.config.NUMBA_NUM_THREADS))
     return out

@@ -24,6 +24,7 @@ else S1 if all three driving chains are compressed (N < 0); else S3.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import sys
 from dataclasses import dataclass
@@ -33,9 +34,9 @@ import numpy as np
 from . import consistent, kernel, point_status, solver
 from .assembly import MechanismMatrices, mechanism_matrices
 from .clearance import ConvergenceError
-from .consistent import thread_pool
 from .parameters import DRIVING, ParameterSpace, parameter_space
 from .second_order import second_order_pose
+from .threads import thread_pool
 from .trajectory import travel_directions
 
 __all__ = ["ForwardResult", "forward", "solve_matrices", "ideal_pose", "ideal_angles", "ConvergenceError",
@@ -260,20 +261,19 @@ def forward(space_values, inputs, directions=None, *, space: ParameterSpace | No
                    chunk_size=chunk_size)
     if n_threads <= 1 or values.shape[0] < 2:
         out = solve_matrices(mechanism_matrices(values, space), x, d, **options)
-    elif options["engine"] == "numba" and not space.chain_shortening:
-        # the whole batch's setup, then the compiled solve's threads
-        out = solve_matrices(mechanism_matrices(values, space), x, d, n_threads=n_threads, **options)
+    elif options["engine"] == "numba":  # the whole batch's setup, then the compiled solve's threads
+        # the consistent model solves on Python threads (model/threads.py): its set-up on one numba
+        # thread, so that no OpenMP team spins beside them (docs/scale.md "Issue 26, session 38"),
+        # its chain kernels split over the same threads (docs/model.md 10, "Session 42")
+        with kernel.numba_threads(1) if space.chain_shortening else contextlib.nullcontext():
+            matrices = mechanism_matrices(values, space, n_threads=n_threads)
+        out = solve_matrices(matrices, x, d, n_threads=n_threads, **options)
     else:
-        # setup and solve in threads over candidate blocks: the numpy engine, and the consistent
-        # model, whose set-up (its chains' shortening forms on one thread) was ~1/4 of a batch's
-        # time before its solve's threads started (docs/model.md 10, "Session 42"). Each block's
-        # set-up on one numba thread, so that no OpenMP team spins beside the other block
-        # (docs/scale.md "Issue 26, session 38"); a candidate's bits do not depend on its block
+        # the numpy engine: setup and solve in threads over candidate blocks
         bounds = np.linspace(0, values.shape[0], min(int(n_threads), values.shape[0]) + 1).astype(int)
 
         def block(span):
-            with kernel.numba_threads(1):
-                matrices = mechanism_matrices(values[span[0]:span[1]], space, candidate_offset=int(span[0]))
+            matrices = mechanism_matrices(values[span[0]:span[1]], space, candidate_offset=int(span[0]))
             return solve_matrices(matrices, x, d, candidate_offset=int(span[0]), **options)
 
         parts = list(thread_pool().map(block, zip(bounds[:-1], bounds[1:])))

@@ -106,19 +106,22 @@ def chain_entries_compiled(length, hinge_length, width, fillet, thickness_1, thi
 
 
 def chain_entries_elements_compiled(length, hinge_length, width, fillet, thickness_1, thickness_2, section, connector,
-                                    end_block, material, shear_coefficient, nodes, weights
+                                    end_block, material, shear_coefficient, nodes, weights, n_threads: int = 1
                                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Compiled ``chain.chain_entries_and_elements``: broadcast inputs -> entries (..., 8), element
-    entries (..., 9, 8) and offsets (..., 9) [m]."""
+    entries (..., 9, 8) and offsets (..., 9) [m]; the chains split over ``n_threads`` (``threads``)."""
     from . import _numba_kernels
+    from .threads import run_split
 
     shape, flat = _flat_batch(length, hinge_length, width, fillet, thickness_1, thickness_2, section, connector,
                               end_block)
     n = flat[0].size
     out, elements, offsets = np.empty((n, 8)), np.empty((n, 9, 8)), np.empty((n, 9))
-    _numba_kernels.chain_entries_elements(*flat, float(material.youngs_modulus), float(material.shear_modulus),
-                                          float(shear_coefficient), np.asarray(nodes, float),
-                                          np.asarray(weights, float), out, elements, offsets)
+    constants = (float(material.youngs_modulus), float(material.shear_modulus), float(shear_coefficient),
+                 np.asarray(nodes, float), np.asarray(weights, float))
+    run_split(lambda first, stop: _numba_kernels.chain_entries_elements(
+        *(part[first:stop] for part in flat), *constants, out[first:stop], elements[first:stop],
+        offsets[first:stop]), n, n_threads)
     return out.reshape(shape + (8,)), elements.reshape(shape + (9, 8)), offsets.reshape(shape + (9,))
 
 

@@ -215,20 +215,24 @@ def _compiled_forms(length, hinge_length, width, fillet, thickness_1, thickness_
     return forms_from_elements(entries, offsets)
 
 
-def forms_from_elements(entries: np.ndarray, offsets: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def forms_from_elements(entries: np.ndarray, offsets: np.ndarray, *, n_threads: int = 1
+                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``chain_second_order_forms`` (S, L, T) of chains given by their elements: entries (..., 9, 8)
     at each element's loaded end in the chain's axes (``hinge.ENTRY_INDEX`` order, leaf 2 turned),
     offsets (..., 9) [m] that end's x minus B's (``chain.chain_entries_and_elements``). Compiled
-    (``_numba_shortening.shortening_forms``)."""
+    (``_numba_shortening.shortening_forms``), the chains split over ``n_threads`` (``threads``)."""
     from . import _numba_shortening
+    from .threads import run_split
 
     shape = offsets.shape[:-1]
     flat = np.ascontiguousarray(entries.reshape((-1,) + entries.shape[-2:]))
     n = flat.shape[0]
+    flat_offsets = np.ascontiguousarray(offsets.reshape(n, -1))
     form, lateral, load, stiffness = (np.empty((n, 6, 6)), np.empty((n, 5, 6, 6)), np.empty((n, 6, 6)),
                                       np.empty((n, 6, 6)))
-    _numba_shortening.shortening_forms(flat, np.ascontiguousarray(offsets.reshape(n, -1)), *_BRACKET_ENTRIES,
-                                       _PARTNER, _PHI_CROSS_D, _AXIAL_AD, form, lateral, load, stiffness)
+    run_split(lambda first, stop: _numba_shortening.shortening_forms(
+        flat[first:stop], flat_offsets[first:stop], *_BRACKET_ENTRIES, _PARTNER, _PHI_CROSS_D, _AXIAL_AD,
+        form[first:stop], lateral[first:stop], load[first:stop], stiffness[first:stop]), n, n_threads)
     return form.reshape(shape + (6, 6)), lateral.reshape(shape + (5, 6, 6)), load.reshape(shape + (6, 6))
 
 

@@ -141,3 +141,20 @@ def test_the_kernel_runs_numbas_copy_without_the_extension(tmp_path):
     subprocess.run([sys.executable, "-c", _WITHOUT_EXTENSION, str(tmp_path / "pose.npy")], check=True)
     # 5e-13 rad: the bound of test_the_c_equilibrium_gives_numbas_results (the same two iterations)
     np.testing.assert_allclose(np.load(tmp_path / "pose.npy"), here, rtol=0, atol=5e-13)
+
+
+def test_the_set_up_split_over_threads_gives_the_same_bits():
+    """The consistent set-up's chain kernels and the lane rows split their rows over threads
+    (model/threads.py): every field of the matrices and every lane row to the bit, 1 or 2 threads
+    (each row is computed on its own)."""
+    space = _space(breakaway_force=2.0)
+    values = space.from_unit(np.random.default_rng(7).random((9, 45)))
+    one, two = (mechanism_matrices(values, space, n_threads=n) for n in (1, 2))
+    for field in dataclasses.fields(one):
+        a, b = getattr(one, field.name), getattr(two, field.name)
+        if isinstance(a, np.ndarray):
+            assert np.array_equal(a, b), field.name
+    _, defect = defect_terms(one.lateral_defect)
+    frame = np.random.default_rng(8).random((9, 6, 6))
+    assert np.array_equal(lane_rows(one, defect, frame, frame[:, 0], 1), lane_rows(one, defect, frame, frame[:, 0], 2))
+    assert np.array_equal(pack_chains(one, 1), pack_chains(one, 2))
