@@ -11,7 +11,9 @@ equilibrium, same physics) timed in the same run on a few candidates.
 Issue 24's consistent second-order model (``model.consistent``, with the play state) is timed
 beside the second-order model (with and without the play state) in the same run, on the random
 candidates and on table1's true values repeated, at 1 and 2 threads, each with its setup
-(``mechanism_matrices``) alone; its RESULT line is against issue 24's 1 M postures/s.
+(``mechanism_matrices``) alone; its RESULT line is against issue 24's 1 M postures/s. Its kernel
+alone is then timed with the map and equilibrium in C (``model/consistent_native.py``, the default
+where the extension is built) against numba's copy of the same formulas.
 
     .venv/bin/python benchmarks/bench_model.py [--candidates 300] [--repeat 15]
 """
@@ -123,6 +125,29 @@ def main() -> None:
           f"random candidates {max(new_rates[(k, t)] for k, t in new_rates if k == 'random candidates') / 1e6:.3f} "
           f"M/s; target {NEW_MODEL_TARGET / 1e6:.1f} M/s "
           f"{'met' if new_best >= NEW_MODEL_TARGET else f'missed by {NEW_MODEL_TARGET / new_best:.1f}x'}")
+
+    # the consistent kernel alone (its set-up apart), its map and equilibrium in C with the chains
+    # as vector lanes (model/consistent_native.py) against numba's copy of the same formulas, same
+    # run: table1's true values, one thread
+    from flexcal.model import consistent_native
+    from flexcal.model.consistent import solve_points_consistent
+    from flexcal.model.forward import CONSISTENT_MAX_ITER, CONSISTENT_TOL, DIVERGENCE_LIMIT, STATE_TOLERANCE
+
+    if consistent_native.AVAILABLE:
+        matrices_x = mechanism_matrices(table1, consistent)
+        kernel_walls = {}
+        for native in (True, False):
+            def solve_kernel():
+                solve_points_consistent(matrices_x, trajectory.inputs, clearance=True, tol=CONSISTENT_TOL,
+                                        max_iter=CONSISTENT_MAX_ITER, divergence=DIVERGENCE_LIMIT,
+                                        state_tolerance=STATE_TOLERANCE, native=native)
+            solve_kernel()
+            kernel_walls[native], _, _ = best_of(solve_kernel, args.repeat)
+        print(f"  consistent kernel alone, table1 x {args.candidates}, 1 thread: C lanes "
+              f"{kernel_walls[True] * 1e3:.2f} ms, numba's copy {kernel_walls[False] * 1e3:.2f} ms best -> "
+              f"{kernel_walls[False] / kernel_walls[True]:.2f}x")
+    else:
+        print("  consistent kernel alone: flexcal.model._consistent_map not built (numba's copy ran above)")
 
     subset = list(range(min(args.baseline_candidates, args.candidates)))
     matrices = mechanism_matrices(values[subset], space)

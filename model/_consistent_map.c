@@ -57,7 +57,7 @@ static inline lanes_t load6(const double *v)
    once by three rounds of pairwise shuffles, instead of six sums of one vector each */
 static inline lanes_t lane_sums6(const lanes_t *a)
 {
-    typedef long long index_t __attribute__((vector_size(64)));
+    typedef int64_t index_t __attribute__((vector_size(64)));
     const lanes_t zero = {0};
     const index_t even = {0, 8, 2, 10, 4, 12, 6, 14}, odd = {1, 9, 3, 11, 5, 13, 7, 15};
     const index_t low2 = {0, 1, 8, 9, 4, 5, 12, 13}, high2 = {2, 3, 10, 11, 6, 7, 14, 15};
@@ -82,8 +82,8 @@ struct map_out {
 /* the map at pose x for one candidate: ``block`` its lane rows, x0c and w its x0 (3) and weight (6) */
 static inline __attribute__((always_inline)) struct map_out
 map_at(const double *restrict block, const lanes_t x, const double *restrict c, const double *restrict command,
-       const double *restrict x0c, const double *restrict w, long n_terms, const long *restrict defect_index,
-       long symmetric)
+       const double *restrict x0c, const double *restrict w, int64_t n_terms, const int64_t *restrict defect_index,
+       int64_t symmetric)
 {
     const lanes_u *L = (const lanes_u *)block;
     const double t0 = x[3], t1 = x[4], t2 = x[5];
@@ -128,7 +128,7 @@ map_at(const double *restrict block, const lanes_t x, const double *restrict c, 
     } else {
         for (int i = 1; i < 6; i++)
             m[i] = (lanes_t){0};
-        for (long t = 0; t < n_terms; t++)
+        for (int64_t t = 0; t < n_terms; t++)
             m[defect_index[3 * t]] += q[t] * d[defect_index[3 * t + 1]] * d[defect_index[3 * t + 2]];
     }
     /* K m, and the lateral chain force (K e)_c = K m - K[:, 0] u + K D (c = y..rz) */
@@ -166,8 +166,8 @@ map_at(const double *restrict block, const lanes_t x, const double *restrict c, 
         gr[4] += fl[1] * q[1] * d[3] + fl[3] * q[5] * d[1] + fl[3] * q[7] * d[5] + fl[5] * q[11] * d[3];
         gr[5] += fl[2] * q[3] * d[3] + fl[3] * q[6] * d[2] + fl[3] * q[7] * d[4] + fl[4] * q[9] * d[3];
     } else {
-        for (long t = 0; t < n_terms; t++) {
-            const long ia = defect_index[3 * t + 1], ib = defect_index[3 * t + 2];
+        for (int64_t t = 0; t < n_terms; t++) {
+            const int64_t ia = defect_index[3 * t + 1], ib = defect_index[3 * t + 2];
             const lanes_t wt = fl[defect_index[3 * t]] * q[t];
             gr[ia] += wt * d[ib];
             gr[ib] += wt * d[ia];
@@ -197,9 +197,9 @@ map_at(const double *restrict block, const lanes_t x, const double *restrict c, 
 /* the map at pose x for candidate ``cand`` of the lane rows (n_c, n_rows, 8): r, u, n (6) and force
    (8, its entries 6 and 7 zero) as ``_numba_consistent._terms`` gives them */
 CLONES
-void flexcal_consistent_terms(long cand, long n_rows, const double *lanes, const double *x, const double *c,
-                              const double *command, const double *x0, const double *weight, long n_terms,
-                              const long *defect_index, long symmetric, double *r, double *u, double *n,
+void flexcal_consistent_terms(int64_t cand, int64_t n_rows, const double *lanes, const double *x, const double *c,
+                              const double *command, const double *x0, const double *weight, int64_t n_terms,
+                              const int64_t *defect_index, int64_t symmetric, double *r, double *u, double *n,
                               double *force)
 {
     const struct map_out out = map_at(lanes + cand * n_rows * WIDTH, load6(x), c, command, x0 + 3 * cand,
@@ -236,15 +236,16 @@ static inline double max_abs6(lanes_t v)
 }
 
 CLONES
-long flexcal_consistent_equilibrium(intptr_t context_at, intptr_t x_at, intptr_t c_at, intptr_t n_at, intptr_t r_at,
-                                    intptr_t u_at, intptr_t force_at, intptr_t secant_at, intptr_t inputs_at, long p,
-                                    double tol, long max_iter, double divergence, long settle)
+int64_t flexcal_consistent_equilibrium(intptr_t context_at, intptr_t x_at, intptr_t c_at, intptr_t n_at,
+                                       intptr_t r_at, intptr_t u_at, intptr_t force_at, intptr_t secant_at,
+                                       intptr_t inputs_at, int64_t p, double tol, int64_t max_iter, double divergence,
+                                       int64_t settle)
 {
     const int64_t *cx = (const int64_t *)context_at;
-    const long cand = cx[CX_CAND], n_terms = cx[CX_TERMS], symmetric = cx[CX_SYMMETRIC];
+    const int64_t cand = cx[CX_CAND], n_terms = cx[CX_TERMS], symmetric = cx[CX_SYMMETRIC];
     const double *block = (const double *)cx[CX_LANES] + cand * cx[CX_ROWS] * WIDTH;
     const double *x0c = (const double *)cx[CX_X0] + 3 * cand, *w = (const double *)cx[CX_WEIGHT] + 6 * cand;
-    const long *defect_index = (const long *)cx[CX_DEFECT];
+    const int64_t *defect_index = (const int64_t *)cx[CX_DEFECT];
     const double *command = (const double *)inputs_at + 3 * p, *c = (const double *)c_at;
     const lanes_u *L = (const lanes_u *)block;
     /* the 6 x 6 products on the pose's six components as lanes: G u = sum_j u_j G[:, j], and so
@@ -257,8 +258,8 @@ long flexcal_consistent_equilibrium(intptr_t context_at, intptr_t x_at, intptr_t
         B[b] = secant[b];
     struct map_out out = {{0}};
     double previous = INFINITY;
-    long packed = 4 * max_iter + 1;
-    for (long it = 0; it < max_iter; it++) {
+    int64_t packed = 4 * max_iter + 1;
+    for (int64_t it = 0; it < max_iter; it++) {
         out = map_at(block, x, c, command, x0c, w, n_terms, defect_index, symmetric);
         lanes_t rhs = wrench - out.force;  /* F_C + sum_j g_j u_j - f2(x) */
         for (int j = 0; j < 6; j++)
@@ -330,7 +331,7 @@ long flexcal_consistent_equilibrium(intptr_t context_at, intptr_t x_at, intptr_t
    consistent kernel calls them once per Newton step on the offsets; as inlined numba calls their
    fifteen array arguments cost ~35 reference count pairs per posture, ~15 % of the kernel's time
    with the map in C (measured). b is 3 x 3 row-major, status 0 lower / 1 free / 2 upper. */
-static int face_values(const long *status, const double *a, const double *b, const double *lo, const double *hi,
+static int face_values(const int64_t *status, const double *a, const double *b, const double *lo, const double *hi,
                        double *out)
 {
     for (int i = 0; i < 3; i++)
@@ -371,7 +372,7 @@ static int face_values(const long *status, const double *a, const double *b, con
     return 1;
 }
 
-static double face_slack(const long *status, const double *c, const double *a, const double *b, const double *lo,
+static double face_slack(const int64_t *status, const double *c, const double *a, const double *b, const double *lo,
                          const double *hi)
 {
     double worst = -INFINITY;
@@ -397,12 +398,12 @@ static inline double clip(double v, double lo, double hi)
     return hi < m ? hi : m;
 }
 
-static int enumerate_box(const double *a, const double *b, const double *lo, const double *hi, long *status,
+static int enumerate_box(const double *a, const double *b, const double *lo, const double *hi, int64_t *status,
                          double tol, double *c)
 {
     double best = INFINITY, trial[3];
-    long best_face = -1, face[3];
-    for (long f = 0; f < 27; f++) {  /* the faces in _FACES' order: (i, j, k) over {0, 1, 2}^3 */
+    int64_t best_face = -1, face[3];
+    for (int64_t f = 0; f < 27; f++) {  /* the faces in _FACES' order: (i, j, k) over {0, 1, 2}^3 */
         face[0] = f / 9, face[1] = (f / 3) % 3, face[2] = f % 3;
         if (!face_values(face, a, b, lo, hi, trial))
             continue;
@@ -423,7 +424,7 @@ static int enumerate_box(const double *a, const double *b, const double *lo, con
     return 1;
 }
 
-static int solve_box(const double *a, const double *b, const double *lo, const double *hi, long *status, double tol,
+static int solve_box(const double *a, const double *b, const double *lo, const double *hi, int64_t *status, double tol,
                      double *c)
 {
     for (int sweep = 0; sweep < 8; sweep++) {
@@ -463,14 +464,14 @@ static int solve_box(const double *a, const double *b, const double *lo, const d
    C = clip(a + B C, lo, hi); status (and the play's sides ``side``) updated; 1 solved, 0 failed.
    Every array arrives as its address (see flexcal_consistent_equilibrium). */
 CLONES
-long flexcal_consistent_offsets(intptr_t a_at, intptr_t b_at, intptr_t lo_at, intptr_t hi_at, intptr_t c_prev_at,
-                                intptr_t band_at, intptr_t side_at, intptr_t status_at, double tol, intptr_t c_at,
-                                long play, long fresh)
+int64_t flexcal_consistent_offsets(intptr_t a_at, intptr_t b_at, intptr_t lo_at, intptr_t hi_at,
+                                   intptr_t c_prev_at, intptr_t band_at, intptr_t side_at, intptr_t status_at,
+                                   double tol, intptr_t c_at, int64_t play, int64_t fresh)
 {
     const double *a = (const double *)a_at, *b = (const double *)b_at, *lo = (const double *)lo_at;
     const double *hi = (const double *)hi_at, *c_prev = (const double *)c_prev_at, *band = (const double *)band_at;
     double *side = (double *)side_at, *c = (double *)c_at;
-    long *status = (long *)status_at;
+    int64_t *status = (int64_t *)status_at;
     if (!play)
         return solve_box(a, b, lo, hi, status, tol, c);
     double lo2[3], hi2[3], a2[3];
