@@ -12,7 +12,9 @@ for pkg in libgl1 libx11-6 libegl1 libosmesa6 libxrender1; do
   dpkg -s "$pkg" >/dev/null 2>&1 || missing+=("$pkg")
 done
 # a C compiler builds flexcal.fem._entropy (fem/_entropy.c), which makes fTetWild's meshes
-# repeat; without one flexcal still installs, but its fTetWild meshes vary from run to run
+# repeat, and flexcal.model._consistent_map (model/_consistent_map.c), the consistent model's map
+# on vector lanes; without one flexcal still installs, but its fTetWild meshes vary from run to
+# run and the consistent model runs numba's slower copy
 command -v cc >/dev/null 2>&1 || missing+=(gcc libc6-dev)
 if [ ${#missing[@]} -gt 0 ]; then
   if command -v apt-get >/dev/null 2>&1 && [ "$(id -u)" = 0 ]; then
