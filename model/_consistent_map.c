@@ -1,15 +1,17 @@
-/* flexcal.model._consistent_map: the consistent model's map at one pose, the six chains as
- * the lanes of one vector (docs/model.md 10, "Session 42").
+/* flexcal.model._consistent_map: the consistent model's per-point work with the six chains as the
+ * lanes of one vector (docs/model.md 10, "Session 42").
  *
- * flexcal_consistent_terms computes what ``_numba_consistent._terms`` computes (the chains'
- * shortening r, axial inputs u, tensions n and the second-order wrench ``force``) with the same
- * formulas in the same order, each chain's arithmetic in one lane of an 8-wide vector (six
- * lanes used). numba does not vectorize across the chains (its LLVM pass that would, SLP, is
- * off: numba PR 8852), so ``_terms`` runs one chain after another on scalars; here every
- * product runs on the six chains at once. GCC's vector extensions give the lanes; with
- * target_clones the loader picks AVX-512, AVX2 or the baseline at run time. The numba kernel
- * calls this through ``numba.types.ExternalFunction`` (model/consistent_native.py); numba's
- * ``_terms`` stays as the reference and the fallback where this module is not built.
+ * numba does not vectorize across the chains (its LLVM pass that would, SLP, is off: numba PR
+ * 8852), so ``_numba_consistent`` runs one chain after another on scalars. Here every product
+ * runs on the six chains at once (GCC's vector extensions; with target_clones the loader picks
+ * AVX-512, AVX2 or the baseline at run time). Three functions, each the numba copy's formulas and
+ * steps in the same order, which numba's kernel calls by symbol through
+ * ``numba.types.ExternalFunction`` (model/consistent_native.py); the numba copies stay as the
+ * reference and the fallback where this module is not built (it needs GCC: ``__builtin_shuffle``):
+ * - flexcal_consistent_terms: ``_terms``, the map at one pose (the chains' shortening r, axial
+ *   inputs u, tensions n and the second-order wrench);
+ * - flexcal_consistent_equilibrium: ``_equilibrium``, Broyden's steps to the map's fixed point;
+ * - flexcal_consistent_offsets: ``_numba_kernels``' box and play problems of the nut offsets.
  *
  * Layout (model/consistent.py ``lane_rows``): per candidate ``n_rows`` rows of 8 lanes:
  * rows row * WIDTH + col hold ``pack_chains``' entry [chain, row, col] in lane ``chain``
@@ -22,7 +24,6 @@
 #include <Python.h>
 #include <math.h>
 #include <stdint.h>
-#include <string.h>
 
 typedef double lanes_t __attribute__((vector_size(64)));
 typedef double lanes_u __attribute__((vector_size(64), aligned(8)));  /* numpy's rows: 8-byte aligned */
@@ -88,7 +89,7 @@ map_at(const double *restrict block, const lanes_t x, const double *restrict c, 
     const lanes_u *L = (const lanes_u *)block;
     const double t0 = x[3], t1 = x[4], t2 = x[5];
     const double tt = t0 * t0 + t1 * t1 + t2 * t2;
-    lanes_t wrench[6];  /* wrench[a]: component a of each chain's second-order wrench, summed at the end */
+    lanes_t chain_wrench[6];  /* [a]: component a of each chain's second-order wrench, summed at the end */
     /* the weight W at the centre of gravity r turns with the frame: -d ext_r / d theta^T W */
     const double tw = t0 * w[0] + t1 * w[1] + t2 * w[2];
     const double tr = t0 * w[3] + t1 * w[4] + t2 * w[5];
@@ -178,9 +179,9 @@ map_at(const double *restrict block, const lanes_t x, const double *restrict c, 
     for (int i = 0; i < 6; i++)
         v[i] = two_t * s[i] + gr[i];
     for (int a = 0; a < 6; a++)
-        wrench[a] = v[0] * P(J_ROW, a) + v[1] * P(J_ROW + 1, a) + v[2] * P(J_ROW + 2, a) + v[3] * P(J_ROW + 3, a)
-                    + v[4] * P(J_ROW + 4, a) + v[5] * P(J_ROW + 5, a)
-                    + (e0 * P(W_COL, a) + e1 * P(W_COL + 1, a) + e2 * P(W_COL + 2, a));
+        chain_wrench[a] = v[0] * P(J_ROW, a) + v[1] * P(J_ROW + 1, a) + v[2] * P(J_ROW + 2, a)
+                          + v[3] * P(J_ROW + 3, a) + v[4] * P(J_ROW + 4, a) + v[5] * P(J_ROW + 5, a)
+                          + (e0 * P(W_COL, a) + e1 * P(W_COL + 1, a) + e2 * P(W_COL + 2, a));
     /* the chain force F (tension along the axis, lateral K e) works through the second-order
        displacement of B: d ext / d theta^T F = 1/2 (p (theta.F) + (theta.p) F - 2 theta (p.F)) */
     const lanes_t g0 = P(R_ROW, 0) * tension + P(R_ROW, 1) * fl[1] + P(R_ROW, 2) * fl[2];
@@ -188,10 +189,10 @@ map_at(const double *restrict block, const lanes_t x, const double *restrict c, 
     const lanes_t g2 = P(R_ROW + 2, 0) * tension + P(R_ROW + 2, 1) * fl[1] + P(R_ROW + 2, 2) * fl[2];
     const lanes_t tf = t0 * g0 + t1 * g1 + t2 * g2;
     const lanes_t pf = pb0 * g0 + pb1 * g1 + pb2 * g2;
-    wrench[3] += 0.5 * (pb0 * tf + tp * g0 - 2.0 * t0 * pf);
-    wrench[4] += 0.5 * (pb1 * tf + tp * g1 - 2.0 * t1 * pf);
-    wrench[5] += 0.5 * (pb2 * tf + tp * g2 - 2.0 * t2 * pf);
-    return (struct map_out){-rr, uj, tension, weight_turn + lane_sums6(wrench)};
+    chain_wrench[3] += 0.5 * (pb0 * tf + tp * g0 - 2.0 * t0 * pf);
+    chain_wrench[4] += 0.5 * (pb1 * tf + tp * g1 - 2.0 * t1 * pf);
+    chain_wrench[5] += 0.5 * (pb2 * tf + tp * g2 - 2.0 * t2 * pf);
+    return (struct map_out){-rr, uj, tension, weight_turn + lane_sums6(chain_wrench)};
 }
 
 /* the map at pose x for candidate ``cand`` of the lane rows (n_c, n_rows, 8): r, u, n (6) and force
@@ -216,12 +217,13 @@ void flexcal_consistent_terms(int64_t cand, int64_t n_rows, const double *lanes,
 /* ``_numba_consistent._equilibrium`` with the map above: the pose x (6) solved in place to ``tol``
    at fixed offsets c by Broyden's steps, the same steps, tests and updates in the same order as
    the numba copy (see its docstring); the command is row p of ``inputs`` (n_p, 3). A candidate's
-   read-only arguments (the kernel's own arguments) come in ``context``, int64 slots
-   (``consistent_native.CONTEXT``) written once per candidate: each array argument of an inlined
-   numba call costs a reference count pair, and with the map in C those were ~1/5 of the kernel's
-   time (measured); so does an array's ``.ctypes`` at a call, so every array arrives as its address,
-   taken once per candidate. ``secant`` (6 x 6, row-major) is kept from call to call. Returns 4 x (evaluations of the map) + status, the status 0 converged, 1 not converged
-   in max_iter, 2 diverged (``_numba_consistent._status`` maps them to point_status' codes). */
+   read-only arguments come in ``context``, int64 slots (``consistent_native.CONTEXT``) written once
+   per candidate, and every other array as its address taken once per candidate: an array argument
+   of an inlined numba call, or its ``.ctypes`` at a call, costs a reference count pair, ~15 % of
+   the kernel's time once the map ran in C (measured). ``secant`` (6, 8) holds B's six columns
+   (lanes 6, 7 zero), kept from call to call. Returns 4 x (evaluations of the map) + status, the
+   status 0 converged, 1 not converged in max_iter, 2 diverged (``_numba_consistent._status`` maps
+   them to point_status' codes). */
 enum { CX_CAND, CX_ROWS, CX_LANES, CX_X0, CX_WEIGHT, CX_TERMS, CX_DEFECT, CX_SYMMETRIC, CX_SIZE };
 _Static_assert(sizeof(void *) == sizeof(int64_t), "addresses travel in int64 slots");
 

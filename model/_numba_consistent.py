@@ -29,7 +29,7 @@ from .point_status import CLEARANCE_FAILED, DIVERGED, NOT_CONVERGED, OK
 # the files whose code or constants these cached kernels compile in, with a digest of their text
 # (numba keys its cache by this file's text only: tests/test_numba_cache_keys.py)
 SOURCES_COMPILED_IN = {"_numba_kernels.py": "2caf0299d30a8c71", "point_status.py": "9ba9d4aa3a906f93",
-                       "consistent_native.py": "133aae7d1276ebf5"}
+                       "consistent_native.py": "5fe8949d426cd44b"}
 
 _FAST = {"reassoc", "contract", "arcp"}
 TANGENT_STEP = 1e-6  # [m] offset step of the measured tangent: its second-order error ~1e-6 relative
@@ -304,7 +304,6 @@ def _terms(cand, x, c, command, x0, axial, pack, point_b, defect_index, defect, 
         force[5] += 0.5 * (pb2 * tf + tp * g2 - 2.0 * t2 * pf)
 
 
-
 # inlined into ``solve`` (session 38): as a call, numba linked a second copy of it into ``solve``
 # and optimised that one again, whose fused multiply-adds rounded otherwise, so ``solve``
 # compiled in the running process gave other last bits than loaded from numba's cache
@@ -322,8 +321,7 @@ def _equilibrium(cand, x, c, command, compliance, wrench, x0, gain, axial, pack,
     (6, 6) from call to call and updated by the secant condition at each step): Phi contracts
     by only 0.04-0.09 per step here (its Jacobian's spectral radius on the standard trajectory),
     the secant steps converge superlinearly. A step that does not halve the residual resets B to
-    the identity, i.e. to the plain fixed-point step. work (6, 6) scratch.
-"""
+    the identity, i.e. to the plain fixed-point step. work (6, 6) scratch."""
     x_new, f_prev, s_prev, b_y, s_b, rhs = work[0], work[1], work[2], work[3], work[4], work[5]
     previous = np.inf
     for it in range(max_iter):
