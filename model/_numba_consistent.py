@@ -413,9 +413,10 @@ def solve(first, stop, compliance, wrench, gain, axial, pack, lanes, point_b, de
     change's second-order part only needs fewer fixed-point steps; where they end is unchanged.
     Inside a leg of equal steps the drift is extrapolated (linear, quadratic, then cubic in the
     step count). A point whose command an earlier point had (``revisit`` (n_p,), the latest such
-    point or -1; ``consistent.revisits``) starts from that point's equilibrium when the nut offsets
-    are those it ended with there: the same equations, so the start is the fixed point (the legs'
-    way back; session 16)."""
+    point or -1; ``consistent.revisits``: the same to 1 pm) starts from that point's equilibrium
+    (moved by the linear response to the commands' difference) when the nut offsets are those it
+    ended with there: the same equations, so the start is the fixed point to that difference (the
+    legs' way back; session 16)."""
     n_p = inputs.shape[0]
     inner_tol = INNER_SHARE * tol
     # the C copy (``consistent_native``; where the call has lanes) reaches its arrays by address
@@ -530,9 +531,11 @@ def solve(first, stop, compliance, wrench, gain, axial, pack, lanes, point_b, de
                 for i in range(3):
                     if c_seen[seen, i] != c[i]:
                         seen = -1
-            if seen >= 0:
+            if seen >= 0:  # moved by the linear response to the commands' difference (<= REVISIT_TOLERANCE)
                 for k in range(6):
                     x[k] = x_seen[seen, k]
+                    for i in range(3):
+                        x[k] += input_gain[cand, k, 3 + i] * (command[i] - inputs[seen, i])
             elif p > 0 and size > 0.0:
                 for k in range(6):
                     if uniform >= 4:  # the drift extrapolated as a cubic in the step count
@@ -562,16 +565,18 @@ def solve(first, stop, compliance, wrench, gain, axial, pack, lanes, point_b, de
                 for k in range(3):
                     reuse[k] = (reuse_rates and loose and p > 0 and rate_point[k] == p - 1
                                 and mu[cand, k] > 0 and c[k] > state_tol)
+                # every nut on its flank: the pose to the point's own tolerance (the offsets' Newton
+                # steps, which need it 1/INNER_SHARE tighter, follow only where a nut leaves its flank)
+                pose_tol = LOOSE_TOL if loose else (inner_tol if probed else tol)
                 if native:
                     code, its = _status(equilibrium(context_at, x_at, c_at, n_at, r_at, u_at, force_at, secant_at,
-                                                    inputs_at, p,
-                                                    LOOSE_TOL if loose else inner_tol, max_iter, divergence,
+                                                    inputs_at, p, pose_tol, max_iter, divergence,
                                                     1 if probed and not loose else 0))
                 else:
                     code, its = _equilibrium(cand, x, c, command, compliance, wrench, x0, gain, axial, pack, point_b,
-                                             defect_index, defect, symmetric, weight,
-                                             LOOSE_TOL if loose else inner_tol, max_iter, divergence,
-                                             probed and not loose, r, u, n, force, d, ml, grad, work, secant)
+                                             defect_index, defect, symmetric, weight, pose_tol, max_iter,
+                                             divergence, probed and not loose, r, u, n, force, d, ml, grad, work,
+                                             secant)
                 iterations += its
                 if code != OK or not use_clearance:
                     break

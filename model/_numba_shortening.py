@@ -21,7 +21,10 @@ SOURCES_COMPILED_IN = {}
 _FAST = {"reassoc", "contract", "arcp"}
 
 
-@njit(cache=True, nogil=True)
+# this helper and the load form's are inlined into ``shortening_forms`` (``inline="always"``): as
+# calls, their array arguments cost ~138 reference-count pairs per chain, ~28 % of its time
+# (session 43: 3.6 -> 2.6 ms for 300 candidates' 1800 chains on one thread, the same bits)
+@njit(cache=True, nogil=True, inline="always")
 def _gain(t, k, out):
     """G = C~ K_B (6, 6) in place, from C~'s eight entries t and the dense block matrix K_B."""
     for a in range(6):
@@ -149,7 +152,7 @@ def shortening_forms(entries, offsets, bracket_c, bracket_p, bracket_r, bracket_
 LATERAL = np.array([1, 2, 4, 5], dtype=np.int64)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def _signed_sum(parts, out, prefix, whole):
     """out_e = sum_f sign(e - f) parts_f = 2 sum_{f<e} parts_f - sum_f parts_f + parts_e, on the
     lateral rows and columns (``LATERAL``; the rest of out is left as it was)."""
@@ -172,7 +175,7 @@ def _signed_sum(parts, out, prefix, whole):
                 prefix[a, b] += parts[e, a, b]
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def _half_ad_product(left, axial_ad, right, out):
     """out = 1/2 left P right on the lateral rows and columns (``LATERAL``; the rest of out is left
     as it was) for P = ``shortening._AXIAL_AD``: P[1, 5] = P[4, 2] = -1, P[2, 4] = P[5, 1] = 1 (its
@@ -185,7 +188,7 @@ def _half_ad_product(left, axial_ad, right, out):
             out[a, b] = 0.5 * (-l1 * right[5, b] - l4 * right[2, b] + l2 * right[4, b] + l5 * right[1, b])
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def _product(left, right, out):
     """out = left right on the lateral rows and columns, over the lateral inner index (``LATERAL``:
     exact where left's lateral rows are zero off them; the rest of out is left as it was)."""
@@ -200,7 +203,7 @@ def _product(left, right, out):
             out[a, b] = acc
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def _load_form(moved, k_b, axial_ad, dense, signed, first, prefix, whole, tmp, c1, c2, out):
     """T (6, 6) of ``shortening._load_form``: Y_e = sum_f s_ef C~_f, Z_e = 1/2 C~_e P Y_e,
     C1 = sum Z_e, C2 = sum 1/2 C~_e P (sum_f s_ef Z_f), T = sym(K (C1 K C1 - C2) K), axial zero;

@@ -46,6 +46,12 @@ import numpy as np
 
 from .threads import run_split
 
+# [m] two commands this close in every component are one revisited command: 1 pm, ~1e-9 of a
+# stroke and far below any actuator's step; a trajectory's way back computed by other arithmetic
+# than its way out lands 1e-19 m off (the standard trajectory's A1 and A2 legs) and was not
+# recognised as a revisit by an exact comparison (session 43)
+REVISIT_TOLERANCE = 1e-12
+
 __all__ = ["pivot_shortening", "shortening_matrices", "defect_terms", "solve_points_consistent"]
 
 
@@ -146,8 +152,9 @@ def lane_rows(m, defect: np.ndarray, compliance: np.ndarray, wrench: np.ndarray,
 
 
 def revisits(inputs: np.ndarray) -> np.ndarray:
-    """(n_p,) int64: for each point the latest earlier point with the very same command (-1 if
-    none); the kernel starts there when the nut offsets are the same too (a leg's way back).
+    """(n_p,) int64: for each point the latest earlier point with the same command to
+    ``REVISIT_TOLERANCE`` in every component (-1 if none); the kernel starts there, moved by the
+    linear response to the difference, when the nut offsets are the same too (a leg's way back).
     Remembered for the last few trajectories (a calibration calls the model on one trajectory
     thousands of times)."""
     inputs = np.ascontiguousarray(inputs, dtype=float)
@@ -156,13 +163,13 @@ def revisits(inputs: np.ndarray) -> np.ndarray:
 
 @functools.lru_cache(maxsize=8)
 def _revisits(data: bytes, shape: tuple[int, ...]) -> np.ndarray:
+    from scipy.spatial import cKDTree
+
     inputs = np.frombuffer(data, dtype=float).reshape(shape)
     out = np.full(shape[0], -1, dtype=np.int64)
-    last: dict[bytes, int] = {}
-    for p, row in enumerate(inputs):
-        key = row.tobytes()
-        out[p] = last.get(key, -1)
-        last[key] = p
+    for p, near in enumerate(cKDTree(inputs).query_ball_point(inputs, r=REVISIT_TOLERANCE, p=np.inf)):
+        earlier = [q for q in near if q < p]
+        out[p] = max(earlier, default=-1)
     return out
 
 
