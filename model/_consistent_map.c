@@ -224,7 +224,9 @@ void flexcal_consistent_terms(int64_t cand, int64_t n_rows, const double *lanes,
    (lanes 6, 7 zero), kept from call to call. Returns 4 x (evaluations of the map) + status, the
    status 0 converged, 1 not converged in max_iter, 2 diverged (``_numba_consistent._status`` maps
    them to point_status' codes). */
-enum { CX_CAND, CX_ROWS, CX_LANES, CX_X0, CX_WEIGHT, CX_TERMS, CX_DEFECT, CX_SYMMETRIC, CX_SIZE };
+/* CX_STRIDE: the lane rows from one candidate's block to the next in CX_LANES (0 where it holds the
+   one candidate's block, as the kernel passes it) */
+enum { CX_CAND, CX_STRIDE, CX_LANES, CX_X0, CX_WEIGHT, CX_TERMS, CX_DEFECT, CX_SYMMETRIC, CX_SIZE };
 _Static_assert(sizeof(void *) == sizeof(int64_t), "addresses travel in int64 slots");
 
 static inline double max_abs6(lanes_t v)
@@ -245,7 +247,7 @@ int64_t flexcal_consistent_equilibrium(intptr_t context_at, intptr_t x_at, intpt
 {
     const int64_t *cx = (const int64_t *)context_at;
     const int64_t cand = cx[CX_CAND], n_terms = cx[CX_TERMS], symmetric = cx[CX_SYMMETRIC];
-    const double *block = (const double *)cx[CX_LANES] + cand * cx[CX_ROWS] * WIDTH;
+    const double *block = (const double *)cx[CX_LANES] + cand * cx[CX_STRIDE] * WIDTH;
     const double *x0c = (const double *)cx[CX_X0] + 3 * cand, *w = (const double *)cx[CX_WEIGHT] + 6 * cand;
     const int64_t *defect_index = (const int64_t *)cx[CX_DEFECT];
     const double *command = (const double *)inputs_at + 3 * p, *c = (const double *)c_at;

@@ -29,7 +29,7 @@ from .point_status import CLEARANCE_FAILED, DIVERGED, NOT_CONVERGED, OK
 # the files whose code or constants these cached kernels compile in, with a digest of their text
 # (numba keys its cache by this file's text only: tests/test_numba_cache_keys.py)
 SOURCES_COMPILED_IN = {"_numba_kernels.py": "2caf0299d30a8c71", "point_status.py": "9ba9d4aa3a906f93",
-                       "consistent_native.py": "5fe8949d426cd44b"}
+                       "consistent_native.py": "80edeb55df7cfe74"}
 
 _FAST = {"reassoc", "contract", "arcp"}
 TANGENT_STEP = 1e-6  # [m] offset step of the measured tangent: its second-order error ~1e-6 relative
@@ -70,19 +70,19 @@ N_PACK = 39
 
 
 @njit(inline="always", nogil=True)
-def _put(out, lanes, cand, j, row, col, value):
-    """One entry [chain j, row, col] of candidate ``cand``'s pack: out (n_c, 6, N_PACK, WIDTH) as
-    ``pack_chains`` lays it out, or with ``lanes`` (n_c, N_PACK, WIDTH, 8), chain j in lane j."""
+def _put(out, lanes, at, j, row, col, value):
+    """One entry [chain j, row, col] of a candidate's pack at ``out[at]``: out (n, 6, N_PACK, WIDTH)
+    as ``pack_chains`` lays it out, or with ``lanes`` (n, N_PACK, WIDTH, 8), chain j in lane j."""
     if lanes:
-        out[cand, row, col, j] = value
+        out[at, row, col, j] = value
     else:
-        out[cand, j, row, col] = value
+        out[at, j, row, col] = value
 
 
 @njit(cache=True, nogil=True)
-def fill_pack(transform, rotation, shortening, stiffness, load_form, gain, first, stop, out, lanes):
-    """The pack rows above of candidates ``first`` to ``stop - 1`` into ``out`` (zeros where no
-    entry goes; layout by ``lanes``, see ``_put``): J's columns and rows, R, the shortening form S,
+def fill_pack(transform, rotation, shortening, stiffness, load_form, gain, first, stop, out, lanes, shift):
+    """The pack rows above of candidates ``first`` to ``stop - 1`` into ``out[cand - shift]`` (zeros
+    where no entry goes; layout by ``lanes``, see ``_put``): J's columns and rows, R, the shortening form S,
     K, the load form T with its axial row and column zero (``shortening._load_form``), J^T K[:, :3]
     R^T (``to_wrench``), the axial gain's column j and K's first row. transform, shortening,
     stiffness, load_form (n_c, 6, 6, 6), rotation (n_c, 6, 3, 3), gain (n_c, 6, 6) (dof, chain)."""
@@ -90,18 +90,18 @@ def fill_pack(transform, rotation, shortening, stiffness, load_form, gain, first
         for j in range(6):
             for k in range(6):
                 for col in range(6):
-                    _put(out, lanes, cand, j, J_COL + k, col, transform[cand, j, col, k])
-                    _put(out, lanes, cand, j, S_COL + k, col, shortening[cand, j, col, k])
-                    _put(out, lanes, cand, j, K_COL + k, col, stiffness[cand, j, col, k])
-                    _put(out, lanes, cand, j, T_COL + k, col,
+                    _put(out, lanes, cand - shift, j, J_COL + k, col, transform[cand, j, col, k])
+                    _put(out, lanes, cand - shift, j, S_COL + k, col, shortening[cand, j, col, k])
+                    _put(out, lanes, cand - shift, j, K_COL + k, col, stiffness[cand, j, col, k])
+                    _put(out, lanes, cand - shift, j, T_COL + k, col,
                          0.0 if k == 0 or col == 0 else load_form[cand, j, col, k])
-                    _put(out, lanes, cand, j, J_ROW + k, col, transform[cand, j, k, col])
-                _put(out, lanes, cand, j, GAIN, k, gain[cand, k, j])
-                _put(out, lanes, cand, j, K_ROW0, k, stiffness[cand, j, 0, k])
+                    _put(out, lanes, cand - shift, j, J_ROW + k, col, transform[cand, j, k, col])
+                _put(out, lanes, cand - shift, j, GAIN, k, gain[cand, k, j])
+                _put(out, lanes, cand - shift, j, K_ROW0, k, stiffness[cand, j, 0, k])
             for k in range(3):
                 for col in range(3):
-                    _put(out, lanes, cand, j, R_ROW + k, col, rotation[cand, j, k, col])
-                _put(out, lanes, cand, j, AXIAL_ROW, k, stiffness[cand, j, 0, k])
+                    _put(out, lanes, cand - shift, j, R_ROW + k, col, rotation[cand, j, k, col])
+                _put(out, lanes, cand - shift, j, AXIAL_ROW, k, stiffness[cand, j, 0, k])
             for a in range(6):  # to_wrench[a, b] = sum_m sum_n<3 J[m, a] K[m, n] R[b, n]
                 for b in range(3):
                     acc = 0.0
@@ -110,34 +110,36 @@ def fill_pack(transform, rotation, shortening, stiffness, load_form, gain, first
                         for n in range(3):
                             kr += stiffness[cand, j, m, n] * rotation[cand, j, b, n]
                         acc += transform[cand, j, m, a] * kr
-                    _put(out, lanes, cand, j, W_COL + b, a, acc)
+                    _put(out, lanes, cand - shift, j, W_COL + b, a, acc)
 
 
 @njit(cache=True, nogil=True)
 def fill_lanes(transform, rotation, shortening, stiffness, load_form, gain, point_b, axial, compliance, wrench, defect,
-               first, stop, rows4, rows):
-    """``consistent.lane_rows`` of candidates ``first`` to ``stop - 1``: rows (n_c, n_rows, 8) zeroed,
-    then ``fill_pack``'s entries through rows4, the same memory as (n_c, n_rows / 8, WIDTH, 8), then
-    the rows after them (``_consistent_map.c``: point_b, the axial stiffness, the frame's gain and
-    compliance columns and wrench with the pose's components as lanes, the defect's coefficients)."""
+               first, stop, rows4, rows, shift):
+    """``consistent.lane_rows`` of candidates ``first`` to ``stop - 1`` into ``rows[cand - shift]``:
+    rows (n, n_rows, 8) zeroed, then ``fill_pack``'s entries through rows4, the same memory as (n,
+    n_rows / 8, WIDTH, 8), then the rows after them (``_consistent_map.c``: point_b, the axial
+    stiffness, the frame's gain and compliance columns and wrench with the pose's components as
+    lanes, the defect's coefficients)."""
     extra = N_PACK * WIDTH
     for cand in range(first, stop):
         for i in range(rows.shape[1]):
             for lane in range(8):
-                rows[cand, i, lane] = 0.0
-    fill_pack(transform, rotation, shortening, stiffness, load_form, gain, first, stop, rows4, True)
+                rows[cand - shift, i, lane] = 0.0
+    fill_pack(transform, rotation, shortening, stiffness, load_form, gain, first, stop, rows4, True, shift)
     for cand in range(first, stop):
+        at = cand - shift
         for j in range(6):
             for k in range(3):
-                rows[cand, extra + k, j] = point_b[cand, j, k]
-            rows[cand, extra + 3, j] = axial[cand, j]
+                rows[at, extra + k, j] = point_b[cand, j, k]
+            rows[at, extra + 3, j] = axial[cand, j]
             for t in range(defect.shape[2]):
-                rows[cand, extra + 17 + t, j] = defect[cand, j, t]
+                rows[at, extra + 17 + t, j] = defect[cand, j, t]
         for k in range(6):
             for a in range(6):
-                rows[cand, extra + 4 + k, a] = gain[cand, a, k]
-                rows[cand, extra + 10 + k, a] = compliance[cand, a, k]
-            rows[cand, extra + 16, k] = wrench[cand, k]
+                rows[at, extra + 4 + k, a] = gain[cand, a, k]
+                rows[at, extra + 10 + k, a] = compliance[cand, a, k]
+            rows[at, extra + 16, k] = wrench[cand, k]
 
 
 @njit(inline="always", fastmath=_FAST)
@@ -400,7 +402,8 @@ def _status(packed):
 
 
 @njit(cache=True, nogil=True, fastmath=_FAST)
-def solve(first, stop, compliance, wrench, gain, axial, pack, lanes, point_b, defect_index, defect, symmetric, weight,
+def solve(first, stop, compliance, wrench, gain, axial, pack, native, n_rows, transform, rotation, shortening,
+          stiffness, load_form, point_b, defect_index, defect, symmetric, weight,
           coupling, mu, limit,
           x0, nut, band, play, inputs, revisit, clearance, tol, max_iter, divergence,
           faces, state_tol, input_gain, reuse_rates,
@@ -419,12 +422,16 @@ def solve(first, stop, compliance, wrench, gain, axial, pack, lanes, point_b, de
     legs' way back; session 16)."""
     n_p = inputs.shape[0]
     inner_tol = INNER_SHARE * tol
-    # the C copy (``consistent_native``; where the call has lanes) reaches its arrays by address
-    # (an array argument costs a reference count pair at each call). Every array whose address it
-    # takes is used in the candidate loop's numba code too (these two at each candidate's start),
-    # which keeps it allocated through that loop
-    native = lanes.shape[1] > 0
+    # the C copy (``consistent_native``; where ``native``) reaches its arrays by address (an array
+    # argument costs a reference count pair at each call). Every array whose address it takes is
+    # used in the candidate loop's numba code too (these three at each candidate's start), which
+    # keeps it allocated through that loop. Its lane rows (``consistent.lane_rows``, n_rows of them)
+    # are filled per candidate into ``block`` from the pack's sources (transform, rotation,
+    # shortening, stiffness, load_form, ...), where they stay in the core's cache (session 43: the
+    # whole batch's rows before the solve, 6.6 MB for 300 candidates, cost ~1.5 ms on 2 threads)
     context = np.zeros(8, dtype=np.int64)  # the candidate's read-only arguments: CONTEXT's slots
+    block = np.zeros((1, n_rows if native else 0, 8))
+    block4 = block.reshape((1, block.shape[1] // WIDTH, WIDTH, 8))
     secant_lanes = np.zeros((6, WIDTH))  # the C copy's B as columns, padded to vector lanes
     for cand in range(first, stop):
         x = np.zeros(6)
@@ -473,7 +480,9 @@ def solve(first, stop, compliance, wrench, gain, axial, pack, lanes, point_b, de
         grad = np.zeros(WIDTH)
         force = np.zeros(WIDTH)
         if native:
-            context[0], context[1], context[2] = cand, lanes.shape[1], lanes.ctypes.data
+            fill_lanes(transform, rotation, shortening, stiffness, load_form, gain, point_b, axial, compliance, wrench,
+                       defect, cand, cand + 1, block4, block, cand)
+            context[0], context[1], context[2] = cand, 0, block.ctypes.data  # (x0, weight: row cand)
             context[3], context[4], context[5] = x0.ctypes.data, weight.ctypes.data, defect_index.shape[0]
             context[6], context[7] = defect_index.ctypes.data, 1 if symmetric else 0
         # the C copy's per-candidate arrays as addresses, taken once (each ``.ctypes`` at a call cost

@@ -126,7 +126,7 @@ def pack_chains(m, n_threads: int = 1) -> np.ndarray:
     c = np.ascontiguousarray
     parts = (c(m.frame_transform), c(m.rotation), c(m.shortening), c(m.chain_stiffness), c(m.load_shortening),
              c(m.axial_gain))
-    run_split(lambda first, stop: nc.fill_pack(*parts, first, stop, pack, False), m.n_candidates, n_threads)
+    run_split(lambda first, stop: nc.fill_pack(*parts, first, stop, pack, False, 0), m.n_candidates, n_threads)
     return pack
 
 
@@ -140,15 +140,22 @@ def lane_rows(m, defect: np.ndarray, compliance: np.ndarray, wrench: np.ndarray,
     WIDTH (``_numba_consistent.fill_lanes``)."""
     from . import _numba_consistent as nc
 
-    n_c, width = m.n_candidates, nc.WIDTH
-    groups = nc.N_PACK + -(-(17 + defect.shape[2]) // width)  # the rows in groups of WIDTH
-    rows4 = np.empty((n_c, groups, width, 8))
-    rows = rows4.reshape(n_c, groups * width, 8)
+    n_c, n_rows = m.n_candidates, lane_row_count(defect.shape[2])
+    rows4 = np.empty((n_c, n_rows // nc.WIDTH, nc.WIDTH, 8))
+    rows = rows4.reshape(n_c, n_rows, 8)
     c = np.ascontiguousarray
     parts = (c(m.frame_transform), c(m.rotation), c(m.shortening), c(m.chain_stiffness), c(m.load_shortening),
              c(m.axial_gain), c(m.point_b), c(m.axial_stiffness), c(compliance), c(wrench), c(defect))
-    run_split(lambda first, stop: nc.fill_lanes(*parts, first, stop, rows4, rows), n_c, n_threads)
+    run_split(lambda first, stop: nc.fill_lanes(*parts, first, stop, rows4, rows, 0), n_c, n_threads)
     return rows
+
+
+def lane_row_count(n_terms: int) -> int:
+    """The lane rows of one candidate (``lane_rows``) for ``n_terms`` defect terms: the pack's
+    N_PACK x WIDTH, then 17 + n_terms, padded to a multiple of WIDTH."""
+    from . import _numba_consistent as nc
+
+    return (nc.N_PACK + -(-(17 + n_terms) // nc.WIDTH)) * nc.WIDTH
 
 
 def revisits(inputs: np.ndarray) -> np.ndarray:
@@ -204,16 +211,15 @@ def solve_points_consistent(matrices, inputs: np.ndarray, *, clearance: bool, to
     seen = revisits(inputs) if revisit else np.full(inputs.shape[0], -1, dtype=np.int64)
     defect_index, defect = defect_terms(m.lateral_defect)
     symmetric = written_out and np.array_equal(defect_index, _numba_consistent.SYMMETRIC_DEFECT)
-    if consistent_native.AVAILABLE if native is None else native:
-        if not consistent_native.AVAILABLE:
-            raise RuntimeError("flexcal.model._consistent_map is not built (no C compiler when flexcal was installed)")
-        pack = np.zeros((0, 6, _numba_consistent.N_PACK, _numba_consistent.WIDTH))
-        lanes = lane_rows(m, defect, compliance, wrench, n_threads)
-    else:
-        pack, lanes = pack_chains(m, n_threads), np.zeros((n_c, 0, 8))
+    native = consistent_native.AVAILABLE if native is None else native
+    if native and not consistent_native.AVAILABLE:
+        raise RuntimeError("flexcal.model._consistent_map is not built (no C compiler when flexcal was installed)")
+    # the C copy's lane rows are filled per candidate inside the kernel from the pack's sources
+    pack = np.zeros((0, 6, _numba_consistent.N_PACK, _numba_consistent.WIDTH)) if native else pack_chains(m, n_threads)
     arguments = (
-        c(compliance), c(wrench), c(m.axial_gain), c(m.axial_stiffness), pack, lanes, c(m.point_b),
-        defect_index, defect, bool(symmetric), c(m.payload),
+        c(compliance), c(wrench), c(m.axial_gain), c(m.axial_stiffness), pack, bool(native),
+        lane_row_count(defect.shape[2]), c(m.frame_transform), c(m.rotation), c(m.shortening), c(m.chain_stiffness),
+        c(m.load_shortening), c(m.point_b), defect_index, defect, bool(symmetric), c(m.payload),
         c(m.coupling[:, DRIVING][:, :, DRIVING]), c(m.mu), c(m.clearance),
         c(m.initial_position), c(m.nut_stiffness), c(np.maximum(m.breakaway_band, 0.0)),
         bool(clearance and np.all(m.breakaway_band >= 0)), c(inputs, dtype=float), seen, bool(clearance), float(tol),

@@ -32,7 +32,9 @@ terms = types.ExternalFunction(TERMS, TERMS_SIGNATURE)
 # the kernel's two: every array as its address (an array's ``.ctypes`` at each call cost a
 # reference count pair), the candidate's read-only ones in an int64 context, CONTEXT's slots in
 # ``_consistent_map.c``'s order (its ``CX_*``)
-CONTEXT = ("cand", "n_rows", "lanes", "x0", "weight", "n_terms", "defect_index", "symmetric")
+# (``stride``: the lane rows from one candidate's block to the next, 0 where ``lanes`` is the one
+# candidate's block, as the kernel passes it)
+CONTEXT = ("cand", "stride", "lanes", "x0", "weight", "n_terms", "defect_index", "symmetric")
 EQUILIBRIUM = "flexcal_consistent_equilibrium"
 # (context, x, c, n, r, u, force, secant, inputs, p, tol, max_iter, divergence, settle)
 #   -> 4 x evaluations + status
