@@ -158,3 +158,29 @@ def test_the_set_up_split_over_threads_gives_the_same_bits():
     frame = np.random.default_rng(8).random((9, 6, 6))
     assert np.array_equal(lane_rows(one, defect, frame, frame[:, 0], 1), lane_rows(one, defect, frame, frame[:, 0], 2))
     assert np.array_equal(pack_chains(one, 1), pack_chains(one, 2))
+
+
+def test_the_c_map_runs_only_where_the_zeros_it_skips_are_there():
+    """The C map skips the zero entries of the chain stiffness (off its blocks), of the transform's
+    rotation rows (the frame's translation) and of the load form (off its lateral rows and columns):
+    they hold for random candidates; a matrix with such an entry falls back to numba's copy, or
+    raises where the C copy is asked for, instead of giving a wrong pose."""
+    from flexcal.model.consistent import lanes_apply
+
+    space = _space(breakaway_force=2.0)
+    m = mechanism_matrices(space.from_unit(np.random.default_rng(2).random((4, 45))), space)
+    assert lanes_apply(m)
+    inputs = standard_trajectory().inputs[:12]
+    options = dict(clearance=True, tol=CONSISTENT_TOL, max_iter=CONSISTENT_MAX_ITER, divergence=DIVERGENCE_LIMIT,
+                   state_tolerance=STATE_TOLERANCE)
+    for field, index in (("chain_stiffness", (1, 2, 1, 3)), ("frame_transform", (0, 4, 3, 1)),
+                         ("load_shortening", (3, 0, 3, 2))):
+        values = getattr(m, field).copy()
+        values[index] = 1e-3 * np.abs(values).max()
+        other = dataclasses.replace(m, **{field: values})
+        assert not lanes_apply(other)
+        automatic = solve_points_consistent(other, inputs, **options)
+        reference = solve_points_consistent(other, inputs, native=False, **options)
+        assert all(np.array_equal(automatic[key], reference[key]) for key in reference)
+        with pytest.raises(ValueError, match="lanes_apply"):
+            solve_points_consistent(other, inputs, native=True, **options)
