@@ -75,11 +75,11 @@ def shortening_matrices(correction, length, hinge_length, width, fillet, thickne
                         connector_length, end_block_length, material, elements=None, n_threads: int = 1
                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(S_j (n_c, 6, 6, 6), L_j (n_c, 6, 5, 6, 6), T_j (n_c, 6, 6, 6)): each candidate's chains' own
-    shortening form plus the measured correction (6, 6, 6) (or per candidate (n_c, 6, 6, 6)), their lateral defect forms and their
-    load forms (``shortening.chain_second_order_forms``; dimensions (n_c, 6) [m]). elements: the
-    chains' (element entries, offsets) when the caller has them (``chain.chain_entries_and_elements``;
-    the forms then come from them, ``shortening.forms_from_elements``, their chains split over
-    ``n_threads``)."""
+    shortening form plus the measured correction (6, 6, 6) (or per candidate (n_c, 6, 6, 6)), their
+    lateral defect forms and their load forms (``shortening.chain_second_order_forms``; dimensions
+    (n_c, 6) [m]). elements: the chains' (element entries, offsets) when the caller has them
+    (``chain.chain_entries_and_elements``; the forms then come from them,
+    ``shortening.forms_from_elements``, their chains split over ``n_threads``)."""
     from .shortening import chain_second_order_forms, forms_from_elements
 
     if elements is not None:
