@@ -158,26 +158,31 @@ def lane_row_count(n_terms: int) -> int:
     return (nc.N_PACK + -(-(17 + n_terms) // nc.WIDTH)) * nc.WIDTH
 
 
+@functools.cache
 def _block_masks() -> tuple[np.ndarray, np.ndarray]:
-    stiffness = np.zeros((6, 6), dtype=bool)  # K's blocks: ux, rx, (uy, rz), (uz, ry)
-    for i, j in ((0, 0), (3, 3), (1, 1), (1, 5), (5, 1), (5, 5), (2, 2), (2, 4), (4, 2), (4, 4)):
-        stiffness[i, j] = True
-    lateral = np.zeros((6, 6), dtype=bool)  # T's lateral rows and columns (uy, uz, ry, rz)
-    lateral[np.ix_([1, 2, 4, 5], [1, 2, 4, 5])] = True
+    """(6, 6) masks of the entries that can be non-zero: a chain stiffness's (``hinge.ENTRY_INDEX``'s
+    entries and their transposes: ux, rx, (uy, rz), (uz, ry)) and a load form's (the lateral rows
+    and columns ``_numba_shortening.LATERAL``)."""
+    from ._numba_shortening import LATERAL
+    from .hinge import ENTRY_INDEX
+
+    stiffness = np.zeros((6, 6), dtype=bool)
+    for i, j in ENTRY_INDEX.values():
+        stiffness[i, j] = stiffness[j, i] = True
+    lateral = np.zeros((6, 6), dtype=bool)
+    lateral[np.ix_(LATERAL, LATERAL)] = True
     return stiffness, lateral
-
-
-STIFFNESS_BLOCKS, LATERAL_BLOCK = _block_masks()
 
 
 def lanes_apply(m) -> bool:
     """Whether ``_consistent_map.c``'s map, which skips their zeros, applies to these matrices: every
-    chain stiffness on ``STIFFNESS_BLOCKS``, every transform's rotation rows free of the frame's
-    translation, every load form on ``LATERAL_BLOCK`` (all three hold by construction:
-    ``chain.stiffness_from_entries``, the rigid transport, ``shortening``'s load form)."""
-    return bool(np.all(m.chain_stiffness[..., ~STIFFNESS_BLOCKS] == 0.0)
+    chain stiffness on its blocks, every transform's rotation rows free of the frame's translation,
+    every load form on its lateral rows and columns (``_block_masks``; all three hold by
+    construction: ``chain.stiffness_from_entries``, the rigid transport, ``shortening``'s load form)."""
+    stiffness, lateral = _block_masks()
+    return bool(np.all(m.chain_stiffness[..., ~stiffness] == 0.0)
                 and np.all(m.frame_transform[..., 3:, :3] == 0.0)
-                and np.all(m.load_shortening[..., ~LATERAL_BLOCK] == 0.0))
+                and np.all(m.load_shortening[..., ~lateral] == 0.0))
 
 
 def revisits(inputs: np.ndarray) -> np.ndarray:
@@ -234,12 +239,14 @@ def solve_points_consistent(matrices, inputs: np.ndarray, *, clearance: bool, to
     seen = revisits(inputs) if revisit else np.full(inputs.shape[0], -1, dtype=np.int64)
     defect_index, defect = defect_terms(m.lateral_defect)
     symmetric = written_out and np.array_equal(defect_index, _numba_consistent.SYMMETRIC_DEFECT)
-    native = consistent_native.AVAILABLE and lanes_apply(m) if native is None else native
-    if native and not consistent_native.AVAILABLE:
-        raise RuntimeError("flexcal.model._consistent_map is not built (no C compiler when flexcal was installed)")
-    if native and not lanes_apply(m):
-        raise ValueError("the C map skips the zero entries of K, J and T (consistent.lanes_apply); these matrices "
-                         "have others: use native=False")
+    if native is not False:  # the C copy where it is built and applies (each checked once per call)
+        applies = consistent_native.AVAILABLE and lanes_apply(m)
+        if native and not consistent_native.AVAILABLE:
+            raise RuntimeError("flexcal.model._consistent_map is not built (no C compiler when flexcal was installed)")
+        if native and not applies:
+            raise ValueError("the C map skips the zero entries of K, J and T (consistent.lanes_apply); these "
+                             "matrices have others: use native=False")
+        native = applies
     # the C copy's lane rows are filled per candidate inside the kernel from the pack's sources
     pack = np.zeros((0, 6, _numba_consistent.N_PACK, _numba_consistent.WIDTH)) if native else pack_chains(m, n_threads)
     arguments = (
