@@ -3,8 +3,9 @@
  *
  * numba does not vectorize across the chains (its LLVM pass that would, SLP, is off: numba PR
  * 8852), so ``_numba_consistent`` runs one chain after another on scalars. Here every product
- * runs on the six chains at once (GCC's vector extensions; with target_clones the loader picks
- * AVX-512, AVX2 or the baseline at run time). Three functions, each the numba copy's formulas and
+ * runs on the six chains at once: the lane rows' two halves of four (chains 0-3, 4-5), each one
+ * AVX2 register (GCC's vector extensions; with target_clones the loader picks AVX-512's, AVX2's or
+ * the baseline's instructions at run time; session 44, see half_t). Three functions, each the numba copy's formulas and
  * steps in the same order, which numba's kernel calls by symbol through
  * ``numba.types.ExternalFunction`` (model/consistent_native.py); the numba copies stay as the
  * reference and the fallback where this module is not built (it needs GCC: ``__builtin_shuffle``):
@@ -31,8 +32,15 @@
 #include <math.h>
 #include <stdint.h>
 
-typedef double lanes_t __attribute__((vector_size(64)));
-typedef double lanes_u __attribute__((vector_size(64), aligned(8)));  /* numpy's rows: 8-byte aligned */
+/* the vector type: four lanes, the width of an AVX2 register. The six chains are two halves of
+   four lanes (chains 0-3, 4-5 and two zero lanes), and so are the pose's six components. (Session
+   44: as one 64-byte vector, the lanes were one register only with AVX-512; elsewhere GCC kept
+   every vector in memory and built each scalar's broadcast there, by narrow stores read back by
+   wide loads whose store forwarding fails: on an AVX2 machine the map ran 3.4x slower per
+   evaluation than on an AVX-512 one, against 1.7x for numba's scalar code.) */
+typedef double half_t __attribute__((vector_size(32)));
+typedef double half_u __attribute__((vector_size(32), aligned(8)));  /* numpy's rows: 8-byte aligned */
+typedef int64_t half_index __attribute__((vector_size(32)));
 
 enum {
     WIDTH = 8, J_COL = 0, R_ROW = 6, S_COL = 9, K_COL = 15, T_COL = 21, J_ROW = 27, W_COL = 33, GAIN = 36,
@@ -47,69 +55,70 @@ enum {
 #define CLONES
 #endif
 
-static inline double lane_sum(lanes_t a)
+/* an 8-lane vector as its two halves [0] (lanes 0-3) and [1] (lanes 4-7) */
+static inline double lane_sum(const half_t *a)
 {
-    return ((a[0] + a[1]) + (a[2] + a[3])) + ((a[4] + a[5]) + (a[6] + a[7]));
+    return ((a[0][0] + a[0][1]) + (a[0][2] + a[0][3])) + ((a[1][0] + a[1][1]) + (a[1][2] + a[1][3]));
 }
 
-static inline lanes_t load6(const double *v)
+/* {a0 + a1, b0 + b1, a2 + a3, b2 + b3} */
+static inline half_t pair_sums(half_t a, half_t b)
 {
-    lanes_t out = {0};
-    for (int k = 0; k < 6; k++)
-        out[k] = v[k];
-    return out;
+    return __builtin_shuffle(a, b, (half_index){0, 4, 2, 6}) + __builtin_shuffle(a, b, (half_index){1, 5, 3, 7});
 }
 
-/* lane k of the result = the sum of a[k]'s lanes (k < 6; a[6], a[7] taken as zero): six sums at
-   once by three rounds of pairwise shuffles, instead of six sums of one vector each */
-static inline lanes_t lane_sums6(const lanes_t *a)
+/* {a0 + a2, a1 + a3, b0 + b2, b1 + b3} */
+static inline half_t quad_sums(half_t a, half_t b)
 {
-    typedef int64_t index_t __attribute__((vector_size(64)));
-    const lanes_t zero = {0};
-    const index_t even = {0, 8, 2, 10, 4, 12, 6, 14}, odd = {1, 9, 3, 11, 5, 13, 7, 15};
-    const index_t low2 = {0, 1, 8, 9, 4, 5, 12, 13}, high2 = {2, 3, 10, 11, 6, 7, 14, 15};
-    const index_t low4 = {0, 1, 2, 3, 8, 9, 10, 11}, high4 = {4, 5, 6, 7, 12, 13, 14, 15};
-    const lanes_t s01 = __builtin_shuffle(a[0], a[1], even) + __builtin_shuffle(a[0], a[1], odd);
-    const lanes_t s23 = __builtin_shuffle(a[2], a[3], even) + __builtin_shuffle(a[2], a[3], odd);
-    const lanes_t s45 = __builtin_shuffle(a[4], a[5], even) + __builtin_shuffle(a[4], a[5], odd);
-    const lanes_t s67 = zero;
-    const lanes_t t03 = __builtin_shuffle(s01, s23, low2) + __builtin_shuffle(s01, s23, high2);
-    const lanes_t t47 = __builtin_shuffle(s45, s67, low2) + __builtin_shuffle(s45, s67, high2);
-    return __builtin_shuffle(t03, t47, low4) + __builtin_shuffle(t03, t47, high4);
+    return __builtin_shuffle(a, b, (half_index){0, 1, 4, 5}) + __builtin_shuffle(a, b, (half_index){2, 3, 6, 7});
 }
 
-/* the map's outputs, lanes 0-5: the chains' shortening r, axial inputs u and tensions n, and the
-   second-order wrench (its six components as lanes) */
-struct map_out {
-    lanes_t r, u, n, force;
+/* out's lane k (halves out[0], out[1]) = the sum of the 8-lane vector a[k]'s lanes (a[k][0] and
+   a[k][1] its halves; k < 6, lanes 6, 7 of out zero) in ``lane_sum``'s order: six sums at once by
+   three rounds of pairwise shuffles, instead of six sums of one vector each */
+static inline void lane_sums6(half_t a[6][2], half_t *out)
+{
+    const half_t zero = {0};
+    half_t s01[2], s23[2], s45[2], t03[2], t47[2];
+    for (int h = 0; h < 2; h++) {
+        s01[h] = pair_sums(a[0][h], a[1][h]);
+        s23[h] = pair_sums(a[2][h], a[3][h]);
+        s45[h] = pair_sums(a[4][h], a[5][h]);
+        t03[h] = quad_sums(s01[h], s23[h]);
+        t47[h] = quad_sums(s45[h], zero);
+    }
+    out[0] = t03[0] + t03[1];
+    out[1] = t47[0] + t47[1];
+}
+
+/* one half's share of the map (its four chains as lanes): r, u, n and the chain wrench's six
+   components, each summed over the chains by the caller */
+struct map_half {
+    half_t r, u, n, wrench[6];
 };
 
-#define P(row, col) (L[(row) * WIDTH + (col)])
+#define ROW(row) (L[2 * (row)])  /* a lane row's half */
+#define P(row, col) ROW((row) * WIDTH + (col))
+#define Q(t) ROW(DEFECT + (t))  /* the lateral defect's coefficients */
 
-/* the map at pose x for one candidate: ``block`` its lane rows, x0c and w its x0 (3) and weight (6) */
-static inline __attribute__((always_inline)) struct map_out
-map_at(const double *restrict block, const lanes_t x, const double *restrict c, const double *restrict command,
-       const double *restrict x0c, const double *restrict w, int64_t n_terms, const int64_t *restrict defect_index,
-       int64_t symmetric)
+/* the map at pose x (its halves ``pose``) for half h of one candidate's chains: ``block`` its lane rows, ``offset``
+   the half's lanes of the drives' offsets {0, 0, 0, u_x0 + c} */
+static inline __attribute__((always_inline)) struct map_half
+map_at_half(const double *restrict block, int h, const half_t *pose, half_t offset, int64_t n_terms,
+            const int64_t *restrict defect_index, int64_t symmetric)
 {
-    const lanes_u *L = (const lanes_u *)block;
+    const half_u *L = (const half_u *)(block + 4 * h);
+    const double x[6] = {pose[0][0], pose[0][1], pose[0][2], pose[0][3], pose[1][0], pose[1][1]};
     const double t0 = x[3], t1 = x[4], t2 = x[5];
     const double tt = t0 * t0 + t1 * t1 + t2 * t2;
-    lanes_t chain_wrench[6];  /* [a]: component a of each chain's second-order wrench, summed at the end */
-    /* the weight W at the centre of gravity r turns with the frame: -d ext_r / d theta^T W */
-    const double tw = t0 * w[0] + t1 * w[1] + t2 * w[2];
-    const double tr = t0 * w[3] + t1 * w[4] + t2 * w[5];
-    const double rw = w[3] * w[0] + w[4] * w[1] + w[5] * w[2];
-    const lanes_t weight_turn = {0.0, 0.0, 0.0, -0.5 * (w[3] * tw + tr * w[0] - 2.0 * t0 * rw),
-                                 -0.5 * (w[4] * tw + tr * w[1] - 2.0 * t1 * rw),
-                                 -0.5 * (w[5] * tw + tr * w[2] - 2.0 * t2 * rw), 0.0, 0.0};
-
-    const lanes_t pb0 = L[POINT], pb1 = L[POINT + 1], pb2 = L[POINT + 2];
-    const lanes_t tp = t0 * pb0 + t1 * pb1 + t2 * pb2;
-    const lanes_t e0 = 0.5 * (t0 * tp - pb0 * tt);  /* ext = 1/2 theta x (theta x p_j) */
-    const lanes_t e1 = 0.5 * (t1 * tp - pb1 * tt);
-    const lanes_t e2 = 0.5 * (t2 * tp - pb2 * tt);
-    lanes_t ec[3], d[6], s[6];
+    struct map_half out;  /* out.wrench[a]: component a of each chain's second-order wrench */
+    half_t *chain_wrench = out.wrench;
+    const half_t pb0 = ROW(POINT), pb1 = ROW(POINT + 1), pb2 = ROW(POINT + 2);
+    const half_t tp = t0 * pb0 + t1 * pb1 + t2 * pb2;
+    const half_t e0 = 0.5 * (t0 * tp - pb0 * tt);  /* ext = 1/2 theta x (theta x p_j) */
+    const half_t e1 = 0.5 * (t1 * tp - pb1 * tt);
+    const half_t e2 = 0.5 * (t2 * tp - pb2 * tt);
+    half_t ec[3], d[6], s[6];
     for (int k = 0; k < 3; k++)
         ec[k] = e0 * P(R_ROW, k) + e1 * P(R_ROW + 1, k) + e2 * P(R_ROW + 2, k);
     for (int k = 0; k < 3; k++)
@@ -120,78 +129,75 @@ map_at(const double *restrict block, const lanes_t x, const double *restrict c, 
     for (int k = 0; k < 6; k++)
         s[k] = d[0] * P(S_COL, k) + d[1] * P(S_COL + 1, k) + d[2] * P(S_COL + 2, k) + d[3] * P(S_COL + 3, k)
                + d[4] * P(S_COL + 4, k) + d[5] * P(S_COL + 5, k);
-    const lanes_t rr = d[0] * s[0] + d[1] * s[1] + d[2] * s[2] + d[3] * s[3] + d[4] * s[4] + d[5] * s[5];
-    const lanes_t offset = {0.0, 0.0, 0.0, command[0] + x0c[0] + c[0], command[1] + x0c[1] + c[1],
-                            command[2] + x0c[2] + c[2], 0.0, 0.0};
-    const lanes_t uj = -rr + offset;
+    const half_t rr = d[0] * s[0] + d[1] * s[1] + d[2] * s[2] + d[3] * s[3] + d[4] * s[4] + d[5] * s[5];
+    const half_t uj = -rr + offset;
 
     /* the lateral compatibility defect m_c = sum_t q_t d_a d_b (c = y..rz) */
-    const lanes_u *q = L + DEFECT;
-    lanes_t m[6];
+    half_t m[6];
     if (symmetric) {  /* _numba_consistent.SYMMETRIC_DEFECT's terms in its order */
-        m[1] = q[0] * d[2] * d[3] + q[1] * d[3] * d[4];
-        m[2] = q[2] * d[1] * d[3] + q[3] * d[3] * d[5];
-        m[3] = q[4] * d[1] * d[2] + q[5] * d[1] * d[4] + q[6] * d[2] * d[5] + q[7] * d[4] * d[5];
-        m[4] = q[8] * d[1] * d[3] + q[9] * d[3] * d[5];
-        m[5] = q[10] * d[2] * d[3] + q[11] * d[3] * d[4];
+        m[1] = Q(0) * d[2] * d[3] + Q(1) * d[3] * d[4];
+        m[2] = Q(2) * d[1] * d[3] + Q(3) * d[3] * d[5];
+        m[3] = Q(4) * d[1] * d[2] + Q(5) * d[1] * d[4] + Q(6) * d[2] * d[5] + Q(7) * d[4] * d[5];
+        m[4] = Q(8) * d[1] * d[3] + Q(9) * d[3] * d[5];
+        m[5] = Q(10) * d[2] * d[3] + Q(11) * d[3] * d[4];
     } else {
         for (int i = 1; i < 6; i++)
-            m[i] = (lanes_t){0};
+            m[i] = (half_t){0};
         for (int64_t t = 0; t < n_terms; t++)
-            m[defect_index[3 * t]] += q[t] * d[defect_index[3 * t + 1]] * d[defect_index[3 * t + 2]];
+            m[defect_index[3 * t]] += Q(t) * d[defect_index[3 * t + 1]] * d[defect_index[3 * t + 2]];
     }
     /* K m, and the lateral chain force (K e)_c = K m - K[:, 0] u + K D (c = y..rz), on K's blocks:
        ux and rx alone, (uy, rz) and (uz, ry) (``_numba_consistent``'s sums without their zero terms) */
-    lanes_t k[6], fl[6];
-    k[0] = (lanes_t){0};
+    half_t k[6], fl[6];
+    k[0] = (half_t){0};
     k[1] = m[1] * P(K_COL + 1, 1) + m[5] * P(K_COL + 5, 1);
     k[2] = m[2] * P(K_COL + 2, 2) + m[4] * P(K_COL + 4, 2);
     k[3] = m[3] * P(K_COL + 3, 3);
     k[4] = m[2] * P(K_COL + 2, 4) + m[4] * P(K_COL + 4, 4);
     k[5] = m[1] * P(K_COL + 1, 5) + m[5] * P(K_COL + 5, 5);
-    fl[0] = (lanes_t){0};  /* (the tension carries the axial force) */
+    fl[0] = (half_t){0};  /* (the tension carries the axial force) */
     fl[1] = k[1] + (d[1] * P(K_COL + 1, 1) + d[5] * P(K_COL + 5, 1));
     fl[2] = k[2] + (d[2] * P(K_COL + 2, 2) + d[4] * P(K_COL + 4, 2));
     fl[3] = k[3] + d[3] * P(K_COL + 3, 3);
     fl[4] = k[4] + (d[2] * P(K_COL + 2, 4) + d[4] * P(K_COL + 4, 4));
     fl[5] = k[5] + (d[1] * P(K_COL + 1, 5) + d[5] * P(K_COL + 5, 5));
-    const lanes_t axial = L[AXIAL];
-    lanes_t load = -axial * uj;
+    const half_t axial = ROW(AXIAL);
+    half_t load = -axial * uj;
     load += P(GAIN, 0) * x[0] + P(GAIN, 1) * x[1] + P(GAIN, 2) * x[2] + P(GAIN, 3) * x[3] + P(GAIN, 4) * x[4]
             + P(GAIN, 5) * x[5];
     load += P(AXIAL_ROW, 0) * ec[0];
     /* the chain's own P-delta inside: tension N (1 + k q), shortening D^T (S + N T) D; T lives on the
        lateral rows and columns (uy, uz, ry, rz) */
-    lanes_t tq[6];
-    tq[0] = tq[3] = (lanes_t){0};
+    half_t tq[6];
+    tq[0] = tq[3] = (half_t){0};
     for (int i = 1; i < 6; i++)
         if (i != 3)
             tq[i] = d[1] * P(T_COL + 1, i) + d[2] * P(T_COL + 2, i) + d[4] * P(T_COL + 4, i)
                     + d[5] * P(T_COL + 5, i);
-    const lanes_t qq = d[1] * tq[1] + d[2] * tq[2] + d[4] * tq[4] + d[5] * tq[5];
-    const lanes_t tension = load * (1.0 + axial * qq);
+    const half_t qq = d[1] * tq[1] + d[2] * tq[2] + d[4] * tq[4] + d[5] * tq[5];
+    const half_t tension = load * (1.0 + axial * qq);
     /* the energy gradient beyond the linear part: K m + sum_c (K e)_c dm_c/dD (+ the load form) */
-    lanes_t gr[6];
+    half_t gr[6];
     gr[0] = load * (qq * P(K_ROW0, 0));
     for (int i = 1; i < 6; i++)
         gr[i] = k[i] + load * (load * tq[i]);
     if (symmetric) {  /* each term q d_a d_b gives f_c q d_b to a and f_c q d_a to b */
-        gr[1] += fl[2] * q[2] * d[3] + fl[3] * q[4] * d[2] + fl[3] * q[5] * d[4] + fl[4] * q[8] * d[3];
-        gr[2] += fl[1] * q[0] * d[3] + fl[3] * q[4] * d[1] + fl[3] * q[6] * d[5] + fl[5] * q[10] * d[3];
-        gr[3] += (fl[1] * q[0] * d[2] + fl[1] * q[1] * d[4] + fl[2] * q[2] * d[1] + fl[2] * q[3] * d[5]
-                  + fl[4] * q[8] * d[1] + fl[4] * q[9] * d[5] + fl[5] * q[10] * d[2] + fl[5] * q[11] * d[4]);
-        gr[4] += fl[1] * q[1] * d[3] + fl[3] * q[5] * d[1] + fl[3] * q[7] * d[5] + fl[5] * q[11] * d[3];
-        gr[5] += fl[2] * q[3] * d[3] + fl[3] * q[6] * d[2] + fl[3] * q[7] * d[4] + fl[4] * q[9] * d[3];
+        gr[1] += fl[2] * Q(2) * d[3] + fl[3] * Q(4) * d[2] + fl[3] * Q(5) * d[4] + fl[4] * Q(8) * d[3];
+        gr[2] += fl[1] * Q(0) * d[3] + fl[3] * Q(4) * d[1] + fl[3] * Q(6) * d[5] + fl[5] * Q(10) * d[3];
+        gr[3] += (fl[1] * Q(0) * d[2] + fl[1] * Q(1) * d[4] + fl[2] * Q(2) * d[1] + fl[2] * Q(3) * d[5]
+                  + fl[4] * Q(8) * d[1] + fl[4] * Q(9) * d[5] + fl[5] * Q(10) * d[2] + fl[5] * Q(11) * d[4]);
+        gr[4] += fl[1] * Q(1) * d[3] + fl[3] * Q(5) * d[1] + fl[3] * Q(7) * d[5] + fl[5] * Q(11) * d[3];
+        gr[5] += fl[2] * Q(3) * d[3] + fl[3] * Q(6) * d[2] + fl[3] * Q(7) * d[4] + fl[4] * Q(9) * d[3];
     } else {
         for (int64_t t = 0; t < n_terms; t++) {
             const int64_t ia = defect_index[3 * t + 1], ib = defect_index[3 * t + 2];
-            const lanes_t wt = fl[defect_index[3 * t]] * q[t];
+            const half_t wt = fl[defect_index[3 * t]] * Q(t);
             gr[ia] += wt * d[ib];
             gr[ib] += wt * d[ia];
         }
     }
-    const lanes_t two_t = 2.0 * tension;
-    lanes_t v[6];
+    const half_t two_t = 2.0 * tension;
+    half_t v[6];
     for (int i = 0; i < 6; i++)
         v[i] = two_t * s[i] + gr[i];
     for (int a = 0; a < 3; a++)  /* J^T v: the frame's force sees the chain's force only */
@@ -203,15 +209,70 @@ map_at(const double *restrict block, const lanes_t x, const double *restrict c, 
                           + (e0 * P(W_COL, a) + e1 * P(W_COL + 1, a) + e2 * P(W_COL + 2, a));
     /* the chain force F (tension along the axis, lateral K e) works through the second-order
        displacement of B: d ext / d theta^T F = 1/2 (p (theta.F) + (theta.p) F - 2 theta (p.F)) */
-    const lanes_t g0 = P(R_ROW, 0) * tension + P(R_ROW, 1) * fl[1] + P(R_ROW, 2) * fl[2];
-    const lanes_t g1 = P(R_ROW + 1, 0) * tension + P(R_ROW + 1, 1) * fl[1] + P(R_ROW + 1, 2) * fl[2];
-    const lanes_t g2 = P(R_ROW + 2, 0) * tension + P(R_ROW + 2, 1) * fl[1] + P(R_ROW + 2, 2) * fl[2];
-    const lanes_t tf = t0 * g0 + t1 * g1 + t2 * g2;
-    const lanes_t pf = pb0 * g0 + pb1 * g1 + pb2 * g2;
+    const half_t g0 = P(R_ROW, 0) * tension + P(R_ROW, 1) * fl[1] + P(R_ROW, 2) * fl[2];
+    const half_t g1 = P(R_ROW + 1, 0) * tension + P(R_ROW + 1, 1) * fl[1] + P(R_ROW + 1, 2) * fl[2];
+    const half_t g2 = P(R_ROW + 2, 0) * tension + P(R_ROW + 2, 1) * fl[1] + P(R_ROW + 2, 2) * fl[2];
+    const half_t tf = t0 * g0 + t1 * g1 + t2 * g2;
+    const half_t pf = pb0 * g0 + pb1 * g1 + pb2 * g2;
     chain_wrench[3] += 0.5 * (pb0 * tf + tp * g0 - 2.0 * t0 * pf);
     chain_wrench[4] += 0.5 * (pb1 * tf + tp * g1 - 2.0 * t1 * pf);
     chain_wrench[5] += 0.5 * (pb2 * tf + tp * g2 - 2.0 * t2 * pf);
-    return (struct map_out){-rr, uj, tension, weight_turn + lane_sums6(chain_wrench)};
+    out.r = -rr;
+    out.u = uj;
+    out.n = tension;
+    return out;
+}
+
+/* the map's outputs, 8-lane vectors as their halves: the chains' shortening r, axial inputs u and
+   tensions n (the chains as lanes), and the second-order wrench (its six components as lanes) */
+struct map_out {
+    half_t r[2], u[2], n[2], force[2];
+};
+
+/* the drives' offsets command + x0 + c in the chains' lanes 3-5, as halves */
+static inline void drive_offsets(const double *command, const double *x0c, const double *c, half_t *offset)
+{
+    offset[0] = (half_t){0.0, 0.0, 0.0, command[0] + x0c[0] + c[0]};
+    offset[1] = (half_t){command[1] + x0c[1] + c[1], command[2] + x0c[2] + c[2], 0.0, 0.0};
+}
+
+/* the map at pose x (its halves) for one candidate: ``block`` its lane rows, ``offset`` its drives'
+   offsets (``drive_offsets``), w its weight (6) */
+static inline __attribute__((always_inline)) struct map_out
+map_at(const double *restrict block, const half_t *x, const half_t *offset, const double *restrict w, int64_t n_terms,
+       const int64_t *restrict defect_index, int64_t symmetric)
+{
+    const double t0 = x[0][3], t1 = x[1][0], t2 = x[1][1];
+    /* the weight W at the centre of gravity r turns with the frame: -d ext_r / d theta^T W */
+    const double tw = t0 * w[0] + t1 * w[1] + t2 * w[2];
+    const double tr = t0 * w[3] + t1 * w[4] + t2 * w[5];
+    const double rw = w[3] * w[0] + w[4] * w[1] + w[5] * w[2];
+    const half_t turn_0 = {0.0, 0.0, 0.0, -0.5 * (w[3] * tw + tr * w[0] - 2.0 * t0 * rw)};
+    const half_t turn_1 = {-0.5 * (w[4] * tw + tr * w[1] - 2.0 * t1 * rw), -0.5 * (w[5] * tw + tr * w[2] - 2.0 * t2 * rw),
+                           0.0, 0.0};
+    half_t chain_wrench[6][2];
+    struct map_out out;
+    for (int h = 0; h < 2; h++) {
+        const struct map_half half = map_at_half(block, h, x, offset[h], n_terms, defect_index, symmetric);
+        out.r[h] = half.r;
+        out.u[h] = half.u;
+        out.n[h] = half.n;
+        for (int a = 0; a < 6; a++)
+            chain_wrench[a][h] = half.wrench[a];
+    }
+    lane_sums6(chain_wrench, out.force);
+    out.force[0] = turn_0 + out.force[0];
+    out.force[1] = turn_1 + out.force[1];
+    return out;
+}
+
+/* lane k of an 8-lane vector's halves v */
+#define LANE(v, k) ((v)[(k) / 4][(k) % 4])
+
+static inline void load_halves(const double *v, half_t *out)  /* 6 doubles, lanes 6, 7 zero */
+{
+    out[0] = (half_t){v[0], v[1], v[2], v[3]};
+    out[1] = (half_t){v[4], v[5], 0.0, 0.0};
 }
 
 /* the map at pose x for candidate ``cand`` of the lane rows (n_c, n_rows, 8): r, u, n (6) and force
@@ -222,13 +283,16 @@ void flexcal_consistent_terms(int64_t cand, int64_t n_rows, const double *lanes,
                               const int64_t *defect_index, int64_t symmetric, double *r, double *u, double *n,
                               double *force)
 {
-    const struct map_out out = map_at(lanes + cand * n_rows * WIDTH, load6(x), c, command, x0 + 3 * cand,
-                                      weight + 6 * cand, n_terms, defect_index, symmetric);
+    half_t pose[2], offset[2];
+    load_halves(x, pose);
+    drive_offsets(command, x0 + 3 * cand, c, offset);
+    const struct map_out out = map_at(lanes + cand * n_rows * WIDTH, pose, offset, weight + 6 * cand, n_terms,
+                                      defect_index, symmetric);
     for (int k = 0; k < 6; k++) {
-        r[k] = out.r[k];
-        u[k] = out.u[k];
-        n[k] = out.n[k];
-        force[k] = out.force[k];
+        r[k] = LANE(out.r, k);
+        u[k] = LANE(out.u, k);
+        n[k] = LANE(out.n, k);
+        force[k] = LANE(out.force, k);
     }
     force[6] = force[7] = 0.0;
 }
@@ -248,11 +312,11 @@ void flexcal_consistent_terms(int64_t cand, int64_t n_rows, const double *lanes,
 enum { CX_CAND, CX_STRIDE, CX_LANES, CX_X0, CX_WEIGHT, CX_TERMS, CX_DEFECT, CX_SYMMETRIC, CX_SIZE };
 _Static_assert(sizeof(void *) == sizeof(int64_t), "addresses travel in int64 slots");
 
-static inline double max_abs6(lanes_t v)
+static inline double max_abs6(const half_t *v)
 {
     double worst = 0.0;
     for (int k = 0; k < 6; k++) {
-        const double a = fabs(v[k]);
+        const double a = fabs(LANE(v, k));
         worst = a > worst ? a : worst;  /* Python's max(worst, a), NaN as the numba copy */
     }
     return worst;
@@ -270,38 +334,45 @@ int64_t flexcal_consistent_equilibrium(intptr_t context_at, intptr_t x_at, intpt
     const double *x0c = (const double *)cx[CX_X0] + 3 * cand, *w = (const double *)cx[CX_WEIGHT] + 6 * cand;
     const int64_t *defect_index = (const int64_t *)cx[CX_DEFECT];
     const double *command = (const double *)inputs_at + 3 * p, *c = (const double *)c_at;
-    const lanes_u *L = (const lanes_u *)block;
+    const half_u *L = (const half_u *)block;
     /* the 6 x 6 products on the pose's six components as lanes: G u = sum_j u_j G[:, j], and so
-       on; B as its six columns, ``secant`` (6, 8) holding them (lanes 6, 7 zero) */
-    const lanes_u *gain = L + GAIN_COLUMNS, *compliance = L + COMPLIANCE_COLUMNS;
-    const lanes_t wrench = L[WRENCH];
-    lanes_u *secant = (lanes_u *)secant_at;
-    lanes_t B[6], x = load6((const double *)x_at), f_prev = {0}, s_prev = {0};
+       on; B as its six columns, ``secant`` (6, 8) holding them (lanes 6, 7 zero); every 8-lane
+       vector as its two halves */
+    const half_u *gain = L + 2 * GAIN_COLUMNS, *compliance = L + 2 * COMPLIANCE_COLUMNS, *wrench = L + 2 * WRENCH;
+    half_u *secant = (half_u *)secant_at;
+    half_t B[6][2], x[2], offset[2], f_prev[2] = {{0}}, s_prev[2] = {{0}};
+    load_halves((const double *)x_at, x);
+    drive_offsets(command, x0c, c, offset);
     for (int b = 0; b < 6; b++)
-        B[b] = secant[b];
-    struct map_out out = {{0}};
+        for (int h = 0; h < 2; h++)
+            B[b][h] = secant[2 * b + h];
+    struct map_out out = {{{0}}};
     double previous = INFINITY;
     int64_t packed = 4 * max_iter + 1;
     for (int64_t it = 0; it < max_iter; it++) {
-        out = map_at(block, x, c, command, x0c, w, n_terms, defect_index, symmetric);
-        lanes_t rhs = wrench - out.force;  /* F_C + sum_j g_j u_j - f2(x) */
+        out = map_at(block, x, offset, w, n_terms, defect_index, symmetric);
+        half_t rhs[2], x_new[2] = {{0}}, residual[2];
+        for (int h = 0; h < 2; h++)
+            rhs[h] = wrench[h] - out.force[h];  /* F_C + sum_j g_j u_j - f2(x) */
         for (int j = 0; j < 6; j++)
-            rhs += out.u[j] * gain[j];
-        lanes_t x_new = {0};
+            for (int h = 0; h < 2; h++)
+                rhs[h] += LANE(out.u, j) * gain[2 * j + h];
         for (int m = 0; m < 6; m++)
-            x_new += rhs[m] * compliance[m];
-        const lanes_t residual = x_new - x;  /* f = Phi(x) - x */
+            for (int h = 0; h < 2; h++)
+                x_new[h] += LANE(rhs, m) * compliance[2 * m + h];
+        for (int h = 0; h < 2; h++)
+            residual[h] = x_new[h] - x[h];  /* f = Phi(x) - x */
         const double change = max_abs6(residual);
         const double r_max = max_abs6(out.r);
         if (!isfinite(change) || r_max > divergence) {
-            x = x_new;
+            x[0] = x_new[0], x[1] = x_new[1];
             packed = 4 * (it + 1) + 2;
             break;
         }
         if (change <= tol) {
             if (settle) {  /* x moved to Phi(x), ~rho tol from the fixed point, and its terms */
-                x = x_new;
-                out = map_at(block, x, c, command, x0c, w, n_terms, defect_index, symmetric);
+                x[0] = x_new[0], x[1] = x_new[1];
+                out = map_at(block, x, offset, w, n_terms, defect_index, symmetric);
             }
             packed = 4 * (it + 1);
             break;
@@ -309,43 +380,56 @@ int64_t flexcal_consistent_equilibrium(intptr_t context_at, intptr_t x_at, intpt
         if (it > 0) {
             if (change > 0.5 * previous) {  /* the secant model did not help: plain fixed-point steps again */
                 for (int b = 0; b < 6; b++) {
-                    B[b] = (lanes_t){0};
-                    B[b][b] = 1.0;
+                    B[b][0] = B[b][1] = (half_t){0};
+                    LANE(B[b], b) = 1.0;
                 }
             } else {  /* B+ = B - (s + B y) (s^T B) / (s^T B y), y = f - f_prev: then B+ y = -s */
-                const lanes_t y = residual - f_prev;
-                lanes_t b_y = {0}, s_bb[6];
-                for (int b = 0; b < 6; b++) {
-                    b_y += y[b] * B[b];
-                    s_bb[b] = s_prev * B[b];
+                half_t y[2], b_y[2] = {{0}}, s_bb[6][2], s_b[2], s_by[2], s_s[2];
+                for (int h = 0; h < 2; h++)
+                    y[h] = residual[h] - f_prev[h];
+                for (int b = 0; b < 6; b++)
+                    for (int h = 0; h < 2; h++) {
+                        b_y[h] += LANE(y, b) * B[b][h];
+                        s_bb[b][h] = s_prev[h] * B[b][h];
+                    }
+                lane_sums6(s_bb, s_b);
+                for (int h = 0; h < 2; h++) {
+                    s_by[h] = s_prev[h] * b_y[h];
+                    s_s[h] = s_prev[h] * s_prev[h];
                 }
-                const lanes_t s_b = lane_sums6(s_bb);
-                const double denominator = lane_sum(s_prev * b_y), scale = lane_sum(s_prev * s_prev);
+                const double denominator = lane_sum(s_by), scale = lane_sum(s_s);
                 if (fabs(denominator) > 1e-3 * scale) {  /* |B y| ~ |s|: a well-posed update */
-                    const lanes_t row = (s_prev + b_y) / denominator;
+                    half_t row[2];
+                    for (int h = 0; h < 2; h++)
+                        row[h] = (s_prev[h] + b_y[h]) / denominator;
                     for (int b = 0; b < 6; b++)
-                        B[b] -= row * s_b[b];
+                        for (int h = 0; h < 2; h++)
+                            B[b][h] -= row[h] * LANE(s_b, b);
                 }
             }
         }
-        s_prev = (lanes_t){0};
+        s_prev[0] = s_prev[1] = (half_t){0};
         for (int b = 0; b < 6; b++)
-            s_prev += residual[b] * B[b];
-        f_prev = residual;
-        x += s_prev;
+            for (int h = 0; h < 2; h++)
+                s_prev[h] += LANE(residual, b) * B[b][h];
+        for (int h = 0; h < 2; h++) {
+            f_prev[h] = residual[h];
+            x[h] += s_prev[h];
+        }
         previous = change;
     }
     double *x_out = (double *)x_at, *r = (double *)r_at, *u = (double *)u_at, *n = (double *)n_at;
     double *force = (double *)force_at;
     for (int k = 0; k < 6; k++) {
-        x_out[k] = x[k];
-        r[k] = out.r[k];
-        u[k] = out.u[k];
-        n[k] = out.n[k];
-        force[k] = out.force[k];
+        x_out[k] = LANE(x, k);
+        r[k] = LANE(out.r, k);
+        u[k] = LANE(out.u, k);
+        n[k] = LANE(out.n, k);
+        force[k] = LANE(out.force, k);
     }
     for (int b = 0; b < 6; b++)
-        secant[b] = B[b];
+        for (int h = 0; h < 2; h++)
+            secant[2 * b + h] = B[b][h];
     return packed;
 }
 
