@@ -5,7 +5,7 @@
   (fem/tetwild_process.py).
 - flexcal.model._consistent_map (model/_consistent_map.c): the consistent model's map with the
   six chains as vector lanes (model/consistent_native.py). Without it the consistent kernel
-  runs numba's scalar copy of the same formulas, ~1.6x slower.
+  runs numba's scalar copy of the same formulas, 2.6-3.4x slower (docs/model.md 10).
 
 optional=True: without a C compiler the install still succeeds, with the fallbacks above.
 """

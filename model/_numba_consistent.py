@@ -29,7 +29,7 @@ from .point_status import CLEARANCE_FAILED, DIVERGED, NOT_CONVERGED, OK
 # the files whose code or constants these cached kernels compile in, with a digest of their text
 # (numba keys its cache by this file's text only: tests/test_numba_cache_keys.py)
 SOURCES_COMPILED_IN = {"_numba_kernels.py": "2caf0299d30a8c71", "point_status.py": "9ba9d4aa3a906f93",
-                       "consistent_native.py": "80edeb55df7cfe74"}
+                       "consistent_native.py": "d4b395a53158cabf"}
 
 _FAST = {"reassoc", "contract", "arcp"}
 TANGENT_STEP = 1e-6  # [m] offset step of the measured tangent: its second-order error ~1e-6 relative

@@ -8,7 +8,9 @@ consistent kernel calls them by their symbols (``numba.types.ExternalFunction``)
 caches the kernel: the symbols are resolved when the cached code is loaded, after ``AVAILABLE``
 below has loaded the library into the process. Measured per evaluation of the map (one
 process, 10^6 calls): 0.09-0.10 us with AVX-512 against numba's 0.33 us (docs/model.md 10,
-"Session 42").
+"Session 42"). The lanes are two halves of four (one AVX2 register each; session 44): as one
+8-wide vector they were registers with AVX-512 only, and the kernel ran 2.1x slower on an AVX2
+machine.
 
 Where the extension was not built (no C compiler at install), the symbols are bound to
 placeholders that are never called, and the kernel runs numba's copies (``AVAILABLE`` False).
