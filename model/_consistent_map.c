@@ -1,12 +1,12 @@
-/* flexcal.model._consistent_map: the consistent model's per-point work with the six chains as the
- * lanes of one vector (docs/model.md 10, "Session 42").
+/* flexcal.model._consistent_map: the consistent model's per-point work with the six chains as
+ * vector lanes (docs/model.md 10, "Session 42"; two halves of four since "Session 44").
  *
  * numba does not vectorize across the chains (its LLVM pass that would, SLP, is off: numba PR
  * 8852), so ``_numba_consistent`` runs one chain after another on scalars. Here every product
  * runs on the six chains at once: the lane rows' two halves of four (chains 0-3, 4-5), each one
- * AVX2 register (GCC's vector extensions; with target_clones the loader picks AVX-512's, AVX2's or
- * the baseline's instructions at run time; session 44, see half_t). Three functions, each the numba copy's formulas and
- * steps in the same order, which numba's kernel calls by symbol through
+ * AVX2 register (GCC's vector extensions, see half_t; with target_clones the loader picks
+ * AVX-512's, AVX2's or the baseline's instructions at run time). Three functions, each the numba
+ * copy's formulas and steps in the same order, which numba's kernel calls by symbol through
  * ``numba.types.ExternalFunction`` (model/consistent_native.py); the numba copies stay as the
  * reference and the fallback where this module is not built (it needs GCC: ``__builtin_shuffle``):
  * - flexcal_consistent_terms: ``_terms``, the map at one pose (the chains' shortening r, axial
@@ -101,8 +101,8 @@ struct map_half {
 #define P(row, col) ROW((row) * WIDTH + (col))
 #define Q(t) ROW(DEFECT + (t))  /* the lateral defect's coefficients */
 
-/* the map at pose x (its halves ``pose``) for half h of one candidate's chains: ``block`` its lane rows, ``offset``
-   the half's lanes of the drives' offsets {0, 0, 0, u_x0 + c} */
+/* the map at pose x (its halves ``pose``) for half h of one candidate's chains: ``block`` its lane
+   rows, ``offset`` the half's lanes of the drives' offsets (``drive_offsets``) */
 static inline __attribute__((always_inline)) struct map_half
 map_at_half(const double *restrict block, int h, const half_t *pose, half_t offset, int64_t n_terms,
             const int64_t *restrict defect_index, int64_t symmetric)
@@ -248,8 +248,8 @@ map_at(const double *restrict block, const half_t *x, const half_t *offset, cons
     const double tr = t0 * w[3] + t1 * w[4] + t2 * w[5];
     const double rw = w[3] * w[0] + w[4] * w[1] + w[5] * w[2];
     const half_t turn_0 = {0.0, 0.0, 0.0, -0.5 * (w[3] * tw + tr * w[0] - 2.0 * t0 * rw)};
-    const half_t turn_1 = {-0.5 * (w[4] * tw + tr * w[1] - 2.0 * t1 * rw), -0.5 * (w[5] * tw + tr * w[2] - 2.0 * t2 * rw),
-                           0.0, 0.0};
+    const half_t turn_1 = {-0.5 * (w[4] * tw + tr * w[1] - 2.0 * t1 * rw),
+                           -0.5 * (w[5] * tw + tr * w[2] - 2.0 * t2 * rw), 0.0, 0.0};
     half_t chain_wrench[6][2];
     struct map_out out;
     for (int h = 0; h < 2; h++) {
