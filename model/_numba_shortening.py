@@ -20,6 +20,18 @@ SOURCES_COMPILED_IN = {}
 
 _FAST = {"reassoc", "contract", "arcp"}
 
+# the non-zero entries of the twist bracket A (``shortening.twist_bracket_tensor``, ``[a, b]_c =
+# A[c, p, r] a_p b_r``) as (c, p, r, value), and each index's partner in its 2x2 block of a
+# collinear chain's matrices ((uy, rz) = (1, 5), (uz, ry) = (2, 4); ux, rx alone: -1). Module
+# constants, which numba compiles in: the bracket loop unrolls (session 45: 1.2x on
+# ``shortening_forms`` against the same arrays as arguments, the same bits; tests check them
+# against the tensor)
+BRACKET_C = np.array([0, 0, 0, 0, 1, 1, 1, 1, 2, 2, 2, 2, 3, 3, 4, 4, 5, 5], dtype=np.int64)
+BRACKET_P = np.array([1, 2, 4, 5, 0, 2, 3, 5, 0, 1, 3, 4, 4, 5, 3, 5, 3, 4], dtype=np.int64)
+BRACKET_R = np.array([5, 4, 2, 1, 5, 3, 2, 0, 4, 3, 1, 0, 5, 4, 5, 3, 4, 3], dtype=np.int64)
+BRACKET_VALUE = np.array([1., -1., 1., -1., -1., 1., -1., 1., 1., -1., 1., -1., 1., -1., -1., 1., 1., -1.])
+PARTNER = np.array([-1, 5, 4, -1, 2, 1], dtype=np.int64)
+
 
 # this helper and the load form's are inlined into ``shortening_forms`` (``inline="always"``): as
 # calls, their array arguments cost ~138 reference-count pairs per chain, ~28 % of its time
@@ -43,12 +55,10 @@ def _gain(t, k, out):
 
 
 @njit(cache=True, nogil=True, fastmath=_FAST)
-def shortening_forms(entries, offsets, bracket_c, bracket_p, bracket_r, bracket_value, partner, phi_cross_d,
-                     axial_ad, form_out, lateral_out, load_out, stiffness_out):
+def shortening_forms(entries, offsets, phi_cross_d, axial_ad, form_out, lateral_out, load_out, stiffness_out):
     """entries (n, 9, 8) of each element's compliance at its loaded end (chain axes, leaf 2
-    turned), offsets (n, 9) [m] its loaded end minus B along x; the non-zero entries of the
-    twist bracket A (c, p, r, value); partner (6,) the other index of each row's 2x2 block
-    (-1: none); phi_cross_d (3, 6, 6); axial_ad (6, 6) ``shortening._AXIAL_AD``. Writes S (n, 6, 6),
+    turned), offsets (n, 9) [m] its loaded end minus B along x; phi_cross_d (3, 6, 6); axial_ad
+    (6, 6) ``shortening._AXIAL_AD`` (the twist bracket: ``BRACKET_*``, ``PARTNER``). Writes S (n, 6, 6),
     L (n, 5, 6, 6), T (n, 6, 6) and K_B (n, 6, 6). One thread: a few us per chain, less than
     starting numba's threads on a busy machine."""
     n = entries.shape[0]
@@ -100,15 +110,15 @@ def shortening_forms(entries, offsets, bracket_c, bracket_p, bracket_r, bracket_
         k_b[2, 4] = k_b[4, 2] = -total[5] / det
         for f in range(n_e):
             _gain(moved[f], k_b, gain)
-            for z in range(bracket_c.shape[0]):
-                c, p, r, v = bracket_c[z], bracket_p[z], bracket_r[z], 0.5 * bracket_value[z]
+            for z in range(BRACKET_C.shape[0]):
+                c, p, r, v = BRACKET_C[z], BRACKET_P[z], BRACKET_R[z], 0.5 * BRACKET_VALUE[z]
                 for s in range(2):
-                    col_p = p if s == 0 else partner[p]
+                    col_p = p if s == 0 else PARTNER[p]
                     if col_p < 0:
                         continue
                     left = v * before[p, col_p]
                     for s2 in range(2):
-                        col_r = r if s2 == 0 else partner[r]
+                        col_r = r if s2 == 0 else PARTNER[r]
                         if col_r < 0:
                             continue
                         q[c, col_p, col_r] += left * gain[r, col_r]

@@ -231,15 +231,11 @@ def forms_from_elements(entries: np.ndarray, offsets: np.ndarray, *, n_threads: 
     form, lateral, load, stiffness = (np.empty((n, 6, 6)), np.empty((n, 5, 6, 6)), np.empty((n, 6, 6)),
                                       np.empty((n, 6, 6)))
     run_split(lambda first, stop: _numba_shortening.shortening_forms(
-        flat[first:stop], flat_offsets[first:stop], *_BRACKET_ENTRIES, _PARTNER, _PHI_CROSS_D, _AXIAL_AD,
+        flat[first:stop], flat_offsets[first:stop], _PHI_CROSS_D, _AXIAL_AD,
         form[first:stop], lateral[first:stop], load[first:stop], stiffness[first:stop]), n, n_threads)
     return form.reshape(shape + (6, 6)), lateral.reshape(shape + (5, 6, 6)), load.reshape(shape + (6, 6))
 
 
-# the non-zero entries of the twist bracket (c, p, r, value) and each index's 2x2-block partner
-# in a collinear chain's matrices ((uy, rz) = (1, 5), (uz, ry) = (2, 4); ux, rx alone)
-_BRACKET_ENTRIES = tuple(np.ascontiguousarray(v) for v in (*np.nonzero(_BRACKET), _BRACKET[np.nonzero(_BRACKET)]))
-_PARTNER = np.array([-1, 5, 4, -1, 2, 1], dtype=np.int64)
 _KEYS = tuple(ENTRY_INDEX)  # ux_Fx, uy_Fy, uy_Mz, rz_Mz, uz_Fz, uz_My, ry_My, rx_Mx
 
 

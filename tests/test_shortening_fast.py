@@ -116,3 +116,17 @@ def test_the_compiled_forms_equal_the_dense_ones(chains):
         assert np.all(scale > 0), name
         excess = np.max(np.abs(got - want) / scale)
         assert excess <= bound, (name, excess)
+
+
+def test_the_compiled_bracket_constants_are_the_twist_brackets_entries():
+    """``_numba_shortening``'s compiled-in bracket entries are exactly the non-zero entries of
+    ``twist_bracket_tensor`` (in its order), and PARTNER pairs the 2x2 blocks (uy, rz), (uz, ry)."""
+    from flexcal.model import _numba_shortening as fast
+    from flexcal.model.shortening import twist_bracket_tensor
+
+    bracket = twist_bracket_tensor()
+    nonzero = np.nonzero(bracket)
+    for constant, expected in zip((fast.BRACKET_C, fast.BRACKET_P, fast.BRACKET_R), nonzero):
+        np.testing.assert_array_equal(constant, expected)
+    np.testing.assert_array_equal(fast.BRACKET_VALUE, bracket[nonzero])
+    np.testing.assert_array_equal(fast.PARTNER, [-1, 5, 4, -1, 2, 1])
