@@ -55,12 +55,13 @@ def _gain(t, k, out):
 
 
 @njit(cache=True, nogil=True, fastmath=_FAST)
-def shortening_forms(entries, offsets, phi_cross_d, axial_ad, form_out, lateral_out, load_out, stiffness_out):
+def shortening_forms(entries, offsets, phi_cross_d, axial_ad, form_out, lateral_out, load_out):
     """entries (n, 9, 8) of each element's compliance at its loaded end (chain axes, leaf 2
     turned), offsets (n, 9) [m] its loaded end minus B along x; phi_cross_d (3, 6, 6); axial_ad
     (6, 6) ``shortening._AXIAL_AD`` (the twist bracket: ``BRACKET_*``, ``PARTNER``). Writes S (n, 6, 6),
-    L (n, 5, 6, 6), T (n, 6, 6) and K_B (n, 6, 6). One thread: a few us per chain, less than
-    starting numba's threads on a busy machine."""
+    L (n, 5, 6, 6) and T (n, 6, 6); the chain's stiffness at B, K_B, is a local (session 45: as an
+    output nobody read, its fresh pages cost ~0.5 MB of page faults a call for 300 candidates).
+    One thread: a few us per chain, less than starting numba's threads on a busy machine."""
     n = entries.shape[0]
     n_e = entries.shape[1]
     moved = np.zeros((n_e, 8))  # C~_e entries
@@ -76,6 +77,7 @@ def shortening_forms(entries, offsets, phi_cross_d, axial_ad, form_out, lateral_
     tmp = np.zeros((6, 6))
     c1 = np.zeros((6, 6))
     c2 = np.zeros((6, 6))
+    k_b = np.zeros((6, 6))  # K_B of the chain at hand
     for i in range(n):
         total[:] = 0.0
         before[:, :] = 0.0
@@ -94,7 +96,6 @@ def shortening_forms(entries, offsets, phi_cross_d, axial_ad, form_out, lateral_
             t[7] = p[7]
             for k in range(8):
                 total[k] += t[k]
-        k_b = stiffness_out[i]
         for a in range(6):
             for b in range(6):
                 k_b[a, b] = 0.0

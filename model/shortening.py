@@ -228,11 +228,10 @@ def forms_from_elements(entries: np.ndarray, offsets: np.ndarray, *, n_threads: 
     flat = np.ascontiguousarray(entries.reshape((-1,) + entries.shape[-2:]))
     n = flat.shape[0]
     flat_offsets = np.ascontiguousarray(offsets.reshape(n, -1))
-    form, lateral, load, stiffness = (np.empty((n, 6, 6)), np.empty((n, 5, 6, 6)), np.empty((n, 6, 6)),
-                                      np.empty((n, 6, 6)))
+    form, lateral, load = np.empty((n, 6, 6)), np.empty((n, 5, 6, 6)), np.empty((n, 6, 6))
     run_split(lambda first, stop: _numba_shortening.shortening_forms(
         flat[first:stop], flat_offsets[first:stop], _PHI_CROSS_D, _AXIAL_AD,
-        form[first:stop], lateral[first:stop], load[first:stop], stiffness[first:stop]), n, n_threads)
+        form[first:stop], lateral[first:stop], load[first:stop]), n, n_threads)
     return form.reshape(shape + (6, 6)), lateral.reshape(shape + (5, 6, 6)), load.reshape(shape + (6, 6))
 
 
