@@ -121,8 +121,8 @@ def main() -> None:
                       f"-> {n_evals / wall_x / 1e6:5.3f} M postures/s")
     # the two figures the 2-thread rate is the product of (docs/model.md 10, "Session 45"): the
     # model's own single-thread rate against the second-order line the issue quotes (the same on
-    # two hosts measured: 0.80-0.84x) and the host's scaling from one thread to two (1.76x on
-    # session 44's host, 1.1-1.25x on session 45's)
+    # two hosts measured: 0.77-0.84x) and the host's scaling from one thread to two (1.76x on
+    # session 44's host, 1.1-1.5x on session 45's)
     table1_key = f"table1's true values x {args.candidates}"
     print(f"  consistent + play state, table1, 1 thread: {new_rates[(table1_key, 1)] * wall_second / n_evals:.2f}x the "
           f"second-order line's rate; 1 -> 2 threads: {new_rates[(table1_key, 2)] / new_rates[(table1_key, 1)]:.2f}x")
