@@ -120,8 +120,10 @@ def test_the_compiled_forms_equal_the_dense_ones(chains):
 
 def test_the_compiled_bracket_constants_are_the_twist_brackets_entries():
     """``_numba_shortening``'s compiled-in bracket entries are exactly the non-zero entries of
-    ``twist_bracket_tensor`` (in its order), and PARTNER pairs the 2x2 blocks (uy, rz), (uz, ry)."""
+    ``twist_bracket_tensor`` (in its order), and PARTNER pairs the indices of the off-diagonal
+    entries of ``hinge.ENTRY_INDEX`` (the 2x2 blocks of a collinear chain's matrices), -1 elsewhere."""
     from flexcal.model import _numba_shortening as fast
+    from flexcal.model.hinge import ENTRY_INDEX
     from flexcal.model.shortening import twist_bracket_tensor
 
     bracket = twist_bracket_tensor()
@@ -129,4 +131,8 @@ def test_the_compiled_bracket_constants_are_the_twist_brackets_entries():
     for constant, expected in zip((fast.BRACKET_C, fast.BRACKET_P, fast.BRACKET_R), nonzero):
         np.testing.assert_array_equal(constant, expected)
     np.testing.assert_array_equal(fast.BRACKET_VALUE, bracket[nonzero])
-    np.testing.assert_array_equal(fast.PARTNER, [-1, 5, 4, -1, 2, 1])
+    partner = np.full(6, -1)
+    for i, j in ENTRY_INDEX.values():
+        if i != j:
+            partner[i], partner[j] = j, i
+    np.testing.assert_array_equal(fast.PARTNER, partner)
